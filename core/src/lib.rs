@@ -1,0 +1,23 @@
+//! nldf-core: everything the talking-head pipeline shares that needs no ML framework.
+//!
+//! Cameras and rays in AD-NeRF's convention ([`camera`], [`rays`]), the student's beam
+//! encoding ([`encoding`], [`beam`]), the f64 compositing reference of the paper's Eq. 3-5
+//! ([`composite`]), datasets in AD-NeRF's layout ([`dataset`]), audio features
+//! ([`audio`]), image metrics ([`metrics`]) and a procedural talking head whose ground truth is
+//! known exactly ([`synth`]). `nldf-train` (candle), `nldf-export` (prost) and `nldf-infer`
+//! (tract / onnxruntime) build on it; it never depends on them.
+
+pub mod audio;
+pub mod beam;
+pub mod camera;
+pub mod composite;
+pub mod dataset;
+pub mod encoding;
+pub mod error;
+pub mod image;
+pub mod metrics;
+pub mod rays;
+pub mod region;
+pub mod synth;
+
+pub use error::{Error, Result};

@@ -1,0 +1,151 @@
+//! Camera rays as flat f32 buffers that any backend (candle, tract, onnxruntime) can take:
+//! for a whole image, for a list of pixels, or as a seeded random training batch biased to
+//! the face rectangle as AD-NeRF samples it.
+
+use glam::Vec3;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Camera;
+
+/// A pixel rectangle `[x, y, w, h]` (AD-NeRF's `face_rect`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(from = "[i64; 4]", into = "[i64; 4]")]
+pub struct Rect {
+    pub x: i64,
+    pub y: i64,
+    pub w: i64,
+    pub h: i64,
+}
+
+impl From<[i64; 4]> for Rect {
+    fn from([x, y, w, h]: [i64; 4]) -> Self {
+        Rect { x, y, w, h }
+    }
+}
+
+impl From<Rect> for [i64; 4] {
+    fn from(r: Rect) -> Self {
+        [r.x, r.y, r.w, r.h]
+    }
+}
+
+impl Rect {
+    /// The rectangle cut to a `width` x `height` image; `None` if nothing is left.
+    pub fn clipped(&self, width: u32, height: u32) -> Option<Rect> {
+        let x0 = self.x.max(0);
+        let y0 = self.y.max(0);
+        let x1 = (self.x + self.w).min(width as i64);
+        let y1 = (self.y + self.h).min(height as i64);
+        (x1 > x0 && y1 > y0).then_some(Rect { x: x0, y: y0, w: x1 - x0, h: y1 - y0 })
+    }
+
+    /// True if pixel (`i`, `j`) lies inside.
+    pub fn contains(&self, i: u32, j: u32) -> bool {
+        let (i, j) = (i as i64, j as i64);
+        i >= self.x && i < self.x + self.w && j >= self.y && j < self.y + self.h
+    }
+}
+
+/// A set of rays, `origins` and `directions` each flat `[n_rays, 3]`. Directions are not
+/// normalised (NeRF's convention): a point at parameter `t` is `o + t d`, and `t` is depth
+/// along the camera's viewing axis.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Rays {
+    pub origins: Vec<f32>,
+    pub directions: Vec<f32>,
+}
+
+impl Rays {
+    /// Room for `n` rays.
+    pub fn with_capacity(n: usize) -> Rays {
+        Rays { origins: Vec::with_capacity(3 * n), directions: Vec::with_capacity(3 * n) }
+    }
+
+    /// Number of rays.
+    pub fn len(&self) -> usize {
+        self.origins.len() / 3
+    }
+
+    /// True when there are no rays.
+    pub fn is_empty(&self) -> bool {
+        self.origins.is_empty()
+    }
+
+    /// Appends one ray.
+    pub fn push(&mut self, origin: Vec3, direction: Vec3) {
+        self.origins.extend_from_slice(&origin.to_array());
+        self.directions.extend_from_slice(&direction.to_array());
+    }
+
+    /// Origin of ray `r`.
+    pub fn origin(&self, r: usize) -> Vec3 {
+        Vec3::from_slice(&self.origins[3 * r..3 * r + 3])
+    }
+
+    /// Direction of ray `r`.
+    pub fn direction(&self, r: usize) -> Vec3 {
+        Vec3::from_slice(&self.directions[3 * r..3 * r + 3])
+    }
+}
+
+/// Rays through every pixel of `camera`'s image, row by row (`j` outer, `i` inner), as
+/// AD-NeRF's `get_rays` orders them.
+///
+/// # Shapes
+/// - returns `width * height` rays
+pub fn rays_for_image(camera: &Camera) -> Rays {
+    let k = &camera.intrinsics;
+    let mut rays = Rays::with_capacity(k.n_pixels());
+    for j in 0..k.height {
+        for i in 0..k.width {
+            let (o, d) = camera.ray(i as f32, j as f32);
+            rays.push(o, d);
+        }
+    }
+    rays
+}
+
+/// Rays through the listed pixels (`i`, `j`), in order.
+pub fn rays_for_pixels(camera: &Camera, pixels: &[(u32, u32)]) -> Rays {
+    let mut rays = Rays::with_capacity(pixels.len());
+    for &(i, j) in pixels {
+        let (o, d) = camera.ray(i as f32, j as f32);
+        rays.push(o, d);
+    }
+    rays
+}
+
+/// A random training batch: which pixels, and their rays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PixelBatch {
+    /// Pixel coordinates (`i`, `j`) of each ray.
+    pub pixels: Vec<(u32, u32)>,
+    pub rays: Rays,
+}
+
+/// Draws `n_rays` pixels of `camera`'s image, `round(face_fraction * n_rays)` of them
+/// uniformly inside `face_rect` and the rest uniformly over the whole image (AD-NeRF uses
+/// 0.95, the paper's student 0.9), and returns their rays. Deterministic for a seeded `rng`.
+/// A `face_rect` outside the image falls back to the whole image.
+pub fn sample_batch(
+    camera: &Camera,
+    face_rect: Rect,
+    n_rays: usize,
+    face_fraction: f32,
+    rng: &mut impl Rng,
+) -> PixelBatch {
+    let k = &camera.intrinsics;
+    let full = Rect { x: 0, y: 0, w: k.width as i64, h: k.height as i64 };
+    let face = face_rect.clipped(k.width, k.height).unwrap_or(full);
+    let n_face = ((face_fraction.clamp(0.0, 1.0) * n_rays as f32).round() as usize).min(n_rays);
+    let mut pixels = Vec::with_capacity(n_rays);
+    for r in 0..n_rays {
+        let rect = if r < n_face { face } else { full };
+        let i = rect.x + rng.random_range(0..rect.w);
+        let j = rect.y + rng.random_range(0..rect.h);
+        pixels.push((i as u32, j as u32));
+    }
+    let rays = rays_for_pixels(camera, &pixels);
+    PixelBatch { pixels, rays }
+}

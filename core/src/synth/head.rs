@@ -1,0 +1,1 @@
+//! Signed-distance head model and its sphere-tracing renderer.

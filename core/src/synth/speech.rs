@@ -1,0 +1,1 @@
+//! Speech-like audio (syllables with pitch and formants) and the mouth track it drives.
