@@ -36,7 +36,11 @@ impl Intrinsics {
     /// The un-normalised camera-space direction through pixel (`i`, `j`), as AD-NeRF's
     /// `get_rays` writes it: `[(i - cx) / f, -(j - cy) / f, -1]`.
     pub fn camera_direction(&self, i: f32, j: f32) -> Vec3 {
-        Vec3::new((i - self.cx) / self.focal, -(j - self.cy) / self.focal, -1.0)
+        Vec3::new(
+            (i - self.cx) / self.focal,
+            -(j - self.cy) / self.focal,
+            -1.0,
+        )
     }
 
     /// Number of pixels.
@@ -103,17 +107,27 @@ pub fn rigid_problem(m: &Mat4, tol: f32) -> Option<String> {
     }
     let row3 = m.row(3);
     if (row3 - Vec4::new(0.0, 0.0, 0.0, 1.0)).abs().max_element() > tol {
-        return Some(format!("last row is {:?}, expected [0, 0, 0, 1]", row3.to_array()));
+        return Some(format!(
+            "last row is {:?}, expected [0, 0, 0, 1]",
+            row3.to_array()
+        ));
     }
     let r = Mat3::from_mat4(*m);
     let rtr = r.transpose() * r;
-    let off = (rtr - Mat3::IDENTITY).to_cols_array().iter().fold(0f32, |a, v| a.max(v.abs()));
+    let off = (rtr - Mat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .fold(0f32, |a, v| a.max(v.abs()));
     if off > tol {
-        return Some(format!("rotation block is not orthonormal (|R^T R - I| = {off:.3e})"));
+        return Some(format!(
+            "rotation block is not orthonormal (|R^T R - I| = {off:.3e})"
+        ));
     }
     let det = r.determinant();
     if (det - 1.0).abs() > tol {
-        return Some(format!("rotation block has determinant {det:.4}, expected 1"));
+        return Some(format!(
+            "rotation block has determinant {det:.4}, expected 1"
+        ));
     }
     None
 }
@@ -126,7 +140,13 @@ mod tests {
     fn look_at_is_rigid_and_projects_target_to_centre() {
         let c2w = look_at(Vec3::new(0.3, 0.2, 1.5), Vec3::ZERO, Vec3::Y);
         assert!(rigid_problem(&c2w, 1e-5).is_none());
-        let k = Intrinsics { focal: 100.0, cx: 64.0, cy: 64.0, width: 128, height: 128 };
+        let k = Intrinsics {
+            focal: 100.0,
+            cx: 64.0,
+            cy: 64.0,
+            width: 128,
+            height: 128,
+        };
         let cam = Camera { intrinsics: k, c2w };
         let (i, j, z) = cam.project(Vec3::ZERO).unwrap();
         assert!((i - 64.0).abs() < 1e-3 && (j - 64.0).abs() < 1e-3);
@@ -135,8 +155,18 @@ mod tests {
 
     #[test]
     fn project_inverts_ray() {
-        let c2w = look_at(Vec3::new(-0.4, 0.1, 1.2), Vec3::new(0.0, 0.05, 0.0), Vec3::Y);
-        let k = Intrinsics { focal: 120.0, cx: 60.0, cy: 70.0, width: 128, height: 140 };
+        let c2w = look_at(
+            Vec3::new(-0.4, 0.1, 1.2),
+            Vec3::new(0.0, 0.05, 0.0),
+            Vec3::Y,
+        );
+        let k = Intrinsics {
+            focal: 120.0,
+            cx: 60.0,
+            cy: 70.0,
+            width: 128,
+            height: 140,
+        };
         let cam = Camera { intrinsics: k, c2w };
         let (o, d) = cam.ray(17.0, 93.0);
         let (i, j, z) = cam.project(o + 2.0 * d).unwrap();

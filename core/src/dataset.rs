@@ -1,1 +1,486 @@
-//! dataset
+//! Datasets in AD-NeRF's layout (DESIGN.md section 2): `transforms_{train,val}.json` with
+//! AD-NeRF's field names, frames under `head_imgs/` (or `ori_imgs/`, `gt_imgs/`), the static
+//! background `bc.png|jpg`, audio windows `aud.npy` `[N, 16, F]` and optional `parsing/`
+//! region masks. Loading validates everything it can without decoding every frame, and every
+//! problem is one line naming the file.
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use glam::Mat4;
+use serde::{Deserialize, Serialize};
+
+use crate::audio::AudioWindows;
+use crate::camera::{Camera, Intrinsics, rigid_problem};
+use crate::error::{Error, Result, write_atomic};
+use crate::image::{ImageRgb, save_png_bytes};
+use crate::rays::Rect;
+use crate::region::Region;
+
+/// Folders searched for frames, in order.
+pub const IMAGE_DIRS: [&str; 3] = ["head_imgs", "ori_imgs", "gt_imgs"];
+/// Image extensions accepted, in order.
+pub const IMAGE_EXTS: [&str; 3] = ["png", "jpg", "jpeg"];
+/// Tolerance of the rigidity check of camera matrices.
+pub const RIGID_TOL: f32 = 1e-3;
+
+/// One frame entry of a transforms file, AD-NeRF's fields plus optional ones of ours.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FrameEntry {
+    /// Image file stem under the image folder.
+    pub img_id: i64,
+    /// Row of `aud.npy` holding this frame's audio window.
+    pub aud_id: i64,
+    /// 4 x 4 camera-to-world matrix, rows as written in the JSON.
+    pub transform_matrix: [[f32; 4]; 4],
+    /// Face bounding box `[x, y, w, h]` in pixels; the whole image when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face_rect: Option<Rect>,
+    /// Blink amount of this frame (ours; AD-NeRF's later work uses it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eye: Option<f32>,
+}
+
+/// A `transforms_{train,val}.json` file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransformsFile {
+    /// Focal length in pixels.
+    pub focal_len: f32,
+    /// Principal point x in pixels.
+    pub cx: f32,
+    /// Principal point y in pixels.
+    pub cy: f32,
+    /// Near bound of the rays (ours; AD-NeRF's rule applies when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub near: Option<f32>,
+    /// Far bound of the rays (ours).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub far: Option<f32>,
+    /// Video frame rate (ours; 25 when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fps: Option<f32>,
+    /// Image width (ours; the background's when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub width: Option<u32>,
+    /// Image height (ours).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height: Option<u32>,
+    pub frames: Vec<FrameEntry>,
+}
+
+impl TransformsFile {
+    /// Reads and parses a transforms file (no cross-file checks).
+    pub fn load(path: &Path) -> Result<TransformsFile> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+    }
+
+    /// Writes the file atomically, pretty-printed.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
+        write_atomic(path, text.as_bytes())
+    }
+}
+
+/// Which part of a dataset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Split {
+    Train,
+    Val,
+}
+
+impl Split {
+    /// The transforms file name of the split.
+    pub fn file_name(self) -> &'static str {
+        match self {
+            Split::Train => "transforms_train.json",
+            Split::Val => "transforms_val.json",
+        }
+    }
+}
+
+/// One validated frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    pub img_id: i64,
+    /// Row of the audio windows.
+    pub aud_id: usize,
+    /// Camera-to-world, validated rigid.
+    pub c2w: Mat4,
+    /// Face box clipped to the image.
+    pub face_rect: Rect,
+    pub eye: Option<f32>,
+    /// The frame's image file (exists).
+    pub image_path: PathBuf,
+    /// The frame's parsing mask, when the dataset has one.
+    pub parsing_path: Option<PathBuf>,
+}
+
+/// A loaded, validated dataset. Frames are decoded on demand ([`Dataset::load_image`]).
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    pub root: PathBuf,
+    pub intrinsics: Intrinsics,
+    /// Ray bounds: from the transforms file, or AD-NeRF's rule (mean camera distance - 0.2,
+    /// + 0.4).
+    pub near: f32,
+    pub far: f32,
+    pub fps: f32,
+    pub background: ImageRgb,
+    pub audio: AudioWindows,
+    pub train: Vec<Frame>,
+    pub val: Vec<Frame>,
+}
+
+fn find_with_ext(dir: &Path, stem: &str) -> Option<PathBuf> {
+    IMAGE_EXTS
+        .iter()
+        .map(|e| dir.join(format!("{stem}.{e}")))
+        .find(|p| p.is_file())
+}
+
+impl Dataset {
+    /// Loads and validates the dataset at `root`: both transforms files, the background,
+    /// `aud.npy`, and that every frame's image (and parsing mask, if `parsing/` exists)
+    /// is present and every matrix is a finite rigid transform.
+    pub fn load(root: &Path) -> Result<Dataset> {
+        if !root.is_dir() {
+            return Err(Error::invalid(root, "dataset folder does not exist"));
+        }
+        let train_file = TransformsFile::load(&root.join(Split::Train.file_name()))?;
+        let val_path = root.join(Split::Val.file_name());
+        let val_file = TransformsFile::load(&val_path)?;
+        let train_path = root.join(Split::Train.file_name());
+
+        let bc_path = find_with_ext(root, "bc").ok_or_else(|| {
+            Error::invalid(
+                root.join("bc.png"),
+                "background image missing (bc.png or bc.jpg)",
+            )
+        })?;
+        let background = ImageRgb::load(&bc_path)?;
+        let (width, height) = (background.width, background.height);
+        for (path, t) in [(&train_path, &train_file), (&val_path, &val_file)] {
+            check_intrinsics(path, t, width, height)?;
+        }
+        if (train_file.focal_len, train_file.cx, train_file.cy)
+            != (val_file.focal_len, val_file.cx, val_file.cy)
+        {
+            return Err(Error::invalid(
+                &val_path,
+                "intrinsics differ from transforms_train.json",
+            ));
+        }
+        let intrinsics = Intrinsics {
+            focal: train_file.focal_len,
+            cx: train_file.cx,
+            cy: train_file.cy,
+            width,
+            height,
+        };
+
+        let audio = load_audio_npy(&root.join("aud.npy"))?;
+        let image_dir = IMAGE_DIRS
+            .iter()
+            .map(|d| root.join(d))
+            .find(|d| d.is_dir())
+            .ok_or_else(|| {
+                Error::invalid(
+                    root.join("head_imgs"),
+                    "no image folder (head_imgs/, ori_imgs/ or gt_imgs/)",
+                )
+            })?;
+        let parsing_dir = root.join("parsing");
+        let parsing_dir = parsing_dir.is_dir().then_some(parsing_dir);
+        let frames = |path: &Path, t: &TransformsFile| -> Result<Vec<Frame>> {
+            t.frames
+                .iter()
+                .enumerate()
+                .map(|(n, e)| {
+                    validate_frame(
+                        path,
+                        n,
+                        e,
+                        &intrinsics,
+                        &audio,
+                        &image_dir,
+                        parsing_dir.as_deref(),
+                    )
+                })
+                .collect()
+        };
+        let train = frames(&train_path, &train_file)?;
+        let val = frames(&val_path, &val_file)?;
+        if train.is_empty() {
+            return Err(Error::invalid(&train_path, "has no frames"));
+        }
+
+        let (near, far) = match (train_file.near, train_file.far) {
+            (Some(n), Some(f)) => (n, f),
+            (None, None) => ad_nerf_bounds(&train),
+            _ => {
+                return Err(Error::invalid(
+                    &train_path,
+                    "gives only one of `near` and `far`",
+                ));
+            }
+        };
+        if !(near.is_finite() && far.is_finite() && near > 0.0 && far > near) {
+            return Err(Error::invalid(
+                &train_path,
+                format!("ray bounds must satisfy 0 < near < far, got near {near}, far {far}"),
+            ));
+        }
+        let fps = train_file.fps.unwrap_or(25.0);
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(Error::invalid(
+                &train_path,
+                format!("fps must be positive, got {fps}"),
+            ));
+        }
+        Ok(Dataset {
+            root: root.to_path_buf(),
+            intrinsics,
+            near,
+            far,
+            fps,
+            background,
+            audio,
+            train,
+            val,
+        })
+    }
+
+    /// The frames of a split.
+    pub fn frames(&self, split: Split) -> &[Frame] {
+        match split {
+            Split::Train => &self.train,
+            Split::Val => &self.val,
+        }
+    }
+
+    /// The camera of a frame.
+    pub fn camera(&self, frame: &Frame) -> Camera {
+        Camera {
+            intrinsics: self.intrinsics,
+            c2w: frame.c2w,
+        }
+    }
+
+    /// Decodes a frame's image and checks its size.
+    pub fn load_image(&self, frame: &Frame) -> Result<ImageRgb> {
+        let img = ImageRgb::load(&frame.image_path)?;
+        self.check_size(&frame.image_path, img.width, img.height)?;
+        Ok(img)
+    }
+
+    /// Decodes a frame's parsing mask (`None` when the dataset has none).
+    pub fn load_regions(&self, frame: &Frame) -> Result<Option<Vec<Region>>> {
+        let Some(path) = &frame.parsing_path else {
+            return Ok(None);
+        };
+        let img = ImageRgb::load(path)?;
+        self.check_size(path, img.width, img.height)?;
+        let bytes = img.to_rgb8();
+        Ok(Some(
+            bytes
+                .chunks_exact(3)
+                .map(|c| Region::from_color([c[0], c[1], c[2]]))
+                .collect(),
+        ))
+    }
+
+    fn check_size(&self, path: &Path, w: u32, h: u32) -> Result<()> {
+        let k = &self.intrinsics;
+        if (w, h) != (k.width, k.height) {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "image is {w}x{h}, the dataset's background is {}x{}",
+                    k.width, k.height
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+fn check_intrinsics(path: &Path, t: &TransformsFile, width: u32, height: u32) -> Result<()> {
+    for (name, v) in [("focal_len", t.focal_len), ("cx", t.cx), ("cy", t.cy)] {
+        if !v.is_finite() {
+            return Err(Error::invalid(path, format!("`{name}` is not finite")));
+        }
+    }
+    if t.focal_len <= 0.0 {
+        return Err(Error::invalid(
+            path,
+            format!("`focal_len` must be positive, got {}", t.focal_len),
+        ));
+    }
+    if let (Some(w), Some(h)) = (t.width, t.height)
+        && (w, h) != (width, height)
+    {
+        return Err(Error::invalid(
+            path,
+            format!("says {w}x{h} images but the background bc image is {width}x{height}"),
+        ));
+    }
+    Ok(())
+}
+
+fn validate_frame(
+    path: &Path,
+    n: usize,
+    e: &FrameEntry,
+    k: &Intrinsics,
+    audio: &AudioWindows,
+    image_dir: &Path,
+    parsing_dir: Option<&Path>,
+) -> Result<Frame> {
+    let at = |problem: String| {
+        Error::invalid(path, format!("frame {n} (img_id {}): {problem}", e.img_id))
+    };
+    let c2w = Mat4::from_cols_array_2d(&e.transform_matrix).transpose();
+    if let Some(problem) = rigid_problem(&c2w, RIGID_TOL) {
+        return Err(at(format!("transform_matrix {problem}")));
+    }
+    if e.aud_id < 0 || e.aud_id as usize >= audio.n_frames {
+        return Err(at(format!(
+            "aud_id {} is outside aud.npy's {} audio frames (frame and audio counts do not match)",
+            e.aud_id, audio.n_frames
+        )));
+    }
+    let full = Rect {
+        x: 0,
+        y: 0,
+        w: k.width as i64,
+        h: k.height as i64,
+    };
+    let face_rect = match e.face_rect {
+        None => full,
+        Some(r) => r.clipped(k.width, k.height).ok_or_else(|| {
+            at(format!(
+                "face_rect {:?} lies outside the image",
+                <[i64; 4]>::from(r)
+            ))
+        })?,
+    };
+    let stem = e.img_id.to_string();
+    let image_path = find_with_ext(image_dir, &stem).ok_or_else(|| {
+        at(format!(
+            "image {}/{stem}.png|jpg is missing",
+            image_dir.display()
+        ))
+    })?;
+    let parsing_path = match parsing_dir {
+        None => None,
+        Some(d) => Some(find_with_ext(d, &stem).ok_or_else(|| {
+            at(format!(
+                "parsing mask {}/{stem}.png is missing",
+                d.display()
+            ))
+        })?),
+    };
+    if let Some(eye) = e.eye
+        && !eye.is_finite()
+    {
+        return Err(at("`eye` is not finite".into()));
+    }
+    Ok(Frame {
+        img_id: e.img_id,
+        aud_id: e.aud_id as usize,
+        c2w,
+        face_rect,
+        eye: e.eye,
+        image_path,
+        parsing_path,
+    })
+}
+
+/// AD-NeRF's ray bounds: the mean camera distance to the origin minus 0.2 and plus 0.4.
+pub fn ad_nerf_bounds(frames: &[Frame]) -> (f32, f32) {
+    let mean = frames
+        .iter()
+        .map(|f| f.c2w.w_axis.truncate().length())
+        .sum::<f32>()
+        / frames.len().max(1) as f32;
+    ((mean - 0.2).max(1e-3), mean + 0.4)
+}
+
+/// Reads `aud.npy`: a C-order float32 (or float64) array of shape `[N, 16, F]`, all finite.
+pub fn load_audio_npy(path: &Path) -> Result<AudioWindows> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let npy = npyz::NpyFile::new(Cursor::new(&bytes[..]))
+        .map_err(|e| Error::invalid(path, format!("not a .npy file: {e}")))?;
+    let shape: Vec<u64> = npy.shape().to_vec();
+    if shape.len() != 3 || shape[1] != 16 || shape[2] == 0 {
+        return Err(Error::invalid(
+            path,
+            format!("expected shape [N, 16, F], got {shape:?}"),
+        ));
+    }
+    if npy.order() != npyz::Order::C {
+        return Err(Error::invalid(
+            path,
+            "Fortran-ordered arrays are not supported; save with C order",
+        ));
+    }
+    let dtype = npy.dtype().descr();
+    let data: Vec<f32> = match dtype.as_str() {
+        "'<f4'" => npy.into_vec::<f32>(),
+        "'<f8'" => npy
+            .into_vec::<f64>()
+            .map(|v| v.into_iter().map(|x| x as f32).collect()),
+        other => {
+            return Err(Error::invalid(
+                path,
+                format!("expected float32 data, got dtype {other}"),
+            ));
+        }
+    }
+    .map_err(|e| Error::invalid(path, format!("truncated or unreadable data: {e}")))?;
+    let (n, window, f) = (shape[0] as usize, shape[1] as usize, shape[2] as usize);
+    if data.len() != n * window * f {
+        return Err(Error::invalid(path, "data length does not match its shape"));
+    }
+    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+        return Err(Error::invalid(
+            path,
+            format!("non-finite value at flat index {i}"),
+        ));
+    }
+    Ok(AudioWindows {
+        n_frames: n,
+        window,
+        n_features: f,
+        data,
+    })
+}
+
+/// Writes audio windows as a C-order float32 `.npy` of shape `[N, window, F]`, atomically.
+pub fn save_audio_npy(path: &Path, audio: &AudioWindows) -> Result<()> {
+    use npyz::WriterBuilder;
+    let mut buf = Vec::new();
+    let shape = [
+        audio.n_frames as u64,
+        audio.window as u64,
+        audio.n_features as u64,
+    ];
+    let fail = |e: std::io::Error| Error::invalid(path, format!("cannot encode .npy: {e}"));
+    let mut writer = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&shape)
+        .writer(&mut buf)
+        .begin_nd()
+        .map_err(fail)?;
+    writer.extend(audio.data.iter().copied()).map_err(fail)?;
+    writer.finish().map_err(fail)?;
+    write_atomic(path, &buf)
+}
+
+/// Writes a parsing mask (`regions` row-major) as a PNG of region colours, atomically.
+pub fn save_regions_png(path: &Path, width: u32, height: u32, regions: &[Region]) -> Result<()> {
+    let bytes: Vec<u8> = regions.iter().flat_map(|r| r.color()).collect();
+    save_png_bytes(path, width, height, image::ExtendedColorType::Rgb8, &bytes)
+}

@@ -23,20 +23,31 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 impl Error {
     /// An I/O error on `path`.
     pub fn io(path: impl AsRef<Path>, err: std::io::Error) -> Self {
-        Error::Io { path: path.as_ref().to_path_buf(), err }
+        Error::Io {
+            path: path.as_ref().to_path_buf(),
+            err,
+        }
     }
 
     /// A content error in `path`.
     pub fn invalid(path: impl AsRef<Path>, problem: impl Into<String>) -> Self {
-        Error::Invalid { path: path.as_ref().to_path_buf(), problem: problem.into() }
+        Error::Invalid {
+            path: path.as_ref().to_path_buf(),
+            problem: problem.into(),
+        }
     }
 }
 
 /// Writes `bytes` to `path` atomically: a temporary file beside it, then a rename, so that a
 /// failure never leaves a half-written file under the final name.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| Error::invalid(path, "not a file path"))?;
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::invalid(path, "not a file path"))?;
     let tmp = dir.join(format!(".{}.tmp", name.to_string_lossy()));
     std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| {

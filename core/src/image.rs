@@ -20,7 +20,11 @@ impl ImageRgb {
         for _ in 0..n {
             data.extend_from_slice(&rgb);
         }
-        ImageRgb { width, height, data }
+        ImageRgb {
+            width,
+            height,
+            data,
+        }
     }
 
     /// The colour at pixel (`i`, `j`).
@@ -47,7 +51,11 @@ impl ImageRgb {
 
     /// From 8-bit RGB bytes.
     pub fn from_rgb8(width: u32, height: u32, bytes: &[u8]) -> ImageRgb {
-        ImageRgb { width, height, data: bytes.iter().map(|&b| b as f32 / 255.0).collect() }
+        ImageRgb {
+            width,
+            height,
+            data: bytes.iter().map(|&b| b as f32 / 255.0).collect(),
+        }
     }
 
     /// Reads a PNG or JPEG (any colour type; alpha is dropped, grey is spread to RGB).
@@ -61,13 +69,23 @@ impl ImageRgb {
 
     /// Writes an 8-bit PNG atomically.
     pub fn save_png(&self, path: &Path) -> Result<()> {
-        save_png_bytes(path, self.width, self.height, image::ExtendedColorType::Rgb8, &self.to_rgb8())
+        save_png_bytes(
+            path,
+            self.width,
+            self.height,
+            image::ExtendedColorType::Rgb8,
+            &self.to_rgb8(),
+        )
     }
 }
 
 /// A float in [0, 1] to an 8-bit value (NaN becomes 0).
 pub fn to_u8(v: f32) -> u8 {
-    if v.is_nan() { 0 } else { (v.clamp(0.0, 1.0) * 255.0).round() as u8 }
+    if v.is_nan() {
+        0
+    } else {
+        (v.clamp(0.0, 1.0) * 255.0).round() as u8
+    }
 }
 
 /// Encodes raw pixel bytes as PNG and writes them atomically.

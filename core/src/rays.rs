@@ -37,7 +37,12 @@ impl Rect {
         let y0 = self.y.max(0);
         let x1 = (self.x + self.w).min(width as i64);
         let y1 = (self.y + self.h).min(height as i64);
-        (x1 > x0 && y1 > y0).then_some(Rect { x: x0, y: y0, w: x1 - x0, h: y1 - y0 })
+        (x1 > x0 && y1 > y0).then_some(Rect {
+            x: x0,
+            y: y0,
+            w: x1 - x0,
+            h: y1 - y0,
+        })
     }
 
     /// True if pixel (`i`, `j`) lies inside.
@@ -59,7 +64,10 @@ pub struct Rays {
 impl Rays {
     /// Room for `n` rays.
     pub fn with_capacity(n: usize) -> Rays {
-        Rays { origins: Vec::with_capacity(3 * n), directions: Vec::with_capacity(3 * n) }
+        Rays {
+            origins: Vec::with_capacity(3 * n),
+            directions: Vec::with_capacity(3 * n),
+        }
     }
 
     /// Number of rays.
@@ -136,7 +144,12 @@ pub fn sample_batch(
     rng: &mut impl Rng,
 ) -> PixelBatch {
     let k = &camera.intrinsics;
-    let full = Rect { x: 0, y: 0, w: k.width as i64, h: k.height as i64 };
+    let full = Rect {
+        x: 0,
+        y: 0,
+        w: k.width as i64,
+        h: k.height as i64,
+    };
     let face = face_rect.clipped(k.width, k.height).unwrap_or(full);
     let n_face = ((face_fraction.clamp(0.0, 1.0) * n_rays as f32).round() as usize).min(n_rays);
     let mut pixels = Vec::with_capacity(n_rays);

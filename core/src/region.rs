@@ -13,7 +13,12 @@ pub enum Region {
 
 impl Region {
     /// All regions, in label order.
-    pub const ALL: [Region; 4] = [Region::Background, Region::Face, Region::Mouth, Region::Eyes];
+    pub const ALL: [Region; 4] = [
+        Region::Background,
+        Region::Face,
+        Region::Mouth,
+        Region::Eyes,
+    ];
 
     /// The colour of this region in a parsing PNG.
     pub fn color(self) -> [u8; 3] {
@@ -27,10 +32,12 @@ impl Region {
 
     /// The region whose colour is nearest to `rgb` (parsing PNGs may be JPEG-damaged).
     pub fn from_color(rgb: [u8; 3]) -> Region {
-        let dist = |c: [u8; 3]| -> i32 {
-            (0..3).map(|i| (c[i] as i32 - rgb[i] as i32).pow(2)).sum()
-        };
-        Region::ALL.into_iter().min_by_key(|r| dist(r.color())).unwrap_or(Region::Background)
+        let dist =
+            |c: [u8; 3]| -> i32 { (0..3).map(|i| (c[i] as i32 - rgb[i] as i32).pow(2)).sum() };
+        Region::ALL
+            .into_iter()
+            .min_by_key(|r| dist(r.color()))
+            .unwrap_or(Region::Background)
     }
 
     /// The region with label `v`, if any.
