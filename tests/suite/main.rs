@@ -1,4 +1,7 @@
 //! The workspace test suite: one binary, a module per topic.
 
 mod audio;
+mod dataset;
+mod metrics;
+mod rendering;
 mod synth_head;
