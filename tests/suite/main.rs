@@ -4,4 +4,5 @@ mod audio;
 mod dataset;
 mod metrics;
 mod rendering;
+mod synth;
 mod synth_head;
