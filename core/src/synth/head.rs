@@ -29,7 +29,7 @@ const MAX_GAP: f32 = 0.024;
 /// Smooth-union widths of the parts.
 const K_JAW: f32 = 0.03;
 const K_CHEEK: f32 = 0.025;
-const K_CHIN: f32 = 0.02;
+const K_CHIN: f32 = 0.025;
 const K_HAIR: f32 = 0.004;
 const K_NOSE: f32 = 0.008;
 const K_EAR: f32 = 0.008;
@@ -113,7 +113,7 @@ impl Default for HeadParams {
             eye_height: 0.02,
             eye_radius: 0.0165,
             nose_length: 0.02,
-            nose_width: 0.011,
+            nose_width: 0.0095,
             mouth_height: -0.05,
             mouth_half_width: 0.024,
             lip_thickness: 0.0055,
@@ -121,7 +121,7 @@ impl Default for HeadParams {
             brow_tilt: 0.004,
             brow_thickness: 0.0034,
             hairline: 0.018,
-            hair_thickness: 0.006,
+            hair_thickness: 0.008,
             ear_size: 1.0,
         }
     }
@@ -680,8 +680,7 @@ struct Model {
     iris: Vec3,
     skull: Ellipsoid,
     jaw: Ellipsoid,
-    chin_c: Vec3,
-    chin_r: f32,
+    chin: Ellipsoid,
     /// Right cheek; the left one is its mirror image (x -> -x).
     cheek: Ellipsoid,
     hair_n: Vec3,
@@ -737,15 +736,20 @@ impl Model {
                 Vec3::new(h.jaw_width, h.jaw_height, 0.072),
             )
         };
-        let chin_at = |drop: f32| Vec3::new(0.0, -0.087 - drop, 0.052);
+        let chin_at = |drop: f32| {
+            Ellipsoid::new(
+                Vec3::new(0.0, -0.084 - drop, 0.05),
+                Vec3::new(1.25 * h.chin_size, 0.9 * h.chin_size, 0.95 * h.chin_size),
+            )
+        };
         let cheek = Ellipsoid::new(
-            Vec3::new(0.042, -0.016, 0.046),
-            Vec3::new(0.031, 0.027, 0.034),
+            Vec3::new(0.037, -0.014, 0.05),
+            Vec3::new(0.028, 0.026, 0.032),
         );
         let base = |p: Vec3, drop: f32| {
             let q = Vec3::new(p.x.abs(), p.y, p.z);
             let d = smin(skull.dist(p), jaw_at(drop).dist(p), K_JAW).0;
-            let d = smin(d, (p - chin_at(drop)).length() - h.chin_size, K_CHIN).0;
+            let d = smin(d, chin_at(drop).dist(p), K_CHIN).0;
             smin(d, cheek.dist(q), K_CHEEK).0
         };
         // Front surface of the featureless face at (x, y), found by marching along -z.
@@ -801,12 +805,12 @@ impl Model {
                 tip_y - 0.35 * h.nose_width,
                 tip_z - 0.6 * h.nose_width,
             ),
-            Vec3::splat(0.62 * h.nose_width),
+            Vec3::splat(0.55 * h.nose_width),
         );
 
         let ear = Ellipsoid::new(
-            Vec3::new(0.96 * h.head_width, h.eye_height - 0.018, -0.012),
-            Vec3::new(0.008, 0.026, 0.016) * h.ear_size,
+            Vec3::new(h.head_width + 0.001, h.eye_height - 0.02, -0.014),
+            Vec3::new(0.009, 0.026, 0.016) * h.ear_size,
         );
 
         // Hair: the skull grown by the hair thickness above a plane that rises to the front.
@@ -863,8 +867,7 @@ impl Model {
             iris: Vec3::from(h.iris),
             skull,
             jaw: jaw_at(drop),
-            chin_c: chin_at(drop),
-            chin_r: h.chin_size,
+            chin: chin_at(drop),
             cheek,
             hair_n,
             hair_off,
@@ -875,8 +878,8 @@ impl Model {
             eye_c,
             eye_r,
             socket_r: eye_r + 0.002,
-            lid_r: eye_r + 0.0021,
-            lid_half: 0.0013,
+            lid_r: eye_r + 0.0017,
+            lid_half: 0.0011,
             lid_up_n,
             lid_down_n,
             eye_region_r: eye_r + 0.006,
@@ -924,8 +927,6 @@ impl Model {
             lo = lo.min(c - Vec3::splat(m.lid_r + m.lid_half));
             hi = hi.max(c + Vec3::splat(m.lid_r + m.lid_half));
         }
-        lo = lo.min(m.chin_c - Vec3::splat(m.chin_r));
-        hi = hi.max(m.chin_c + Vec3::splat(m.chin_r));
         m.lo = lo - Vec3::splat(BOUNDS_MARGIN);
         m.hi = hi + Vec3::splat(BOUNDS_MARGIN);
         m
@@ -951,12 +952,7 @@ impl Model {
             },
         };
         acc.union(self.jaw.dist(p), K_JAW, Part::Skin, || self.skin);
-        acc.union(
-            (p - self.chin_c).length() - self.chin_r,
-            K_CHIN,
-            Part::Skin,
-            || self.skin,
-        );
+        acc.union(self.chin.dist(p), K_CHIN, Part::Skin, || self.skin);
         if self.cheek.bound(q) < acc.s.d + K_CHEEK {
             acc.union(self.cheek.dist(q), K_CHEEK, Part::Skin, || self.skin);
         }
@@ -974,7 +970,13 @@ impl Model {
             0.01,
         )
         .0;
-        acc.union(hair_d, K_HAIR, Part::Hair, || self.hair);
+        acc.union(hair_d, K_HAIR, Part::Hair, || {
+            // Fine strands radiating from the crown, darker towards the hairline.
+            let phi = p.x.atan2(p.z);
+            let strands = 0.92 + 0.08 * (phi * 70.0 + 40.0 * p.y).sin();
+            let edge = smoothstep(0.0, 0.02, self.hair_off - self.hair_n.dot(p));
+            self.hair * strands * (0.85 + 0.15 * edge)
+        });
         if self.ear.bound(q) < acc.s.d + K_EAR {
             acc.union(self.ear.dist(q), K_EAR, Part::Skin, || {
                 self.skin * Vec3::new(1.0, 0.92, 0.92)
