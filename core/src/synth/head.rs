@@ -951,8 +951,12 @@ impl Model {
                 part: Part::Skin,
             },
         };
-        acc.union(self.jaw.dist(p), K_JAW, Part::Skin, || self.skin);
-        acc.union(self.chin.dist(p), K_CHIN, Part::Skin, || self.skin);
+        if self.jaw.bound(p) < acc.s.d + K_JAW {
+            acc.union(self.jaw.dist(p), K_JAW, Part::Skin, || self.skin);
+        }
+        if self.chin.bound(p) < acc.s.d + K_CHIN {
+            acc.union(self.chin.dist(p), K_CHIN, Part::Skin, || self.skin);
+        }
         if self.cheek.bound(q) < acc.s.d + K_CHEEK {
             acc.union(self.cheek.dist(q), K_CHEEK, Part::Skin, || self.skin);
         }
@@ -1009,18 +1013,18 @@ impl Model {
             if self.lower_lip.bound(p) < acc.s.d + K_LIPS {
                 acc.union(self.lower_lip.dist(p), K_LIPS, Part::Lips, lip_colour);
             }
-            if let Some(cav) = &self.cavity {
-                if cav.bound(p) < K_CAVITY - acc.s.d {
-                    let cavity_colour = || {
-                        let depth = ((self.mouth_c.z - p.z) / 0.02).clamp(0.0, 1.0);
-                        Vec3::new(0.42, 0.10, 0.11) * (1.0 - 0.6 * depth)
-                    };
-                    acc.carve(cav.dist(p), K_CAVITY, Part::Cavity, cavity_colour);
-                    if self.teeth.bound(p) < acc.s.d {
-                        acc.hard_union(self.teeth.dist(p), Part::Teeth, || {
-                            Vec3::new(0.93, 0.91, 0.85)
-                        });
-                    }
+            if let Some(cav) = &self.cavity
+                && cav.bound(p) < K_CAVITY - acc.s.d
+            {
+                let cavity_colour = || {
+                    let depth = ((self.mouth_c.z - p.z) / 0.02).clamp(0.0, 1.0);
+                    Vec3::new(0.42, 0.10, 0.11) * (1.0 - 0.6 * depth)
+                };
+                acc.carve(cav.dist(p), K_CAVITY, Part::Cavity, cavity_colour);
+                if self.teeth.bound(p) < acc.s.d {
+                    acc.hard_union(self.teeth.dist(p), Part::Teeth, || {
+                        Vec3::new(0.93, 0.91, 0.85)
+                    });
                 }
             }
         }
