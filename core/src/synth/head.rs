@@ -771,7 +771,7 @@ impl Model {
         // Eyes, lids and brows, placed on the face at rest.
         let eye_r = h.eye_radius;
         let ez = surface_z(h.eye_spacing, h.eye_height, 0.0);
-        let eye_c = Vec3::new(h.eye_spacing, h.eye_height, ez - 0.5 * eye_r);
+        let eye_c = Vec3::new(h.eye_spacing, h.eye_height, ez - 0.62 * eye_r);
         let up_open = 0.42;
         let down_open = -0.55;
         let meet = -0.15;
@@ -825,13 +825,13 @@ impl Model {
         let y_up = my + 0.3 * gap;
         let y_down = my - 0.7 * gap;
         let upper_lip = Ellipsoid::new(
-            Vec3::new(0.0, y_up + 0.8 * lt, zm - 0.35 * lt),
-            Vec3::new(a, lt, 1.3 * lt),
+            Vec3::new(0.0, y_up + 0.8 * lt, zm - 0.45 * lt),
+            Vec3::new(a, lt, 1.15 * lt),
         );
         let zl = surface_z(0.0, y_down - 0.9 * lt, drop);
         let lower_lip = Ellipsoid::new(
-            Vec3::new(0.0, y_down - 0.9 * lt, zl - 0.3 * lt),
-            Vec3::new(0.95 * a, 1.15 * lt, 1.3 * lt),
+            Vec3::new(0.0, y_down - 0.9 * lt, zl - 0.4 * lt),
+            Vec3::new(0.95 * a, 1.15 * lt, 1.15 * lt),
         );
         let cavity = (gap > 1e-5).then(|| {
             Ellipsoid::new(
