@@ -97,8 +97,13 @@ fn run_synth(args: SynthArgs) -> Result<()> {
         start.elapsed().as_secs_f32(),
         summary.out.display()
     );
-    for f in &summary.files {
-        println!("  {}", f.display());
+    for (path, count) in &summary.files {
+        let path = summary.out.join(path);
+        if *count == 1 {
+            println!("  {}", path.display());
+        } else {
+            println!("  {}/ ({count} files)", path.display());
+        }
     }
     Ok(())
 }

@@ -1,12 +1,65 @@
 //! Audio features: WAV in, AD-NeRF-shaped windows of log-mel frames out, one window of 16
 //! feature frames (50 Hz) per 25 fps video frame. The same function serves training and
 //! rendering.
+//!
+//! The pipeline is fixed and stateless past its input, so that a stream and a file give the
+//! same features: any WAV ([`read_wav`]: mono or stereo, 8 to 32-bit integer or 32-bit
+//! float, any rate) -> mono -> resampled to 16 kHz by windowed sinc ([`resample`]) -> a
+//! 25 ms Hann window every 20 ms -> power spectrum (realfft) -> triangular mel filters ->
+//! `(log10(max(energy, 1e-10)) + 5) / 5` ([`log_mel`]) -> per video frame the 16 feature
+//! frames centred on it ([`audio_windows`]).
+
+use std::f64::consts::PI;
+use std::io::Cursor;
+use std::path::Path;
+
+use realfft::RealFftPlanner;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result, write_atomic};
 
 /// Mono audio samples in [-1, 1] at `sample_rate` Hz.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Waveform {
     pub sample_rate: u32,
     pub samples: Vec<f32>,
+}
+
+impl Waveform {
+    /// Length in seconds.
+    pub fn seconds(&self) -> f64 {
+        self.samples.len() as f64 / self.sample_rate.max(1) as f64
+    }
+
+    /// The first `n` samples (all of them when there are fewer).
+    pub fn truncated(&self, n: usize) -> Waveform {
+        Waveform {
+            sample_rate: self.sample_rate,
+            samples: self.samples[..n.min(self.samples.len())].to_vec(),
+        }
+    }
+
+    /// The waveform as 16-bit PCM would store it: every sample rounded to a multiple of
+    /// 1/32768 and clamped to the 16-bit range, so that features computed from it equal
+    /// those computed from the written file.
+    pub fn quantized_16bit(&self) -> Waveform {
+        Waveform {
+            sample_rate: self.sample_rate,
+            samples: self
+                .samples
+                .iter()
+                .map(|&s| to_i16(s) as f32 / 32768.0)
+                .collect(),
+        }
+    }
+}
+
+fn to_i16(s: f32) -> i16 {
+    if s.is_nan() {
+        0
+    } else {
+        (s * 32768.0).round().clamp(-32768.0, 32767.0) as i16
+    }
 }
 
 /// Audio feature windows, `data` is `[n_frames, window, n_features]` row-major (the layout of
@@ -25,4 +78,331 @@ impl AudioWindows {
         let n = self.window * self.n_features;
         &self.data[f * n..(f + 1) * n]
     }
+}
+
+/// Settings of the log-mel features. The defaults follow common speech front ends (25 ms
+/// windows every 20 ms at 16 kHz, as DeepSpeech's 50 Hz features that AD-NeRF uses) with
+/// AD-NeRF's 16-frame window and its feature count F = 29.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct FeatureConfig {
+    /// Rate every input is resampled to, in Hz.
+    pub sample_rate: u32,
+    /// Samples between feature frames (320 at 16 kHz = 50 Hz).
+    pub hop: usize,
+    /// Hann window length in samples (400 at 16 kHz = 25 ms).
+    pub win: usize,
+    /// FFT length (>= `win`).
+    pub n_fft: usize,
+    /// Number of mel bands, the F of `aud.npy` `[N, 16, F]`.
+    pub n_mels: usize,
+    /// Lowest mel filter edge in Hz.
+    pub f_min: f32,
+    /// Highest mel filter edge in Hz (at most half the sample rate).
+    pub f_max: f32,
+    /// Feature frames per video frame window (AD-NeRF: 16).
+    pub window: usize,
+}
+
+impl Default for FeatureConfig {
+    fn default() -> Self {
+        FeatureConfig {
+            sample_rate: 16_000,
+            hop: 320,
+            win: 400,
+            n_fft: 512,
+            n_mels: 29,
+            f_min: 60.0,
+            f_max: 7600.0,
+            window: 16,
+        }
+    }
+}
+
+impl FeatureConfig {
+    /// Feature frames per second.
+    pub fn feature_rate(&self) -> f64 {
+        self.sample_rate as f64 / self.hop as f64
+    }
+
+    /// Checks that the settings describe a usable front end.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Argument(format!("audio features: {m}")));
+        if self.sample_rate < 1000 || self.hop == 0 || self.win == 0 || self.window == 0 {
+            return bad("sample_rate >= 1000 and positive hop, win and window are required".into());
+        }
+        if self.n_fft < self.win {
+            return bad(format!(
+                "n_fft {} is shorter than win {}",
+                self.n_fft, self.win
+            ));
+        }
+        if self.n_mels == 0 || self.n_mels > self.n_fft / 2 {
+            return bad(format!(
+                "n_mels {} must be in 1..={}",
+                self.n_mels,
+                self.n_fft / 2
+            ));
+        }
+        let nyquist = self.sample_rate as f32 / 2.0;
+        if !(self.f_min >= 0.0 && self.f_max > self.f_min && self.f_max <= nyquist) {
+            return bad(format!(
+                "need 0 <= f_min < f_max <= {nyquist} Hz, got {} and {}",
+                self.f_min, self.f_max
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Reads a WAV file: PCM integer (8, 16, 24 or 32 bit) or 32-bit float, any number of
+/// channels (averaged to mono), any sample rate. Every problem is one error naming the file.
+pub fn read_wav(path: &Path) -> Result<Waveform> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode_wav(&bytes).map_err(|problem| Error::invalid(path, problem))
+}
+
+/// Decodes WAV bytes (see [`read_wav`]); the error is the problem without the file name.
+pub fn decode_wav(bytes: &[u8]) -> std::result::Result<Waveform, String> {
+    if bytes.is_empty() {
+        return Err("empty file, not a WAV file".into());
+    }
+    let reader = hound::WavReader::new(Cursor::new(bytes))
+        .map_err(|e| format!("not a readable WAV file: {e}"))?;
+    let spec = reader.spec();
+    if spec.channels == 0 {
+        return Err("WAV header declares 0 channels".into());
+    }
+    if !(1000..=768_000).contains(&spec.sample_rate) {
+        return Err(format!(
+            "WAV sample rate {} Hz is outside 1000..=768000",
+            spec.sample_rate
+        ));
+    }
+    let channels = spec.channels as usize;
+    let interleaved: Vec<f32> = match spec.sample_format {
+        hound::SampleFormat::Int => {
+            if !(1..=32).contains(&spec.bits_per_sample) {
+                return Err(format!(
+                    "unsupported sample width {} bits",
+                    spec.bits_per_sample
+                ));
+            }
+            let scale = 1.0 / (1u64 << (spec.bits_per_sample - 1)) as f64;
+            reader
+                .into_samples::<i32>()
+                .map(|s| s.map(|v| (v as f64 * scale) as f32))
+                .collect::<std::result::Result<_, _>>()
+        }
+        hound::SampleFormat::Float => reader
+            .into_samples::<f32>()
+            .collect::<std::result::Result<_, _>>(),
+    }
+    .map_err(|e| format!("truncated or unreadable sample data: {e}"))?;
+    if let Some(i) = interleaved.iter().position(|v| !v.is_finite()) {
+        return Err(format!("sample {} is not finite", i / channels));
+    }
+    if interleaved.len() % channels != 0 {
+        return Err("sample data ends inside a frame (truncated)".into());
+    }
+    let samples: Vec<f32> = interleaved
+        .chunks_exact(channels)
+        .map(|c| c.iter().sum::<f32>() / channels as f32)
+        .collect();
+    if samples.is_empty() {
+        return Err("holds no samples".into());
+    }
+    Ok(Waveform {
+        sample_rate: spec.sample_rate,
+        samples,
+    })
+}
+
+/// Writes a mono 16-bit PCM WAV atomically.
+pub fn write_wav(path: &Path, wave: &Waveform) -> Result<()> {
+    let spec = hound::WavSpec {
+        channels: 1,
+        sample_rate: wave.sample_rate,
+        bits_per_sample: 16,
+        sample_format: hound::SampleFormat::Int,
+    };
+    let fail = |e: hound::Error| Error::invalid(path, format!("cannot encode WAV: {e}"));
+    let mut buf = Vec::new();
+    {
+        let mut writer = hound::WavWriter::new(Cursor::new(&mut buf), spec).map_err(fail)?;
+        for &s in &wave.samples {
+            writer.write_sample(to_i16(s)).map_err(fail)?;
+        }
+        writer.finalize().map_err(fail)?;
+    }
+    write_atomic(path, &buf)
+}
+
+/// Zero crossings of the sinc kernel on each side of a resampled point.
+const SINC_ZEROS: f64 = 16.0;
+
+/// Resamples to `rate` Hz with a Hann-windowed sinc low-pass at 0.95 of the lower Nyquist
+/// frequency. The output has `round(n * rate / input_rate)` samples; the input is returned
+/// unchanged when the rates agree. Samples outside the input count as zero.
+pub fn resample(wave: &Waveform, rate: u32) -> Waveform {
+    if wave.sample_rate == rate || wave.samples.is_empty() {
+        return Waveform {
+            sample_rate: rate,
+            samples: wave.samples.clone(),
+        };
+    }
+    let ratio = rate as f64 / wave.sample_rate as f64;
+    let cutoff = 0.95 * 0.5 * ratio.min(1.0); // cycles per input sample
+    let half = SINC_ZEROS / (2.0 * cutoff); // kernel half width in input samples
+    let n_out = (wave.samples.len() as f64 * ratio).round() as usize;
+    let input = &wave.samples;
+    let samples = (0..n_out)
+        .map(|n| {
+            let x = n as f64 / ratio;
+            let lo = ((x - half).ceil().max(0.0)) as usize;
+            let hi = ((x + half).floor() as usize).min(input.len() - 1);
+            let mut acc = 0.0f64;
+            for (k, &s) in input.iter().enumerate().take(hi + 1).skip(lo) {
+                let u = x - k as f64;
+                let arg = 2.0 * cutoff * u;
+                let sinc = if arg.abs() < 1e-12 {
+                    1.0
+                } else {
+                    (PI * arg).sin() / (PI * arg)
+                };
+                let window = 0.5 + 0.5 * (PI * u / half).cos();
+                acc += s as f64 * 2.0 * cutoff * sinc * window;
+            }
+            acc as f32
+        })
+        .collect();
+    Waveform {
+        sample_rate: rate,
+        samples,
+    }
+}
+
+fn hz_to_mel(f: f64) -> f64 {
+    2595.0 * (1.0 + f / 700.0).log10()
+}
+
+fn mel_to_hz(m: f64) -> f64 {
+    700.0 * (10f64.powf(m / 2595.0) - 1.0)
+}
+
+/// Triangular mel filters (HTK mel scale, peak 1), `[n_mels][n_fft / 2 + 1]`.
+fn mel_filters(cfg: &FeatureConfig) -> Vec<Vec<f32>> {
+    let n_bins = cfg.n_fft / 2 + 1;
+    let (lo, hi) = (hz_to_mel(cfg.f_min as f64), hz_to_mel(cfg.f_max as f64));
+    let edges: Vec<f64> = (0..cfg.n_mels + 2)
+        .map(|i| mel_to_hz(lo + (hi - lo) * i as f64 / (cfg.n_mels + 1) as f64))
+        .collect();
+    let bin_hz = cfg.sample_rate as f64 / cfg.n_fft as f64;
+    (0..cfg.n_mels)
+        .map(|m| {
+            let (a, b, c) = (edges[m], edges[m + 1], edges[m + 2]);
+            (0..n_bins)
+                .map(|k| {
+                    let f = k as f64 * bin_hz;
+                    let w = if f <= a || f >= c {
+                        0.0
+                    } else if f <= b {
+                        (f - a) / (b - a)
+                    } else {
+                        (c - f) / (c - b)
+                    };
+                    w as f32
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Number of feature frames of `n_samples` samples (at the feature rate): frame `k` is
+/// centred on sample `k * hop`, and frames are made while that centre lies inside the audio.
+pub fn n_feature_frames(n_samples: usize, cfg: &FeatureConfig) -> usize {
+    n_samples.div_ceil(cfg.hop).max(1)
+}
+
+/// Number of video frames at `fps` in `n_samples` samples at `sample_rate`: every frame
+/// whose whole interval `[i / fps, (i + 1) / fps)` lies inside the audio.
+pub fn n_video_frames(n_samples: usize, sample_rate: u32, fps: f32) -> usize {
+    let seconds = n_samples as f64 / sample_rate.max(1) as f64;
+    // The small slack absorbs rounding of lengths that are whole numbers of frames.
+    (seconds * fps as f64 + 1e-6).floor().max(0.0) as usize
+}
+
+/// Log-mel features of a waveform (resampled to `cfg.sample_rate` first if needed),
+/// `[n_feature_frames, n_mels]` row-major; values are `(log10(max(e, 1e-10)) + 5) / 5`, so
+/// silence is -1 and a full-scale tone is about +0.9. Samples outside the audio count as
+/// zero.
+pub fn log_mel(wave: &Waveform, cfg: &FeatureConfig) -> Result<Vec<f32>> {
+    cfg.validate()?;
+    let wave = resample(wave, cfg.sample_rate);
+    let x = &wave.samples;
+    let filters = mel_filters(cfg);
+    let hann: Vec<f32> = (0..cfg.win)
+        .map(|i| (0.5 - 0.5 * (2.0 * PI * i as f64 / cfg.win as f64).cos()) as f32)
+        .collect();
+    let norm = {
+        let s: f32 = hann.iter().sum();
+        1.0 / (s * s)
+    };
+    let fft = RealFftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft);
+    let mut frame = fft.make_input_vec();
+    let mut spectrum = fft.make_output_vec();
+    let mut power = vec![0.0f32; cfg.n_fft / 2 + 1];
+    let n_frames = n_feature_frames(x.len(), cfg);
+    let mut out = Vec::with_capacity(n_frames * cfg.n_mels);
+    for k in 0..n_frames {
+        let start = (k * cfg.hop) as isize - (cfg.win / 2) as isize;
+        frame.iter_mut().for_each(|v| *v = 0.0);
+        for (i, w) in hann.iter().enumerate() {
+            let s = start + i as isize;
+            if s >= 0 && (s as usize) < x.len() {
+                frame[i] = x[s as usize] * w;
+            }
+        }
+        fft.process(&mut frame, &mut spectrum)
+            .map_err(|e| Error::Argument(format!("FFT failed: {e}")))?;
+        for (p, c) in power.iter_mut().zip(&spectrum) {
+            *p = c.norm_sqr() * norm;
+        }
+        for filter in &filters {
+            let e: f32 = filter.iter().zip(&power).map(|(w, p)| w * p).sum();
+            out.push((e.max(1e-10).log10() + 5.0) / 5.0);
+        }
+    }
+    Ok(out)
+}
+
+/// AD-NeRF-shaped audio windows: for each video frame `i` at `fps` (see [`n_video_frames`]),
+/// the `cfg.window` feature frames centred on time `i / fps`, i.e. feature frames
+/// `round(i * rate / fps) - window / 2 + j`, clamped to the first and last feature frame.
+///
+/// # Shapes
+/// - returns `[n_video_frames, window, n_mels]`
+pub fn audio_windows(wave: &Waveform, fps: f32, cfg: &FeatureConfig) -> Result<AudioWindows> {
+    if !(fps.is_finite() && fps > 0.0) {
+        return Err(Error::Argument(format!("fps must be positive, got {fps}")));
+    }
+    let feats = log_mel(wave, cfg)?;
+    let n_feat = feats.len() / cfg.n_mels;
+    let n_frames = n_video_frames(wave.samples.len(), wave.sample_rate, fps);
+    let per_video_frame = cfg.feature_rate() / fps as f64;
+    let mut data = Vec::with_capacity(n_frames * cfg.window * cfg.n_mels);
+    for i in 0..n_frames {
+        let centre = (i as f64 * per_video_frame).round() as isize;
+        for j in 0..cfg.window {
+            let k = (centre - (cfg.window / 2) as isize + j as isize).clamp(0, n_feat as isize - 1);
+            let k = k as usize;
+            data.extend_from_slice(&feats[k * cfg.n_mels..(k + 1) * cfg.n_mels]);
+        }
+    }
+    Ok(AudioWindows {
+        n_frames,
+        window: cfg.window,
+        n_features: cfg.n_mels,
+        data,
+    })
 }

@@ -10,7 +10,13 @@ use nldf_core::region::Region;
 use nldf_core::synth::{SceneFile, SynthConfig, generate};
 
 fn small(seed: u64, seconds: f32, size: u32) -> SynthConfig {
-    SynthConfig { seed, seconds, size, supersample: 1, ..SynthConfig::default() }
+    SynthConfig {
+        seed,
+        seconds,
+        size,
+        supersample: 1,
+        ..SynthConfig::default()
+    }
 }
 
 fn files_under(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
@@ -22,7 +28,10 @@ fn files_under(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             if path.is_dir() {
                 stack.push(path);
             } else {
-                out.insert(path.strip_prefix(root).unwrap().to_path_buf(), std::fs::read(&path).unwrap());
+                out.insert(
+                    path.strip_prefix(root).unwrap().to_path_buf(),
+                    std::fs::read(&path).unwrap(),
+                );
             }
         }
     }
@@ -48,7 +57,11 @@ fn shared_scene() -> &'static Path {
 #[test]
 fn same_seed_gives_identical_files_and_another_seed_differs() {
     let dir = tempfile::tempdir().unwrap();
-    let (a, b, c) = (dir.path().join("a"), dir.path().join("b"), dir.path().join("c"));
+    let (a, b, c) = (
+        dir.path().join("a"),
+        dir.path().join("b"),
+        dir.path().join("c"),
+    );
     generate(&small(1, 2.0, 32), None, &a, false, &|| {}).unwrap();
     generate(&small(1, 2.0, 32), None, &b, false, &|| {}).unwrap();
     generate(&small(2, 2.0, 32), None, &c, false, &|| {}).unwrap();
@@ -56,15 +69,29 @@ fn same_seed_gives_identical_files_and_another_seed_differs() {
     assert!(fa.len() >= 6 + 3 * 50, "{} files", fa.len());
     assert_eq!(fa.keys().collect::<Vec<_>>(), fb.keys().collect::<Vec<_>>());
     for (name, bytes) in &fa {
-        assert!(bytes == &fb[name], "{} differs between two runs with one seed", name.display());
+        assert!(
+            bytes == &fb[name],
+            "{} differs between two runs with one seed",
+            name.display()
+        );
     }
     for name in ["aud.wav", "bc.png", "head_imgs/0.png", "aud.npy"] {
-        assert_ne!(fa[Path::new(name)], fc[Path::new(name)], "{name} is the same for two seeds");
+        assert_ne!(
+            fa[Path::new(name)],
+            fc[Path::new(name)],
+            "{name} is the same for two seeds"
+        );
     }
-    let (sa, sc) = (SceneFile::load(&a.join("scene.json")).unwrap(), SceneFile::load(&c.join("scene.json")).unwrap());
+    let (sa, sc) = (
+        SceneFile::load(&a.join("scene.json")).unwrap(),
+        SceneFile::load(&c.join("scene.json")).unwrap(),
+    );
     assert_ne!(sa.head, sc.head);
     // No staging folder is left beside the output.
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(leftovers.len(), 3, "{leftovers:?}");
 }
 
@@ -76,12 +103,21 @@ fn existing_output_is_kept_unless_forced() {
     std::fs::write(out.join("keep.txt"), "mine").unwrap();
     let err = generate(&small(0, 1.0, 16), None, &out, false, &|| {}).unwrap_err();
     assert!(err.to_string().contains("not empty"), "{err}");
-    assert_eq!(std::fs::read_to_string(out.join("keep.txt")).unwrap(), "mine");
+    assert_eq!(
+        std::fs::read_to_string(out.join("keep.txt")).unwrap(),
+        "mine"
+    );
     generate(&small(0, 1.0, 16), None, &out, true, &|| {}).unwrap();
     assert!(!out.join("keep.txt").exists() && out.join("scene.json").exists());
     // An earlier synthetic scene is replaced without --force.
     generate(&small(3, 1.0, 16), None, &out, false, &|| {}).unwrap();
-    assert_eq!(SceneFile::load(&out.join("scene.json")).unwrap().config.seed, 3);
+    assert_eq!(
+        SceneFile::load(&out.join("scene.json"))
+            .unwrap()
+            .config
+            .seed,
+        3
+    );
 }
 
 #[test]
@@ -102,7 +138,9 @@ fn synthetic_dataset_loads_back() {
     let head = regions.iter().filter(|r| r.is_head()).count();
     assert!(head > 64 * 64 / 8, "head covers {head} pixels");
     // Background pixels are the background image; depth is zero exactly there.
-    let depth = image::open(root.join(format!("depth/{}.png", frame.img_id))).unwrap().into_luma16();
+    let depth = image::open(root.join(format!("depth/{}.png", frame.img_id)))
+        .unwrap()
+        .into_luma16();
     for (p, r) in regions.iter().enumerate() {
         let (i, j) = ((p % 64) as u32, (p / 64) as u32);
         let d = depth.get_pixel(i, j)[0] as f32 / scene.depth_scale;
@@ -133,7 +171,10 @@ fn mouth_opening_follows_the_loudness_of_the_audio() {
     // The loudness envelope straight from aud.wav: RMS of each 1/25 s.
     let mut reader = hound::WavReader::open(root.join("aud.wav")).unwrap();
     let rate = reader.spec().sample_rate as usize;
-    let samples: Vec<f64> = reader.samples::<i16>().map(|s| s.unwrap() as f64 / 32768.0).collect();
+    let samples: Vec<f64> = reader
+        .samples::<i16>()
+        .map(|s| s.unwrap() as f64 / 32768.0)
+        .collect();
     let per_frame = rate / 25;
     let rms: Vec<f64> = (0..scene.frames.len())
         .map(|f| {
@@ -144,7 +185,10 @@ fn mouth_opening_follows_the_loudness_of_the_audio() {
     let open: Vec<f64> = scene.frames.iter().map(|f| f.mouth_open as f64).collect();
     let r = pearson(&open, &rms);
     eprintln!("Pearson r(mouth_open, RMS) = {r:.3}");
-    assert!(r > 0.8, "mouth opening correlates with loudness at only {r:.3}");
+    assert!(
+        r > 0.8,
+        "mouth opening correlates with loudness at only {r:.3}"
+    );
 }
 
 #[test]
@@ -154,21 +198,38 @@ fn a_loud_frame_and_a_silent_frame_differ_at_the_mouth() {
     let scene = SceneFile::load(&root.join("scene.json")).unwrap();
     let frames: Vec<_> = ds.train.iter().chain(&ds.val).collect();
     let by_loudness = |f: &&nldf_core::dataset::Frame| scene.frames[f.img_id as usize].loudness;
-    let loud = frames.iter().max_by(|a, b| by_loudness(a).total_cmp(&by_loudness(b))).unwrap();
-    let quiet = frames.iter().min_by(|a, b| by_loudness(a).total_cmp(&by_loudness(b))).unwrap();
+    let loud = frames
+        .iter()
+        .max_by(|a, b| by_loudness(a).total_cmp(&by_loudness(b)))
+        .unwrap();
+    let quiet = frames
+        .iter()
+        .min_by(|a, b| by_loudness(a).total_cmp(&by_loudness(b)))
+        .unwrap();
     assert!(scene.frames[quiet.img_id as usize].mouth_open < 0.1);
     assert!(scene.frames[loud.img_id as usize].mouth_open > 0.5);
     let mouth = |f: &nldf_core::dataset::Frame| {
         let regions = ds.load_regions(f).unwrap().unwrap();
         let img = ds.load_image(f).unwrap();
-        let pixels: Vec<[f32; 3]> =
-            (0..regions.len()).filter(|&p| regions[p] == Region::Mouth).map(|p| img.get((p % 64) as u32, (p / 64) as u32)).collect();
-        let luma = pixels.iter().map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2]).sum::<f32>();
+        let pixels: Vec<[f32; 3]> = (0..regions.len())
+            .filter(|&p| regions[p] == Region::Mouth)
+            .map(|p| img.get((p % 64) as u32, (p / 64) as u32))
+            .collect();
+        let luma = pixels
+            .iter()
+            .map(|c| 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2])
+            .sum::<f32>();
         (pixels.len(), luma / pixels.len().max(1) as f32)
     };
     let (n_loud, luma_loud) = mouth(loud);
     let (n_quiet, luma_quiet) = mouth(quiet);
     eprintln!("mouth pixels {n_quiet} -> {n_loud}, mean luma {luma_quiet:.3} -> {luma_loud:.3}");
-    assert!(n_loud as f32 > 1.3 * n_quiet as f32, "the open mouth is not larger: {n_quiet} -> {n_loud}");
-    assert!(luma_loud < luma_quiet - 0.03, "the open mouth is not darker: {luma_quiet} -> {luma_loud}");
+    assert!(
+        n_loud as f32 > 1.3 * n_quiet as f32,
+        "the open mouth is not larger: {n_quiet} -> {n_loud}"
+    );
+    assert!(
+        luma_loud < luma_quiet - 0.03,
+        "the open mouth is not darker: {luma_quiet} -> {luma_loud}"
+    );
 }

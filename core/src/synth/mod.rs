@@ -1,6 +1,577 @@
 //! The synthetic talking head: a procedural head rendered by sphere tracing a signed distance
 //! field, with a mouth driven by its own speech-like audio, written as an AD-NeRF dataset
 //! whose ground truth (mouth opening, blink, head pose, depth) is known exactly.
+//!
+//! [`generate`] draws everything random up front from the seed (head, background, voice,
+//! blinks, head motion; one ChaCha stream each, so that `--audio` leaves the head as it
+//! was), renders the frames in parallel, and writes the dataset into a staging folder that
+//! replaces the output only once it is complete.
 
 pub mod head;
 pub mod speech;
+
+use std::f32::consts::PI;
+use std::path::{Path, PathBuf};
+
+use glam::{EulerRot, Mat4, Quat, Vec3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::audio::{FeatureConfig, Waveform, audio_windows, resample, write_wav};
+use crate::camera::{Camera, Intrinsics, look_at};
+use crate::dataset::{FrameEntry, Split, TransformsFile, save_audio_npy, save_regions_png};
+use crate::error::{Error, Result, write_atomic};
+use crate::image::save_png_bytes;
+use crate::rays::Rect;
+use crate::region::Region;
+use head::{FaceState, HeadParams, head_bounds, render_background, render_head};
+use speech::{MouthFrame, Voice, blink_track, mouth_track, synthesize_speech};
+
+/// Depth PNGs store `t * DEPTH_SCALE` as 16-bit integers (0 where the ray misses).
+pub const DEPTH_SCALE: f32 = 10_000.0;
+
+/// Settings of the synthetic scene. Defaults: 12 s of 128 x 128 video at 25 fps (AD-NeRF's
+/// frame rate), the camera 1 unit from a head about 0.25 units tall (AD-NeRF's world scale).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SynthConfig {
+    /// Seed of the head's look, its voice, its blinks and its motion.
+    pub seed: u64,
+    /// Length in seconds.
+    pub seconds: f32,
+    /// Image width and height in pixels.
+    pub size: u32,
+    /// Sub-pixel rays per pixel along each axis (anti-aliasing; 1 = one ray per pixel).
+    pub supersample: u32,
+    /// Video frame rate.
+    pub fps: f32,
+    /// Focal length in pixels for a 128-pixel image (scales with `size`).
+    pub focal_at_128: f32,
+    /// Distance of the camera from the head's centre.
+    pub camera_distance: f32,
+    /// Largest head turn (yaw) in degrees; pitch and roll follow at 0.6 and 0.4 of it.
+    pub max_yaw_deg: f32,
+    /// Largest head shift along each axis, in head units.
+    pub max_shift: f32,
+    /// Audio features written to `aud.npy`.
+    pub features: FeatureConfig,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        SynthConfig {
+            seed: 0,
+            seconds: 12.0,
+            size: 128,
+            supersample: 3,
+            fps: 25.0,
+            focal_at_128: 330.0,
+            camera_distance: 1.0,
+            max_yaw_deg: 12.0,
+            max_shift: 0.015,
+            features: FeatureConfig::default(),
+        }
+    }
+}
+
+/// Checks that a configuration can be rendered.
+pub fn validate(cfg: &SynthConfig) -> Result<()> {
+    let bad = |m: String| Err(Error::Argument(m));
+    if !(cfg.seconds.is_finite() && cfg.seconds > 0.0 && cfg.seconds <= 3600.0) {
+        return bad(format!(
+            "--seconds must be in (0, 3600], got {}",
+            cfg.seconds
+        ));
+    }
+    if !(16..=2048).contains(&cfg.size) {
+        return bad(format!(
+            "--size must be in 16..=2048 pixels, got {}",
+            cfg.size
+        ));
+    }
+    if !(1..=8).contains(&cfg.supersample) {
+        return bad(format!(
+            "--supersample must be in 1..=8, got {}",
+            cfg.supersample
+        ));
+    }
+    if !(cfg.fps.is_finite() && cfg.fps >= 1.0 && cfg.fps <= 120.0) {
+        return bad(format!("fps must be in [1, 120], got {}", cfg.fps));
+    }
+    if (cfg.seconds * cfg.fps).floor() < 1.0 {
+        return bad(format!(
+            "{} s at {} fps holds no whole video frame",
+            cfg.seconds, cfg.fps
+        ));
+    }
+    let positive = [
+        ("focal_at_128", cfg.focal_at_128),
+        ("camera_distance", cfg.camera_distance),
+    ];
+    for (name, v) in positive {
+        if !(v.is_finite() && v > 0.0) {
+            return bad(format!("{name} must be positive, got {v}"));
+        }
+    }
+    if cfg.camera_distance < 0.5 {
+        return bad(format!(
+            "camera_distance {} puts the camera inside the head's reach (>= 0.5)",
+            cfg.camera_distance
+        ));
+    }
+    for (name, v) in [
+        ("max_yaw_deg", cfg.max_yaw_deg),
+        ("max_shift", cfg.max_shift),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            return bad(format!("{name} must be >= 0, got {v}"));
+        }
+    }
+    if cfg.max_yaw_deg > 45.0 || cfg.max_shift > 0.1 {
+        return bad("head motion is limited to 45 degrees and 0.1 units".into());
+    }
+    cfg.features.validate()
+}
+
+/// The rigid head pose of one frame (head-to-world): rotation then translation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeadPose {
+    /// Turn about +y, degrees.
+    pub yaw_deg: f32,
+    /// Nod about +x, degrees.
+    pub pitch_deg: f32,
+    /// Tilt about +z, degrees.
+    pub roll_deg: f32,
+    /// Shift in world units.
+    pub translation: [f32; 3],
+}
+
+impl HeadPose {
+    /// The head-to-world matrix.
+    pub fn matrix(&self) -> Mat4 {
+        let r = Quat::from_euler(
+            EulerRot::YXZ,
+            self.yaw_deg.to_radians(),
+            self.pitch_deg.to_radians(),
+            self.roll_deg.to_radians(),
+        );
+        Mat4::from_rotation_translation(r, Vec3::from(self.translation))
+    }
+}
+
+/// A slow, smooth head-motion track: each of yaw, pitch, roll and the three shifts is a sum
+/// of three sines of 0.03 to 0.25 Hz with random phases, scaled to its largest value.
+fn pose_track(rng: &mut impl Rng, cfg: &SynthConfig, n_frames: usize) -> Vec<HeadPose> {
+    let mut channel = |amplitude: f32| {
+        let parts: Vec<(f32, f32, f32)> = (0..3)
+            .map(|_| {
+                (
+                    rng.random_range(0.03..0.25f32),
+                    rng.random_range(0.0..2.0 * PI),
+                    rng.random_range(0.3..1.0f32),
+                )
+            })
+            .collect();
+        let total: f32 = parts.iter().map(|p| p.2).sum();
+        (0..n_frames)
+            .map(|i| {
+                let t = i as f32 / cfg.fps;
+                let v: f32 = parts
+                    .iter()
+                    .map(|(f, ph, a)| a * (2.0 * PI * f * t + ph).sin())
+                    .sum();
+                amplitude * v / total
+            })
+            .collect::<Vec<f32>>()
+    };
+    let yaw = channel(cfg.max_yaw_deg);
+    let pitch = channel(0.6 * cfg.max_yaw_deg);
+    let roll = channel(0.4 * cfg.max_yaw_deg);
+    let tx = channel(cfg.max_shift);
+    let ty = channel(cfg.max_shift);
+    let tz = channel(cfg.max_shift);
+    (0..n_frames)
+        .map(|i| HeadPose {
+            yaw_deg: yaw[i],
+            pitch_deg: pitch[i],
+            roll_deg: roll[i],
+            translation: [tx[i], ty[i], tz[i]],
+        })
+        .collect()
+}
+
+/// Per-frame ground truth in `scene.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneFrame {
+    pub img_id: i64,
+    /// Time of the frame's start in seconds.
+    pub time: f32,
+    /// RMS of the frame's audio samples.
+    pub loudness: f32,
+    /// Mouth opening 0..1.
+    pub mouth_open: f32,
+    /// Mouth width 0..1 (0.5 neutral).
+    pub mouth_width: f32,
+    /// Eyelid closure 0..1.
+    pub blink: f32,
+    /// Head-to-world pose; the frame's camera-to-world (in head space) is its inverse times
+    /// the fixed world camera.
+    pub pose: HeadPose,
+}
+
+/// `scene.json`: how the scene was made and its per-frame ground truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneFile {
+    /// Format marker, so that an output folder can be recognised as an earlier scene.
+    pub generator: String,
+    pub config: SynthConfig,
+    pub head: HeadParams,
+    pub voice: Option<Voice>,
+    /// The audio's source: `generated` or the path given with `--audio`.
+    pub audio_source: String,
+    pub intrinsics: Intrinsics,
+    /// Depth PNG value per unit of `t`.
+    pub depth_scale: f32,
+    /// Axis-aligned head bounds in head space (min, max), valid for every face state.
+    pub head_bounds: [[f32; 3]; 2],
+    pub frames: Vec<SceneFrame>,
+}
+
+/// The `generator` value of `scene.json`.
+pub const GENERATOR: &str = "nldf synth 1";
+
+impl SceneFile {
+    /// Reads `scene.json`.
+    pub fn load(path: &Path) -> Result<SceneFile> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+    }
+
+    fn save(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
+        write_atomic(path, text.as_bytes())
+    }
+}
+
+/// What [`generate`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    pub out: PathBuf,
+    pub n_frames: usize,
+    pub n_train: usize,
+    /// The files and folders written, relative to `out`, with the number of files in each
+    /// (1 for a file).
+    pub files: Vec<(PathBuf, usize)>,
+}
+
+/// Whether `out` may be replaced: absent, empty, an earlier scene, or `force`.
+fn check_output(out: &Path, force: bool) -> Result<()> {
+    if !out.exists() {
+        return Ok(());
+    }
+    if !out.is_dir() {
+        return Err(Error::invalid(out, "exists and is not a folder"));
+    }
+    let empty = std::fs::read_dir(out)
+        .map_err(|e| Error::io(out, e))?
+        .next()
+        .is_none();
+    let earlier_scene = SceneFile::load(&out.join("scene.json"))
+        .map(|s| s.generator == GENERATOR)
+        .unwrap_or(false);
+    if empty || earlier_scene || force {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            out,
+            "folder is not empty and holds no earlier synthetic scene; pass --force to replace it",
+        ))
+    }
+}
+
+/// Generates the synthetic scene into `out` (see the module docs). `audio`, when given,
+/// drives the mouth instead of generated speech and is cut to `cfg.seconds`. `tick` is
+/// called once per rendered frame, from any thread. `out` must be absent, empty or an
+/// earlier scene unless `force`; on failure it is left as it was.
+pub fn generate(
+    cfg: &SynthConfig,
+    audio: Option<Waveform>,
+    out: &Path,
+    force: bool,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Summary> {
+    validate(cfg)?;
+    check_output(out, force)?;
+    let name = out
+        .file_name()
+        .ok_or_else(|| Error::invalid(out, "not a folder path"))?
+        .to_string_lossy()
+        .into_owned();
+    let parent = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+    let staging = parent.join(format!(".{name}.staging-{}", std::process::id()));
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging).map_err(|e| Error::io(&staging, e))?;
+    }
+    std::fs::create_dir(&staging).map_err(|e| Error::io(&staging, e))?;
+    let written = write_scene(cfg, audio, &staging, tick);
+    let summary = match written {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&staging);
+            return Err(e);
+        }
+    };
+    let old = parent.join(format!(".{name}.old-{}", std::process::id()));
+    if out.exists() {
+        std::fs::rename(out, &old).map_err(|e| {
+            let _ = std::fs::remove_dir_all(&staging);
+            Error::io(out, e)
+        })?;
+    }
+    if let Err(e) = std::fs::rename(&staging, out) {
+        let _ = std::fs::rename(&old, out);
+        let _ = std::fs::remove_dir_all(&staging);
+        return Err(Error::io(out, e));
+    }
+    if old.exists() {
+        std::fs::remove_dir_all(&old).map_err(|e| Error::io(&old, e))?;
+    }
+    Ok(Summary {
+        out: out.to_path_buf(),
+        ..summary
+    })
+}
+
+/// A sub-stream of the seed, one per random ingredient.
+fn stream(seed: u64, id: u64) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(id);
+    rng
+}
+
+fn write_scene(
+    cfg: &SynthConfig,
+    audio: Option<Waveform>,
+    dir: &Path,
+    tick: &(dyn Fn() + Sync),
+) -> Result<Summary> {
+    let rate = cfg.features.sample_rate;
+    let n_frames = (cfg.seconds * cfg.fps).floor() as usize;
+    let n_samples = (n_frames as f64 * rate as f64 / cfg.fps as f64).round() as usize;
+
+    let head = HeadParams::random(&mut stream(cfg.seed, 1));
+    let background = render_background(&mut stream(cfg.seed, 2), cfg.size, cfg.size);
+    let (voice, audio_source, wave) = match audio {
+        None => {
+            let mut rng = stream(cfg.seed, 3);
+            let voice = Voice::random(&mut rng);
+            let wave = synthesize_speech(&mut rng, &voice, n_samples, rate);
+            (Some(voice), "generated".to_string(), wave)
+        }
+        Some(w) => {
+            let w = resample(&w, rate);
+            if w.samples.len() < n_samples {
+                return Err(Error::Argument(format!(
+                    "the audio lasts {:.2} s, shorter than the {} s asked for",
+                    w.seconds(),
+                    cfg.seconds
+                )));
+            }
+            (None, "file".to_string(), w.truncated(n_samples))
+        }
+    };
+    // Features and the mouth are computed from the audio exactly as aud.wav stores it.
+    let wave = wave.quantized_16bit();
+    let mouth: Vec<MouthFrame> = mouth_track(&wave, cfg.fps, n_frames);
+    let blink = blink_track(&mut stream(cfg.seed, 4), cfg.fps, n_frames);
+    let poses = pose_track(&mut stream(cfg.seed, 5), cfg, n_frames);
+    let windows = audio_windows(&wave, cfg.fps, &cfg.features)?;
+    if windows.n_frames != n_frames {
+        return Err(Error::Argument(format!(
+            "audio features give {} frames for {n_frames} video frames",
+            windows.n_frames
+        )));
+    }
+
+    let s = cfg.size as f32;
+    let intrinsics = Intrinsics {
+        focal: cfg.focal_at_128 * s / 128.0,
+        cx: s / 2.0,
+        cy: s / 2.0,
+        width: cfg.size,
+        height: cfg.size,
+    };
+    let world_camera = look_at(
+        Vec3::new(0.0, 0.0, cfg.camera_distance),
+        Vec3::ZERO,
+        Vec3::Y,
+    );
+    let cameras: Vec<Camera> = poses
+        .iter()
+        .map(|p| Camera {
+            intrinsics,
+            c2w: p.matrix().inverse() * world_camera,
+        })
+        .collect();
+
+    for sub in ["head_imgs", "parsing", "depth"] {
+        let d = dir.join(sub);
+        std::fs::create_dir(&d).map_err(|e| Error::io(&d, e))?;
+    }
+    background.save_png(&dir.join("bc.png"))?;
+    write_wav(&dir.join("aud.wav"), &wave)?;
+    save_audio_npy(&dir.join("aud.npy"), &windows)?;
+
+    let face_rects: Vec<Rect> = (0..n_frames)
+        .into_par_iter()
+        .map(|i| {
+            let state = FaceState {
+                mouth_open: mouth[i].mouth_open,
+                mouth_width: mouth[i].mouth_width,
+                blink: blink[i],
+            };
+            let frame = render_head(&head, &state, &cameras[i], &background, cfg.supersample);
+            frame
+                .rgb
+                .save_png(&dir.join(format!("head_imgs/{i}.png")))?;
+            save_regions_png(
+                &dir.join(format!("parsing/{i}.png")),
+                cfg.size,
+                cfg.size,
+                &frame.regions,
+            )?;
+            let depth: Vec<u8> = frame
+                .depth
+                .iter()
+                .flat_map(|&t| ((t * DEPTH_SCALE).round().clamp(0.0, 65535.0) as u16).to_ne_bytes())
+                .collect();
+            save_png_bytes(
+                &dir.join(format!("depth/{i}.png")),
+                cfg.size,
+                cfg.size,
+                image::ExtendedColorType::L16,
+                &depth,
+            )?;
+            tick();
+            Ok(face_rect(&frame.regions, cfg.size))
+        })
+        .collect::<Result<_>>()?;
+
+    let (near, far) = {
+        let mean = cameras.iter().map(|c| c.origin().length()).sum::<f32>() / n_frames as f32;
+        (mean - 0.2, mean + 0.4)
+    };
+    let entries: Vec<FrameEntry> = (0..n_frames)
+        .map(|i| FrameEntry {
+            img_id: i as i64,
+            aud_id: i as i64,
+            transform_matrix: cameras[i].c2w.transpose().to_cols_array_2d(),
+            face_rect: Some(face_rects[i]),
+            eye: Some(blink[i]),
+        })
+        .collect();
+    let n_train = n_frames * 10 / 11;
+    let n_train = n_train.max(1).min(n_frames);
+    let transforms = |frames: &[FrameEntry]| TransformsFile {
+        focal_len: intrinsics.focal,
+        cx: intrinsics.cx,
+        cy: intrinsics.cy,
+        near: Some(near),
+        far: Some(far),
+        fps: Some(cfg.fps),
+        width: Some(cfg.size),
+        height: Some(cfg.size),
+        frames: frames.to_vec(),
+    };
+    transforms(&entries[..n_train]).save(&dir.join(Split::Train.file_name()))?;
+    transforms(&entries[n_train..]).save(&dir.join(Split::Val.file_name()))?;
+
+    let (lo, hi) = head_bounds(&head);
+    let scene = SceneFile {
+        generator: GENERATOR.to_string(),
+        config: cfg.clone(),
+        head,
+        voice,
+        audio_source,
+        intrinsics,
+        depth_scale: DEPTH_SCALE,
+        head_bounds: [lo.to_array(), hi.to_array()],
+        frames: (0..n_frames)
+            .map(|i| SceneFrame {
+                img_id: i as i64,
+                time: i as f32 / cfg.fps,
+                loudness: mouth[i].loudness,
+                mouth_open: mouth[i].mouth_open,
+                mouth_width: mouth[i].mouth_width,
+                blink: blink[i],
+                pose: poses[i],
+            })
+            .collect(),
+    };
+    scene.save(&dir.join("scene.json"))?;
+
+    let files = [
+        ("transforms_train.json", 1),
+        ("transforms_val.json", 1),
+        ("bc.png", 1),
+        ("aud.wav", 1),
+        ("aud.npy", 1),
+        ("head_imgs", n_frames),
+        ("parsing", n_frames),
+        ("depth", n_frames),
+        ("scene.json", 1),
+    ]
+    .into_iter()
+    .map(|(p, n)| (PathBuf::from(p), n))
+    .collect();
+    Ok(Summary {
+        out: dir.to_path_buf(),
+        n_frames,
+        n_train,
+        files,
+    })
+}
+
+/// The bounding box of the head's pixels, padded by 4 % of the image, or the whole image
+/// when the head is not in view.
+fn face_rect(regions: &[Region], size: u32) -> Rect {
+    let n = size as i64;
+    let (mut x0, mut y0, mut x1, mut y1) = (n, n, -1, -1);
+    for (p, r) in regions.iter().enumerate() {
+        if r.is_head() {
+            let (i, j) = (p as i64 % n, p as i64 / n);
+            x0 = x0.min(i);
+            y0 = y0.min(j);
+            x1 = x1.max(i);
+            y1 = y1.max(j);
+        }
+    }
+    if x1 < 0 {
+        return Rect {
+            x: 0,
+            y: 0,
+            w: n,
+            h: n,
+        };
+    }
+    let pad = (n as f32 * 0.04).ceil() as i64;
+    let r = Rect {
+        x: x0 - pad,
+        y: y0 - pad,
+        w: x1 - x0 + 1 + 2 * pad,
+        h: y1 - y0 + 1 + 2 * pad,
+    };
+    r.clipped(size, size).unwrap_or(Rect {
+        x: 0,
+        y: 0,
+        w: n,
+        h: n,
+    })
+}
