@@ -202,7 +202,7 @@ pub fn decode_wav(bytes: &[u8]) -> std::result::Result<Waveform, String> {
     if let Some(i) = interleaved.iter().position(|v| !v.is_finite()) {
         return Err(format!("sample {} is not finite", i / channels));
     }
-    if interleaved.len() % channels != 0 {
+    if !interleaved.len().is_multiple_of(channels) {
         return Err("sample data ends inside a frame (truncated)".into());
     }
     let samples: Vec<f32> = interleaved
