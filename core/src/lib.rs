@@ -9,6 +9,7 @@
 
 pub mod audio;
 pub mod beam;
+pub mod bounds;
 pub mod camera;
 pub mod composite;
 pub mod dataset;

@@ -2,3 +2,22 @@
 //! the audio-conditioned NeRF teacher, the NLDF light-segment ResMLP student, their losses,
 //! the active beam pool and the trainers, with safetensors checkpoints and their configs.
 //! Builds on nldf-core (rays, beams, data); nldf-export reads what it writes.
+//!
+//! The teacher follows nerfstudio's split: [`sampler`] (where rays are sampled), [`field`]
+//! (the network), [`render`] (compositing), joined by [`teacher`] and trained by
+//! [`trainer`].
+
+pub mod adam;
+pub mod audio_net;
+pub mod checkpoint;
+pub mod config;
+pub mod error;
+pub mod field;
+pub mod log;
+pub mod nn;
+pub mod render;
+pub mod sampler;
+pub mod teacher;
+pub mod trainer;
+
+pub use error::{Error, Result};

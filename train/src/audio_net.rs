@@ -1,0 +1,159 @@
+//! AD-NeRF's audio encoder: [`AudioNet`] turns one window of audio features into a code, and
+//! [`AudioAttNet`] fuses the codes of neighbouring frames with learned attention.
+
+use candle_core::{D, Module, Result, Tensor};
+use candle_nn::{Linear, VarBuilder, linear};
+
+use crate::nn::{Conv1d, conv1d};
+
+use crate::config::AudioConfig;
+
+/// AD-NeRF's LeakyReLU slope.
+const SLOPE: f64 = 0.02;
+
+/// AudioNet: four Conv1d over the window (F -> 32 -> 32 -> 64 -> 64, kernel 3, stride 2,
+/// padding 1, LeakyReLU 0.02) that halve it 16 -> 1, then Linear 64 -> 64, LeakyReLU,
+/// Linear 64 -> dim.
+#[derive(Debug, Clone)]
+pub struct AudioNet {
+    convs: Vec<Conv1d>,
+    fc1: Linear,
+    fc2: Linear,
+}
+
+/// Builds an [`AudioNet`] under `vb` (`convs.{i}`, `fc1`, `fc2`).
+pub fn audio_net(cfg: &AudioConfig, vb: VarBuilder) -> Result<AudioNet> {
+    let channels = [cfg.n_features, 32, 32, 64, 64];
+    let mut convs = Vec::new();
+    for i in 0..4 {
+        convs.push(conv1d(
+            channels[i],
+            channels[i + 1],
+            3,
+            2,
+            1,
+            vb.pp("convs").pp(i),
+        )?);
+    }
+    Ok(AudioNet {
+        convs,
+        fc1: linear(64, 64, vb.pp("fc1"))?,
+        fc2: linear(64, cfg.dim, vb.pp("fc2"))?,
+    })
+}
+
+impl AudioNet {
+    /// The audio code of each window.
+    ///
+    /// # Shapes
+    /// - `windows`: `[n, window, n_features]` (AD-NeRF's `aud.npy` rows; window 16)
+    /// - returns `[n, dim]`
+    pub fn forward(&self, windows: &Tensor) -> Result<Tensor> {
+        let mut x = windows.transpose(1, 2)?.contiguous()?;
+        for conv in &self.convs {
+            x = candle_nn::ops::leaky_relu(&conv.forward(&x)?, SLOPE)?;
+        }
+        // Whatever length is left (1 for a 16-frame window) is averaged away.
+        let x = x.mean(D::Minus1)?;
+        let x = candle_nn::ops::leaky_relu(&self.fc1.forward(&x)?, SLOPE)?;
+        self.fc2.forward(&x)
+    }
+}
+
+/// AudioAttNet: Conv1d over the sequence of codes (dim -> 16 -> 8 -> 4 -> 2 -> 1, kernel 3,
+/// padding 1, LeakyReLU 0.02), Linear(seq, seq) and a softmax give one weight per
+/// neighbouring frame; the fused code is the weighted sum.
+#[derive(Debug, Clone)]
+pub struct AudioAttNet {
+    convs: Vec<Conv1d>,
+    attention: Linear,
+}
+
+/// Builds an [`AudioAttNet`] under `vb` (`convs.{i}`, `attention`).
+pub fn audio_att_net(cfg: &AudioConfig, vb: VarBuilder) -> Result<AudioAttNet> {
+    let channels = [cfg.dim, 16, 8, 4, 2, 1];
+    let mut convs = Vec::new();
+    for i in 0..5 {
+        convs.push(conv1d(
+            channels[i],
+            channels[i + 1],
+            3,
+            1,
+            1,
+            vb.pp("convs").pp(i),
+        )?);
+    }
+    Ok(AudioAttNet {
+        convs,
+        attention: linear(cfg.att_frames, cfg.att_frames, vb.pp("attention"))?,
+    })
+}
+
+impl AudioAttNet {
+    /// Fuses the codes of each sequence of neighbouring frames.
+    ///
+    /// # Shapes
+    /// - `codes`: `[n, seq, dim]` (seq = `att_frames`)
+    /// - returns `[n, dim]`
+    pub fn forward(&self, codes: &Tensor) -> Result<Tensor> {
+        let (n, seq, _dim) = codes.dims3()?;
+        let mut y = codes.transpose(1, 2)?.contiguous()?;
+        for conv in &self.convs {
+            y = candle_nn::ops::leaky_relu(&conv.forward(&y)?, SLOPE)?;
+        }
+        let y = self.attention.forward(&y.reshape((n, seq))?)?;
+        let weights = candle_nn::ops::softmax(&y, D::Minus1)?;
+        codes.broadcast_mul(&weights.unsqueeze(2)?)?.sum(1)
+    }
+}
+
+/// The audio encoder: AudioNet, and AudioAttNet once it is switched on.
+#[derive(Debug, Clone)]
+pub struct AudioEncoder {
+    pub net: AudioNet,
+    pub att: AudioAttNet,
+    pub cfg: AudioConfig,
+}
+
+/// Builds an [`AudioEncoder`] under `vb` (`net`, `att`).
+pub fn audio_encoder(cfg: &AudioConfig, vb: VarBuilder) -> Result<AudioEncoder> {
+    Ok(AudioEncoder {
+        net: audio_net(cfg, vb.pp("net"))?,
+        att: audio_att_net(cfg, vb.pp("att"))?,
+        cfg: cfg.clone(),
+    })
+}
+
+impl AudioEncoder {
+    /// Codes of `n` frames from their neighbourhoods: with attention, the `att_frames`
+    /// windows around each frame are encoded and fused; without, only the centre window
+    /// (index `att_frames / 2`) is encoded.
+    ///
+    /// # Shapes
+    /// - `neighbourhoods`: `[n, att_frames, window, n_features]`
+    /// - returns `[n, dim]`
+    pub fn forward(&self, neighbourhoods: &Tensor, attention: bool) -> Result<Tensor> {
+        let (n, seq, window, f) = neighbourhoods.dims4()?;
+        if attention {
+            let codes = self
+                .net
+                .forward(&neighbourhoods.reshape((n * seq, window, f))?)?;
+            self.att.forward(&codes.reshape((n, seq, self.cfg.dim))?)
+        } else {
+            let centre = neighbourhoods.narrow(1, seq / 2, 1)?.squeeze(1)?;
+            self.net.forward(&centre.contiguous()?)
+        }
+    }
+}
+
+/// The neighbourhood of frame `f`: the windows of frames `f - seq/2 .. f + seq/2`, clamped to
+/// `[0, n_frames)` (AD-NeRF's `smo_size` windows), as flat `[seq, window, n_features]`.
+pub fn neighbourhood(audio: &nldf_core::audio::AudioWindows, f: usize, seq: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(seq * audio.window * audio.n_features);
+    for s in 0..seq {
+        let g =
+            (f as isize + s as isize - (seq / 2) as isize).clamp(0, audio.n_frames as isize - 1);
+        out.extend_from_slice(audio.frame(g as usize));
+    }
+    out
+}

@@ -1,0 +1,99 @@
+//! Checkpoints: the weights (`model.safetensors`), the optimizer state
+//! (`train_state.safetensors`) and the resolved `config.json`, each written atomically
+//! (temporary file, then rename). Both safetensors files carry the step in their metadata so
+//! that a resume can tell they belong together.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use candle_nn::VarMap;
+use nldf_core::error::write_atomic;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::error::{Error, Result};
+use crate::nn::sorted_vars;
+
+/// File names inside a stage folder (`runs/<name>/teacher/`).
+pub const MODEL_FILE: &str = "model.safetensors";
+pub const STATE_FILE: &str = "train_state.safetensors";
+pub const CONFIG_FILE: &str = "config.json";
+
+/// Writes named tensors with string metadata to `path` atomically.
+pub fn save_tensors(
+    path: &Path,
+    tensors: &HashMap<String, Tensor>,
+    metadata: HashMap<String, String>,
+) -> Result<()> {
+    let mut entries: Vec<(&String, &Tensor)> = tensors.iter().collect();
+    entries.sort_by(|a, b| a.0.cmp(b.0));
+    let bytes = safetensors::serialize(entries, Some(metadata))
+        .map_err(|e| Error::invalid(path, format!("cannot serialise tensors: {e}")))?;
+    Ok(write_atomic(path, &bytes)?)
+}
+
+/// Reads a safetensors file: its tensors (f32 on the CPU) and its metadata.
+pub fn load_tensors(path: &Path) -> Result<(HashMap<String, Tensor>, HashMap<String, String>)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    let metadata = meta.metadata().clone().unwrap_or_default();
+    let tensors = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)
+        .map_err(|e| Error::invalid(path, format!("unreadable tensors: {e}")))?;
+    Ok((tensors, metadata))
+}
+
+/// The weights of `varmap` as named tensors.
+pub fn weights(varmap: &VarMap) -> Result<HashMap<String, Tensor>> {
+    Ok(sorted_vars(varmap)?
+        .into_iter()
+        .map(|(k, v)| (k, v.as_tensor().clone()))
+        .collect())
+}
+
+/// Sets every variable of `varmap` from `tensors`, checking names and shapes.
+pub fn restore_weights(
+    path: &Path,
+    varmap: &VarMap,
+    tensors: &HashMap<String, Tensor>,
+) -> Result<()> {
+    for (name, var) in sorted_vars(varmap)? {
+        let t = tensors
+            .get(&name)
+            .ok_or_else(|| Error::invalid(path, format!("lacks weight `{name}`")))?;
+        if t.dims() != var.dims() {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "weight `{name}` has shape {:?}, the model expects {:?} (was it trained with another config?)",
+                    t.dims(),
+                    var.dims()
+                ),
+            ));
+        }
+        var.set(&t.to_dtype(candle_core::DType::F32)?)?;
+    }
+    Ok(())
+}
+
+/// Writes a JSON file atomically, pretty-printed.
+pub fn save_json(path: &Path, value: &impl Serialize) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
+    Ok(write_atomic(path, text.as_bytes())?)
+}
+
+/// Reads a JSON file.
+pub fn load_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+}
+
+/// The `step` entry of a checkpoint's metadata.
+pub fn step_of(path: &Path, metadata: &HashMap<String, String>) -> Result<usize> {
+    metadata
+        .get("step")
+        .and_then(|s| s.parse().ok())
+        .ok_or_else(|| Error::invalid(path, "metadata lacks the training step"))
+}

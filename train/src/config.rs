@@ -1,0 +1,196 @@
+//! Serde configurations of the teacher and its trainer, with documented defaults and presets
+//! that say which anchor they follow. The resolved configuration is saved beside every
+//! checkpoint as `config.json` and read back by later stages.
+
+use serde::{Deserialize, Serialize};
+
+/// The audio encoder (AD-NeRF's AudioNet and AudioAttNet).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct AudioConfig {
+    /// Features per audio frame, the F of `aud.npy` `[N, 16, F]` (set from the data).
+    pub n_features: usize,
+    /// Feature frames per window (AD-NeRF: 16).
+    pub window: usize,
+    /// Width of the audio code (AD-NeRF: 64).
+    pub dim: usize,
+    /// Neighbouring frames fused by AudioAttNet (AD-NeRF: 8).
+    pub att_frames: usize,
+}
+
+impl Default for AudioConfig {
+    fn default() -> Self {
+        AudioConfig {
+            n_features: 29,
+            window: 16,
+            dim: 64,
+            att_frames: 8,
+        }
+    }
+}
+
+/// The audio-conditioned NeRF teacher: network shape and sampling.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TeacherConfig {
+    pub audio: AudioConfig,
+    /// Hidden layers of the density trunk (AD-NeRF: 8).
+    pub depth: usize,
+    /// Width of the density trunk (AD-NeRF: 256).
+    pub width: usize,
+    /// Trunk layers after which the input is fed in again (AD-NeRF: [4]).
+    pub skips: Vec<usize>,
+    /// Width of the colour head (AD-NeRF: 128).
+    pub color_width: usize,
+    /// Positional-encoding frequencies of points (AD-NeRF: 10).
+    pub pos_freqs: usize,
+    /// Positional-encoding frequencies of view directions (AD-NeRF: 4).
+    pub dir_freqs: usize,
+    /// Stratified samples per ray inside the head's bounds (AD-NeRF: 64 over [near, far]).
+    pub n_samples: usize,
+    /// Importance samples per ray drawn from the coarse weights and evaluated by the same
+    /// network (AD-NeRF: 128 with a second, fine network; 0 = none).
+    pub n_importance: usize,
+    /// Margin added around the head's bounds, as a fraction of their size.
+    pub bounds_margin: f32,
+    /// Transmittance below which a ray stops being sampled when rendering.
+    pub min_transmittance: f32,
+}
+
+impl Default for TeacherConfig {
+    fn default() -> Self {
+        TeacherConfig::small()
+    }
+}
+
+impl TeacherConfig {
+    /// AD-NeRF's head NeRF: 8 x 256 with a skip at layer 4, 10 / 4 frequencies, 64 samples
+    /// plus 128 importance samples (AD-NeRF uses a separate fine network; nldf reuses one).
+    pub fn ad_nerf() -> TeacherConfig {
+        TeacherConfig {
+            audio: AudioConfig::default(),
+            depth: 8,
+            width: 256,
+            skips: vec![4],
+            color_width: 128,
+            pos_freqs: 10,
+            dir_freqs: 4,
+            n_samples: 64,
+            n_importance: 128,
+            bounds_margin: 0.05,
+            min_transmittance: 1e-4,
+        }
+    }
+
+    /// A preset for 2-core machines: 6 x 128 with a skip at 3 (the JAX probe of DESIGN.md
+    /// section 8 used 6 x 128), 32 samples inside the head's bounds, no importance samples.
+    pub fn small() -> TeacherConfig {
+        TeacherConfig {
+            depth: 6,
+            width: 128,
+            skips: vec![3],
+            color_width: 64,
+            n_samples: 32,
+            n_importance: 0,
+            ..TeacherConfig::ad_nerf()
+        }
+    }
+
+    /// A tiny network for tests (seconds per hundred steps).
+    pub fn tiny() -> TeacherConfig {
+        TeacherConfig {
+            audio: AudioConfig {
+                dim: 8,
+                ..AudioConfig::default()
+            },
+            depth: 2,
+            width: 32,
+            skips: vec![1],
+            color_width: 16,
+            pos_freqs: 6,
+            dir_freqs: 2,
+            n_samples: 16,
+            n_importance: 0,
+            ..TeacherConfig::ad_nerf()
+        }
+    }
+
+    /// Width of the encoded point, `3 (1 + 2 L)`.
+    pub fn pos_dim(&self) -> usize {
+        3 * (1 + 2 * self.pos_freqs)
+    }
+
+    /// Width of the encoded view direction.
+    pub fn dir_dim(&self) -> usize {
+        3 * (1 + 2 * self.dir_freqs)
+    }
+}
+
+/// How the teacher is trained.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrainConfig {
+    /// Seed of the ray batches and the initial weights.
+    pub seed: u64,
+    /// Training steps.
+    pub iters: usize,
+    /// Rays per step (AD-NeRF: 2048 from one frame).
+    pub batch_rays: usize,
+    /// Frames each step draws its rays from (AD-NeRF: 1).
+    pub frames_per_batch: usize,
+    /// Fraction of rays inside `face_rect` (AD-NeRF: 0.95).
+    pub face_fraction: f32,
+    /// Adam learning rate at step 0 (AD-NeRF: 5e-4).
+    pub lr: f64,
+    /// Steps over which the learning rate decays by 10x (AD-NeRF: 500k; shorter runs here).
+    pub lr_decay_steps: usize,
+    /// Step from which AudioAttNet fuses neighbouring frames (AD-NeRF: 200k of ~400k).
+    pub att_start: usize,
+    /// AudioAttNet's learning rate as a multiple of `lr` (AD-NeRF: 5).
+    pub att_lr_scale: f64,
+    /// Adam's first-moment decay.
+    pub beta1: f64,
+    /// Adam's second-moment decay.
+    pub beta2: f64,
+    /// Adam's epsilon.
+    pub eps: f64,
+    /// Steps between lines of `log.csv`.
+    pub log_every: usize,
+    /// Steps between validations (0: only at the end).
+    pub val_every: usize,
+    /// Validation frames rendered each time (spread evenly over the split).
+    pub val_frames: usize,
+    /// Steps between checkpoints (also written at the end and on Ctrl-C).
+    pub checkpoint_every: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        TrainConfig {
+            seed: 0,
+            iters: 6000,
+            batch_rays: 1024,
+            frames_per_batch: 4,
+            face_fraction: 0.95,
+            lr: 5e-4,
+            lr_decay_steps: 20_000,
+            att_start: 3000,
+            att_lr_scale: 5.0,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            log_every: 20,
+            val_every: 500,
+            val_frames: 4,
+            checkpoint_every: 500,
+        }
+    }
+}
+
+/// Everything a teacher run needs, as saved in `config.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default)]
+pub struct TeacherRunConfig {
+    pub model: TeacherConfig,
+    pub train: TrainConfig,
+}

@@ -1,0 +1,218 @@
+//! The teacher: audio encoder + field, rendered through the sampler and the compositor.
+//! Holds the glue that turns rays, frames and a background into pixel colours.
+
+use candle_core::{Device, Result, Tensor};
+use candle_nn::VarBuilder;
+use nldf_core::encoding::{encode_positions, encoded_len};
+use nldf_core::rays::Rays;
+use rayon::prelude::*;
+
+use crate::audio_net::{AudioEncoder, audio_encoder};
+use crate::config::TeacherConfig;
+use crate::field::{TeacherField, teacher_field};
+use crate::render::composite;
+use crate::sampler::{RaySamples, sample_stratified};
+use nldf_core::bounds::Bounds;
+
+/// The audio-conditioned NeRF teacher.
+#[derive(Debug, Clone)]
+pub struct Teacher {
+    pub cfg: TeacherConfig,
+    pub audio: AudioEncoder,
+    pub field: TeacherField,
+}
+
+/// Builds a [`Teacher`] under `vb` (`audio`, `field`).
+pub fn teacher(cfg: &TeacherConfig, vb: VarBuilder) -> Result<Teacher> {
+    Ok(Teacher {
+        cfg: cfg.clone(),
+        audio: audio_encoder(&cfg.audio, vb.pp("audio"))?,
+        field: teacher_field(cfg, vb.pp("field"))?,
+    })
+}
+
+/// Positional encoding of `n` 3-vectors, in parallel.
+///
+/// # Shapes
+/// - `values`: `[n, 3]` flat; returns `[n, 3 (1 + 2 n_freqs)]`
+pub fn encode_vectors(values: &[f32], n_freqs: usize) -> Matrix {
+    let width = encoded_len(3, n_freqs);
+    let n = values.len() / 3;
+    let mut out = vec![0.0f32; n * width];
+    out.par_chunks_mut(width * 256)
+        .zip(values.par_chunks(3 * 256))
+        .for_each(|(o, v)| {
+            for (o, v) in o.chunks_mut(width).zip(v.chunks(3)) {
+                encode_positions(v, n_freqs, o);
+            }
+        });
+    Matrix {
+        data: out,
+        n,
+        width,
+    }
+}
+
+/// A flat row-major matrix ready to become a tensor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Matrix {
+    pub data: Vec<f32>,
+    pub n: usize,
+    pub width: usize,
+}
+
+impl Matrix {
+    /// As a `[n, width]` tensor.
+    pub fn tensor(self) -> Result<Tensor> {
+        Tensor::from_vec(self.data, (self.n, self.width), &Device::Cpu)
+    }
+}
+
+/// What rendering a batch of rays gives.
+#[derive(Debug, Clone)]
+pub struct RayColors {
+    /// Indices of the rays that hit the head's bounds.
+    pub hit: Vec<usize>,
+    /// `[n_hit, 3]`: colours of the rays that hit (the others are their background).
+    pub color: Tensor,
+    /// `[n_hit, n_samples]`: sample weights.
+    pub weights: Tensor,
+    /// The samples (positions, `t`, spacings).
+    pub samples: RaySamples,
+}
+
+impl Teacher {
+    /// Renders rays: samples inside `bounds`, queries the field with each ray's audio code,
+    /// composites over the ray's background. With `rng`, samples are jittered (training).
+    ///
+    /// # Shapes
+    /// - `rays`: `n_rays` rays; `background`: `[n_rays, 3]` flat
+    /// - `codes`: `[n_frames, audio_dim]`; `frame_of_ray`: `[n_rays]` indices into `codes`
+    #[allow(clippy::too_many_arguments)]
+    pub fn render(
+        &self,
+        rays: &Rays,
+        background: &[f32],
+        codes: &Tensor,
+        frame_of_ray: &[u32],
+        bounds: &Bounds,
+        near: f32,
+        far: f32,
+        rng: Option<&mut dyn rand::RngCore>,
+    ) -> Result<RayColors> {
+        let n_samples = self.cfg.n_samples;
+        let samples = sample_stratified(rays, bounds, near, far, n_samples, rng);
+        let n_hit = samples.hit.len();
+        let dev = Device::Cpu;
+        if n_hit == 0 {
+            return Ok(RayColors {
+                hit: vec![],
+                color: Tensor::zeros((0, 3), candle_core::DType::F32, &dev)?,
+                weights: Tensor::zeros((0, n_samples), candle_core::DType::F32, &dev)?,
+                samples,
+            });
+        }
+        let points = encode_vectors(&samples.points, self.cfg.pos_freqs).tensor()?;
+        let dirs = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs).tensor()?;
+        let ray_frames: Vec<u32> = samples.hit.iter().map(|&r| frame_of_ray[r]).collect();
+        let ray_frames = Tensor::from_vec(ray_frames, n_hit, &dev)?;
+        let ray_codes = codes.index_select(&ray_frames, 0)?;
+        let (densities, colors) = self.field.forward(&points, &ray_codes, &dirs, n_samples)?;
+        let deltas = Tensor::from_slice(&samples.deltas, (n_hit, n_samples), &dev)?;
+        let bg: Vec<f32> = samples
+            .hit
+            .iter()
+            .flat_map(|&r| background[3 * r..3 * r + 3].iter().copied())
+            .collect();
+        let bg = Tensor::from_vec(bg, (n_hit, 3), &dev)?;
+        let out = composite(&densities, &deltas, &colors, &bg)?;
+        Ok(RayColors {
+            hit: samples.hit.clone(),
+            color: out.color,
+            weights: out.weights,
+            samples,
+        })
+    }
+}
+
+/// Rays rendered together by [`Teacher::render_eval`].
+const EVAL_CHUNK: usize = 4096;
+
+impl Teacher {
+    /// Renders rays for display or scoring: no jitter; samples are evaluated front to back in
+    /// four groups, and a ray leaves once its transmittance falls below
+    /// `cfg.min_transmittance`; rays that miss the bounds are their background.
+    ///
+    /// # Shapes
+    /// - `background`: `[n_rays, 3]` flat; `code`: `[1, audio_dim]`
+    /// - returns `[n_rays, 3]` flat
+    pub fn render_eval(
+        &self,
+        rays: &Rays,
+        background: &[f32],
+        code: &Tensor,
+        bounds: &Bounds,
+        near: f32,
+        far: f32,
+    ) -> Result<Vec<f32>> {
+        let n_samples = self.cfg.n_samples;
+        let samples = sample_stratified(rays, bounds, near, far, n_samples, None);
+        let mut out = background.to_vec();
+        let group = n_samples.div_ceil(4);
+        let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
+        for chunk_start in (0..samples.hit.len()).step_by(EVAL_CHUNK) {
+            let chunk: Vec<usize> =
+                (chunk_start..(chunk_start + EVAL_CHUNK).min(samples.hit.len())).collect();
+            let mut color = vec![[0.0f32; 3]; chunk.len()];
+            let mut trans = vec![1.0f32; chunk.len()];
+            for g0 in (0..n_samples).step_by(group) {
+                let g1 = (g0 + group).min(n_samples);
+                let g = g1 - g0;
+                let active: Vec<usize> = (0..chunk.len())
+                    .filter(|&a| trans[a] >= self.cfg.min_transmittance)
+                    .collect();
+                if active.is_empty() {
+                    break;
+                }
+                let mut points = Vec::with_capacity(active.len() * g * 3);
+                let mut dirs = Vec::with_capacity(active.len() * dirs_all.width);
+                for &a in &active {
+                    let h = chunk[a];
+                    points.extend_from_slice(
+                        &samples.points[3 * (h * n_samples + g0)..3 * (h * n_samples + g1)],
+                    );
+                    dirs.extend_from_slice(
+                        &dirs_all.data[h * dirs_all.width..(h + 1) * dirs_all.width],
+                    );
+                }
+                let points = encode_vectors(&points, self.cfg.pos_freqs).tensor()?;
+                let dirs = Tensor::from_vec(dirs, (active.len(), dirs_all.width), &Device::Cpu)?;
+                let codes = code
+                    .broadcast_as((active.len(), code.dim(1)?))?
+                    .contiguous()?;
+                let (densities, colors) = self.field.forward(&points, &codes, &dirs, g)?;
+                let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
+                let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
+                for (k, &a) in active.iter().enumerate() {
+                    let h = chunk[a];
+                    for s in 0..g {
+                        let sigma = densities[k * g + s].max(0.0);
+                        let tau = sigma * samples.deltas[h * n_samples + g0 + s];
+                        let w = trans[a] * -(-tau).exp_m1();
+                        for c in 0..3 {
+                            color[a][c] += w * colors[3 * (k * g + s) + c];
+                        }
+                        trans[a] *= (-tau).exp();
+                    }
+                }
+            }
+            for (a, &h) in chunk.iter().enumerate() {
+                let r = samples.hit[h];
+                for c in 0..3 {
+                    out[3 * r + c] = color[a][c] + trans[a] * background[3 * r + c];
+                }
+            }
+        }
+        Ok(out)
+    }
+}

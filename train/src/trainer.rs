@@ -1,0 +1,482 @@
+//! The teacher's trainer: AD-NeRF's recipe (face-biased ray batches, Adam with exponential
+//! learning-rate decay, AudioAttNet switched on late at a higher rate) with periodic
+//! validation, `log.csv`, atomic checkpoints and bit-exact resume.
+//!
+//! Every step draws its batch from a generator seeded by `(seed, step)`, so a resumed run
+//! sees exactly the batches an uninterrupted one would have seen.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::VarMap;
+use nldf_core::bounds::{Bounds, dataset_bounds};
+use nldf_core::dataset::{Dataset, Frame, Split};
+use nldf_core::image::ImageRgb;
+use nldf_core::metrics::{psnr, psnr_from_mse, psnr_masked, ssim};
+use nldf_core::rays::{Rays, rays_for_image, sample_batch};
+use nldf_core::region::Region;
+use rand::seq::index::sample as sample_indices;
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::adam::{Adam, AdamParams};
+use crate::audio_net::neighbourhood;
+use crate::checkpoint::{
+    CONFIG_FILE, MODEL_FILE, STATE_FILE, load_json, load_tensors, restore_weights, save_json,
+    save_tensors, step_of, weights,
+};
+use crate::config::TeacherRunConfig;
+use crate::error::{Error, Result};
+use crate::nn::{init_seeded, new_varmap, sorted_vars};
+use crate::teacher::{Teacher, teacher};
+
+/// A dataset prepared for training: decoded training frames and the head's bounds.
+#[derive(Debug, Clone)]
+pub struct TrainData {
+    pub dataset: Dataset,
+    /// Decoded images of the training frames, in split order.
+    pub images: Vec<ImageRgb>,
+    pub bounds: Bounds,
+}
+
+impl TrainData {
+    /// Loads and validates a dataset and decodes its training frames.
+    pub fn load(root: &Path) -> Result<TrainData> {
+        let dataset = Dataset::load(root)?;
+        let images = dataset
+            .frames(Split::Train)
+            .iter()
+            .map(|f| dataset.load_image(f))
+            .collect::<nldf_core::Result<Vec<_>>>()?;
+        let bounds = dataset_bounds(&dataset)?;
+        Ok(TrainData {
+            dataset,
+            images,
+            bounds,
+        })
+    }
+}
+
+/// What the trainer reports as it goes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A training step finished.
+    Step {
+        step: usize,
+        loss: f64,
+        psnr: f64,
+        rays_per_s: f64,
+    },
+    /// Validation frames were rendered and scored.
+    Validation { step: usize, scores: Scores },
+    /// A checkpoint was written.
+    Checkpoint { step: usize, dir: PathBuf },
+}
+
+/// Image scores averaged over frames.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Scores {
+    pub psnr: f64,
+    pub ssim: f64,
+    /// PSNR inside the mouth region (when the dataset has parsing masks).
+    pub mouth_psnr: Option<f64>,
+    pub frames: usize,
+}
+
+/// Scores of rendered frames against their ground truth and optional region masks.
+pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Result<Scores> {
+    let (mut p, mut s, mut m, mut n_m) = (0.0, 0.0, 0.0, 0usize);
+    for (render, truth, regions) in pairs {
+        p += psnr(render, truth)?.min(100.0);
+        s += ssim(render, truth)?;
+        if let Some(regions) = regions {
+            let mask: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
+            if let Some(v) = psnr_masked(render, truth, &mask)? {
+                m += v.min(100.0);
+                n_m += 1;
+            }
+        }
+    }
+    let n = pairs.len().max(1) as f64;
+    Ok(Scores {
+        psnr: p / n,
+        ssim: s / n,
+        mouth_psnr: (n_m > 0).then(|| m / n_m as f64),
+        frames: pairs.len(),
+    })
+}
+
+/// A teacher being trained: its folder, configuration, weights and optimizer.
+pub struct TeacherRun {
+    pub dir: PathBuf,
+    pub cfg: TeacherRunConfig,
+    pub varmap: VarMap,
+    pub teacher: Teacher,
+    adam: Adam,
+    /// Steps done.
+    pub step: usize,
+    /// Training seconds before this process (from the checkpoint).
+    elapsed_before: f64,
+    started: Instant,
+}
+
+impl TeacherRun {
+    /// A new run in `dir` with seeded weights. The audio feature width is taken from the
+    /// data.
+    pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
+        cfg.model.audio.n_features = data.dataset.audio.n_features;
+        cfg.model.audio.window = data.dataset.audio.window;
+        validate(&cfg)?;
+        let (varmap, vb) = new_varmap();
+        let teacher = teacher(&cfg.model, vb)?;
+        init_seeded(&varmap, cfg.train.seed)?;
+        let adam = new_adam(&varmap, &cfg)?;
+        Ok(TeacherRun {
+            dir: dir.to_path_buf(),
+            cfg,
+            varmap,
+            teacher,
+            adam,
+            step: 0,
+            elapsed_before: 0.0,
+            started: Instant::now(),
+        })
+    }
+
+    /// Loads the run in `dir` (its `config.json`, weights and, with `optimizer`, the
+    /// optimizer state) to continue training or to render.
+    pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
+        let cfg: TeacherRunConfig = load_json(&dir.join(CONFIG_FILE))?;
+        validate(&cfg)?;
+        let (varmap, vb) = new_varmap();
+        let teacher = teacher(&cfg.model, vb)?;
+        let model_path = dir.join(MODEL_FILE);
+        let (tensors, meta) = load_tensors(&model_path)?;
+        restore_weights(&model_path, &varmap, &tensors)?;
+        let step = step_of(&model_path, &meta)?;
+        let elapsed_before = meta
+            .get("elapsed_s")
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0.0);
+        let mut adam = new_adam(&varmap, &cfg)?;
+        if optimizer {
+            let state_path = dir.join(STATE_FILE);
+            let (state, state_meta) = load_tensors(&state_path)?;
+            let state_step = step_of(&state_path, &state_meta)?;
+            if state_step != step {
+                return Err(Error::invalid(
+                    &state_path,
+                    format!(
+                        "is from step {state_step} but {MODEL_FILE} from step {step}; the last checkpoint was cut short"
+                    ),
+                ));
+            }
+            adam.load_state(&state)
+                .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
+        }
+        Ok(TeacherRun {
+            dir: dir.to_path_buf(),
+            cfg,
+            varmap,
+            teacher,
+            adam,
+            step,
+            elapsed_before,
+            started: Instant::now(),
+        })
+    }
+
+    /// Training seconds so far, across resumes.
+    pub fn elapsed(&self) -> f64 {
+        self.elapsed_before + self.started.elapsed().as_secs_f64()
+    }
+
+    /// The learning rate at the current step: `lr 0.1^(step / lr_decay_steps)`.
+    pub fn learning_rate(&self) -> f64 {
+        let t = &self.cfg.train;
+        t.lr * 0.1f64.powf(self.step as f64 / t.lr_decay_steps.max(1) as f64)
+    }
+
+    fn attention_on(&self) -> bool {
+        self.step >= self.cfg.train.att_start
+    }
+
+    /// Audio codes of `frames` (indices into the dataset's audio windows).
+    ///
+    /// # Shapes
+    /// - returns `[frames.len(), audio_dim]`
+    pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
+        let audio = &data.dataset.audio;
+        let seq = self.cfg.model.audio.att_frames;
+        let flat: Vec<f32> = aud_ids
+            .iter()
+            .flat_map(|&f| neighbourhood(audio, f, seq))
+            .collect();
+        let windows = Tensor::from_vec(
+            flat,
+            (aud_ids.len(), seq, audio.window, audio.n_features),
+            &Device::Cpu,
+        )?;
+        Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
+    }
+
+    /// One training step; returns the batch's loss (MSE over all its rays) and PSNR.
+    pub fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
+        let t = self.cfg.train.clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
+        rng.set_stream(self.step as u64 + 1);
+        let frames = data.dataset.frames(Split::Train);
+        let n_frames = t.frames_per_batch.min(frames.len()).max(1);
+        let picked = sample_indices(&mut rng, frames.len(), n_frames).into_vec();
+        let per_frame = t.batch_rays.div_ceil(n_frames);
+        let mut rays = Rays::with_capacity(per_frame * n_frames);
+        let (mut gt, mut bg, mut frame_of_ray) = (Vec::new(), Vec::new(), Vec::new());
+        for (slot, &fi) in picked.iter().enumerate() {
+            let frame = &frames[fi];
+            let batch = sample_batch(
+                &data.dataset.camera(frame),
+                frame.face_rect,
+                per_frame,
+                t.face_fraction,
+                &mut rng,
+            );
+            for (r, &(i, j)) in batch.pixels.iter().enumerate() {
+                rays.push(batch.rays.origin(r), batch.rays.direction(r));
+                gt.extend_from_slice(&data.images[fi].get(i, j));
+                bg.extend_from_slice(&data.dataset.background.get(i, j));
+                frame_of_ray.push(slot as u32);
+            }
+        }
+        let aud_ids: Vec<usize> = picked.iter().map(|&fi| frames[fi].aud_id).collect();
+        let codes = self.audio_codes(data, &aud_ids)?;
+        let out = self.teacher.render(
+            &rays,
+            &bg,
+            &codes,
+            &frame_of_ray,
+            &data.bounds,
+            data.dataset.near,
+            data.dataset.far,
+            Some(&mut rng as &mut dyn RngCore),
+        )?;
+        let n = rays.len();
+        // Rays that miss the bounds are their background: a constant part of the loss.
+        let mut hit_mask = vec![false; n];
+        out.hit.iter().for_each(|&r| hit_mask[r] = true);
+        let miss_sq: f64 = (0..n)
+            .filter(|&r| !hit_mask[r])
+            .map(|r| {
+                (0..3)
+                    .map(|c| (bg[3 * r + c] - gt[3 * r + c]) as f64)
+                    .map(|d| d * d)
+                    .sum::<f64>()
+            })
+            .sum();
+        let gt_hit: Vec<f32> = out
+            .hit
+            .iter()
+            .flat_map(|&r| gt[3 * r..3 * r + 3].iter().copied())
+            .collect();
+        let gt_hit = Tensor::from_vec(gt_hit, (out.hit.len(), 3), &Device::Cpu)?;
+        let scale = 1.0 / (3 * n) as f64;
+        let hit_sq = (&out.color - &gt_hit)?.sqr()?.sum_all()?;
+        let loss = (hit_sq.affine(scale, miss_sq * scale))?;
+        let lr = self.learning_rate();
+        let grads = loss.backward()?;
+        self.adam.step(&grads, lr)?;
+        self.step += 1;
+        let loss = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+        Ok((loss, psnr_from_mse(loss)))
+    }
+
+    /// Renders a whole frame of the dataset (any split).
+    pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        let ds = &data.dataset;
+        let rays = rays_for_image(&ds.camera(frame));
+        let codes = self.audio_codes(data, &[frame.aud_id])?;
+        let bg = &ds.background.data;
+        let colors = self
+            .teacher
+            .render_eval(&rays, bg, &codes, &data.bounds, ds.near, ds.far)?;
+        Ok(ImageRgb {
+            width: ds.intrinsics.width,
+            height: ds.intrinsics.height,
+            data: colors,
+        })
+    }
+
+    /// Renders `n` validation frames spread evenly over the split and scores them.
+    pub fn validate(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        let frames = data.dataset.frames(Split::Val);
+        let frames = if frames.is_empty() {
+            data.dataset.frames(Split::Train)
+        } else {
+            frames
+        };
+        let n = n.clamp(1, frames.len());
+        let mut pairs = Vec::with_capacity(n);
+        for k in 0..n {
+            let frame = &frames[k * frames.len() / n];
+            let render = self.render_frame(data, frame)?;
+            let truth = data.dataset.load_image(frame)?;
+            let regions = data.dataset.load_regions(frame)?;
+            pairs.push((render, truth, regions));
+        }
+        score_frames(&pairs)
+    }
+
+    /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.
+    pub fn save(&self) -> Result<()> {
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        let meta = |kind: &str| {
+            [
+                ("step".to_string(), self.step.to_string()),
+                ("elapsed_s".to_string(), format!("{:.3}", self.elapsed())),
+                ("kind".to_string(), kind.to_string()),
+            ]
+            .into_iter()
+            .collect()
+        };
+        save_json(&self.dir.join(CONFIG_FILE), &self.cfg)?;
+        save_tensors(
+            &self.dir.join(STATE_FILE),
+            &self.adam.state()?,
+            meta("optimizer"),
+        )?;
+        save_tensors(
+            &self.dir.join(MODEL_FILE),
+            &weights(&self.varmap)?,
+            meta("teacher"),
+        )?;
+        Ok(())
+    }
+
+    /// Trains until `cfg.train.iters` steps are done or `stop` is set, validating, logging to
+    /// `log.csv` and checkpointing as configured; always leaves a checkpoint of the last
+    /// step. Returns the final validation scores when it ran to the end.
+    pub fn train(
+        &mut self,
+        data: &TrainData,
+        stop: &AtomicBool,
+        on_event: &mut dyn FnMut(&Event),
+    ) -> Result<Option<Scores>> {
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        let log_path = self.dir.join("log.csv");
+        let mut log = crate::log::CsvLog::open(&log_path, self.step)?;
+        let t = self.cfg.train.clone();
+        let mut last_val = None;
+        while self.step < t.iters {
+            if stop.load(Ordering::Relaxed) {
+                self.save()?;
+                on_event(&Event::Checkpoint {
+                    step: self.step,
+                    dir: self.dir.clone(),
+                });
+                return Ok(None);
+            }
+            let started = Instant::now();
+            let (loss, psnr) = self.train_step(data)?;
+            let rays_per_s = t.batch_rays as f64 / started.elapsed().as_secs_f64().max(1e-9);
+            on_event(&Event::Step {
+                step: self.step,
+                loss,
+                psnr,
+                rays_per_s,
+            });
+            let validate_now =
+                (t.val_every > 0 && self.step.is_multiple_of(t.val_every)) || self.step == t.iters;
+            let scores = if validate_now {
+                let s = self.validate(data, t.val_frames)?;
+                on_event(&Event::Validation {
+                    step: self.step,
+                    scores: s,
+                });
+                last_val = Some(s);
+                Some(s)
+            } else {
+                None
+            };
+            if self.step.is_multiple_of(t.log_every.max(1)) || scores.is_some() {
+                log.row(
+                    self.step,
+                    self.elapsed(),
+                    loss,
+                    psnr,
+                    self.learning_rate(),
+                    rays_per_s,
+                    scores,
+                )?;
+            }
+            if (t.checkpoint_every > 0 && self.step.is_multiple_of(t.checkpoint_every))
+                || self.step == t.iters
+            {
+                self.save()?;
+                on_event(&Event::Checkpoint {
+                    step: self.step,
+                    dir: self.dir.clone(),
+                });
+            }
+        }
+        Ok(last_val)
+    }
+}
+
+fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
+    let t = &cfg.train;
+    let vars = sorted_vars(varmap)?
+        .into_iter()
+        .map(|(name, var)| {
+            let scale = if name.starts_with("audio.att.") {
+                t.att_lr_scale
+            } else {
+                1.0
+            };
+            (name, var, scale)
+        })
+        .collect();
+    Ok(Adam::new(
+        vars,
+        AdamParams {
+            beta1: t.beta1,
+            beta2: t.beta2,
+            eps: t.eps,
+        },
+    ))
+}
+
+/// Checks a run configuration before any work starts.
+pub fn validate(cfg: &TeacherRunConfig) -> Result<()> {
+    let m = &cfg.model;
+    let t = &cfg.train;
+    let bad = |s: String| Err(Error::Config(s));
+    if m.depth == 0 || m.width == 0 || m.color_width == 0 || m.n_samples < 2 {
+        return bad(
+            "the teacher needs depth, width and color_width >= 1 and n_samples >= 2".into(),
+        );
+    }
+    if m.skips.iter().any(|&s| s + 1 >= m.depth) {
+        return bad(format!(
+            "skips {:?} must name layers before the last of {}",
+            m.skips, m.depth
+        ));
+    }
+    if m.audio.window != 16 {
+        return bad(format!(
+            "the audio window must be 16 frames (AudioNet halves it 4 times), got {}",
+            m.audio.window
+        ));
+    }
+    if m.audio.att_frames == 0 || m.audio.dim == 0 || m.audio.n_features == 0 {
+        return bad("audio dim, att_frames and n_features must be >= 1".into());
+    }
+    if t.batch_rays == 0 || t.frames_per_batch == 0 {
+        return bad("batch_rays and frames_per_batch must be >= 1".into());
+    }
+    let betas_ok = (0.0..1.0).contains(&t.beta1) && (0.0..1.0).contains(&t.beta2);
+    if !(t.lr.is_finite() && t.lr > 0.0 && betas_ok) {
+        return bad("lr must be positive and beta1, beta2 in [0, 1)".into());
+    }
+    Ok(())
+}
