@@ -6,3 +6,4 @@ mod metrics;
 mod rendering;
 mod synth;
 mod synth_head;
+mod teacher;

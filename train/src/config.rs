@@ -96,14 +96,14 @@ impl TeacherConfig {
         }
     }
 
-    /// A tiny network for tests (seconds per hundred steps).
+    /// A tiny network for tests (3 x 32; seconds per hundred steps).
     pub fn tiny() -> TeacherConfig {
         TeacherConfig {
             audio: AudioConfig {
                 dim: 8,
                 ..AudioConfig::default()
             },
-            depth: 2,
+            depth: 3,
             width: 32,
             skips: vec![1],
             color_width: 16,

@@ -69,6 +69,12 @@ pub fn teacher_field(cfg: &TeacherConfig, vb: VarBuilder) -> Result<TeacherField
     })
 }
 
+/// `log(1 + exp(x))`, written so that it neither overflows nor loses its gradient: the
+/// density activation (a ReLU, as AD-NeRF uses, can switch a young field off everywhere).
+pub fn softplus(x: &Tensor) -> Result<Tensor> {
+    x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
+}
+
 /// Adds a per-ray term to every sample of its ray.
 ///
 /// # Shapes
@@ -82,7 +88,7 @@ fn add_per_ray(per_sample: &Tensor, per_ray: &Tensor, n_samples: usize) -> Resul
 }
 
 impl TeacherField {
-    /// Densities (before the ReLU of compositing) and colours of every sample.
+    /// Densities (softplus, so >= 0) and colours of every sample.
     ///
     /// # Shapes
     /// - `points`: `[n_rays * n_samples, pos_dim]` encoded sample positions
@@ -117,7 +123,7 @@ impl TeacherField {
             );
         }
         let h = h.ok_or_else(|| candle_core::Error::Msg("teacher trunk is empty".into()))?;
-        let density = self.density.forward(&h)?.reshape((n_rays, n_samples))?;
+        let density = softplus(&self.density.forward(&h)?)?.reshape((n_rays, n_samples))?;
         let feature = self.feature.forward(&h)?;
         let c = add_per_ray(
             &self.color_feature.forward(&feature)?,

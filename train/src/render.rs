@@ -4,6 +4,9 @@
 
 use candle_core::{D, Result, Tensor};
 
+/// Optical depth at which a sample is opaque to f32 precision (`exp(-100)` is 4e-44).
+pub const MAX_TAU: f32 = 100.0;
+
 /// Compositing results of a batch of rays.
 #[derive(Debug, Clone)]
 pub struct Rendered {
@@ -17,7 +20,8 @@ pub struct Rendered {
 
 /// Composites samples front to back: `T_k = exp(-sum_{j<k} sigma_j delta_j)` computed from an
 /// exclusive cumulative sum in log space, `w_k = T_k (1 - exp(-sigma_k delta_k))`,
-/// `C = sum_k w_k c_k + T_N bg`. Densities are clamped at 0.
+/// `C = sum_k w_k c_k + T_N bg`. Densities are clamped at 0 and each optical depth
+/// `sigma delta` at [`MAX_TAU`], so any finite input gives a finite colour.
 ///
 /// # Shapes
 /// - `densities`, `deltas`: `[n_rays, n_samples]`
@@ -29,13 +33,23 @@ pub fn composite(
     colors: &Tensor,
     background: &Tensor,
 ) -> Result<Rendered> {
-    let tau = densities.relu()?.mul(deltas)?;
-    let inclusive = tau.cumsum(1)?;
-    let exclusive = (&inclusive - &tau)?;
+    // Optical depth per sample, capped where exp(-tau) is already 0 in f32, so that huge
+    // densities or spacings never make inf - inf.
+    let tau = densities.relu()?.mul(deltas)?.clamp(0f32, MAX_TAU)?;
+    let (n_rays, n) = tau.dims2()?;
+    // The exclusive sum is summed directly (not inclusive - tau, which cancels badly).
+    let shifted = Tensor::cat(
+        &[
+            Tensor::zeros((n_rays, 1), tau.dtype(), tau.device())?,
+            tau.narrow(1, 0, n - 1)?,
+        ],
+        1,
+    )?;
+    let exclusive = shifted.cumsum(1)?;
+    let inclusive = (&exclusive + &tau)?;
     let transmittance = exclusive.neg()?.exp()?;
     let alpha = (1.0 - tau.neg()?.exp()?)?;
     let weights = transmittance.mul(&alpha)?;
-    let n = tau.dim(1)?;
     let left = inclusive.narrow(1, n - 1, 1)?.neg()?.exp()?;
     let color = weights
         .unsqueeze(2)?

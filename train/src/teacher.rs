@@ -197,7 +197,8 @@ impl Teacher {
                     let h = chunk[a];
                     for s in 0..g {
                         let sigma = densities[k * g + s].max(0.0);
-                        let tau = sigma * samples.deltas[h * n_samples + g0 + s];
+                        let tau = (sigma * samples.deltas[h * n_samples + g0 + s])
+                            .min(crate::render::MAX_TAU);
                         let w = trans[a] * -(-tau).exp_m1();
                         for c in 0..3 {
                             color[a][c] += w * colors[3 * (k * g + s) + c];

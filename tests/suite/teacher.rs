@@ -1,0 +1,320 @@
+//! The teacher: compositing against the f64 reference, the audio encoder and sampler shapes,
+//! a tiny training run that learns, and a resume that continues bit for bit.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+use std::sync::atomic::AtomicBool;
+
+use candle_core::{Device, Tensor};
+use glam::Vec3;
+use nldf_core::bounds::Bounds;
+use nldf_core::composite::composite_f64;
+use nldf_core::rays::Rays;
+use nldf_core::synth::{SynthConfig, generate};
+use nldf_train::config::{TeacherConfig, TeacherRunConfig, TrainConfig};
+use nldf_train::nn::{conv1d, new_varmap};
+use nldf_train::render::composite;
+use nldf_train::sampler::sample_stratified;
+use nldf_train::trainer::{TeacherRun, TrainData};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+#[test]
+fn candle_compositing_matches_the_f64_reference() {
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let (n_rays, n_samples) = (64, 24);
+    let mut sigma = vec![0.0f32; n_rays * n_samples];
+    let mut delta = vec![0.0f32; n_rays * n_samples];
+    let mut rgb = vec![0.0f32; n_rays * n_samples * 3];
+    let mut bg = vec![0.0f32; n_rays * 3];
+    for r in 0..n_rays {
+        for s in 0..n_samples {
+            let k = r * n_samples + s;
+            // Some rays are nearly empty, some hit an opaque wall, some have negative raw
+            // densities that the ReLU removes.
+            sigma[k] = match r % 4 {
+                0 => rng.random_range(0.0..0.5),
+                1 => rng.random_range(-5.0..50.0),
+                2 => {
+                    if s == 7 {
+                        1e6
+                    } else {
+                        rng.random_range(0.0..5.0)
+                    }
+                }
+                _ => rng.random_range(0.0..200.0),
+            };
+            delta[k] = rng.random_range(0.001..0.05);
+            for c in 0..3 {
+                rgb[3 * k + c] = rng.random();
+            }
+        }
+        for c in 0..3 {
+            bg[3 * r + c] = rng.random();
+        }
+    }
+    let t = |v: &[f32], shape: &[usize]| Tensor::from_slice(v, shape, &Device::Cpu).unwrap();
+    let out = composite(
+        &t(&sigma, &[n_rays, n_samples]),
+        &t(&delta, &[n_rays, n_samples]),
+        &t(&rgb, &[n_rays, n_samples, 3]),
+        &t(&bg, &[n_rays, 3]),
+    )
+    .unwrap();
+    let color: Vec<Vec<f32>> = out.color.to_vec2().unwrap();
+    let weights: Vec<Vec<f32>> = out.weights.to_vec2().unwrap();
+    let left: Vec<f32> = out.transmittance.to_vec1().unwrap();
+    let mut worst = 0.0f64;
+    for r in 0..n_rays {
+        let d = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<f64>>();
+        let range = r * n_samples..(r + 1) * n_samples;
+        let colors: Vec<[f64; 3]> = range
+            .clone()
+            .map(|k| {
+                [
+                    rgb[3 * k] as f64,
+                    rgb[3 * k + 1] as f64,
+                    rgb[3 * k + 2] as f64,
+                ]
+            })
+            .collect();
+        let reference = composite_f64(
+            &d(&sigma[range.clone()]),
+            &d(&delta[range.clone()]),
+            &vec![0.0; n_samples],
+            &colors,
+        );
+        let t_left = 1.0 - reference.opacity;
+        for c in 0..3 {
+            let want = reference.color[c] + t_left * bg[3 * r + c] as f64;
+            worst = worst.max((color[r][c] as f64 - want).abs());
+        }
+        for s in 0..n_samples {
+            worst = worst.max((weights[r][s] as f64 - reference.weights[s]).abs());
+        }
+        worst = worst.max((left[r] as f64 - t_left).abs());
+    }
+    assert!(
+        worst < 1e-5,
+        "largest difference from the f64 reference: {worst:e}"
+    );
+}
+
+#[test]
+fn compositing_stays_finite_for_extreme_densities_and_spacings() {
+    let sigma = [0.0f32, 1e30, f32::MAX, 1e-30, 5.0, 1e10];
+    let delta = [1e10f32, 1e10, 1.0, 1e10, 1e-30, 1e10];
+    let t = |v: &[f32], shape: &[usize]| Tensor::from_slice(v, shape, &Device::Cpu).unwrap();
+    let out = composite(
+        &t(&sigma, &[1, 6]),
+        &t(&delta, &[1, 6]),
+        &t(&[0.5f32; 18], &[1, 6, 3]),
+        &t(&[0.25f32; 3], &[1, 3]),
+    )
+    .unwrap();
+    let color: Vec<f32> = out.color.flatten_all().unwrap().to_vec1().unwrap();
+    let weights: Vec<f32> = out.weights.flatten_all().unwrap().to_vec1().unwrap();
+    assert!(
+        color.iter().chain(&weights).all(|v| v.is_finite()),
+        "{color:?} {weights:?}"
+    );
+    // The second sample is opaque: it takes everything.
+    assert!((weights[1] - 1.0).abs() < 1e-6 && color.iter().all(|&c| (c - 0.5).abs() < 1e-6));
+}
+
+#[test]
+fn im2col_convolution_matches_candles_forward() {
+    let (varmap, vb) = new_varmap();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for (stride, padding, len) in [(2usize, 1usize, 16usize), (2, 1, 2), (1, 1, 8), (2, 1, 1)] {
+        let conv = conv1d(5, 4, 3, stride, padding, vb.pp(format!("c{stride}{len}"))).unwrap();
+        let x: Vec<f32> = (0..2 * 5 * len)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect();
+        let x = Tensor::from_vec(x, (2, 5, len), &Device::Cpu).unwrap();
+        let ours: Vec<f32> = conv
+            .forward(&x)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1()
+            .unwrap();
+        let theirs = x
+            .conv1d(&conv.weight, padding, stride, 1, 1)
+            .unwrap()
+            .broadcast_add(&conv.bias.reshape((1, 4, 1)).unwrap())
+            .unwrap();
+        let theirs: Vec<f32> = theirs.flatten_all().unwrap().to_vec1().unwrap();
+        assert_eq!(ours.len(), theirs.len(), "stride {stride}, length {len}");
+        for (a, b) in ours.iter().zip(&theirs) {
+            assert!(
+                (a - b).abs() < 1e-5,
+                "stride {stride}, length {len}: {a} vs {b}"
+            );
+        }
+    }
+    drop(varmap);
+}
+
+#[test]
+fn samples_lie_inside_the_bounds_and_misses_are_skipped() {
+    let bounds = Bounds {
+        lo: Vec3::splat(-0.1),
+        hi: Vec3::splat(0.1),
+    };
+    let mut rays = Rays::with_capacity(3);
+    rays.push(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0)); // through the box
+    rays.push(Vec3::new(0.5, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0)); // beside it
+    rays.push(Vec3::new(0.0, 0.05, 1.0), Vec3::new(0.0, 0.0, -2.0)); // un-normalised
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let s = sample_stratified(&rays, &bounds, 0.5, 2.0, 8, Some(&mut rng));
+    assert_eq!(s.hit, vec![0, 2]);
+    for (h, &r) in s.hit.iter().enumerate() {
+        let d = rays.direction(r);
+        let (t0, t1) = bounds.intersect(rays.origin(r), d, 0.5, 2.0).unwrap();
+        let t = &s.t_vals[h * 8..(h + 1) * 8];
+        assert!(t.windows(2).all(|w| w[0] <= w[1]) && t[0] >= t0 && t[7] <= t1);
+        // The spacings run from the first sample to the exit, in world units.
+        let total: f32 = s.deltas[h * 8..(h + 1) * 8].iter().sum();
+        assert!((total - (t1 - t[0]) * d.length()).abs() < 1e-5);
+        for k in 0..8 {
+            let p = Vec3::from_slice(&s.points[3 * (h * 8 + k)..]);
+            assert!(p.cmpge(bounds.lo - 1e-5).all() && p.cmple(bounds.hi + 1e-5).all());
+        }
+    }
+}
+
+/// A 32 x 32, 2 s synthetic scene shared by the training tests.
+fn tiny_scene() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = tempfile::Builder::new()
+            .prefix("teacher-scene")
+            .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
+            .unwrap()
+            .keep();
+        let out = dir.join("scene");
+        let cfg = SynthConfig {
+            seconds: 2.0,
+            size: 32,
+            supersample: 1,
+            ..SynthConfig::default()
+        };
+        generate(&cfg, None, &out, false, &|| {}).unwrap();
+        out
+    })
+}
+
+fn tiny_run_config(iters: usize) -> TeacherRunConfig {
+    TeacherRunConfig {
+        model: TeacherConfig::tiny(),
+        train: TrainConfig {
+            iters,
+            batch_rays: 256,
+            frames_per_batch: 2,
+            lr: 5e-3,
+            att_start: 4,
+            val_every: 0,
+            val_frames: 2,
+            checkpoint_every: 0,
+            ..TrainConfig::default()
+        },
+    }
+}
+
+#[test]
+fn a_tiny_teacher_learns_the_tiny_scene() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = TeacherRun::create(dir.path(), tiny_run_config(200), &data).unwrap();
+    let before = run.validate(&data, 2).unwrap();
+    let mut losses = Vec::new();
+    for _ in 0..200 {
+        losses.push(run.train_step(&data).unwrap().0);
+    }
+    let after = run.validate(&data, 2).unwrap();
+    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+    let last: f64 = losses[190..].iter().sum::<f64>() / 10.0;
+    eprintln!(
+        "loss {first:.4e} -> {last:.4e}, val PSNR {:.2} -> {:.2} dB",
+        before.psnr, after.psnr
+    );
+    assert!(last < 0.6 * first, "loss {first} -> {last}");
+    assert!(
+        after.psnr > before.psnr + 2.0,
+        "PSNR {} -> {}",
+        before.psnr,
+        after.psnr
+    );
+    assert!(losses.iter().all(|l| l.is_finite()));
+}
+
+#[test]
+fn resuming_from_a_checkpoint_gives_the_identical_next_step() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // Past att_start, so that AudioAttNet's weights and moments are in the state too.
+    let mut run = TeacherRun::create(dir.path(), tiny_run_config(20), &data).unwrap();
+    for _ in 0..6 {
+        run.train_step(&data).unwrap();
+    }
+    run.save().unwrap();
+    let (a1, _) = run.train_step(&data).unwrap();
+    let (a2, _) = run.train_step(&data).unwrap();
+    let mut resumed = TeacherRun::open(dir.path(), true).unwrap();
+    assert_eq!(resumed.step, 6);
+    let (b1, _) = resumed.train_step(&data).unwrap();
+    let (b2, _) = resumed.train_step(&data).unwrap();
+    assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
+    assert_eq!(a2.to_bits(), b2.to_bits(), "{a2} vs {b2}");
+    // Without the optimizer state the second step would differ: the check can fail.
+    let mut cold = TeacherRun::open(dir.path(), false).unwrap();
+    cold.train_step(&data).unwrap();
+    let (c2, _) = cold.train_step(&data).unwrap();
+    assert_ne!(a2.to_bits(), c2.to_bits());
+}
+
+#[test]
+fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = tiny_run_config(12);
+    cfg.train.log_every = 4;
+    cfg.train.val_every = 6;
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    let mut events = 0;
+    let scores = run
+        .train(&data, &AtomicBool::new(false), &mut |_| events += 1)
+        .unwrap()
+        .unwrap();
+    assert!(scores.psnr.is_finite() && events >= 12);
+    let log = nldf_train::log::read_log(&dir.path().join("log.csv")).unwrap();
+    assert_eq!(
+        log.iter().map(|r| r.step).collect::<Vec<_>>(),
+        vec![4, 6, 8, 12]
+    );
+    assert!(log[1].val_psnr.is_some() && log[0].val_psnr.is_none());
+    // A stop request leaves a checkpoint that opens at the step it stopped at.
+    let mut run = TeacherRun::open(dir.path(), true).unwrap();
+    run.cfg.train.iters = 30;
+    assert!(
+        run.train(&data, &AtomicBool::new(true), &mut |_| {})
+            .unwrap()
+            .is_none()
+    );
+    assert_eq!(TeacherRun::open(dir.path(), true).unwrap().step, 12);
+    for f in [
+        "model.safetensors",
+        "train_state.safetensors",
+        "config.json",
+    ] {
+        assert!(dir.path().join(f).is_file(), "{f}");
+    }
+    assert!(
+        std::fs::read_dir(dir.path()).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .ends_with(".tmp"))
+    );
+}
