@@ -89,8 +89,8 @@ fn candle_compositing_matches_the_f64_reference() {
             let want = reference.color[c] + t_left * bg[3 * r + c] as f64;
             worst = worst.max((color[r][c] as f64 - want).abs());
         }
-        for s in 0..n_samples {
-            worst = worst.max((weights[r][s] as f64 - reference.weights[s]).abs());
+        for (w, want) in weights[r].iter().zip(&reference.weights) {
+            worst = worst.max((*w as f64 - want).abs());
         }
         worst = worst.max((left[r] as f64 - t_left).abs());
     }
