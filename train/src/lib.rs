@@ -9,6 +9,7 @@
 
 pub mod adam;
 pub mod audio_net;
+pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod error;

@@ -119,6 +119,8 @@ pub struct TeacherRun {
     pub step: usize,
     /// Training seconds before this process (from the checkpoint).
     elapsed_before: f64,
+    /// Rays of the last training step that hit the head's bounds.
+    pub last_hit_rays: usize,
     started: Instant,
 }
 
@@ -141,6 +143,7 @@ impl TeacherRun {
             adam,
             step: 0,
             elapsed_before: 0.0,
+            last_hit_rays: 0,
             started: Instant::now(),
         })
     }
@@ -184,6 +187,7 @@ impl TeacherRun {
             adam,
             step,
             elapsed_before,
+            last_hit_rays: 0,
             started: Instant::now(),
         })
     }
@@ -262,6 +266,7 @@ impl TeacherRun {
             Some(&mut rng as &mut dyn RngCore),
         )?;
         let n = rays.len();
+        self.last_hit_rays = out.hit.len();
         // Rays that miss the bounds are their background: a constant part of the loss.
         let mut hit_mask = vec![false; n];
         out.hit.iter().for_each(|&r| hit_mask[r] = true);

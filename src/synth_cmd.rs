@@ -1,0 +1,80 @@
+//! `nldf synth`: the synthetic talking head as an AD-NeRF dataset.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use nldf_core::synth::{self, SynthConfig};
+
+use crate::progress::progress_bar;
+
+#[derive(clap::Args, Debug)]
+pub struct SynthArgs {
+    /// Output dataset folder (created; must be empty or absent unless --force).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of the head's look, its speech and its motion.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Length in seconds (with --audio: at most the file's length).
+    #[arg(long)]
+    pub seconds: Option<f32>,
+    /// Image width and height in pixels.
+    #[arg(long, default_value_t = 128)]
+    pub size: u32,
+    /// Drive the mouth with this WAV file instead of generated speech.
+    #[arg(long)]
+    pub audio: Option<PathBuf>,
+    /// Sub-pixel rays per pixel along each axis (anti-aliasing).
+    #[arg(long, default_value_t = 3)]
+    pub supersample: u32,
+    /// Replace the output folder even if it holds something other than an earlier scene.
+    #[arg(long)]
+    pub force: bool,
+}
+
+pub fn run(args: SynthArgs) -> Result<()> {
+    let audio = match &args.audio {
+        Some(path) => Some(nldf_core::audio::read_wav(path)?),
+        None => None,
+    };
+    let default = SynthConfig::default();
+    let seconds = match (&audio, args.seconds) {
+        (_, Some(s)) => s,
+        (Some(w), None) => w.samples.len() as f32 / w.sample_rate as f32,
+        (None, None) => default.seconds,
+    };
+    let cfg = SynthConfig {
+        seed: args.seed,
+        seconds,
+        size: args.size,
+        supersample: args.supersample,
+        ..default
+    };
+    synth::validate(&cfg)?;
+    let n_frames = (seconds * 25.0).floor() as u64;
+    let bar = progress_bar(n_frames, "rendering frames");
+    let start = Instant::now();
+    let summary = synth::generate(&cfg, audio, &args.out, args.force, &|| bar.inc(1))
+        .with_context(|| format!("generating the synthetic scene in {}", args.out.display()))?;
+    bar.finish_and_clear();
+    println!(
+        "wrote {} frames ({} train, {} val) of {}x{} in {:.1} s to {}:",
+        summary.n_frames,
+        summary.n_train,
+        summary.n_frames - summary.n_train,
+        cfg.size,
+        cfg.size,
+        start.elapsed().as_secs_f32(),
+        summary.out.display()
+    );
+    for (path, count) in &summary.files {
+        let path = summary.out.join(path);
+        if *count == 1 {
+            println!("  {}", path.display());
+        } else {
+            println!("  {}/ ({count} files)", path.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,190 @@
+//! Training-step benchmarks: rays per second, the step's effective FLOP rate, how many cores
+//! were busy, and candle's own matmul rate at the same shapes for comparison. The CLI's
+//! `nldf bench` writes the results as JSON and Markdown together with the machine, the
+//! commit and the settings.
+
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use serde::Serialize;
+
+use crate::config::TeacherConfig;
+use crate::error::Result;
+use crate::trainer::{TeacherRun, TrainData};
+
+/// The machine a benchmark ran on.
+#[derive(Debug, Clone, Serialize)]
+pub struct Machine {
+    pub cpu: String,
+    pub cores: usize,
+    pub rayon_threads: usize,
+    pub commit: String,
+    pub date_unix_s: u64,
+}
+
+impl Machine {
+    /// Reads the CPU model (`/proc/cpuinfo`), core count and the git commit of the working
+    /// directory, each `unknown` when it cannot be read.
+    pub fn here() -> Machine {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|t| {
+                t.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split(':').nth(1))
+                    .map(|s| s.trim().to_string())
+            })
+            .unwrap_or_else(|| "unknown".into());
+        let commit = std::process::Command::new("git")
+            .args(["rev-parse", "--short", "HEAD"])
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+            .unwrap_or_else(|| "unknown".into());
+        Machine {
+            cpu,
+            cores: std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1),
+            rayon_threads: rayon::current_num_threads(),
+            commit,
+            date_unix_s: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_secs())
+                .unwrap_or(0),
+        }
+    }
+}
+
+/// CPU seconds (user + system) this process has used, from `/proc/self/stat`.
+pub fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // The command name may hold spaces; fields restart after its closing parenthesis.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    Some((utime + stime) / 100.0)
+}
+
+/// The matrix products of one training step of a dense layer over `n` rows: forward
+/// `[n, i] x [i, o]`, input gradient `[n, o] x [o, i]`, weight gradient `[o, n] x [n, i]`.
+fn layer_products(n: usize, i: usize, o: usize) -> [(usize, usize, usize); 3] {
+    [(n, i, o), (n, o, i), (o, n, i)]
+}
+
+/// Per-sample dense layers `(in, out)` of the teacher field (per-ray terms excluded).
+pub fn teacher_sample_layers(cfg: &TeacherConfig) -> Vec<(usize, usize)> {
+    let (w, p) = (cfg.width, cfg.pos_dim());
+    let mut layers = Vec::new();
+    for i in 0..cfg.depth {
+        if i > 0 {
+            layers.push((w, w));
+        }
+        if i == 0 || cfg.skips.contains(&(i - 1)) {
+            layers.push((p, w));
+        }
+    }
+    layers.extend([(w, 1), (w, w), (w, cfg.color_width), (cfg.color_width, 3)]);
+    layers
+}
+
+/// Results of a training-step benchmark.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepBench {
+    pub model: String,
+    pub batch_rays: usize,
+    /// Rays that hit the head's bounds per step (only these reach the network), on average.
+    pub hit_rays: f64,
+    pub samples_per_ray: usize,
+    pub steps: usize,
+    pub seconds_per_step: f64,
+    pub rays_per_s: f64,
+    /// Forward FLOPs per step of the per-sample layers (2 per multiply-add).
+    pub forward_gflop_per_step: f64,
+    /// 3 x forward FLOPs (forward, input and weight gradients) per second.
+    pub effective_gflop_s: f64,
+    /// CPU seconds per wall second during the timed steps.
+    pub cores_busy: f64,
+    /// candle's matmul alone on the step's own matrix shapes: their FLOPs over their time.
+    pub candle_matmul_gflop_s: f64,
+    /// `effective_gflop_s / candle_matmul_gflop_s`.
+    pub fraction_of_candle_matmul: f64,
+}
+
+/// Times candle's matmul on the given `(m, k, n)` products, each repeated until it has run
+/// for at least 0.2 s; returns GFLOP/s over all of them.
+pub fn candle_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
+    let (mut flops, mut secs) = (0.0, 0.0);
+    for &(m, k, n) in products {
+        let a = Tensor::ones((m, k), candle_core::DType::F32, &Device::Cpu)?;
+        let b = Tensor::ones((k, n), candle_core::DType::F32, &Device::Cpu)?;
+        a.matmul(&b)?;
+        let start = Instant::now();
+        let mut reps = 0;
+        while start.elapsed().as_secs_f64() < 0.2 {
+            a.matmul(&b)?;
+            reps += 1;
+        }
+        flops += 2.0 * (m * k * n) as f64 * reps as f64;
+        secs += start.elapsed().as_secs_f64();
+    }
+    Ok(flops / secs / 1e9)
+}
+
+/// Times `steps` teacher training steps after `warmup` untimed ones.
+pub fn bench_teacher_step(
+    run: &mut TeacherRun,
+    data: &TrainData,
+    warmup: usize,
+    steps: usize,
+) -> Result<StepBench> {
+    for _ in 0..warmup {
+        run.train_step(data)?;
+    }
+    let cpu0 = cpu_seconds();
+    let start = Instant::now();
+    let mut hits = 0usize;
+    for _ in 0..steps {
+        run.train_step(data)?;
+        hits += run.last_hit_rays;
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = cpu_seconds()
+        .zip(cpu0)
+        .map(|(b, a)| b - a)
+        .unwrap_or(f64::NAN);
+    let cfg = &run.cfg;
+    let hit_rays = hits as f64 / steps.max(1) as f64;
+    let samples = (hit_rays * cfg.model.n_samples as f64).round() as usize;
+    let layers = teacher_sample_layers(&cfg.model);
+    let fwd_flops: f64 = layers
+        .iter()
+        .map(|&(i, o)| 2.0 * (samples * i * o) as f64)
+        .sum();
+    let products: Vec<_> = layers
+        .iter()
+        .flat_map(|&(i, o)| layer_products(samples, i, o))
+        .collect();
+    let matmul = candle_matmul_rate(&products)?;
+    let per_step = wall / steps.max(1) as f64;
+    let effective = 3.0 * fwd_flops / per_step / 1e9;
+    Ok(StepBench {
+        model: format!(
+            "teacher {}x{} ({} samples/ray)",
+            cfg.model.depth, cfg.model.width, cfg.model.n_samples
+        ),
+        batch_rays: cfg.train.batch_rays,
+        hit_rays,
+        samples_per_ray: cfg.model.n_samples,
+        steps,
+        seconds_per_step: per_step,
+        rays_per_s: cfg.train.batch_rays as f64 / per_step,
+        forward_gflop_per_step: fwd_flops / 1e9,
+        effective_gflop_s: effective,
+        cores_busy: cpu / wall,
+        candle_matmul_gflop_s: matmul,
+        fraction_of_candle_matmul: effective / matmul,
+    })
+}
