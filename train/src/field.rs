@@ -11,6 +11,7 @@ use candle_core::{Result, Tensor};
 use candle_nn::VarBuilder;
 
 use crate::config::TeacherConfig;
+use crate::fused::{AddTo, fused_linear};
 use crate::nn::{Dense, dense};
 
 /// One trunk layer: the hidden input, plus the point encoding and the audio code where the
@@ -75,20 +76,27 @@ pub fn softplus(x: &Tensor) -> Result<Tensor> {
     x.relu()? + (x.abs()?.neg()?.exp()? + 1.0)?.log()?
 }
 
-/// Adds a per-ray term to every sample of its ray.
-///
-/// # Shapes
-/// - `per_sample`: `[n_rays * n_samples, w]`; `per_ray`: `[n_rays, w]`
-fn add_per_ray(per_sample: &Tensor, per_ray: &Tensor, n_samples: usize) -> Result<Tensor> {
-    let (n, w) = per_sample.dims2()?;
-    per_sample
-        .reshape((n / n_samples, n_samples, w))?
-        .broadcast_add(&per_ray.unsqueeze(1)?)?
-        .reshape((n, w))
+/// `x W^T + b` of a per-ray layer, plus `extra` when given.
+fn per_ray(layer: &Dense, x: &Tensor, extra: Option<&Tensor>) -> Result<Tensor> {
+    let y = layer.forward(x)?;
+    match extra {
+        Some(e) => y.broadcast_add(e),
+        None => Ok(y),
+    }
+}
+
+/// The layer's bias, or zeros of its width.
+fn bias_or_zeros(layer: &Dense) -> Result<Tensor> {
+    match &layer.bias {
+        Some(b) => Ok(b.clone()),
+        None => Tensor::zeros(layer.weight.dim(0)?, layer.weight.dtype(), layer.weight.device()),
+    }
 }
 
 impl TeacherField {
-    /// Densities (softplus, so >= 0) and colours of every sample.
+    /// Densities (softplus, so >= 0) and colours of every sample. Every per-sample layer
+    /// runs as one fused op ([`fused_linear`]); the per-ray terms (audio code, view
+    /// direction) enter as group addends.
     ///
     /// # Shapes
     /// - `points`: `[n_rays * n_samples, pos_dim]` encoded sample positions
@@ -103,36 +111,39 @@ impl TeacherField {
         n_samples: usize,
     ) -> Result<(Tensor, Tensor)> {
         let n_rays = codes.dim(0)?;
+        let group = AddTo::Groups(n_samples);
         let mut h: Option<Tensor> = None;
         for layer in &self.trunk {
-            let mut x = match (&layer.hidden, &h) {
-                (Some(l), Some(h)) => Some(l.forward(h)?),
+            let fed = match (&layer.points, &layer.audio) {
+                (Some(p), Some(a)) => Some((p, a)),
                 _ => None,
             };
-            if let (Some(p), Some(a)) = (&layer.points, &layer.audio) {
-                let fed = p.forward(points)?;
-                let fed = match x {
-                    Some(x) => (x + fed)?,
-                    None => fed,
-                };
-                x = Some(add_per_ray(&fed, &a.forward(codes)?, n_samples)?);
-            }
-            h = Some(
-                x.ok_or_else(|| candle_core::Error::Msg("trunk layer without input".into()))?
-                    .relu()?,
-            );
+            h = Some(match (&layer.hidden, h, fed) {
+                // The first layer: points, plus the per-ray audio term and the bias.
+                (None, _, Some((p, a))) => {
+                    let ray = per_ray(a, codes, p.bias.as_ref())?;
+                    fused_linear(points, &p.weight, &ray, group, true)?
+                }
+                // A skip layer: hidden + points + audio, summed before the ReLU.
+                (Some(hid), Some(prev), Some((p, a))) => {
+                    let ray = per_ray(a, codes, Some(&bias_or_zeros(hid)?))?;
+                    let fed = fused_linear(points, &p.weight, &ray, group, false)?;
+                    fused_linear(&prev, &hid.weight, &fed, AddTo::Each, true)?
+                }
+                (Some(hid), Some(prev), None) => {
+                    fused_linear(&prev, &hid.weight, &bias_or_zeros(hid)?, AddTo::Every, true)?
+                }
+                _ => candle_core::bail!("teacher trunk layer without input"),
+            });
         }
         let h = h.ok_or_else(|| candle_core::Error::Msg("teacher trunk is empty".into()))?;
-        let density = softplus(&self.density.forward(&h)?)?.reshape((n_rays, n_samples))?;
-        let feature = self.feature.forward(&h)?;
-        let c = add_per_ray(
-            &self.color_feature.forward(&feature)?,
-            &self.color_dir.forward(dirs)?,
-            n_samples,
-        )?
-        .relu()?;
-        let rgb =
-            candle_nn::ops::sigmoid(&self.rgb.forward(&c)?)?.reshape((n_rays, n_samples, 3))?;
+        let raw = fused_linear(&h, &self.density.weight, &bias_or_zeros(&self.density)?, AddTo::Every, false)?;
+        let density = softplus(&raw)?.reshape((n_rays, n_samples))?;
+        let feature = fused_linear(&h, &self.feature.weight, &bias_or_zeros(&self.feature)?, AddTo::Every, false)?;
+        let ray = per_ray(&self.color_dir, dirs, self.color_feature.bias.as_ref())?;
+        let c = fused_linear(&feature, &self.color_feature.weight, &ray, group, true)?;
+        let rgb = fused_linear(&c, &self.rgb.weight, &bias_or_zeros(&self.rgb)?, AddTo::Every, false)?;
+        let rgb = candle_nn::ops::sigmoid(&rgb)?.reshape((n_rays, n_samples, 3))?;
         Ok((density, rgb))
     }
 }

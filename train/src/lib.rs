@@ -14,6 +14,8 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod field;
+pub mod fused;
+pub mod kernels;
 pub mod log;
 pub mod nn;
 pub mod render;

@@ -1,0 +1,662 @@
+//! CPU kernels for the dense layers of training: a register-blocked matrix product with an
+//! AVX-512 micro-kernel (a portable one elsewhere), the fused forward `act(x W^T + B)`, and
+//! the three backward pieces (ReLU mask with the bias gradient, input gradient, weight
+//! gradient), each parallel over rows with rayon.
+//!
+//! Every result is deterministic whatever the thread count: each output element is summed
+//! by one task in a fixed order, and the reductions over rows (weight and bias gradients)
+//! use fixed-size row chunks summed in chunk order.
+
+use rayon::prelude::*;
+
+/// Rows of a micro-tile.
+const MR: usize = 6;
+/// Columns of a micro-tile (three 16-lane vectors).
+const NR: usize = 64;
+/// Rows per parallel task of the row-parallel products.
+const ROW_CHUNK: usize = MR * 8;
+/// Rows per partial sum of the reductions over rows (fixed, for determinism).
+const REDUCE_CHUNK: usize = 2048;
+/// Rows of the reduction dimension kept hot in cache at a time in the weight gradient.
+const K_BLOCK: usize = 256;
+
+/// How the additive term `B` of [`linear_forward`] is laid out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Addend {
+    /// No term.
+    None,
+    /// `[n]`: one bias row for every row.
+    Row,
+    /// `[m / group, n]`: one row per group of `group` consecutive rows (a per-ray term
+    /// shared by the ray's samples).
+    Group(usize),
+    /// `[m, n]`: one row per row.
+    Full,
+}
+
+impl Addend {
+    /// The row of the addend that output row `i` uses.
+    fn row(self, i: usize) -> Option<usize> {
+        match self {
+            Addend::None => None,
+            Addend::Row => Some(0),
+            Addend::Group(g) => Some(i / g.max(1)),
+            Addend::Full => Some(i),
+        }
+    }
+}
+
+/// `A(i, p) = a[i * rs + p * cs]`.
+#[derive(Clone, Copy)]
+struct StridedA {
+    ptr: *const f32,
+    rs: usize,
+    cs: usize,
+}
+
+/// One micro-tile's job: `C[i0.., j0..] (+)= sum_p A(i, p) B[p, j]` for `rows` x `cols`
+/// (at most MR x NR), then optionally `+ addend row` and ReLU on the way out.
+#[derive(Clone, Copy)]
+struct Tile {
+    k: usize,
+    a: StridedA,
+    /// `B` at column `j0`, row stride `ldb`.
+    b: *const f32,
+    ldb: usize,
+    /// `C` at `(i0, j0)`, row stride `ldc`.
+    c: *mut f32,
+    ldc: usize,
+    rows: usize,
+    cols: usize,
+    accumulate: bool,
+    relu: bool,
+    /// Per tile row, the addend row at column `j0` (null: none).
+    addend: [*const f32; MR],
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{MR, NR, Tile};
+    use std::arch::x86_64::*;
+
+    /// The tile with `R` rows and `V` vectors of 16 columns.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn kernel<const R: usize, const V: usize>(t: &Tile) {
+        // SAFETY (whole function): the caller guarantees that every A(i, p), B row and C
+        // element addressed below (rows < t.rows, columns < t.cols) lies inside its slice.
+        unsafe {
+            let mut masks = [0 as __mmask16; 4];
+            for (v, m) in masks.iter_mut().enumerate() {
+                let left = t.cols.saturating_sub(16 * v).min(16);
+                *m = ((1u32 << left) - 1) as u16;
+            }
+            let mut acc = [[_mm512_setzero_ps(); V]; R];
+            let (rs, cs) = (t.a.rs, t.a.cs);
+            for p in 0..t.k {
+                let brow = t.b.add(p * t.ldb);
+                let mut bv = [_mm512_setzero_ps(); V];
+                for (v, b) in bv.iter_mut().enumerate() {
+                    *b = _mm512_maskz_loadu_ps(masks[v], brow.add(16 * v));
+                }
+                let arow = t.a.ptr.add(p * cs);
+                for (r, acc_r) in acc.iter_mut().enumerate() {
+                    let av = _mm512_set1_ps(*arow.add(r * rs));
+                    for (a, b) in acc_r.iter_mut().zip(&bv) {
+                        *a = _mm512_fmadd_ps(av, *b, *a);
+                    }
+                }
+            }
+            let zero = _mm512_setzero_ps();
+            for (r, acc_r) in acc.iter().enumerate() {
+                let crow = t.c.add(r * t.ldc);
+                for (v, &mask) in masks.iter().enumerate().take(V) {
+                    let mut x = acc_r[v];
+                    if t.accumulate {
+                        x = _mm512_add_ps(x, _mm512_maskz_loadu_ps(mask, crow.add(16 * v)));
+                    }
+                    if !t.addend[r].is_null() {
+                        x = _mm512_add_ps(x, _mm512_maskz_loadu_ps(mask, t.addend[r].add(16 * v)));
+                    }
+                    if t.relu {
+                        x = _mm512_max_ps(x, zero);
+                    }
+                    _mm512_mask_storeu_ps(crow.add(16 * v), mask, x);
+                }
+            }
+        }
+    }
+
+    macro_rules! dispatch {
+        ($t:expr, $v:literal, $($r:literal)*) => {
+            match $t.rows {
+                $($r => kernel::<$r, $v>($t),)*
+                _ => unreachable!("tile rows are 1..=MR"),
+            }
+        };
+    }
+
+    /// Runs one tile (rows 1..=MR, columns 1..=NR).
+    ///
+    /// # Safety
+    /// The CPU supports AVX-512F and the tile's pointers cover its rows and columns.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn tile(t: &Tile) {
+        debug_assert!(t.rows >= 1 && t.rows <= MR && t.cols >= 1 && t.cols <= NR);
+        unsafe {
+            if t.cols > 48 {
+                dispatch!(t, 4, 1 2 3 4 5 6)
+            } else if t.cols > 32 {
+                dispatch!(t, 3, 1 2 3 4 5 6)
+            } else if t.cols > 16 {
+                dispatch!(t, 2, 1 2 3 4 5 6)
+            } else {
+                dispatch!(t, 1, 1 2 3 4 5 6)
+            }
+        }
+    }
+}
+
+/// The portable tile (any CPU).
+///
+/// # Safety
+/// The tile's pointers cover its rows and columns.
+unsafe fn tile_portable(t: &Tile) {
+    let mut acc = [[0.0f32; NR]; MR];
+    // SAFETY: as the caller guarantees, every address below is inside its slice.
+    unsafe {
+        for p in 0..t.k {
+            let brow = t.b.add(p * t.ldb);
+            for (r, acc_r) in acc.iter_mut().enumerate().take(t.rows) {
+                let av = *t.a.ptr.add(r * t.a.rs + p * t.a.cs);
+                for (j, acc_rj) in acc_r.iter_mut().enumerate().take(t.cols) {
+                    *acc_rj += av * *brow.add(j);
+                }
+            }
+        }
+        for (r, acc_r) in acc.iter().enumerate().take(t.rows) {
+            let crow = t.c.add(r * t.ldc);
+            for (j, &v) in acc_r.iter().enumerate().take(t.cols) {
+                let mut x = v;
+                if t.accumulate {
+                    x += *crow.add(j);
+                }
+                if !t.addend[r].is_null() {
+                    x += *t.addend[r].add(j);
+                }
+                if t.relu {
+                    x = x.max(0.0);
+                }
+                *crow.add(j) = x;
+            }
+        }
+    }
+}
+
+fn has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Runs a tile on the best kernel this CPU has.
+///
+/// # Safety
+/// The tile's pointers cover its rows and columns.
+unsafe fn run_tile(t: &Tile, avx512: bool) {
+    #[cfg(target_arch = "x86_64")]
+    if avx512 {
+        // SAFETY: AVX-512F was detected; the caller vouches for the pointers.
+        unsafe { avx512::tile(t) };
+        return;
+    }
+    let _ = avx512;
+    // SAFETY: the caller vouches for the pointers.
+    unsafe { tile_portable(t) }
+}
+
+/// A raw pointer that may cross into rayon tasks (each task writes disjoint rows).
+#[derive(Clone, Copy)]
+struct SendPtr(*mut f32);
+// SAFETY: tasks built on it write disjoint regions; reads are of immutable inputs.
+unsafe impl Send for SendPtr {}
+// SAFETY: as above.
+unsafe impl Sync for SendPtr {}
+
+#[derive(Clone, Copy)]
+struct SendConst(*const f32);
+// SAFETY: points into an input slice that outlives the parallel section and is only read.
+unsafe impl Send for SendConst {}
+// SAFETY: as above.
+unsafe impl Sync for SendConst {}
+
+/// `C = act(A B + addend)` over rows `i_lo..i_hi` of C, all columns.
+/// `A` is `[m, k]` strided, `B` `[k, n]` packed by [`pack_b`], `C` `[m, n]` with row stride
+/// `ldc`.
+///
+/// # Safety
+/// All pointers cover the given shapes.
+#[allow(clippy::too_many_arguments)]
+unsafe fn gemm_rows(
+    i_lo: usize,
+    i_hi: usize,
+    n: usize,
+    k: usize,
+    a: StridedA,
+    b: *const f32,
+    c: *mut f32,
+    ldc: usize,
+    accumulate: bool,
+    addend: (*const f32, usize, Addend),
+    relu: bool,
+    avx512: bool,
+) {
+    let (add_ptr, add_ld, add_mode) = addend;
+    let mut j0 = 0;
+    while j0 < n {
+        let cols = NR.min(n - j0);
+        let mut i0 = i_lo;
+        while i0 < i_hi {
+            let rows = MR.min(i_hi - i0);
+            let mut rows_addend = [std::ptr::null::<f32>(); MR];
+            for (r, slot) in rows_addend.iter_mut().enumerate().take(rows) {
+                if let Some(row) = add_mode.row(i0 + r) {
+                    // SAFETY: the addend covers this row (caller's shape contract).
+                    *slot = unsafe { add_ptr.add(row * add_ld + j0) };
+                }
+            }
+            // SAFETY: the offsets stay within the shapes the caller vouched for.
+            let t = unsafe {
+                Tile {
+                    k,
+                    a: StridedA {
+                        ptr: a.ptr.add(i0 * a.rs),
+                        rs: a.rs,
+                        cs: a.cs,
+                    },
+                    b: b.add((j0 / NR) * k * NR),
+                    ldb: NR,
+                    c: c.add(i0 * ldc + j0),
+                    ldc,
+                    rows,
+                    cols,
+                    accumulate,
+                    relu,
+                    addend: rows_addend,
+                }
+            };
+            // SAFETY: as above.
+            unsafe { run_tile(&t, avx512) };
+            i0 += rows;
+        }
+        j0 += cols;
+    }
+}
+
+/// Copies `B` (`[k, n]`, row stride `ldb`) into column panels of NR, each `[k, NR]`
+/// contiguous and zero-padded, so that the kernel streams B without cache-set conflicts.
+///
+/// # Safety
+/// `b` covers `k` rows of `n` values at stride `ldb`.
+unsafe fn pack_b(b: *const f32, ldb: usize, k: usize, n: usize, out: &mut Vec<f32>) {
+    let panels = n.div_ceil(NR);
+    out.clear();
+    out.resize(panels * k * NR, 0.0);
+    for q in 0..panels {
+        let j0 = q * NR;
+        let cols = NR.min(n - j0);
+        let dst = &mut out[q * k * NR..(q + 1) * k * NR];
+        for p in 0..k {
+            // SAFETY: row p, columns j0..j0+cols of B exist (caller's contract).
+            let src = unsafe { std::slice::from_raw_parts(b.add(p * ldb + j0), cols) };
+            dst[p * NR..p * NR + cols].copy_from_slice(src);
+        }
+    }
+}
+
+fn check(name: &str, len: usize, need: usize) {
+    assert!(
+        len >= need,
+        "kernel argument `{name}` holds {len} values, needs {need}"
+    );
+}
+
+/// The fused dense forward: `y = act(x w^T + addend)`.
+///
+/// # Shapes
+/// - `x`: `[m, k]`, `w`: `[n, k]` (candle's `Linear` layout), `y`: `[m, n]`
+/// - `addend`: see [`Addend`]
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+#[allow(clippy::too_many_arguments)]
+pub fn linear_forward(
+    x: &[f32],
+    m: usize,
+    k: usize,
+    w: &[f32],
+    n: usize,
+    addend: &[f32],
+    mode: Addend,
+    relu: bool,
+    y: &mut [f32],
+) {
+    check("x", x.len(), m * k);
+    check("w", w.len(), n * k);
+    check("y", y.len(), m * n);
+    let add_rows = match mode {
+        Addend::None => 0,
+        Addend::Row => 1,
+        Addend::Group(g) => m.div_ceil(g.max(1)),
+        Addend::Full => m,
+    };
+    check("addend", addend.len(), add_rows * n);
+    // W^T, row-major [k, n], packed into panels.
+    let mut wt = vec![0.0f32; k * n];
+    for j in 0..n {
+        for p in 0..k {
+            wt[p * n + j] = w[j * k + p];
+        }
+    }
+    let mut packed = Vec::new();
+    // SAFETY: wt is [k, n] row-major.
+    unsafe { pack_b(wt.as_ptr(), n, k, n, &mut packed) };
+    let avx512 = has_avx512();
+    let yp = SendPtr(y.as_mut_ptr());
+    let (xp, wp, ap) = (
+        SendConst(x.as_ptr()),
+        SendConst(packed.as_ptr()),
+        SendConst(addend.as_ptr()),
+    );
+    (0..m.div_ceil(ROW_CHUNK)).into_par_iter().for_each(|chunk| {
+        let (yp, xp, wp, ap) = (yp, xp, wp, ap);
+        let i_lo = chunk * ROW_CHUNK;
+        let i_hi = (i_lo + ROW_CHUNK).min(m);
+        // SAFETY: shapes were checked above; tasks write disjoint row ranges of y.
+        unsafe {
+            gemm_rows(
+                i_lo,
+                i_hi,
+                n,
+                k,
+                StridedA {
+                    ptr: xp.0,
+                    rs: k,
+                    cs: 1,
+                },
+                wp.0,
+                yp.0,
+                n,
+                false,
+                (ap.0, n, mode),
+                relu,
+                avx512,
+            )
+        };
+    });
+}
+
+/// `c = a b` for row-major `a` `[m, k]` and `b` `[k, n]` (the input gradient `g' W`).
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32]) {
+    check("a", a.len(), m * k);
+    check("b", b.len(), k * n);
+    check("c", c.len(), m * n);
+    let avx512 = has_avx512();
+    let mut packed = Vec::new();
+    // SAFETY: b is [k, n] row-major (checked above).
+    unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
+    let cp = SendPtr(c.as_mut_ptr());
+    let (ap, bp) = (SendConst(a.as_ptr()), SendConst(packed.as_ptr()));
+    (0..m.div_ceil(ROW_CHUNK)).into_par_iter().for_each(|chunk| {
+        let (cp, ap, bp) = (cp, ap, bp);
+        let i_lo = chunk * ROW_CHUNK;
+        let i_hi = (i_lo + ROW_CHUNK).min(m);
+        // SAFETY: shapes checked above; tasks write disjoint row ranges of c.
+        unsafe {
+            gemm_rows(
+                i_lo,
+                i_hi,
+                n,
+                k,
+                StridedA {
+                    ptr: ap.0,
+                    rs: k,
+                    cs: 1,
+                },
+                bp.0,
+                cp.0,
+                n,
+                false,
+                (std::ptr::null(), 0, Addend::None),
+                false,
+                avx512,
+            )
+        };
+    });
+}
+
+/// `c = a^T b` for row-major `a` `[m, n]` and `b` `[m, k]`, summed over the `m` rows (the
+/// weight gradient `g'^T x`), `c` `[n, k]`. Partial sums over fixed chunks of rows are
+/// added in chunk order.
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+pub fn matmul_tn(a: &[f32], m: usize, n: usize, b: &[f32], k: usize, c: &mut [f32]) {
+    check("a", a.len(), m * n);
+    check("b", b.len(), m * k);
+    check("c", c.len(), n * k);
+    let avx512 = has_avx512();
+    let (ap, bp) = (SendConst(a.as_ptr()), SendConst(b.as_ptr()));
+    let partials: Vec<Vec<f32>> = (0..m.div_ceil(REDUCE_CHUNK))
+        .into_par_iter()
+        .map(|chunk| {
+            let (ap, bp) = (ap, bp);
+            let mut part = vec![0.0f32; n * k];
+            let mut packed = Vec::new();
+            let p_lo = chunk * REDUCE_CHUNK;
+            let p_hi = (p_lo + REDUCE_CHUNK).min(m);
+            let mut p0 = p_lo;
+            while p0 < p_hi {
+                let kb = K_BLOCK.min(p_hi - p0);
+                // SAFETY: rows p0..p0+kb of a and b exist (shapes checked above); `part`
+                // is this task's own [n, k] buffer.
+                unsafe {
+                    pack_b(bp.0.add(p0 * k), k, kb, k, &mut packed);
+                    gemm_rows(
+                        0,
+                        n,
+                        k,
+                        kb,
+                        StridedA {
+                            ptr: ap.0.add(p0 * n),
+                            rs: 1,
+                            cs: n,
+                        },
+                        packed.as_ptr(),
+                        part.as_mut_ptr(),
+                        k,
+                        p0 > p_lo,
+                        (std::ptr::null(), 0, Addend::None),
+                        false,
+                        avx512,
+                    )
+                };
+                p0 += kb;
+            }
+            part
+        })
+        .collect();
+    c[..n * k].iter_mut().for_each(|v| *v = 0.0);
+    for part in &partials {
+        for (ci, pi) in c.iter_mut().zip(part) {
+            *ci += pi;
+        }
+    }
+}
+
+/// The ReLU backward mask and the addend's gradient: returns `g' = g * (y > 0)` (or `g`
+/// itself without ReLU) and the gradient of the addend (`[n]` row sums, `[m / group, n]`
+/// group sums, or `g'` itself for a full addend; empty for none).
+///
+/// # Shapes
+/// - `g`, `y`: `[m, n]`
+pub fn relu_backward(
+    g: &[f32],
+    y: &[f32],
+    m: usize,
+    n: usize,
+    relu: bool,
+    mode: Addend,
+) -> (Vec<f32>, Vec<f32>) {
+    check("g", g.len(), m * n);
+    let mut gm = g[..m * n].to_vec();
+    if relu {
+        check("y", y.len(), m * n);
+        gm.par_chunks_mut(REDUCE_CHUNK * n.max(1))
+            .zip(y.par_chunks(REDUCE_CHUNK * n.max(1)))
+            .for_each(|(g, y)| {
+                for (g, &y) in g.iter_mut().zip(y) {
+                    if y <= 0.0 {
+                        *g = 0.0;
+                    }
+                }
+            });
+    }
+    let db = match mode {
+        Addend::None => Vec::new(),
+        Addend::Full => gm.clone(),
+        Addend::Row => {
+            let partials: Vec<Vec<f32>> = gm
+                .par_chunks(REDUCE_CHUNK * n.max(1))
+                .map(|rows| {
+                    let mut s = vec![0.0f32; n];
+                    for row in rows.chunks(n.max(1)) {
+                        for (s, v) in s.iter_mut().zip(row) {
+                            *s += v;
+                        }
+                    }
+                    s
+                })
+                .collect();
+            let mut db = vec![0.0f32; n];
+            for p in &partials {
+                for (d, v) in db.iter_mut().zip(p) {
+                    *d += v;
+                }
+            }
+            db
+        }
+        Addend::Group(group) => {
+            let group = group.max(1);
+            let mut db = vec![0.0f32; m.div_ceil(group) * n];
+            db.par_chunks_mut(n.max(1))
+                .zip(gm.par_chunks(group * n.max(1)))
+                .for_each(|(d, rows)| {
+                    for row in rows.chunks(n.max(1)) {
+                        for (d, v) in d.iter_mut().zip(row) {
+                            *d += v;
+                        }
+                    }
+                });
+            db
+        }
+    };
+    (gm, db)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reference(a: &[f32], m: usize, k: usize, b: &[f32], n: usize) -> Vec<f64> {
+        let mut c = vec![0.0f64; m * n];
+        for i in 0..m {
+            for j in 0..n {
+                c[i * n + j] = (0..k).map(|p| a[i * k + p] as f64 * b[p * n + j] as f64).sum();
+            }
+        }
+        c
+    }
+
+    fn values(n: usize, seed: u32) -> Vec<f32> {
+        (0..n)
+            .map(|i| {
+                let h = (i as u32).wrapping_mul(2654435761).wrapping_add(seed * 97);
+                ((h >> 8) % 2001) as f32 / 1000.0 - 1.0
+            })
+            .collect()
+    }
+
+    #[test]
+    fn products_match_an_f64_reference_for_awkward_shapes() {
+        for &(m, k, n) in &[(1, 1, 1), (13, 5, 3), (15, 31, 33), (29, 17, 64), (130, 40, 17), (5000, 9, 40)] {
+            let a = values(m * k, 1);
+            let b = values(k * n, 2);
+            let want = reference(&a, m, k, &b, n);
+            let mut c = vec![0.0; m * n];
+            matmul(&a, m, k, &b, n, &mut c);
+            for (x, y) in c.iter().zip(&want) {
+                assert!((*x as f64 - y).abs() < 1e-4, "matmul {m}x{k}x{n}: {x} vs {y}");
+            }
+            // a^T b with a = [k, m] laid out as the transpose.
+            let mut at = vec![0.0; k * m];
+            for i in 0..m {
+                for p in 0..k {
+                    at[p * m + i] = a[i * k + p];
+                }
+            }
+            let mut c2 = vec![0.0; m * n];
+            matmul_tn(&at, k, m, &b, n, &mut c2);
+            for (x, y) in c2.iter().zip(&want) {
+                assert!((*x as f64 - y).abs() < 1e-4, "matmul_tn {m}x{k}x{n}: {x} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_forward_adds_its_term_and_clips() {
+        let (m, k, n, group) = (45, 7, 19, 5);
+        let x = values(m * k, 3);
+        let w = values(n * k, 4);
+        let mut wt = vec![0.0; k * n];
+        for j in 0..n {
+            for p in 0..k {
+                wt[p * n + j] = w[j * k + p];
+            }
+        }
+        let base = reference(&x, m, k, &wt, n);
+        for mode in [Addend::None, Addend::Row, Addend::Group(group), Addend::Full] {
+            let rows = match mode {
+                Addend::None => 0,
+                Addend::Row => 1,
+                Addend::Group(g) => m.div_ceil(g),
+                Addend::Full => m,
+            };
+            let add = values(rows * n, 5);
+            for relu in [false, true] {
+                let mut y = vec![0.0; m * n];
+                linear_forward(&x, m, k, &w, n, &add, mode, relu, &mut y);
+                for i in 0..m {
+                    for j in 0..n {
+                        let mut want = base[i * n + j];
+                        if let Some(r) = mode.row(i) {
+                            want += add[r * n + j] as f64;
+                        }
+                        if relu {
+                            want = want.max(0.0);
+                        }
+                        let got = y[i * n + j] as f64;
+                        assert!((got - want).abs() < 1e-4, "{mode:?} relu {relu} ({i}, {j}): {got} vs {want}");
+                    }
+                }
+            }
+        }
+    }
+}
