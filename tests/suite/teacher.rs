@@ -318,3 +318,78 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
             .ends_with(".tmp"))
     );
 }
+
+#[test]
+fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
+    use candle_core::Var;
+    use nldf_train::field::teacher_field;
+    use nldf_train::nn::{init_seeded, sorted_vars};
+    for (cfg, n_rays, n_samples) in [
+        (TeacherConfig::tiny(), 7, 5),
+        (TeacherConfig::small(), 13, 9),
+    ] {
+        let (varmap, vb) = new_varmap();
+        let field = teacher_field(&cfg, vb).unwrap();
+        init_seeded(&varmap, 11).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut rand =
+            |n: usize| -> Vec<f32> { (0..n).map(|_| rng.random_range(-1.0..1.0)).collect() };
+        let n = n_rays * n_samples;
+        let dev = Device::Cpu;
+        let points = Tensor::from_vec(rand(n * cfg.pos_dim()), (n, cfg.pos_dim()), &dev).unwrap();
+        let codes =
+            Var::from_vec(rand(n_rays * cfg.audio.dim), (n_rays, cfg.audio.dim), &dev).unwrap();
+        let dirs =
+            Var::from_vec(rand(n_rays * cfg.dir_dim()), (n_rays, cfg.dir_dim()), &dev).unwrap();
+        let wd = Tensor::from_vec(rand(n), (n_rays, n_samples), &dev).unwrap();
+        let wc = Tensor::from_vec(rand(n * 3), (n_rays, n_samples, 3), &dev).unwrap();
+        let run = |fused: bool| {
+            let (d, c) = if fused {
+                field
+                    .forward(&points, &codes, &dirs, n_samples, true)
+                    .unwrap()
+            } else {
+                field
+                    .forward_reference(&points, &codes, &dirs, n_samples)
+                    .unwrap()
+            };
+            let loss = ((&d * &wd).unwrap().sum_all().unwrap()
+                + (&c * &wc).unwrap().sum_all().unwrap())
+            .unwrap();
+            let grads = loss.backward().unwrap();
+            let mut out: Vec<(String, Vec<f32>)> = vec![
+                (
+                    "density".into(),
+                    d.flatten_all().unwrap().to_vec1().unwrap(),
+                ),
+                ("rgb".into(), c.flatten_all().unwrap().to_vec1().unwrap()),
+            ];
+            for (name, var) in sorted_vars(&varmap).unwrap() {
+                let g = grads
+                    .get(var.as_tensor())
+                    .map(|g| g.flatten_all().unwrap().to_vec1().unwrap());
+                out.push((format!("grad {name}"), g.unwrap_or_default()));
+            }
+            for (name, var) in [("codes", &codes), ("dirs", &dirs)] {
+                let g = grads.get(var.as_tensor()).unwrap();
+                out.push((
+                    format!("grad {name}"),
+                    g.flatten_all().unwrap().to_vec1().unwrap(),
+                ));
+            }
+            out
+        };
+        let (fused, plain) = (run(true), run(false));
+        for ((name, a), (_, b)) in fused.iter().zip(&plain) {
+            assert_eq!(a.len(), b.len(), "{name}");
+            assert!(!a.is_empty(), "{name} has no gradient");
+            let scale = b.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
+            for (x, y) in a.iter().zip(b) {
+                assert!(
+                    (x - y).abs() <= 1e-4 * scale.max(1.0),
+                    "{name}: fused {x} vs plain {y}"
+                );
+            }
+        }
+    }
+}

@@ -11,7 +11,7 @@ use candle_core::{Result, Tensor};
 use candle_nn::VarBuilder;
 
 use crate::config::TeacherConfig;
-use crate::fused::{AddTo, fused_linear};
+use crate::fused_field::{Affine, FieldOp, FieldPlan, TrunkStep};
 use crate::nn::{Dense, dense};
 
 /// One trunk layer: the hidden input, plus the point encoding and the audio code where the
@@ -85,25 +85,139 @@ fn per_ray(layer: &Dense, x: &Tensor, extra: Option<&Tensor>) -> Result<Tensor> 
     }
 }
 
-/// The layer's bias, or zeros of its width.
-fn bias_or_zeros(layer: &Dense) -> Result<Tensor> {
-    match &layer.bias {
-        Some(b) => Ok(b.clone()),
-        None => Tensor::zeros(layer.weight.dim(0)?, layer.weight.dtype(), layer.weight.device()),
+/// Adds a per-ray term to every sample of its ray.
+///
+/// # Shapes
+/// - `per_sample`: `[n_rays * n_samples, w]`; `per_ray`: `[n_rays, w]`
+fn add_per_ray(per_sample: &Tensor, per_ray: &Tensor, n_samples: usize) -> Result<Tensor> {
+    let (n, w) = per_sample.dims2()?;
+    per_sample
+        .reshape((n / n_samples, n_samples, w))?
+        .broadcast_add(&per_ray.unsqueeze(1)?)?
+        .reshape((n, w))
+}
+
+/// Collects the flat parameter list of the fused op.
+struct Packer {
+    parts: Vec<Tensor>,
+    len: usize,
+}
+
+impl Packer {
+    fn push(&mut self, t: &Tensor) -> Result<usize> {
+        let at = self.len;
+        self.len += t.elem_count();
+        self.parts.push(t.flatten_all()?);
+        Ok(at)
+    }
+
+    fn affine(&mut self, layer: &Dense, with_bias: bool) -> Result<Affine> {
+        let (out, inp) = layer.weight.dims2()?;
+        let weight = self.push(&layer.weight)?;
+        let bias = match (&layer.bias, with_bias) {
+            (Some(b), true) => Some(self.push(b)?),
+            _ => None,
+        };
+        Ok(Affine {
+            weight,
+            bias,
+            out,
+            inp,
+        })
     }
 }
 
 impl TeacherField {
-    /// Densities (softplus, so >= 0) and colours of every sample. Every per-sample layer
-    /// runs as one fused op ([`fused_linear`]); the per-ray terms (audio code, view
-    /// direction) enter as group addends.
+    /// Raw densities and colours of every sample, through the fused op ([`FieldOp`]): one
+    /// candle op for the whole per-sample network. With `train`, it keeps what its backward
+    /// needs.
     ///
     /// # Shapes
     /// - `points`: `[n_rays * n_samples, pos_dim]` encoded sample positions
     /// - `codes`: `[n_rays, audio_dim]` audio code of each ray's frame
     /// - `dirs`: `[n_rays, dir_dim]` encoded view directions
-    /// - returns densities `[n_rays, n_samples]` and colours `[n_rays, n_samples, 3]`
+    /// - returns densities `[n_rays, n_samples]` (softplus, so >= 0) and colours
+    ///   `[n_rays, n_samples, 3]` (sigmoid)
     pub fn forward(
+        &self,
+        points: &Tensor,
+        codes: &Tensor,
+        dirs: &Tensor,
+        n_samples: usize,
+        train: bool,
+    ) -> Result<(Tensor, Tensor)> {
+        let n_rays = codes.dim(0)?;
+        let mut pack = Packer {
+            parts: Vec::new(),
+            len: 0,
+        };
+        let mut ray_terms = Vec::new();
+        let mut ray_width = 0;
+        let mut trunk = Vec::with_capacity(self.trunk.len());
+        for layer in &self.trunk {
+            let fed = matches!((&layer.points, &layer.audio), (Some(_), Some(_)));
+            // The biases of fed layers travel with their per-ray term.
+            let hidden = match &layer.hidden {
+                Some(h) => Some(pack.affine(h, !fed)?),
+                None => None,
+            };
+            let (points_affine, ray) = match (&layer.points, &layer.audio) {
+                (Some(p), Some(a)) => {
+                    let bias = match (&layer.hidden, &p.bias) {
+                        (Some(h), _) => h.bias.clone(),
+                        (None, b) => b.clone(),
+                    };
+                    let term = per_ray(a, codes, bias.as_ref())?;
+                    let off = ray_width;
+                    ray_width += term.dim(1)?;
+                    ray_terms.push(term);
+                    (Some(pack.affine(p, false)?), Some(off))
+                }
+                _ => (None, None),
+            };
+            trunk.push(TrunkStep {
+                hidden,
+                points: points_affine,
+                ray,
+            });
+        }
+        let density = pack.affine(&self.density, true)?;
+        let feature = pack.affine(&self.feature, true)?;
+        let color = pack.affine(&self.color_feature, false)?;
+        let color_term = per_ray(&self.color_dir, dirs, self.color_feature.bias.as_ref())?;
+        let color_ray = ray_width;
+        ray_width += color_term.dim(1)?;
+        ray_terms.push(color_term);
+        let rgb = pack.affine(&self.rgb, true)?;
+        let plan = FieldPlan {
+            trunk,
+            density,
+            feature,
+            color,
+            color_ray,
+            rgb,
+            n_samples,
+            ray_width,
+            n_params: pack.len,
+        };
+        let params = Tensor::cat(&pack.parts, 0)?;
+        let rays = Tensor::cat(&ray_terms, 1)?;
+        let op = FieldOp::new(plan, train);
+        let points = points.contiguous()?;
+        let raw = if train {
+            points.apply_op3(&params, &rays, op)?
+        } else {
+            points.apply_op3_no_bwd(&params, &rays, &op)?
+        };
+        let density = softplus(&raw.narrow(1, 0, 1)?)?.reshape((n_rays, n_samples))?;
+        let rgb =
+            candle_nn::ops::sigmoid(&raw.narrow(1, 1, 3)?)?.reshape((n_rays, n_samples, 3))?;
+        Ok((density, rgb))
+    }
+
+    /// The same function as [`TeacherField::forward`] built from plain candle ops: the
+    /// reference the fused op is tested against.
+    pub fn forward_reference(
         &self,
         points: &Tensor,
         codes: &Tensor,
@@ -111,39 +225,36 @@ impl TeacherField {
         n_samples: usize,
     ) -> Result<(Tensor, Tensor)> {
         let n_rays = codes.dim(0)?;
-        let group = AddTo::Groups(n_samples);
         let mut h: Option<Tensor> = None;
         for layer in &self.trunk {
-            let fed = match (&layer.points, &layer.audio) {
-                (Some(p), Some(a)) => Some((p, a)),
+            let mut x = match (&layer.hidden, &h) {
+                (Some(l), Some(h)) => Some(l.forward(h)?),
                 _ => None,
             };
-            h = Some(match (&layer.hidden, h, fed) {
-                // The first layer: points, plus the per-ray audio term and the bias.
-                (None, _, Some((p, a))) => {
-                    let ray = per_ray(a, codes, p.bias.as_ref())?;
-                    fused_linear(points, &p.weight, &ray, group, true)?
-                }
-                // A skip layer: hidden + points + audio, summed before the ReLU.
-                (Some(hid), Some(prev), Some((p, a))) => {
-                    let ray = per_ray(a, codes, Some(&bias_or_zeros(hid)?))?;
-                    let fed = fused_linear(points, &p.weight, &ray, group, false)?;
-                    fused_linear(&prev, &hid.weight, &fed, AddTo::Each, true)?
-                }
-                (Some(hid), Some(prev), None) => {
-                    fused_linear(&prev, &hid.weight, &bias_or_zeros(hid)?, AddTo::Every, true)?
-                }
-                _ => candle_core::bail!("teacher trunk layer without input"),
-            });
+            if let (Some(p), Some(a)) = (&layer.points, &layer.audio) {
+                let fed = p.forward(points)?;
+                let fed = match x {
+                    Some(x) => (x + fed)?,
+                    None => fed,
+                };
+                x = Some(add_per_ray(&fed, &a.forward(codes)?, n_samples)?);
+            }
+            h = Some(
+                x.ok_or_else(|| candle_core::Error::Msg("trunk layer without input".into()))?
+                    .relu()?,
+            );
         }
         let h = h.ok_or_else(|| candle_core::Error::Msg("teacher trunk is empty".into()))?;
-        let raw = fused_linear(&h, &self.density.weight, &bias_or_zeros(&self.density)?, AddTo::Every, false)?;
-        let density = softplus(&raw)?.reshape((n_rays, n_samples))?;
-        let feature = fused_linear(&h, &self.feature.weight, &bias_or_zeros(&self.feature)?, AddTo::Every, false)?;
-        let ray = per_ray(&self.color_dir, dirs, self.color_feature.bias.as_ref())?;
-        let c = fused_linear(&feature, &self.color_feature.weight, &ray, group, true)?;
-        let rgb = fused_linear(&c, &self.rgb.weight, &bias_or_zeros(&self.rgb)?, AddTo::Every, false)?;
-        let rgb = candle_nn::ops::sigmoid(&rgb)?.reshape((n_rays, n_samples, 3))?;
+        let density = softplus(&self.density.forward(&h)?)?.reshape((n_rays, n_samples))?;
+        let feature = self.feature.forward(&h)?;
+        let c = add_per_ray(
+            &self.color_feature.forward(&feature)?,
+            &self.color_dir.forward(dirs)?,
+            n_samples,
+        )?
+        .relu()?;
+        let rgb =
+            candle_nn::ops::sigmoid(&self.rgb.forward(&c)?)?.reshape((n_rays, n_samples, 3))?;
         Ok((density, rgb))
     }
 }

@@ -372,32 +372,34 @@ pub fn linear_forward(
         SendConst(packed.as_ptr()),
         SendConst(addend.as_ptr()),
     );
-    (0..m.div_ceil(ROW_CHUNK)).into_par_iter().for_each(|chunk| {
-        let (yp, xp, wp, ap) = (yp, xp, wp, ap);
-        let i_lo = chunk * ROW_CHUNK;
-        let i_hi = (i_lo + ROW_CHUNK).min(m);
-        // SAFETY: shapes were checked above; tasks write disjoint row ranges of y.
-        unsafe {
-            gemm_rows(
-                i_lo,
-                i_hi,
-                n,
-                k,
-                StridedA {
-                    ptr: xp.0,
-                    rs: k,
-                    cs: 1,
-                },
-                wp.0,
-                yp.0,
-                n,
-                false,
-                (ap.0, n, mode),
-                relu,
-                avx512,
-            )
-        };
-    });
+    (0..m.div_ceil(ROW_CHUNK))
+        .into_par_iter()
+        .for_each(|chunk| {
+            let (yp, xp, wp, ap) = (yp, xp, wp, ap);
+            let i_lo = chunk * ROW_CHUNK;
+            let i_hi = (i_lo + ROW_CHUNK).min(m);
+            // SAFETY: shapes were checked above; tasks write disjoint row ranges of y.
+            unsafe {
+                gemm_rows(
+                    i_lo,
+                    i_hi,
+                    n,
+                    k,
+                    StridedA {
+                        ptr: xp.0,
+                        rs: k,
+                        cs: 1,
+                    },
+                    wp.0,
+                    yp.0,
+                    n,
+                    false,
+                    (ap.0, n, mode),
+                    relu,
+                    avx512,
+                )
+            };
+        });
 }
 
 /// `c = a b` for row-major `a` `[m, k]` and `b` `[k, n]` (the input gradient `g' W`).
@@ -414,32 +416,34 @@ pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32])
     unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
     let cp = SendPtr(c.as_mut_ptr());
     let (ap, bp) = (SendConst(a.as_ptr()), SendConst(packed.as_ptr()));
-    (0..m.div_ceil(ROW_CHUNK)).into_par_iter().for_each(|chunk| {
-        let (cp, ap, bp) = (cp, ap, bp);
-        let i_lo = chunk * ROW_CHUNK;
-        let i_hi = (i_lo + ROW_CHUNK).min(m);
-        // SAFETY: shapes checked above; tasks write disjoint row ranges of c.
-        unsafe {
-            gemm_rows(
-                i_lo,
-                i_hi,
-                n,
-                k,
-                StridedA {
-                    ptr: ap.0,
-                    rs: k,
-                    cs: 1,
-                },
-                bp.0,
-                cp.0,
-                n,
-                false,
-                (std::ptr::null(), 0, Addend::None),
-                false,
-                avx512,
-            )
-        };
-    });
+    (0..m.div_ceil(ROW_CHUNK))
+        .into_par_iter()
+        .for_each(|chunk| {
+            let (cp, ap, bp) = (cp, ap, bp);
+            let i_lo = chunk * ROW_CHUNK;
+            let i_hi = (i_lo + ROW_CHUNK).min(m);
+            // SAFETY: shapes checked above; tasks write disjoint row ranges of c.
+            unsafe {
+                gemm_rows(
+                    i_lo,
+                    i_hi,
+                    n,
+                    k,
+                    StridedA {
+                        ptr: ap.0,
+                        rs: k,
+                        cs: 1,
+                    },
+                    bp.0,
+                    cp.0,
+                    n,
+                    false,
+                    (std::ptr::null(), 0, Addend::None),
+                    false,
+                    avx512,
+                )
+            };
+        });
 }
 
 /// `c = a^T b` for row-major `a` `[m, n]` and `b` `[m, k]`, summed over the `m` rows (the
@@ -501,43 +505,55 @@ pub fn matmul_tn(a: &[f32], m: usize, n: usize, b: &[f32], k: usize, c: &mut [f3
     }
 }
 
-/// The ReLU backward mask and the addend's gradient: returns `g' = g * (y > 0)` (or `g`
-/// itself without ReLU) and the gradient of the addend (`[n]` row sums, `[m / group, n]`
-/// group sums, or `g'` itself for a full addend; empty for none).
+/// The ReLU backward mask and the addend's gradient, in one pass: sets `g *= (y > 0)` in
+/// place (nothing without ReLU) and returns the gradient of the addend (`[n]` row sums,
+/// `[m / group, n]` group sums, a copy of `g` for a full addend, empty for none).
 ///
 /// # Shapes
-/// - `g`, `y`: `[m, n]`
+/// - `g`, `y`: `[m, n]` (`y` unused without ReLU)
 pub fn relu_backward(
-    g: &[f32],
+    g: &mut [f32],
     y: &[f32],
     m: usize,
     n: usize,
     relu: bool,
     mode: Addend,
-) -> (Vec<f32>, Vec<f32>) {
+) -> Vec<f32> {
     check("g", g.len(), m * n);
-    let mut gm = g[..m * n].to_vec();
     if relu {
         check("y", y.len(), m * n);
-        gm.par_chunks_mut(REDUCE_CHUNK * n.max(1))
-            .zip(y.par_chunks(REDUCE_CHUNK * n.max(1)))
-            .for_each(|(g, y)| {
-                for (g, &y) in g.iter_mut().zip(y) {
-                    if y <= 0.0 {
-                        *g = 0.0;
-                    }
-                }
-            });
     }
-    let db = match mode {
-        Addend::None => Vec::new(),
-        Addend::Full => gm.clone(),
+    let n1 = n.max(1);
+    let mask = |g: &mut [f32], y: &[f32]| {
+        if relu {
+            for (g, &y) in g.iter_mut().zip(y) {
+                if y <= 0.0 {
+                    *g = 0.0;
+                }
+            }
+        }
+    };
+    let y_rows = |lo: usize, len: usize| if relu { &y[lo..lo + len] } else { &y[..0] };
+    match mode {
+        Addend::None | Addend::Full => {
+            g[..m * n]
+                .par_chunks_mut(REDUCE_CHUNK * n1)
+                .enumerate()
+                .for_each(|(c, g)| mask(g, y_rows(c * REDUCE_CHUNK * n1, g.len())));
+            if mode == Addend::Full {
+                g[..m * n].to_vec()
+            } else {
+                Vec::new()
+            }
+        }
         Addend::Row => {
-            let partials: Vec<Vec<f32>> = gm
-                .par_chunks(REDUCE_CHUNK * n.max(1))
-                .map(|rows| {
+            let partials: Vec<Vec<f32>> = g[..m * n]
+                .par_chunks_mut(REDUCE_CHUNK * n1)
+                .enumerate()
+                .map(|(c, g)| {
+                    mask(g, y_rows(c * REDUCE_CHUNK * n1, g.len()));
                     let mut s = vec![0.0f32; n];
-                    for row in rows.chunks(n.max(1)) {
+                    for row in g.chunks(n1) {
                         for (s, v) in s.iter_mut().zip(row) {
                             *s += v;
                         }
@@ -556,10 +572,13 @@ pub fn relu_backward(
         Addend::Group(group) => {
             let group = group.max(1);
             let mut db = vec![0.0f32; m.div_ceil(group) * n];
-            db.par_chunks_mut(n.max(1))
-                .zip(gm.par_chunks(group * n.max(1)))
-                .for_each(|(d, rows)| {
-                    for row in rows.chunks(n.max(1)) {
+            db.par_chunks_mut(n1)
+                .zip(g[..m * n].par_chunks_mut(group * n1))
+                .enumerate()
+                .with_min_len(16)
+                .for_each(|(r, (d, g))| {
+                    mask(g, y_rows(r * group * n1, g.len()));
+                    for row in g.chunks(n1) {
                         for (d, v) in d.iter_mut().zip(row) {
                             *d += v;
                         }
@@ -567,8 +586,7 @@ pub fn relu_backward(
                 });
             db
         }
-    };
-    (gm, db)
+    }
 }
 
 #[cfg(test)]
@@ -579,7 +597,9 @@ mod tests {
         let mut c = vec![0.0f64; m * n];
         for i in 0..m {
             for j in 0..n {
-                c[i * n + j] = (0..k).map(|p| a[i * k + p] as f64 * b[p * n + j] as f64).sum();
+                c[i * n + j] = (0..k)
+                    .map(|p| a[i * k + p] as f64 * b[p * n + j] as f64)
+                    .sum();
             }
         }
         c
@@ -596,14 +616,24 @@ mod tests {
 
     #[test]
     fn products_match_an_f64_reference_for_awkward_shapes() {
-        for &(m, k, n) in &[(1, 1, 1), (13, 5, 3), (15, 31, 33), (29, 17, 64), (130, 40, 17), (5000, 9, 40)] {
+        for &(m, k, n) in &[
+            (1, 1, 1),
+            (13, 5, 3),
+            (15, 31, 33),
+            (29, 17, 64),
+            (130, 40, 17),
+            (5000, 9, 40),
+        ] {
             let a = values(m * k, 1);
             let b = values(k * n, 2);
             let want = reference(&a, m, k, &b, n);
             let mut c = vec![0.0; m * n];
             matmul(&a, m, k, &b, n, &mut c);
             for (x, y) in c.iter().zip(&want) {
-                assert!((*x as f64 - y).abs() < 1e-4, "matmul {m}x{k}x{n}: {x} vs {y}");
+                assert!(
+                    (*x as f64 - y).abs() < 1e-4,
+                    "matmul {m}x{k}x{n}: {x} vs {y}"
+                );
             }
             // a^T b with a = [k, m] laid out as the transpose.
             let mut at = vec![0.0; k * m];
@@ -615,7 +645,10 @@ mod tests {
             let mut c2 = vec![0.0; m * n];
             matmul_tn(&at, k, m, &b, n, &mut c2);
             for (x, y) in c2.iter().zip(&want) {
-                assert!((*x as f64 - y).abs() < 1e-4, "matmul_tn {m}x{k}x{n}: {x} vs {y}");
+                assert!(
+                    (*x as f64 - y).abs() < 1e-4,
+                    "matmul_tn {m}x{k}x{n}: {x} vs {y}"
+                );
             }
         }
     }
@@ -632,7 +665,12 @@ mod tests {
             }
         }
         let base = reference(&x, m, k, &wt, n);
-        for mode in [Addend::None, Addend::Row, Addend::Group(group), Addend::Full] {
+        for mode in [
+            Addend::None,
+            Addend::Row,
+            Addend::Group(group),
+            Addend::Full,
+        ] {
             let rows = match mode {
                 Addend::None => 0,
                 Addend::Row => 1,
@@ -653,7 +691,10 @@ mod tests {
                             want = want.max(0.0);
                         }
                         let got = y[i * n + j] as f64;
-                        assert!((got - want).abs() < 1e-4, "{mode:?} relu {relu} ({i}, {j}): {got} vs {want}");
+                        assert!(
+                            (got - want).abs() < 1e-4,
+                            "{mode:?} relu {relu} ({i}, {j}): {got} vs {want}"
+                        );
                     }
                 }
             }

@@ -14,7 +14,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod error;
 pub mod field;
-pub mod fused;
+pub mod fused_field;
 pub mod kernels;
 pub mod log;
 pub mod nn;

@@ -117,7 +117,9 @@ impl Teacher {
         let ray_frames: Vec<u32> = samples.hit.iter().map(|&r| frame_of_ray[r]).collect();
         let ray_frames = Tensor::from_vec(ray_frames, n_hit, &dev)?;
         let ray_codes = codes.index_select(&ray_frames, 0)?;
-        let (densities, colors) = self.field.forward(&points, &ray_codes, &dirs, n_samples)?;
+        let (densities, colors) = self
+            .field
+            .forward(&points, &ray_codes, &dirs, n_samples, true)?;
         let deltas = Tensor::from_slice(&samples.deltas, (n_hit, n_samples), &dev)?;
         let bg: Vec<f32> = samples
             .hit
@@ -190,7 +192,7 @@ impl Teacher {
                 let codes = code
                     .broadcast_as((active.len(), code.dim(1)?))?
                     .contiguous()?;
-                let (densities, colors) = self.field.forward(&points, &codes, &dirs, g)?;
+                let (densities, colors) = self.field.forward(&points, &codes, &dirs, g, false)?;
                 let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
                 let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
                 for (k, &a) in active.iter().enumerate() {
