@@ -9,11 +9,6 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-/// Training allocates and frees large activation buffers every step; mimalloc reuses them
-/// instead of returning them to the kernel and faulting fresh pages in each time.
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 /// Audio-driven 3D talking heads that render fast (NLDF: a NeRF teacher distilled into a
 /// light-field student, exported to ONNX, rendered on the CPU).
 #[derive(Parser, Debug)]

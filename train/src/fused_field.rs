@@ -13,7 +13,9 @@ use std::sync::Mutex;
 
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
 
-use crate::kernels::{Addend, linear_forward, matmul, matmul_tn, relu_backward};
+use crate::kernels::{
+    Addend, give_buffer, linear_forward, matmul, matmul_tn, relu_backward, take_buffer,
+};
 
 /// A weight `[out, inp]` (and bias `[out]`) inside the flat parameter tensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -143,7 +145,7 @@ impl FieldOp {
                 step.hidden.or(step.points).map(|a| a.out).ok_or_else(|| {
                     candle_core::Error::Msg("fused field: empty trunk layer".into())
                 })?;
-            let mut y = vec![0.0f32; n * width];
+            let mut y = take_buffer(n * width);
             match (step.hidden, step.points, step.ray, prev.as_deref()) {
                 (None, Some(p), Some(off), _) => {
                     let term = block(rays, plan.ray_width, off, width);
@@ -161,7 +163,7 @@ impl FieldOp {
                 }
                 (Some(h), Some(p), Some(off), Some(x)) => {
                     let term = block(rays, plan.ray_width, off, width);
-                    let mut z = vec![0.0f32; n * width];
+                    let mut z = take_buffer(n * width);
                     linear_forward(
                         points,
                         n,
@@ -201,10 +203,12 @@ impl FieldOp {
                 }
                 _ => candle_core::bail!("fused field: a trunk layer lacks its input"),
             }
-            if let Some(p) = prev.take()
-                && self.keep
-            {
-                stash.trunk.push(p);
+            if let Some(p) = prev.take() {
+                if self.keep {
+                    stash.trunk.push(p);
+                } else {
+                    give_buffer(p);
+                }
             }
             prev = Some(y);
         }
@@ -222,7 +226,7 @@ impl FieldOp {
             false,
             &mut density,
         );
-        let mut feature = vec![0.0f32; n * f.out];
+        let mut feature = take_buffer(n * f.out);
         linear_forward(
             &h,
             n,
@@ -235,7 +239,7 @@ impl FieldOp {
             &mut feature,
         );
         let term = block(rays, plan.ray_width, plan.color_ray, c.out);
-        let mut color = vec![0.0f32; n * c.out];
+        let mut color = take_buffer(n * c.out);
         linear_forward(
             &feature,
             n,
@@ -264,9 +268,15 @@ impl FieldOp {
             o[0] = density[i];
             o[1..].copy_from_slice(&rgb[3 * i..3 * i + 3]);
         }
-        stash.trunk.push(h);
-        stash.feature = feature;
-        stash.color = color;
+        if self.keep {
+            stash.trunk.push(h);
+            stash.feature = feature;
+            stash.color = color;
+        } else {
+            give_buffer(h);
+            give_buffer(feature);
+            give_buffer(color);
+        }
         Ok((out, stash))
     }
 }
@@ -362,24 +372,24 @@ impl CustomOp3 for FieldOp {
                     // rgb = color W_r^T + b_r
                     let db = relu_backward(&mut g_rgb, &[], n, 3, false, Addend::Row);
                     accumulate_affine(&mut dp, r, &g_rgb, &stash.color, n, Some(&db));
-                    let mut g_color = vec![0.0f32; n * c.out];
+                    let mut g_color = take_buffer(n * c.out);
                     matmul(&g_rgb, n, 3, weight(p, r), c.out, &mut g_color);
                     // color = relu(feature W_c^T + ray term)
                     let d_term = relu_backward(&mut g_color, &stash.color, n, c.out, true, group);
                     add_block(&mut dr, plan.color_ray, c.out, &d_term);
                     accumulate_affine(&mut dp, c, &g_color, &stash.feature, n, None);
-                    let mut g_feature = vec![0.0f32; n * f.out];
+                    let mut g_feature = take_buffer(n * f.out);
                     matmul(&g_color, n, c.out, weight(p, c), f.out, &mut g_feature);
-                    drop(g_color);
+                    give_buffer(g_color);
                     // feature = h W_f^T + b_f, density = h W_d^T + b_d
                     let db_f = relu_backward(&mut g_feature, &[], n, f.out, false, Addend::Row);
                     accumulate_affine(&mut dp, f, &g_feature, h, n, Some(&db_f));
                     let db_d = relu_backward(&mut g_density, &[], n, 1, false, Addend::Row);
                     accumulate_affine(&mut dp, d, &g_density, h, n, Some(&db_d));
                     let width = f.inp;
-                    let mut g_h = vec![0.0f32; n * width];
+                    let mut g_h = take_buffer(n * width);
                     matmul(&g_feature, n, f.out, weight(p, f), width, &mut g_h);
-                    drop(g_feature);
+                    give_buffer(g_feature);
                     let wd = weight(p, d);
                     for (row, &gd) in g_h.chunks_exact_mut(width).zip(&g_density) {
                         for (x, w) in row.iter_mut().zip(wd) {
@@ -406,15 +416,19 @@ impl CustomOp3 for FieldOp {
                             let x = &stash.trunk[i - 1];
                             let db = (mode == Addend::Row).then_some(&d_add);
                             accumulate_affine(&mut dp, &hid, &g_h, x, n, db);
-                            let mut g_x = vec![0.0f32; n * hid.inp];
+                            let mut g_x = take_buffer(n * hid.inp);
                             matmul(&g_h, n, w_out, weight(p, &hid), hid.inp, &mut g_x);
-                            g_h = g_x;
+                            give_buffer(std::mem::replace(&mut g_h, g_x));
                         }
                     }
+                    give_buffer(g_h);
                     Ok(())
                 })
             })
         })?;
+        stash.trunk.into_iter().for_each(give_buffer);
+        give_buffer(stash.feature);
+        give_buffer(stash.color);
         let d_params = Tensor::from_vec(dp, params.shape(), dev)?;
         let d_rays = Tensor::from_vec(dr, rays.shape(), dev)?;
         Ok((None, Some(d_params), Some(d_rays)))

@@ -589,6 +589,49 @@ pub fn relu_backward(
     }
 }
 
+/// Large scratch buffers kept between training steps: a fresh multi-megabyte allocation
+/// costs a page fault per 4 KiB page, more than the arithmetic that fills it.
+static POOL: std::sync::Mutex<Vec<Vec<f32>>> = std::sync::Mutex::new(Vec::new());
+/// Buffers the pool keeps at most.
+const POOL_SIZE: usize = 48;
+
+/// A buffer of exactly `len` values from the pool. Its contents are unspecified (zeros or
+/// an earlier step's values): only for outputs that are written in full.
+pub fn take_buffer(len: usize) -> Vec<f32> {
+    let reused = POOL.lock().ok().and_then(|mut pool| {
+        let best = pool
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.capacity() >= len)
+            .min_by_key(|(_, v)| v.capacity())
+            .map(|(i, _)| i)?;
+        Some(pool.swap_remove(best))
+    });
+    match reused {
+        Some(mut v) => {
+            if v.len() >= len {
+                v.truncate(len);
+            } else {
+                v.resize(len, 0.0);
+            }
+            v
+        }
+        None => vec![0.0; len],
+    }
+}
+
+/// Returns a buffer to the pool (small ones are simply dropped).
+pub fn give_buffer(v: Vec<f32>) {
+    if v.capacity() < 1 << 16 {
+        return;
+    }
+    if let Ok(mut pool) = POOL.lock()
+        && pool.len() < POOL_SIZE
+    {
+        pool.push(v);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
