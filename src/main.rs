@@ -1,6 +1,7 @@
 //! The `nldf` command line: a thin front end over the workspace's libraries.
 
 mod bench_cmd;
+mod eval_cmd;
 mod progress;
 mod synth_cmd;
 mod train_cmd;
@@ -26,6 +27,8 @@ enum Command {
     /// Train a stage of the pipeline (the teacher NeRF).
     #[command(subcommand)]
     Train(train_cmd::TrainCommand),
+    /// Render held-out frames with a trained model and score them (PSNR, SSIM, mouth PSNR).
+    Eval(eval_cmd::EvalArgs),
     /// Measure training throughput (and, later, rendering speed against error).
     #[command(subcommand)]
     Bench(bench_cmd::BenchCommand),
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Synth(args) => synth_cmd::run(args),
         Command::Train(cmd) => train_cmd::run(cmd),
+        Command::Eval(args) => eval_cmd::run(args),
         Command::Bench(cmd) => bench_cmd::run(cmd),
     };
     match result {

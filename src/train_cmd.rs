@@ -142,10 +142,10 @@ fn run_teacher(args: TeacherArgs) -> Result<()> {
                 "step {step}: validation PSNR {:.2} dB, SSIM {:.4}{}",
                 scores.psnr,
                 scores.ssim,
-                scores
-                    .mouth_psnr
-                    .map(|m| format!(", mouth PSNR {m:.2} dB"))
-                    .unwrap_or_default()
+                match (scores.face_psnr, scores.mouth_psnr) {
+                    (Some(f), Some(m)) => format!(", face {f:.2} dB, mouth {m:.2} dB"),
+                    _ => String::new(),
+                }
             ));
         }
         Event::Checkpoint { .. } => {}

@@ -102,3 +102,66 @@ pub fn save_png_bytes(
         .map_err(|e| Error::invalid(path, format!("cannot encode PNG: {e}")))?;
     write_atomic(path, &buf)
 }
+
+/// A colour for `v` in [0, 1] on a dark-blue -> magenta -> orange -> pale-yellow ramp
+/// (perceptually ordered, like matplotlib's "inferno"); values outside are clamped.
+pub fn heat_color(v: f32) -> [f32; 3] {
+    const STOPS: [[f32; 3]; 5] = [
+        [0.0, 0.0, 0.016],
+        [0.34, 0.06, 0.43],
+        [0.73, 0.21, 0.33],
+        [0.98, 0.55, 0.04],
+        [0.99, 1.0, 0.64],
+    ];
+    let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+    let x = v * (STOPS.len() - 1) as f32;
+    let i = (x.floor() as usize).min(STOPS.len() - 2);
+    let t = x - i as f32;
+    [0, 1, 2].map(|c| STOPS[i][c] + t * (STOPS[i + 1][c] - STOPS[i][c]))
+}
+
+/// The per-pixel error heat map of `a` against `b`: mean absolute RGB difference times
+/// `gain`, coloured by [`heat_color`]. Images of different sizes give an error.
+pub fn error_map(a: &ImageRgb, b: &ImageRgb, gain: f32) -> Result<ImageRgb> {
+    if (a.width, a.height) != (b.width, b.height) {
+        return Err(crate::Error::Argument(format!(
+            "error map of a {}x{} and a {}x{} image",
+            a.width, a.height, b.width, b.height
+        )));
+    }
+    let mut out = ImageRgb::filled(a.width, a.height, [0.0; 3]);
+    for (o, (x, y)) in out
+        .data
+        .chunks_exact_mut(3)
+        .zip(a.data.chunks_exact(3).zip(b.data.chunks_exact(3)))
+    {
+        let e = (0..3).map(|c| (x[c] - y[c]).abs()).sum::<f32>() / 3.0;
+        o.copy_from_slice(&heat_color(e * gain));
+    }
+    Ok(out)
+}
+
+/// Tiles images into a grid, row by row, with a `gap`-pixel border of `gap_color`; every
+/// cell takes the size of the largest image.
+pub fn grid(rows: &[Vec<ImageRgb>], gap: u32, gap_color: [f32; 3]) -> ImageRgb {
+    let cell_w = rows.iter().flatten().map(|i| i.width).max().unwrap_or(0);
+    let cell_h = rows.iter().flatten().map(|i| i.height).max().unwrap_or(0);
+    let n_cols = rows.iter().map(|r| r.len()).max().unwrap_or(0) as u32;
+    let width = n_cols * (cell_w + gap) + gap;
+    let height = rows.len() as u32 * (cell_h + gap) + gap;
+    let mut out = ImageRgb::filled(width, height, gap_color);
+    for (r, row) in rows.iter().enumerate() {
+        for (c, img) in row.iter().enumerate() {
+            let (x0, y0) = (
+                gap + c as u32 * (cell_w + gap),
+                gap + r as u32 * (cell_h + gap),
+            );
+            for j in 0..img.height {
+                for i in 0..img.width {
+                    out.set(x0 + i, y0 + j, img.get(i, j));
+                }
+            }
+        }
+    }
+    out
+}

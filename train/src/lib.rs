@@ -13,6 +13,7 @@ pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod error;
+pub mod eval;
 pub mod field;
 pub mod fused_field;
 pub mod kernels;

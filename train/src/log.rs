@@ -9,7 +9,8 @@ use crate::error::{Error, Result};
 use crate::trainer::Scores;
 
 /// The header of `log.csv`.
-pub const HEADER: &str = "step,elapsed_s,loss,psnr,lr,rays_per_s,val_psnr,val_ssim,val_mouth_psnr";
+pub const HEADER: &str =
+    "step,elapsed_s,loss,psnr,lr,rays_per_s,val_psnr,val_ssim,val_face_psnr,val_mouth_psnr";
 
 /// An open `log.csv`.
 pub struct CsvLog {
@@ -55,17 +56,19 @@ impl CsvLog {
         rays_per_s: f64,
         scores: Option<Scores>,
     ) -> Result<()> {
-        let (vp, vs, vm) = match scores {
+        let opt = |v: Option<f64>| v.map(|m| format!("{m:.4}")).unwrap_or_default();
+        let (vp, vs, vf, vm) = match scores {
             Some(s) => (
                 format!("{:.4}", s.psnr),
                 format!("{:.5}", s.ssim),
-                s.mouth_psnr.map(|m| format!("{m:.4}")).unwrap_or_default(),
+                opt(s.face_psnr),
+                opt(s.mouth_psnr),
             ),
             None => Default::default(),
         };
         writeln!(
             self.file,
-            "{step},{elapsed:.3},{loss:.6e},{psnr:.4},{lr:.4e},{rays_per_s:.1},{vp},{vs},{vm}"
+            "{step},{elapsed:.3},{loss:.6e},{psnr:.4},{lr:.4e},{rays_per_s:.1},{vp},{vs},{vf},{vm}"
         )
         .and_then(|_| self.file.flush())
         .map_err(|e| Error::io(&self.path, e))

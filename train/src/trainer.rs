@@ -44,12 +44,22 @@ pub struct TrainData {
 impl TrainData {
     /// Loads and validates a dataset and decodes its training frames.
     pub fn load(root: &Path) -> Result<TrainData> {
+        Self::open(root, true)
+    }
+
+    /// Loads and validates a dataset; decodes the training frames only with `decode`
+    /// (rendering and evaluation need none).
+    pub fn open(root: &Path, decode: bool) -> Result<TrainData> {
         let dataset = Dataset::load(root)?;
-        let images = dataset
-            .frames(Split::Train)
-            .iter()
-            .map(|f| dataset.load_image(f))
-            .collect::<nldf_core::Result<Vec<_>>>()?;
+        let images = if decode {
+            dataset
+                .frames(Split::Train)
+                .iter()
+                .map(|f| dataset.load_image(f))
+                .collect::<nldf_core::Result<Vec<_>>>()?
+        } else {
+            Vec::new()
+        };
         let bounds = dataset_bounds(&dataset)?;
         Ok(TrainData {
             dataset,
@@ -80,30 +90,48 @@ pub enum Event {
 pub struct Scores {
     pub psnr: f64,
     pub ssim: f64,
+    /// PSNR inside the head (face, eyes, mouth; when the dataset has parsing masks).
+    pub face_psnr: Option<f64>,
     /// PSNR inside the mouth region (when the dataset has parsing masks).
     pub mouth_psnr: Option<f64>,
     pub frames: usize,
 }
 
+/// PSNR inside the head and inside the mouth (each `None` where the region is empty),
+/// capped at 100 dB.
+pub fn region_psnrs(
+    render: &ImageRgb,
+    truth: &ImageRgb,
+    regions: &[Region],
+) -> Result<(Option<f64>, Option<f64>)> {
+    let head: Vec<bool> = regions.iter().map(|r| r.is_head()).collect();
+    let mouth: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
+    Ok((
+        psnr_masked(render, truth, &head)?.map(|v| v.min(100.0)),
+        psnr_masked(render, truth, &mouth)?.map(|v| v.min(100.0)),
+    ))
+}
+
 /// Scores of rendered frames against their ground truth and optional region masks.
 pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Result<Scores> {
-    let (mut p, mut s, mut m, mut n_m) = (0.0, 0.0, 0.0, 0usize);
+    let (mut p, mut s) = (0.0, 0.0);
+    let (mut face, mut mouth) = (Vec::new(), Vec::new());
     for (render, truth, regions) in pairs {
         p += psnr(render, truth)?.min(100.0);
         s += ssim(render, truth)?;
         if let Some(regions) = regions {
-            let mask: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
-            if let Some(v) = psnr_masked(render, truth, &mask)? {
-                m += v.min(100.0);
-                n_m += 1;
-            }
+            let (f, m) = region_psnrs(render, truth, regions)?;
+            face.extend(f);
+            mouth.extend(m);
         }
     }
     let n = pairs.len().max(1) as f64;
+    let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
     Ok(Scores {
         psnr: p / n,
         ssim: s / n,
-        mouth_psnr: (n_m > 0).then(|| m / n_m as f64),
+        face_psnr: mean(face),
+        mouth_psnr: mean(mouth),
         frames: pairs.len(),
     })
 }
