@@ -19,6 +19,7 @@ pub mod fused_field;
 pub mod kernels;
 pub mod log;
 pub mod nn;
+pub mod plot;
 pub mod render;
 pub mod sampler;
 pub mod teacher;

@@ -83,6 +83,8 @@ pub struct LogRow {
     pub loss: f64,
     pub psnr: f64,
     pub val_psnr: Option<f64>,
+    pub val_face_psnr: Option<f64>,
+    pub val_mouth_psnr: Option<f64>,
 }
 
 /// Reads the rows of a `log.csv`.
@@ -106,6 +108,8 @@ pub fn read_log(path: &Path) -> Result<Vec<LogRow>> {
             loss,
             psnr,
             val_psnr: num(6),
+            val_face_psnr: num(8),
+            val_mouth_psnr: num(9),
         });
     }
     Ok(rows)

@@ -28,6 +28,9 @@ use crate::checkpoint::{
     save_tensors, step_of, weights,
 };
 use crate::config::TeacherRunConfig;
+
+/// The training curve written beside the log at every checkpoint.
+pub const CURVE_FILE: &str = "training_curve.png";
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::teacher::{Teacher, teacher};
