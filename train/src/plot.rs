@@ -11,6 +11,9 @@ use plotters::style::FontStyle;
 use crate::error::{Error, Result};
 use crate::log::LogRow;
 
+/// Picks one value of a log row.
+type Pick = fn(&LogRow) -> Option<f64>;
+
 /// Image size of the plot.
 const SIZE: (u32, u32) = (960, 540);
 
@@ -75,7 +78,7 @@ pub fn plot_training_curve(path: &Path, title: &str, rows: &[LogRow]) -> Result<
             .map_err(|e| fail(e.to_string()))?
             .label("training batch")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(170, 170, 170)));
-        let series: [(&str, RGBColor, fn(&LogRow) -> Option<f64>); 3] = [
+        let series: [(&str, RGBColor, Pick); 3] = [
             ("validation, whole image", RGBColor(31, 119, 180), |r| {
                 r.val_psnr
             }),
