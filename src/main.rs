@@ -1,6 +1,7 @@
 //! The `nldf` command line: a thin front end over the workspace's libraries.
 
 mod bench_cmd;
+mod demo_cmd;
 mod eval_cmd;
 mod progress;
 mod synth_cmd;
@@ -21,6 +22,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// The whole pipeline on the synthetic talking head: scene, teacher, evaluation.
+    Demo(demo_cmd::DemoArgs),
     /// Generate the synthetic talking head as an AD-NeRF dataset (frames, background, audio,
     /// audio features, camera poses, depth, parsing masks and scene.json ground truth).
     Synth(synth_cmd::SynthArgs),
@@ -37,6 +40,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => demo_cmd::run(args),
         Command::Synth(args) => synth_cmd::run(args),
         Command::Train(cmd) => train_cmd::run(cmd),
         Command::Eval(args) => eval_cmd::run(args),

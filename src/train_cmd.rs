@@ -63,11 +63,12 @@ impl TeacherPreset {
 /// Runs a `nldf train` subcommand.
 pub fn run(cmd: TrainCommand) -> Result<()> {
     match cmd {
-        TrainCommand::Teacher(args) => run_teacher(args),
+        TrainCommand::Teacher(args) => run_teacher_with(args, None),
     }
 }
 
-fn run_teacher(args: TeacherArgs) -> Result<()> {
+/// Trains (or resumes) a teacher; `budget_s` caps its training time.
+pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> {
     use nldf_train::config::TeacherRunConfig;
     use nldf_train::trainer::{Event, TeacherRun, TrainData};
     use std::sync::Arc;
@@ -114,6 +115,9 @@ fn run_teacher(args: TeacherArgs) -> Result<()> {
             run
         }
     };
+    if let Some(b) = budget_s {
+        run.cfg.train.time_budget_s = b;
+    }
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = stop.clone();

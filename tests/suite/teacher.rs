@@ -14,7 +14,7 @@ use nldf_core::synth::{SynthConfig, generate};
 use nldf_train::config::{TeacherConfig, TeacherRunConfig, TrainConfig};
 use nldf_train::nn::{conv1d, new_varmap};
 use nldf_train::render::composite;
-use nldf_train::sampler::sample_stratified;
+use nldf_train::sampler::{sample_importance, sample_stratified};
 use nldf_train::trainer::{TeacherRun, TrainData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -392,4 +392,62 @@ fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
             }
         }
     }
+}
+
+#[test]
+fn importance_samples_gather_where_the_weight_is() {
+    let bounds = Bounds {
+        lo: Vec3::splat(-0.1),
+        hi: Vec3::splat(0.1),
+    };
+    let mut rays = Rays::with_capacity(2);
+    rays.push(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0));
+    rays.push(Vec3::new(0.02, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.5));
+    let coarse = sample_stratified(&rays, &bounds, 0.5, 2.0, 16, None::<&mut ChaCha8Rng>);
+    // All the weight on coarse sample 10 of each ray.
+    let mut weights = vec![0.0f32; 2 * 16];
+    weights[10] = 1.0;
+    weights[16 + 10] = 1.0;
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    for jitter in [false, true] {
+        let rng: Option<&mut dyn rand::RngCore> = if jitter { Some(&mut rng) } else { None };
+        let fine = sample_importance(&rays, &bounds, 0.5, 2.0, &coarse, &weights, 32, rng);
+        assert_eq!(fine.n_samples, 48);
+        assert_eq!(fine.hit, coarse.hit);
+        for (h, &r) in fine.hit.iter().enumerate() {
+            let (t0, t1) = bounds
+                .intersect(rays.origin(r), rays.direction(r), 0.5, 2.0)
+                .unwrap();
+            let t = &fine.t_vals[h * 48..(h + 1) * 48];
+            assert!(t.windows(2).all(|w| w[0] <= w[1]), "not sorted: {t:?}");
+            assert!(t[0] >= t0 - 1e-6 && t[47] <= t1 + 1e-6);
+            // The bin of coarse sample 10 lies between the midpoints around it.
+            let c = &coarse.t_vals[h * 16..(h + 1) * 16];
+            let (lo, hi) = (0.5 * (c[9] + c[10]), 0.5 * (c[10] + c[11]));
+            let inside = t
+                .iter()
+                .filter(|&&x| x >= lo - 1e-6 && x <= hi + 1e-6)
+                .count();
+            // 32 draws nearly all land there, plus the coarse sample itself.
+            assert!(inside >= 30, "only {inside} samples in the heavy bin");
+            let total: f32 = fine.deltas[h * 48..(h + 1) * 48].iter().sum();
+            let d = rays.direction(r).length();
+            assert!((total - (t1 - t[0]) * d).abs() < 1e-4);
+        }
+    }
+}
+
+#[test]
+fn a_teacher_with_importance_samples_trains_and_renders() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = tiny_run_config(40);
+    cfg.model.n_importance = 8;
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    let losses: Vec<f64> = (0..40).map(|_| run.train_step(&data).unwrap().0).collect();
+    assert!(losses.iter().all(|l| l.is_finite()));
+    assert!(losses[35..].iter().sum::<f64>() < losses[..5].iter().sum::<f64>());
+    let frame = &data.dataset.val[0];
+    let img = run.render_frame(&data, frame).unwrap();
+    assert!(img.data.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
 }

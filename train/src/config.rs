@@ -140,6 +140,10 @@ pub struct TrainConfig {
     pub frames_per_batch: usize,
     /// Fraction of rays inside `face_rect` (AD-NeRF: 0.95).
     pub face_fraction: f32,
+    /// Fraction of rays drawn from the mouth region when the dataset has parsing masks
+    /// (ours: the mouth is a few percent of the face but carries the audio's effect;
+    /// AD-NeRF: 0).
+    pub mouth_fraction: f32,
     /// Adam learning rate at step 0 (AD-NeRF: 5e-4).
     pub lr: f64,
     /// Steps over which the learning rate decays by 10x (AD-NeRF: 500k; shorter runs here).
@@ -162,6 +166,9 @@ pub struct TrainConfig {
     pub val_frames: usize,
     /// Steps between checkpoints (also written at the end and on Ctrl-C).
     pub checkpoint_every: usize,
+    /// Training seconds after which the run ends early, validated and checkpointed
+    /// (0: no limit; counts across resumes).
+    pub time_budget_s: f64,
 }
 
 impl Default for TrainConfig {
@@ -172,6 +179,7 @@ impl Default for TrainConfig {
             batch_rays: 1024,
             frames_per_batch: 4,
             face_fraction: 0.95,
+            mouth_fraction: 0.1,
             lr: 5e-4,
             lr_decay_steps: 20_000,
             att_start: 3000,
@@ -183,6 +191,7 @@ impl Default for TrainConfig {
             val_every: 500,
             val_frames: 4,
             checkpoint_every: 500,
+            time_budget_s: 0.0,
         }
     }
 }

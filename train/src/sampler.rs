@@ -29,13 +29,13 @@ pub struct RaySamples {
 ///
 /// # Shapes
 /// - see [`RaySamples`]; `n_hit` = rays that hit
-pub fn sample_stratified(
+pub fn sample_stratified<R: Rng + ?Sized>(
     rays: &Rays,
     bounds: &Bounds,
     near: f32,
     far: f32,
     n_samples: usize,
-    mut rng: Option<&mut dyn rand::RngCore>,
+    mut rng: Option<&mut R>,
 ) -> RaySamples {
     let mut s = RaySamples {
         n_samples,
@@ -71,4 +71,84 @@ pub fn sample_stratified(
             .extend_from_slice(&(d / norm.max(1e-12)).to_array());
     }
     s
+}
+
+/// Hierarchical sampling (NeRF): for each ray of `coarse`, `n_importance` more `t` values
+/// drawn by inverse-transform sampling from the piecewise-constant density that the coarse
+/// `weights` (plus a floor of 1e-5) put on the coarse samples' bins, merged with the coarse
+/// samples and sorted; spacings and positions are recomputed. Bins run between the
+/// midpoints of neighbouring coarse samples and out to the ray's entry and exit. Without
+/// `rng` the draws are evenly spaced in probability (rendering).
+///
+/// # Shapes
+/// - `weights`: `[n_hit, coarse.n_samples]`
+/// - returns `n_samples = coarse.n_samples + n_importance` per ray, the same rays hit
+#[allow(clippy::too_many_arguments)]
+pub fn sample_importance<R: Rng + ?Sized>(
+    rays: &Rays,
+    bounds: &Bounds,
+    near: f32,
+    far: f32,
+    coarse: &RaySamples,
+    weights: &[f32],
+    n_importance: usize,
+    mut rng: Option<&mut R>,
+) -> RaySamples {
+    let s = coarse.n_samples;
+    let total = s + n_importance;
+    let mut out = RaySamples {
+        hit: coarse.hit.clone(),
+        n_samples: total,
+        view_dirs: coarse.view_dirs.clone(),
+        ..RaySamples::default()
+    };
+    let mut edges = vec![0.0f32; s + 1];
+    let mut cdf = vec![0.0f32; s + 1];
+    let mut t_all = Vec::with_capacity(total);
+    for (h, &r) in coarse.hit.iter().enumerate() {
+        let (o, d) = (rays.origin(r), rays.direction(r));
+        let t = &coarse.t_vals[h * s..(h + 1) * s];
+        let (t0, t1) = bounds
+            .intersect(o, d, near, far)
+            .unwrap_or((t[0], t[s - 1]));
+        edges[0] = t0;
+        for k in 1..s {
+            edges[k] = 0.5 * (t[k - 1] + t[k]);
+        }
+        edges[s] = t1;
+        cdf[0] = 0.0;
+        for k in 0..s {
+            let w = weights[h * s + k];
+            let w = if w.is_finite() { w.max(0.0) } else { 0.0 };
+            cdf[k + 1] = cdf[k] + w + 1e-5;
+        }
+        let norm = cdf[s];
+        t_all.clear();
+        t_all.extend_from_slice(t);
+        for j in 0..n_importance {
+            let jitter = match rng.as_deref_mut() {
+                Some(g) => g.random::<f32>(),
+                None => 0.5,
+            };
+            let u = (j as f32 + jitter) / n_importance as f32 * norm;
+            // The bin whose cumulative range holds u.
+            let k = cdf[1..].partition_point(|&c| c < u).min(s - 1);
+            let span = (cdf[k + 1] - cdf[k]).max(1e-12);
+            let frac = ((u - cdf[k]) / span).clamp(0.0, 1.0);
+            t_all.push(edges[k] + frac * (edges[k + 1] - edges[k]));
+        }
+        t_all.sort_by(f32::total_cmp);
+        let norm_d = d.length();
+        for k in 0..total {
+            let next = if k + 1 < total {
+                t_all[k + 1]
+            } else {
+                t1.max(t_all[k])
+            };
+            out.t_vals.push(t_all[k]);
+            out.deltas.push((next - t_all[k]).max(0.0) * norm_d);
+            out.points.extend_from_slice(&(o + t_all[k] * d).to_array());
+        }
+    }
+    out
 }

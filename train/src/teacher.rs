@@ -11,7 +11,7 @@ use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::config::TeacherConfig;
 use crate::field::{TeacherField, teacher_field};
 use crate::render::composite;
-use crate::sampler::{RaySamples, sample_stratified};
+use crate::sampler::{RaySamples, sample_importance, sample_stratified};
 use nldf_core::bounds::Bounds;
 
 /// The audio-conditioned NeRF teacher.
@@ -100,10 +100,14 @@ impl Teacher {
         far: f32,
         rng: Option<&mut dyn rand::RngCore>,
     ) -> Result<RayColors> {
-        let n_samples = self.cfg.n_samples;
-        let samples = sample_stratified(rays, bounds, near, far, n_samples, rng);
-        let n_hit = samples.hit.len();
         let dev = Device::Cpu;
+        let ray_codes = |hit: &[usize]| -> Result<Tensor> {
+            let frames: Vec<u32> = hit.iter().map(|&r| frame_of_ray[r]).collect();
+            codes.index_select(&Tensor::from_vec(frames, hit.len(), &dev)?, 0)
+        };
+        let samples = self.sample(rays, bounds, near, far, rng, &|hit| ray_codes(hit))?;
+        let n_samples = samples.n_samples;
+        let n_hit = samples.hit.len();
         if n_hit == 0 {
             return Ok(RayColors {
                 hit: vec![],
@@ -114,9 +118,7 @@ impl Teacher {
         }
         let points = encode_vectors(&samples.points, self.cfg.pos_freqs).tensor()?;
         let dirs = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs).tensor()?;
-        let ray_frames: Vec<u32> = samples.hit.iter().map(|&r| frame_of_ray[r]).collect();
-        let ray_frames = Tensor::from_vec(ray_frames, n_hit, &dev)?;
-        let ray_codes = codes.index_select(&ray_frames, 0)?;
+        let ray_codes = ray_codes(&samples.hit)?;
         let (densities, colors) = self
             .field
             .forward(&points, &ray_codes, &dirs, n_samples, true)?;
@@ -134,6 +136,79 @@ impl Teacher {
             weights: out.weights,
             samples,
         })
+    }
+}
+
+impl Teacher {
+    /// The samples of each ray that hits `bounds`: `n_samples` stratified ones, plus
+    /// `n_importance` drawn from the weights that a coarse pass of the field (no gradient)
+    /// gives them. `codes_of` gives the audio codes of a list of hit rays.
+    pub fn sample(
+        &self,
+        rays: &Rays,
+        bounds: &Bounds,
+        near: f32,
+        far: f32,
+        mut rng: Option<&mut dyn rand::RngCore>,
+        codes_of: &dyn Fn(&[usize]) -> Result<Tensor>,
+    ) -> Result<RaySamples> {
+        let coarse = sample_stratified(
+            rays,
+            bounds,
+            near,
+            far,
+            self.cfg.n_samples,
+            rng.as_deref_mut(),
+        );
+        if self.cfg.n_importance == 0 || coarse.hit.is_empty() {
+            return Ok(coarse);
+        }
+        let weights = self.coarse_weights(&coarse, &codes_of(&coarse.hit)?.detach())?;
+        Ok(sample_importance(
+            rays,
+            bounds,
+            near,
+            far,
+            &coarse,
+            &weights,
+            self.cfg.n_importance,
+            rng,
+        ))
+    }
+
+    /// Compositing weights of every sample (forward only, in chunks of rays).
+    ///
+    /// # Shapes
+    /// - `codes`: `[n_hit, audio_dim]`; returns `[n_hit, n_samples]` flat
+    pub fn coarse_weights(&self, samples: &RaySamples, codes: &Tensor) -> Result<Vec<f32>> {
+        let s = samples.n_samples;
+        let n_hit = samples.hit.len();
+        let mut weights = vec![0.0f32; n_hit * s];
+        let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
+        for lo in (0..n_hit).step_by(EVAL_CHUNK) {
+            let hi = (lo + EVAL_CHUNK).min(n_hit);
+            let points =
+                encode_vectors(&samples.points[3 * s * lo..3 * s * hi], self.cfg.pos_freqs)
+                    .tensor()?;
+            let dirs = Tensor::from_slice(
+                &dirs_all.data[lo * dirs_all.width..hi * dirs_all.width],
+                (hi - lo, dirs_all.width),
+                &Device::Cpu,
+            )?;
+            let (densities, _) =
+                self.field
+                    .forward(&points, &codes.narrow(0, lo, hi - lo)?, &dirs, s, false)?;
+            let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
+            for r in 0..hi - lo {
+                let h = lo + r;
+                nldf_core::composite::composite_weights(
+                    &densities[r * s..(r + 1) * s],
+                    &samples.deltas[h * s..(h + 1) * s],
+                    &mut weights[h * s..(h + 1) * s],
+                );
+            }
+        }
+        Ok(weights)
     }
 }
 
@@ -157,8 +232,11 @@ impl Teacher {
         near: f32,
         far: f32,
     ) -> Result<Vec<f32>> {
-        let n_samples = self.cfg.n_samples;
-        let samples = sample_stratified(rays, bounds, near, far, n_samples, None);
+        let code_for = |hit: &[usize]| -> Result<Tensor> {
+            code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous()
+        };
+        let samples = self.sample(rays, bounds, near, far, None, &code_for)?;
+        let n_samples = samples.n_samples;
         let mut out = background.to_vec();
         let group = n_samples.div_ceil(4);
         let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);

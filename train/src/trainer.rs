@@ -18,7 +18,7 @@ use nldf_core::metrics::{psnr, psnr_from_mse, psnr_masked, ssim};
 use nldf_core::rays::{Rays, rays_for_image, sample_batch};
 use nldf_core::region::Region;
 use rand::seq::index::sample as sample_indices;
-use rand::{RngCore, SeedableRng};
+use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::adam::{Adam, AdamParams};
@@ -41,6 +41,9 @@ pub struct TrainData {
     pub dataset: Dataset,
     /// Decoded images of the training frames, in split order.
     pub images: Vec<ImageRgb>,
+    /// Per training frame, its mouth pixels (`i`, `j`) from the parsing masks (empty
+    /// without masks or when not decoded).
+    pub mouth_pixels: Vec<Vec<(u32, u32)>>,
     pub bounds: Bounds,
 }
 
@@ -54,19 +57,28 @@ impl TrainData {
     /// (rendering and evaluation need none).
     pub fn open(root: &Path, decode: bool) -> Result<TrainData> {
         let dataset = Dataset::load(root)?;
-        let images = if decode {
-            dataset
-                .frames(Split::Train)
-                .iter()
-                .map(|f| dataset.load_image(f))
-                .collect::<nldf_core::Result<Vec<_>>>()?
-        } else {
-            Vec::new()
-        };
+        let (mut images, mut mouth_pixels) = (Vec::new(), Vec::new());
+        if decode {
+            let width = dataset.intrinsics.width as usize;
+            for f in dataset.frames(Split::Train) {
+                images.push(dataset.load_image(f)?);
+                let mouth = match dataset.load_regions(f)? {
+                    Some(regions) => regions
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, r)| **r == Region::Mouth)
+                        .map(|(p, _)| ((p % width) as u32, (p / width) as u32))
+                        .collect(),
+                    None => Vec::new(),
+                };
+                mouth_pixels.push(mouth);
+            }
+        }
         let bounds = dataset_bounds(&dataset)?;
         Ok(TrainData {
             dataset,
             images,
+            mouth_pixels,
             bounds,
         })
     }
@@ -270,13 +282,27 @@ impl TeacherRun {
         let (mut gt, mut bg, mut frame_of_ray) = (Vec::new(), Vec::new(), Vec::new());
         for (slot, &fi) in picked.iter().enumerate() {
             let frame = &frames[fi];
-            let batch = sample_batch(
-                &data.dataset.camera(frame),
+            let mouth = data.mouth_pixels.get(fi).map(Vec::as_slice).unwrap_or(&[]);
+            let n_mouth = if mouth.is_empty() {
+                0
+            } else {
+                ((t.mouth_fraction.clamp(0.0, 1.0) * per_frame as f32).round() as usize)
+                    .min(per_frame)
+            };
+            let camera = data.dataset.camera(frame);
+            let mut batch = sample_batch(
+                &camera,
                 frame.face_rect,
-                per_frame,
+                per_frame - n_mouth,
                 t.face_fraction,
                 &mut rng,
             );
+            for _ in 0..n_mouth {
+                let (i, j) = mouth[rng.random_range(0..mouth.len())];
+                let (o, d) = camera.ray(i as f32, j as f32);
+                batch.pixels.push((i, j));
+                batch.rays.push(o, d);
+            }
             for (r, &(i, j)) in batch.pixels.iter().enumerate() {
                 rays.push(batch.rays.origin(r), batch.rays.direction(r));
                 gt.extend_from_slice(&data.images[fi].get(i, j));
@@ -421,8 +447,9 @@ impl TeacherRun {
                 psnr,
                 rays_per_s,
             });
-            let validate_now =
-                (t.val_every > 0 && self.step.is_multiple_of(t.val_every)) || self.step == t.iters;
+            let out_of_time = t.time_budget_s > 0.0 && self.elapsed() >= t.time_budget_s;
+            let last = self.step == t.iters || out_of_time;
+            let validate_now = (t.val_every > 0 && self.step.is_multiple_of(t.val_every)) || last;
             let scores = if validate_now {
                 let s = self.validate(data, t.val_frames)?;
                 on_event(&Event::Validation {
@@ -445,14 +472,15 @@ impl TeacherRun {
                     scores,
                 )?;
             }
-            if (t.checkpoint_every > 0 && self.step.is_multiple_of(t.checkpoint_every))
-                || self.step == t.iters
-            {
+            if (t.checkpoint_every > 0 && self.step.is_multiple_of(t.checkpoint_every)) || last {
                 self.save()?;
                 on_event(&Event::Checkpoint {
                     step: self.step,
                     dir: self.dir.clone(),
                 });
+            }
+            if out_of_time {
+                break;
             }
         }
         Ok(last_val)
