@@ -173,6 +173,7 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
         "model.safetensors",
         "train_state.safetensors",
         "log.csv",
+        "training_curve.png",
     ] {
         println!("  {}", dir.join(f).display());
     }

@@ -307,6 +307,7 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
         "model.safetensors",
         "train_state.safetensors",
         "config.json",
+        "training_curve.png",
     ] {
         assert!(dir.path().join(f).is_file(), "{f}");
     }
@@ -449,5 +450,9 @@ fn a_teacher_with_importance_samples_trains_and_renders() {
     assert!(losses[35..].iter().sum::<f64>() < losses[..5].iter().sum::<f64>());
     let frame = &data.dataset.val[0];
     let img = run.render_frame(&data, frame).unwrap();
-    assert!(img.data.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+    assert!(
+        img.data
+            .iter()
+            .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
+    );
 }

@@ -412,6 +412,15 @@ impl TeacherRun {
             &weights(&self.varmap)?,
             meta("teacher"),
         )?;
+        let log = self.dir.join("log.csv");
+        if log.is_file() {
+            let rows = crate::log::read_log(&log)?;
+            let title = format!(
+                "teacher {}x{}, {} rays/step",
+                self.cfg.model.depth, self.cfg.model.width, self.cfg.train.batch_rays
+            );
+            crate::plot::plot_training_curve(&self.dir.join(CURVE_FILE), &title, &rows)?;
+        }
         Ok(())
     }
 
