@@ -98,7 +98,8 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
          | effective rate (3 x forward FLOPs) | {:.1} GFLOP/s |\n\
          | cores busy | {:.2} |\n\
          | candle matmul at the same shapes | {:.1} GFLOP/s |\n\
-         | step rate / matmul rate | {:.1} % |\n",
+         | step rate / matmul rate | {:.1} % |\n\
+         | nldf kernel matmul at the same shapes | {:.1} GFLOP/s |\n",
         r.model,
         m.cpu,
         m.cores,
@@ -112,6 +113,7 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
         r.effective_gflop_s,
         r.cores_busy,
         r.candle_matmul_gflop_s,
-        100.0 * r.fraction_of_candle_matmul
+        100.0 * r.fraction_of_candle_matmul,
+        r.kernel_matmul_gflop_s
     )
 }

@@ -111,6 +111,9 @@ pub struct StepBench {
     pub candle_matmul_gflop_s: f64,
     /// `effective_gflop_s / candle_matmul_gflop_s`.
     pub fraction_of_candle_matmul: f64,
+    /// nldf's own kernel ([`crate::kernels::matmul`]) alone on the same shapes: the
+    /// ceiling of the fused step.
+    pub kernel_matmul_gflop_s: f64,
 }
 
 /// Times candle's matmul on the given `(m, k, n)` products, each repeated until it has run
@@ -131,6 +134,27 @@ pub fn candle_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
         secs += start.elapsed().as_secs_f64();
     }
     Ok(flops / secs / 1e9)
+}
+
+/// Times nldf's matmul kernel on the given `(m, k, n)` products like
+/// [`candle_matmul_rate`].
+pub fn kernel_matmul_rate(products: &[(usize, usize, usize)]) -> f64 {
+    let (mut flops, mut secs) = (0.0, 0.0);
+    for &(m, k, n) in products {
+        let a = vec![1.0f32; m * k];
+        let b = vec![1.0f32; k * n];
+        let mut c = vec![0.0f32; m * n];
+        crate::kernels::matmul(&a, m, k, &b, n, &mut c);
+        let start = Instant::now();
+        let mut reps = 0;
+        while start.elapsed().as_secs_f64() < 0.2 {
+            crate::kernels::matmul(&a, m, k, &b, n, &mut c);
+            reps += 1;
+        }
+        flops += 2.0 * (m * k * n) as f64 * reps as f64;
+        secs += start.elapsed().as_secs_f64();
+    }
+    flops / secs / 1e9
 }
 
 /// Times `steps` teacher training steps after `warmup` untimed ones.
@@ -168,6 +192,7 @@ pub fn bench_teacher_step(
         .flat_map(|&(i, o)| layer_products(samples, i, o))
         .collect();
     let matmul = candle_matmul_rate(&products)?;
+    let kernel = kernel_matmul_rate(&products);
     let per_step = wall / steps.max(1) as f64;
     let effective = 3.0 * fwd_flops / per_step / 1e9;
     Ok(StepBench {
@@ -186,5 +211,6 @@ pub fn bench_teacher_step(
         cores_busy: cpu / wall,
         candle_matmul_gflop_s: matmul,
         fraction_of_candle_matmul: effective / matmul,
+        kernel_matmul_gflop_s: kernel,
     })
 }
