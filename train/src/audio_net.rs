@@ -157,3 +157,30 @@ pub fn neighbourhood(audio: &nldf_core::audio::AudioWindows, f: usize, seq: usiz
     }
     out
 }
+
+/// Logit of the centre frame in AudioAttNet's initial attention (softmax weight
+/// `e^3 / (e^3 + 7)`, about 0.74, over 8 frames).
+const CENTRE_LOGIT: f32 = 3.0;
+
+/// Starts AudioAttNet focused on the centre frame: its attention layer's weight at zero and
+/// its bias peaked at the centre, so that switching attention on late in training (as
+/// AD-NeRF does) changes the audio code little instead of jolting the field. `prefix` is the
+/// encoder's path in `varmap` (e.g. `audio`).
+pub fn centre_attention(varmap: &candle_nn::VarMap, prefix: &str, att_frames: usize) -> Result<()> {
+    let data = varmap
+        .data()
+        .lock()
+        .map_err(|_| candle_core::Error::Msg("variable map lock poisoned".into()))?;
+    let get = |name: &str| {
+        data.get(&format!("{prefix}.att.attention.{name}"))
+            .ok_or_else(|| candle_core::Error::Msg(format!("no `{prefix}.att.attention.{name}`")))
+    };
+    let weight = get("weight")?;
+    weight.set(&weight.zeros_like()?)?;
+    let mut bias = vec![0.0f32; att_frames];
+    if let Some(c) = bias.get_mut(att_frames / 2) {
+        *c = CENTRE_LOGIT;
+    }
+    let b = get("bias")?;
+    b.set(&Tensor::from_vec(bias, att_frames, b.device())?)
+}

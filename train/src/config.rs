@@ -144,9 +144,10 @@ pub struct TrainConfig {
     /// (ours: the mouth is a few percent of the face but carries the audio's effect;
     /// AD-NeRF: 0).
     pub mouth_fraction: f32,
-    /// Adam learning rate at step 0 (AD-NeRF: 5e-4).
+    /// Adam learning rate at step 0 (AD-NeRF: 5e-4; twice that suits the short runs here).
     pub lr: f64,
-    /// Steps over which the learning rate decays by 10x (AD-NeRF: 500k; shorter runs here).
+    /// Steps over which the learning rate decays by 10x (AD-NeRF: 500k; here the length of
+    /// the default run).
     pub lr_decay_steps: usize,
     /// Step from which AudioAttNet fuses neighbouring frames (AD-NeRF: 200k of ~400k).
     pub att_start: usize,
@@ -180,8 +181,8 @@ impl Default for TrainConfig {
             frames_per_batch: 4,
             face_fraction: 0.95,
             mouth_fraction: 0.1,
-            lr: 5e-4,
-            lr_decay_steps: 20_000,
+            lr: 1e-3,
+            lr_decay_steps: 6000,
             att_start: 3000,
             att_lr_scale: 5.0,
             beta1: 0.9,

@@ -177,6 +177,7 @@ impl TeacherRun {
         let (varmap, vb) = new_varmap();
         let teacher = teacher(&cfg.model, vb)?;
         init_seeded(&varmap, cfg.train.seed)?;
+        crate::audio_net::centre_attention(&varmap, "audio", cfg.model.audio.att_frames)?;
         let adam = new_adam(&varmap, &cfg)?;
         Ok(TeacherRun {
             dir: dir.to_path_buf(),
