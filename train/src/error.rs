@@ -1,6 +1,7 @@
-//! The error type of nldf-train.
+//! The error type of nldf-train. File problems reuse nldf-core's variants, so that every
+//! message names the file the same way across the workspace.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Errors from building, training, saving and loading models.
 #[derive(Debug, thiserror::Error)]
@@ -8,15 +9,9 @@ pub enum Error {
     /// A tensor operation failed (a shape mismatch names the shapes).
     #[error(transparent)]
     Candle(#[from] candle_core::Error),
-    /// Reading the dataset or another nldf-core file failed.
+    /// Reading or writing a file failed, or a file's content is wrong.
     #[error(transparent)]
     Core(#[from] nldf_core::Error),
-    /// The operating system refused a read or write.
-    #[error("{}: {err}", path.display())]
-    Io { path: PathBuf, err: std::io::Error },
-    /// A file exists but its content is wrong.
-    #[error("{}: {problem}", path.display())]
-    Invalid { path: PathBuf, problem: String },
     /// A setting is out of range.
     #[error("{0}")]
     Config(String),
@@ -28,17 +23,11 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 impl Error {
     /// An I/O error on `path`.
     pub fn io(path: impl AsRef<Path>, err: std::io::Error) -> Self {
-        Error::Io {
-            path: path.as_ref().to_path_buf(),
-            err,
-        }
+        Error::Core(nldf_core::Error::io(path, err))
     }
 
     /// A content error in `path`.
     pub fn invalid(path: impl AsRef<Path>, problem: impl Into<String>) -> Self {
-        Error::Invalid {
-            path: path.as_ref().to_path_buf(),
-            problem: problem.into(),
-        }
+        Error::Core(nldf_core::Error::invalid(path, problem))
     }
 }

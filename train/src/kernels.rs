@@ -365,64 +365,37 @@ pub fn linear_forward(
     let mut packed = Vec::new();
     // SAFETY: wt is [k, n] row-major.
     unsafe { pack_b(wt.as_ptr(), n, k, n, &mut packed) };
-    let avx512 = has_avx512();
-    let yp = SendPtr(y.as_mut_ptr());
-    let (xp, wp, ap) = (
-        SendConst(x.as_ptr()),
-        SendConst(packed.as_ptr()),
-        SendConst(addend.as_ptr()),
-    );
-    (0..m.div_ceil(ROW_CHUNK))
-        .into_par_iter()
-        .for_each(|chunk| {
-            let (yp, xp, wp, ap) = (yp, xp, wp, ap);
-            let i_lo = chunk * ROW_CHUNK;
-            let i_hi = (i_lo + ROW_CHUNK).min(m);
-            // SAFETY: shapes were checked above; tasks write disjoint row ranges of y.
-            unsafe {
-                gemm_rows(
-                    i_lo,
-                    i_hi,
-                    n,
-                    k,
-                    StridedA {
-                        ptr: xp.0,
-                        rs: k,
-                        cs: 1,
-                    },
-                    wp.0,
-                    yp.0,
-                    n,
-                    false,
-                    (ap.0, n, mode),
-                    relu,
-                    avx512,
-                )
-            };
-        });
+    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), relu);
 }
 
-/// `c = a b` for row-major `a` `[m, k]` and `b` `[k, n]` (the input gradient `g' W`).
-///
-/// # Panics
-/// If a slice is shorter than its shape (a caller bug).
-pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32]) {
-    check("a", a.len(), m * k);
-    check("b", b.len(), k * n);
-    check("c", c.len(), m * n);
+/// `c = act(a b + addend)` for row-major `a` `[m, k]` and `b` packed by [`pack_b`], in
+/// parallel over chunks of rows (each task writes its own rows of `c`).
+#[allow(clippy::too_many_arguments)]
+fn gemm_parallel(
+    a: &[f32],
+    m: usize,
+    k: usize,
+    packed: &[f32],
+    n: usize,
+    c: &mut [f32],
+    addend: (&[f32], Addend),
+    relu: bool,
+) {
     let avx512 = has_avx512();
-    let mut packed = Vec::new();
-    // SAFETY: b is [k, n] row-major (checked above).
-    unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
     let cp = SendPtr(c.as_mut_ptr());
-    let (ap, bp) = (SendConst(a.as_ptr()), SendConst(packed.as_ptr()));
+    let (ap, bp, dp) = (
+        SendConst(a.as_ptr()),
+        SendConst(packed.as_ptr()),
+        SendConst(addend.0.as_ptr()),
+    );
+    let mode = addend.1;
     (0..m.div_ceil(ROW_CHUNK))
         .into_par_iter()
         .for_each(|chunk| {
-            let (cp, ap, bp) = (cp, ap, bp);
+            let (cp, ap, bp, dp) = (cp, ap, bp, dp);
             let i_lo = chunk * ROW_CHUNK;
             let i_hi = (i_lo + ROW_CHUNK).min(m);
-            // SAFETY: shapes checked above; tasks write disjoint row ranges of c.
+            // SAFETY: the callers checked the shapes; tasks write disjoint row ranges of c.
             unsafe {
                 gemm_rows(
                     i_lo,
@@ -438,12 +411,26 @@ pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32])
                     cp.0,
                     n,
                     false,
-                    (std::ptr::null(), 0, Addend::None),
-                    false,
+                    (dp.0, n, mode),
+                    relu,
                     avx512,
                 )
             };
         });
+}
+
+/// `c = a b` for row-major `a` `[m, k]` and `b` `[k, n]` (the input gradient `g' W`).
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32]) {
+    check("a", a.len(), m * k);
+    check("b", b.len(), k * n);
+    check("c", c.len(), m * n);
+    let mut packed = Vec::new();
+    // SAFETY: b is [k, n] row-major (checked above).
+    unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
+    gemm_parallel(a, m, k, &packed, n, c, (&[], Addend::None), false);
 }
 
 /// `c = a^T b` for row-major `a` `[m, n]` and `b` `[m, k]`, summed over the `m` rows (the

@@ -173,11 +173,50 @@ impl TeacherRun {
     pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
         cfg.model.audio.n_features = data.dataset.audio.n_features;
         cfg.model.audio.window = data.dataset.audio.window;
+        let run = Self::build(dir, cfg)?;
+        init_seeded(&run.varmap, run.cfg.train.seed)?;
+        crate::audio_net::centre_attention(&run.varmap, "audio", run.cfg.model.audio.att_frames)?;
+        Ok(run)
+    }
+
+    /// Loads the run in `dir` (its `config.json`, weights and, with `optimizer`, the
+    /// optimizer state) to continue training or to render.
+    pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
+        let mut run = Self::build(dir, load_json(&dir.join(CONFIG_FILE))?)?;
+        let model_path = dir.join(MODEL_FILE);
+        let (tensors, meta) = load_tensors(&model_path)?;
+        restore_weights(&model_path, &run.varmap, &tensors)?;
+        run.step = step_of(&model_path, &meta)?;
+        run.elapsed_before = meta
+            .get("elapsed_s")
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0.0);
+        if optimizer {
+            let state_path = dir.join(STATE_FILE);
+            let (state, state_meta) = load_tensors(&state_path)?;
+            let state_step = step_of(&state_path, &state_meta)?;
+            if state_step != run.step {
+                return Err(Error::invalid(
+                    &state_path,
+                    format!(
+                        "is from step {state_step} but {MODEL_FILE} from step {}; the last checkpoint was cut short",
+                        run.step
+                    ),
+                ));
+            }
+            run.adam
+                .load_state(&state)
+                .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
+        }
+        Ok(run)
+    }
+
+    /// A run at step 0 with the network of `cfg` (weights as the variable builder made
+    /// them) and a fresh optimizer.
+    fn build(dir: &Path, cfg: TeacherRunConfig) -> Result<TeacherRun> {
         validate(&cfg)?;
         let (varmap, vb) = new_varmap();
         let teacher = teacher(&cfg.model, vb)?;
-        init_seeded(&varmap, cfg.train.seed)?;
-        crate::audio_net::centre_attention(&varmap, "audio", cfg.model.audio.att_frames)?;
         let adam = new_adam(&varmap, &cfg)?;
         Ok(TeacherRun {
             dir: dir.to_path_buf(),
@@ -187,50 +226,6 @@ impl TeacherRun {
             adam,
             step: 0,
             elapsed_before: 0.0,
-            last_hit_rays: 0,
-            started: Instant::now(),
-        })
-    }
-
-    /// Loads the run in `dir` (its `config.json`, weights and, with `optimizer`, the
-    /// optimizer state) to continue training or to render.
-    pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
-        let cfg: TeacherRunConfig = load_json(&dir.join(CONFIG_FILE))?;
-        validate(&cfg)?;
-        let (varmap, vb) = new_varmap();
-        let teacher = teacher(&cfg.model, vb)?;
-        let model_path = dir.join(MODEL_FILE);
-        let (tensors, meta) = load_tensors(&model_path)?;
-        restore_weights(&model_path, &varmap, &tensors)?;
-        let step = step_of(&model_path, &meta)?;
-        let elapsed_before = meta
-            .get("elapsed_s")
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(0.0);
-        let mut adam = new_adam(&varmap, &cfg)?;
-        if optimizer {
-            let state_path = dir.join(STATE_FILE);
-            let (state, state_meta) = load_tensors(&state_path)?;
-            let state_step = step_of(&state_path, &state_meta)?;
-            if state_step != step {
-                return Err(Error::invalid(
-                    &state_path,
-                    format!(
-                        "is from step {state_step} but {MODEL_FILE} from step {step}; the last checkpoint was cut short"
-                    ),
-                ));
-            }
-            adam.load_state(&state)
-                .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
-        }
-        Ok(TeacherRun {
-            dir: dir.to_path_buf(),
-            cfg,
-            varmap,
-            teacher,
-            adam,
-            step,
-            elapsed_before,
             last_hit_rays: 0,
             started: Instant::now(),
         })
