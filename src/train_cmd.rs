@@ -98,7 +98,10 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
         if let Some(n) = args.iters {
             cfg.train.iters = n;
         }
-        nldf_train::trainer::validate(&cfg)?;
+        nldf_train::trainer::validate(&cfg).with_context(|| match &args.config {
+            Some(path) => format!("{}: invalid configuration", path.display()),
+            None => "invalid configuration".to_string(),
+        })?;
         Some(cfg)
     };
 
