@@ -456,3 +456,45 @@ fn a_teacher_with_importance_samples_trains_and_renders() {
             .all(|v| v.is_finite() && (0.0..=1.0).contains(v))
     );
 }
+
+#[test]
+fn segment_targets_sum_to_the_teachers_pixel() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = tiny_run_config(30);
+    // Rendering without early termination, so that both paths see every sample.
+    cfg.model.min_transmittance = 0.0;
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    for _ in 0..30 {
+        run.train_step(&data).unwrap();
+    }
+    let frame = &data.dataset.val[0];
+    let ds = &data.dataset;
+    let rays = nldf_core::rays::rays_for_image(&ds.camera(frame));
+    let code = run.audio_codes(&data, &[frame.aud_id]).unwrap();
+    let bg = &ds.background.data;
+    let t = &run.teacher;
+    let pixels = t
+        .render_eval(&rays, bg, &code, &data.bounds, ds.near, ds.far)
+        .unwrap();
+    for m in [1usize, 4, 5] {
+        let seg = t
+            .segment_targets(&rays, bg, &code, &data.bounds, ds.near, ds.far, m)
+            .unwrap();
+        assert_eq!(seg.len(), rays.len() * m * 3);
+        let mut worst = 0.0f32;
+        for r in 0..rays.len() {
+            for c in 0..3 {
+                let sum: f32 = (0..m).map(|i| seg[(r * m + i) * 3 + c]).sum();
+                worst = worst.max((sum - pixels[3 * r + c]).abs());
+            }
+        }
+        assert!(worst < 1e-5, "M = {m}: segments miss the pixel by {worst}");
+        // With several segments, a head ray's colour is spread over them.
+        if m > 1 {
+            let spread = (0..rays.len())
+                .any(|r| (0..m - 1).any(|i| (0..3).any(|c| seg[(r * m + i) * 3 + c] > 0.05)));
+            assert!(spread, "M = {m}: every colour sits in the last segment");
+        }
+    }
+}

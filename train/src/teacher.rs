@@ -3,6 +3,7 @@
 
 use candle_core::{Device, Result, Tensor};
 use candle_nn::VarBuilder;
+use nldf_core::composite::{composite_weights, segment_colors};
 use nldf_core::encoding::{encode_positions, encoded_len};
 use nldf_core::rays::Rays;
 use rayon::prelude::*;
@@ -201,7 +202,7 @@ impl Teacher {
             let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
             for r in 0..hi - lo {
                 let h = lo + r;
-                nldf_core::composite::composite_weights(
+                composite_weights(
                     &densities[r * s..(r + 1) * s],
                     &samples.deltas[h * s..(h + 1) * s],
                     &mut weights[h * s..(h + 1) * s],
@@ -291,6 +292,85 @@ impl Teacher {
                 let r = samples.hit[h];
                 for c in 0..3 {
                     out[3 * r + c] = color[a][c] + trans[a] * background[3 * r + c];
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl Teacher {
+    /// The teacher's segment colours of Eq. 5, the student's distillation targets: each
+    /// ray's samples are split in order into `m` groups, segment `i` is the sum of
+    /// `w_k c_k` over its group with the transmittance accumulated from the ray's start, and
+    /// the background behind the last sample (AD-NeRF's last sample) belongs to the last
+    /// segment, so that the segments sum to the pixel. Rays that miss the bounds are their
+    /// background, all in the last segment. No early termination, no jitter.
+    ///
+    /// # Shapes
+    /// - `background`: `[n_rays, 3]` flat; `code`: `[1, audio_dim]`
+    /// - returns `[n_rays, m, 3]` flat
+    #[allow(clippy::too_many_arguments)]
+    pub fn segment_targets(
+        &self,
+        rays: &Rays,
+        background: &[f32],
+        code: &Tensor,
+        bounds: &Bounds,
+        near: f32,
+        far: f32,
+        m: usize,
+    ) -> Result<Vec<f32>> {
+        let m = m.max(1);
+        let code_for = |hit: &[usize]| -> Result<Tensor> {
+            code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous()
+        };
+        let samples = self.sample(rays, bounds, near, far, None, &code_for)?;
+        let s = samples.n_samples;
+        let mut out = vec![0.0f32; rays.len() * m * 3];
+        for r in 0..rays.len() {
+            out[(r * m + m - 1) * 3..(r * m + m) * 3]
+                .copy_from_slice(&background[3 * r..3 * r + 3]);
+        }
+        let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
+        let n_hit = samples.hit.len();
+        for lo in (0..n_hit).step_by(EVAL_CHUNK) {
+            let hi = (lo + EVAL_CHUNK).min(n_hit);
+            let points =
+                encode_vectors(&samples.points[3 * s * lo..3 * s * hi], self.cfg.pos_freqs)
+                    .tensor()?;
+            let dirs = Tensor::from_slice(
+                &dirs_all.data[lo * dirs_all.width..hi * dirs_all.width],
+                (hi - lo, dirs_all.width),
+                &Device::Cpu,
+            )?;
+            let codes = code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()?;
+            let (densities, colors) = self.field.forward(&points, &codes, &dirs, s, false)?;
+            let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
+            let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
+            let mut weights = vec![0.0f32; s];
+            for k in 0..hi - lo {
+                let h = lo + k;
+                composite_weights(
+                    &densities[k * s..(k + 1) * s],
+                    &samples.deltas[h * s..(h + 1) * s],
+                    &mut weights,
+                );
+                let segments = segment_colors(&weights, &colors[3 * s * k..3 * s * (k + 1)], m);
+                let optical_depth: f32 = (0..s)
+                    .map(|j| {
+                        (densities[k * s + j].max(0.0) * samples.deltas[h * s + j])
+                            .min(crate::render::MAX_TAU)
+                    })
+                    .sum();
+                let left = (-optical_depth).exp();
+                let r = samples.hit[h];
+                let dst = &mut out[r * m * 3..(r + 1) * m * 3];
+                for (i, v) in segments.iter().enumerate() {
+                    dst[i] = *v;
+                }
+                for c in 0..3 {
+                    dst[(m - 1) * 3 + c] += left * background[3 * r + c];
                 }
             }
         }
