@@ -4,6 +4,7 @@ mod audio;
 mod dataset;
 mod metrics;
 mod rendering;
+mod student;
 mod synth;
 mod synth_head;
 mod teacher;

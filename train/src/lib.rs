@@ -22,6 +22,7 @@ pub mod nn;
 pub mod plot;
 pub mod render;
 pub mod sampler;
+pub mod student;
 pub mod teacher;
 pub mod trainer;
 

@@ -1,0 +1,168 @@
+//! The NLDF student (paper section 3.1, after R2L): a deep residual MLP that maps a whole
+//! encoded beam plus the audio code to M segment colours in one pass; the pixel is their sum
+//! (Eq. 7). Beam encoding lives in nldf-core ([`nldf_core::beam`]); this file is the
+//! network and the segment sum.
+
+use candle_core::{D, Result, Tensor};
+use candle_nn::{Linear, Module, VarBuilder, linear};
+use nldf_core::beam::BeamSpec;
+use serde::{Deserialize, Serialize};
+
+use crate::config::AudioConfig;
+
+/// The student's shape.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct StudentConfig {
+    pub audio: AudioConfig,
+    /// How each ray becomes the network's input (paper: K = 16 points, L = 10).
+    pub beam: BeamSpec,
+    /// Linear layers in all: 1 input layer, `(depth - 2) / 2` residual blocks of two, 1 output
+    /// layer (paper Table 3: 28, 50, 88).
+    pub depth: usize,
+    /// Hidden width (paper: 256).
+    pub width: usize,
+    /// Segments per ray, M (paper: 4).
+    pub segments: usize,
+}
+
+impl Default for StudentConfig {
+    fn default() -> Self {
+        StudentConfig::paper_d88()
+    }
+}
+
+impl StudentConfig {
+    fn paper(depth: usize) -> StudentConfig {
+        StudentConfig {
+            audio: AudioConfig::default(),
+            beam: BeamSpec::default(),
+            depth,
+            width: 256,
+            segments: 4,
+        }
+    }
+
+    /// 28 layers at width 256 (paper Table 3).
+    pub fn paper_d28() -> StudentConfig {
+        Self::paper(28)
+    }
+
+    /// 50 layers at width 256 (paper Table 3).
+    pub fn paper_d50() -> StudentConfig {
+        Self::paper(50)
+    }
+
+    /// 88 layers at width 256, the paper's and R2L's main setting (1 + 43 x 2 + 1).
+    pub fn paper_d88() -> StudentConfig {
+        Self::paper(88)
+    }
+
+    /// 6 layers at width 32 with 4 beam points and 4 frequencies, for tests.
+    pub fn tiny() -> StudentConfig {
+        StudentConfig {
+            audio: AudioConfig {
+                dim: 8,
+                ..AudioConfig::default()
+            },
+            beam: BeamSpec {
+                n_points: 4,
+                n_freqs: 4,
+            },
+            depth: 6,
+            width: 32,
+            segments: 4,
+        }
+    }
+
+    /// Residual blocks between the input and output layers.
+    pub fn n_blocks(&self) -> usize {
+        self.depth.saturating_sub(2) / 2
+    }
+
+    /// Width of the network's input: the encoded beam and the audio code.
+    pub fn input_dim(&self) -> usize {
+        self.beam.encoded_len() + self.audio.dim
+    }
+
+    /// Multiply-adds per ray of the network.
+    pub fn macs_per_ray(&self) -> usize {
+        let w = self.width;
+        self.input_dim() * w + self.n_blocks() * 2 * w * w + w * 3 * self.segments
+    }
+
+    /// Checks the shape: at least one block, even depth, positive sizes.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        if self.depth < 4 || !self.depth.is_multiple_of(2) {
+            return Err(format!(
+                "student depth must be even and >= 4 (1 + 2 x blocks + 1), got {}",
+                self.depth
+            ));
+        }
+        if self.width == 0 || self.segments == 0 || self.beam.n_points < 2 {
+            return Err("student width, segments >= 1 and beam points >= 2 are required".into());
+        }
+        Ok(())
+    }
+}
+
+/// One residual block: `relu(x + fc2(relu(fc1(x))))`.
+#[derive(Debug, Clone)]
+struct ResidualBlock {
+    fc1: Linear,
+    fc2: Linear,
+}
+
+/// The residual MLP: `input`, `body.{i}.{fc1,fc2}`, `output`.
+#[derive(Debug, Clone)]
+pub struct ResidualMlp {
+    input: Linear,
+    body: Vec<ResidualBlock>,
+    output: Linear,
+    segments: usize,
+}
+
+/// Builds a [`ResidualMlp`] for `cfg` under `vb`.
+pub fn residual_mlp(cfg: &StudentConfig, vb: VarBuilder) -> Result<ResidualMlp> {
+    let w = cfg.width;
+    let body = (0..cfg.n_blocks())
+        .map(|i| {
+            let vb = vb.pp("body").pp(i);
+            Ok(ResidualBlock {
+                fc1: linear(w, w, vb.pp("fc1"))?,
+                fc2: linear(w, w, vb.pp("fc2"))?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ResidualMlp {
+        input: linear(cfg.input_dim(), w, vb.pp("input"))?,
+        body,
+        output: linear(w, 3 * cfg.segments, vb.pp("output"))?,
+        segments: cfg.segments,
+    })
+}
+
+impl ResidualMlp {
+    /// Segment colours and their sum, the pixel (Eq. 7). The segments are the network's raw
+    /// outputs: a segment's colour is a weighted sum of sample colours, not bounded by a
+    /// squashing function of its own.
+    ///
+    /// # Shapes
+    /// - `beams`: `[n_rays, beam_dim]` encoded beams; `codes`: `[n_rays, audio_dim]`
+    /// - returns segments `[n_rays, m, 3]` and pixels `[n_rays, 3]`
+    pub fn forward(&self, beams: &Tensor, codes: &Tensor) -> Result<(Tensor, Tensor)> {
+        let n_rays = beams.dim(0)?;
+        let x = Tensor::cat(&[beams, codes], D::Minus1)?;
+        let mut h = self.input.forward(&x)?.relu()?;
+        for block in &self.body {
+            let y = block.fc2.forward(&block.fc1.forward(&h)?.relu()?)?;
+            h = (h + y)?.relu()?;
+        }
+        let segments = self
+            .output
+            .forward(&h)?
+            .reshape((n_rays, self.segments, 3))?;
+        let pixels = segments.sum(1)?;
+        Ok((segments, pixels))
+    }
+}
