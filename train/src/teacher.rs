@@ -183,8 +183,37 @@ impl Teacher {
     /// - `codes`: `[n_hit, audio_dim]`; returns `[n_hit, n_samples]` flat
     pub fn coarse_weights(&self, samples: &RaySamples, codes: &Tensor) -> Result<Vec<f32>> {
         let s = samples.n_samples;
+        let mut weights = vec![0.0f32; samples.hit.len() * s];
+        self.query_chunks(
+            samples,
+            &|lo, hi| codes.narrow(0, lo, hi - lo),
+            &mut |lo, densities, _| {
+                for (k, d) in densities.chunks_exact(s).enumerate() {
+                    let h = lo + k;
+                    composite_weights(
+                        d,
+                        &samples.deltas[h * s..(h + 1) * s],
+                        &mut weights[h * s..(h + 1) * s],
+                    );
+                }
+                Ok(())
+            },
+        )?;
+        Ok(weights)
+    }
+
+    /// Evaluates the field (forward only) on every sample of `samples`, `EVAL_CHUNK` rays at
+    /// a time, and hands each chunk's densities `[rays, n_samples]` and colours
+    /// `[rays, n_samples, 3]` (flat) to `visit` with the chunk's first ray. `codes_of(lo, hi)`
+    /// gives the audio codes of hit rays `lo..hi`.
+    fn query_chunks(
+        &self,
+        samples: &RaySamples,
+        codes_of: &dyn Fn(usize, usize) -> Result<Tensor>,
+        visit: &mut ChunkVisitor,
+    ) -> Result<()> {
+        let s = samples.n_samples;
         let n_hit = samples.hit.len();
-        let mut weights = vec![0.0f32; n_hit * s];
         let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
         for lo in (0..n_hit).step_by(EVAL_CHUNK) {
             let hi = (lo + EVAL_CHUNK).min(n_hit);
@@ -196,22 +225,19 @@ impl Teacher {
                 (hi - lo, dirs_all.width),
                 &Device::Cpu,
             )?;
-            let (densities, _) =
+            let (densities, colors) =
                 self.field
-                    .forward(&points, &codes.narrow(0, lo, hi - lo)?, &dirs, s, false)?;
+                    .forward(&points, &codes_of(lo, hi)?, &dirs, s, false)?;
             let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
-            for r in 0..hi - lo {
-                let h = lo + r;
-                composite_weights(
-                    &densities[r * s..(r + 1) * s],
-                    &samples.deltas[h * s..(h + 1) * s],
-                    &mut weights[h * s..(h + 1) * s],
-                );
-            }
+            let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
+            visit(lo, &densities, &colors)?;
         }
-        Ok(weights)
+        Ok(())
     }
 }
+
+/// Receives a chunk of field outputs: first hit ray, densities, colours (flat).
+type ChunkVisitor<'a> = dyn FnMut(usize, &[f32], &[f32]) -> Result<()> + 'a;
 
 /// Rays rendered together by [`Teacher::render_eval`].
 const EVAL_CHUNK: usize = 4096;
@@ -332,24 +358,12 @@ impl Teacher {
             out[(r * m + m - 1) * 3..(r * m + m) * 3]
                 .copy_from_slice(&background[3 * r..3 * r + 3]);
         }
-        let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
-        let n_hit = samples.hit.len();
-        for lo in (0..n_hit).step_by(EVAL_CHUNK) {
-            let hi = (lo + EVAL_CHUNK).min(n_hit);
-            let points =
-                encode_vectors(&samples.points[3 * s * lo..3 * s * hi], self.cfg.pos_freqs)
-                    .tensor()?;
-            let dirs = Tensor::from_slice(
-                &dirs_all.data[lo * dirs_all.width..hi * dirs_all.width],
-                (hi - lo, dirs_all.width),
-                &Device::Cpu,
-            )?;
-            let codes = code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()?;
-            let (densities, colors) = self.field.forward(&points, &codes, &dirs, s, false)?;
-            let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
-            let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
-            let mut weights = vec![0.0f32; s];
-            for k in 0..hi - lo {
+        let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
+            code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
+        };
+        let mut weights = vec![0.0f32; s];
+        self.query_chunks(&samples, &code_rows, &mut |lo, densities, colors| {
+            for k in 0..densities.len() / s {
                 let h = lo + k;
                 composite_weights(
                     &densities[k * s..(k + 1) * s],
@@ -366,14 +380,13 @@ impl Teacher {
                 let left = (-optical_depth).exp();
                 let r = samples.hit[h];
                 let dst = &mut out[r * m * 3..(r + 1) * m * 3];
-                for (i, v) in segments.iter().enumerate() {
-                    dst[i] = *v;
-                }
+                dst.copy_from_slice(&segments);
                 for c in 0..3 {
                     dst[(m - 1) * 3 + c] += left * background[3 * r + c];
                 }
             }
-        }
+            Ok(())
+        })?;
         Ok(out)
     }
 }
