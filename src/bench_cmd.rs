@@ -81,7 +81,7 @@ fn teacher_step(args: TeacherStepArgs) -> Result<()> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     let json = args.out.join("teacher_step.json");
     let md = args.out.join("teacher_step.md");
-    nldf_core::error::write_atomic(&json, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    nldf_core::error::write_json(&json, &report)?;
     nldf_core::error::write_atomic(&md, markdown(&machine, &result).as_bytes())?;
     print!("{}", markdown(&machine, &result));
     println!("wrote {} and {}", json.display(), md.display());

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::audio::AudioWindows;
 use crate::camera::{Camera, Intrinsics, rigid_problem};
-use crate::error::{Error, Result, write_atomic};
+use crate::error::{Error, Result, read_json, write_atomic, write_json};
 use crate::image::{ImageRgb, save_png_bytes};
 use crate::rays::Rect;
 use crate::region::Region;
@@ -71,15 +71,12 @@ pub struct TransformsFile {
 impl TransformsFile {
     /// Reads and parses a transforms file (no cross-file checks).
     pub fn load(path: &Path) -> Result<TransformsFile> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+        read_json(path)
     }
 
     /// Writes the file atomically, pretty-printed.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let text = serde_json::to_string_pretty(self)
-            .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
-        write_atomic(path, text.as_bytes())
+        write_json(path, self)
     }
 }
 

@@ -55,3 +55,16 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         Error::io(path, e)
     })
 }
+
+/// Reads and parses a JSON file; a read failure or bad JSON is one error naming the file.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+}
+
+/// Writes `value` as pretty-printed JSON, atomically (see [`write_atomic`]).
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
+    write_atomic(path, text.as_bytes())
+}

@@ -116,45 +116,67 @@ pub struct StepBench {
     pub kernel_matmul_gflop_s: f64,
 }
 
-/// Times candle's matmul on the given `(m, k, n)` products, each repeated until it has run
-/// for at least 0.2 s; returns GFLOP/s over all of them.
-pub fn candle_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
+/// Calls `f` once untimed, then repeatedly until 0.2 s have passed; returns the timed calls
+/// and their seconds.
+fn time_repeated(mut f: impl FnMut() -> Result<()>) -> Result<(usize, f64)> {
+    f()?;
+    let start = Instant::now();
+    let mut reps = 0;
+    while start.elapsed().as_secs_f64() < 0.2 {
+        f()?;
+        reps += 1;
+    }
+    Ok((reps, start.elapsed().as_secs_f64()))
+}
+
+/// GFLOP/s of `product(m, k, n)` over the given `(m, k, n)` products, each timed by
+/// [`time_repeated`] after `prepare(m, k, n)` builds its operands.
+fn products_rate<S>(
+    products: &[(usize, usize, usize)],
+    prepare: impl Fn(usize, usize, usize) -> Result<S>,
+    product: impl Fn(&mut S) -> Result<()>,
+) -> Result<f64> {
     let (mut flops, mut secs) = (0.0, 0.0);
     for &(m, k, n) in products {
-        let a = Tensor::ones((m, k), candle_core::DType::F32, &Device::Cpu)?;
-        let b = Tensor::ones((k, n), candle_core::DType::F32, &Device::Cpu)?;
-        a.matmul(&b)?;
-        let start = Instant::now();
-        let mut reps = 0;
-        while start.elapsed().as_secs_f64() < 0.2 {
-            a.matmul(&b)?;
-            reps += 1;
-        }
+        let mut operands = prepare(m, k, n)?;
+        let (reps, s) = time_repeated(|| product(&mut operands))?;
         flops += 2.0 * (m * k * n) as f64 * reps as f64;
-        secs += start.elapsed().as_secs_f64();
+        secs += s;
     }
     Ok(flops / secs / 1e9)
 }
 
+/// Times candle's matmul on the given `(m, k, n)` products; returns GFLOP/s over all of
+/// them.
+pub fn candle_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
+    let ones = |r: usize, c: usize| Tensor::ones((r, c), candle_core::DType::F32, &Device::Cpu);
+    products_rate(
+        products,
+        |m, k, n| Ok((ones(m, k)?, ones(k, n)?)),
+        |(a, b)| Ok(a.matmul(b).map(|_| ())?),
+    )
+}
+
 /// Times nldf's matmul kernel on the given `(m, k, n)` products like
 /// [`candle_matmul_rate`].
-pub fn kernel_matmul_rate(products: &[(usize, usize, usize)]) -> f64 {
-    let (mut flops, mut secs) = (0.0, 0.0);
-    for &(m, k, n) in products {
-        let a = vec![1.0f32; m * k];
-        let b = vec![1.0f32; k * n];
-        let mut c = vec![0.0f32; m * n];
-        crate::kernels::matmul(&a, m, k, &b, n, &mut c);
-        let start = Instant::now();
-        let mut reps = 0;
-        while start.elapsed().as_secs_f64() < 0.2 {
-            crate::kernels::matmul(&a, m, k, &b, n, &mut c);
-            reps += 1;
-        }
-        flops += 2.0 * (m * k * n) as f64 * reps as f64;
-        secs += start.elapsed().as_secs_f64();
-    }
-    flops / secs / 1e9
+pub fn kernel_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
+    products_rate(
+        products,
+        |m, k, n| {
+            Ok((
+                vec![1.0f32; m * k],
+                vec![1.0f32; k * n],
+                vec![0.0f32; m * n],
+                m,
+                k,
+                n,
+            ))
+        },
+        |(a, b, c, m, k, n)| {
+            crate::kernels::matmul(a, *m, *k, b, *n, c);
+            Ok(())
+        },
+    )
 }
 
 /// Times `steps` teacher training steps after `warmup` untimed ones.
@@ -192,7 +214,7 @@ pub fn bench_teacher_step(
         .flat_map(|&(i, o)| layer_products(samples, i, o))
         .collect();
     let matmul = candle_matmul_rate(&products)?;
-    let kernel = kernel_matmul_rate(&products);
+    let kernel = kernel_matmul_rate(&products)?;
     let per_step = wall / steps.max(1) as f64;
     let effective = 3.0 * fwd_flops / per_step / 1e9;
     Ok(StepBench {

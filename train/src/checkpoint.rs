@@ -79,15 +79,12 @@ pub fn restore_weights(
 
 /// Writes a JSON file atomically, pretty-printed.
 pub fn save_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)
-        .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
-    Ok(write_atomic(path, text.as_bytes())?)
+    Ok(nldf_core::error::write_json(path, value)?)
 }
 
 /// Reads a JSON file.
 pub fn load_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+    Ok(nldf_core::error::read_json(path)?)
 }
 
 /// The `step` entry of a checkpoint's metadata.

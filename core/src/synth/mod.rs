@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use crate::audio::{FeatureConfig, Waveform, audio_windows, resample, write_wav};
 use crate::camera::{Camera, Intrinsics, look_at};
 use crate::dataset::{FrameEntry, Split, TransformsFile, save_audio_npy, save_regions_png};
-use crate::error::{Error, Result, write_atomic};
+use crate::error::{Error, Result, read_json, write_json};
 use crate::image::save_png_bytes;
 use crate::rays::Rect;
 use crate::region::Region;
@@ -245,14 +245,11 @@ pub const GENERATOR: &str = "nldf synth 1";
 impl SceneFile {
     /// Reads `scene.json`.
     pub fn load(path: &Path) -> Result<SceneFile> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        serde_json::from_str(&text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+        read_json(path)
     }
 
     fn save(&self, path: &Path) -> Result<()> {
-        let text = serde_json::to_string_pretty(self)
-            .map_err(|e| Error::invalid(path, format!("cannot serialise: {e}")))?;
-        write_atomic(path, text.as_bytes())
+        write_json(path, self)
     }
 }
 
