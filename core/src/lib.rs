@@ -19,6 +19,7 @@ pub mod image;
 pub mod metrics;
 pub mod rays;
 pub mod region;
+pub mod render_spec;
 pub mod synth;
 
 pub use error::{Error, Result};

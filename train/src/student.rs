@@ -3,11 +3,13 @@
 //! (Eq. 7). Beam encoding lives in nldf-core ([`nldf_core::beam`]); this file is the
 //! network and the segment sum.
 
-use candle_core::{D, Result, Tensor};
+use candle_core::{D, Device, Result, Tensor};
 use candle_nn::{Linear, Module, VarBuilder, linear};
-use nldf_core::beam::BeamSpec;
+use nldf_core::beam::{BeamSpec, encode_beams};
+use nldf_core::rays::Rays;
 use serde::{Deserialize, Serialize};
 
+use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::config::AudioConfig;
 
 /// The student's shape.
@@ -24,6 +26,9 @@ pub struct StudentConfig {
     pub width: usize,
     /// Segments per ray, M (paper: 4).
     pub segments: usize,
+    /// Fuse the codes of `audio.att_frames` neighbouring frames with AudioAttNet (AD-NeRF's
+    /// smoothing); without, only the frame's own window is encoded.
+    pub attention: bool,
 }
 
 impl Default for StudentConfig {
@@ -40,6 +45,7 @@ impl StudentConfig {
             depth,
             width: 256,
             segments: 4,
+            attention: true,
         }
     }
 
@@ -72,6 +78,7 @@ impl StudentConfig {
             depth: 6,
             width: 32,
             segments: 4,
+            attention: true,
         }
     }
 
@@ -164,5 +171,67 @@ impl ResidualMlp {
             .reshape((n_rays, self.segments, 3))?;
         let pixels = segments.sum(1)?;
         Ok((segments, pixels))
+    }
+}
+
+/// The student: its own audio encoder (`audio.net.*`, `audio.att.*`, started from the
+/// teacher's) and the residual MLP (`mlp.input`, `mlp.body.{i}.{fc1,fc2}`, `mlp.output`).
+/// These are the checkpoint's tensor names, which the exporter reads.
+#[derive(Debug, Clone)]
+pub struct Student {
+    pub cfg: StudentConfig,
+    pub audio: AudioEncoder,
+    pub mlp: ResidualMlp,
+}
+
+/// Builds a [`Student`] for `cfg` under `vb` (`audio`, `mlp`).
+pub fn student(cfg: &StudentConfig, vb: VarBuilder) -> Result<Student> {
+    Ok(Student {
+        cfg: cfg.clone(),
+        audio: audio_encoder(&cfg.audio, vb.pp("audio"))?,
+        mlp: residual_mlp(cfg, vb.pp("mlp"))?,
+    })
+}
+
+impl Student {
+    /// Audio codes of frames from their neighbourhoods.
+    ///
+    /// # Shapes
+    /// - `neighbourhoods`: `[n, att_frames, window, n_features]`; returns `[n, audio_dim]`
+    pub fn audio_codes(&self, neighbourhoods: &Tensor) -> Result<Tensor> {
+        self.audio.forward(neighbourhoods, self.cfg.attention)
+    }
+
+    /// Encoded beams of `rays` without jitter (rendering).
+    ///
+    /// # Shapes
+    /// - returns `[rays.len(), beam_dim]`
+    pub fn encode(&self, rays: &Rays, near: f32, far: f32) -> Result<Tensor> {
+        let width = self.cfg.beam.encoded_len();
+        let mut out = vec![0.0f32; rays.len() * width];
+        encode_beams(rays, near, far, &self.cfg.beam, None, &mut out);
+        Tensor::from_vec(out, (rays.len(), width), &Device::Cpu)
+    }
+
+    /// Segment colours and pixels of `rays` seen by one frame whose audio neighbourhood is
+    /// `neighbourhood`, with plain candle ops (the reference every exported runtime must
+    /// match).
+    ///
+    /// # Shapes
+    /// - `neighbourhood`: `[1, att_frames, window, n_features]`
+    /// - returns segments `[n, m, 3]` and pixels `[n, 3]`
+    pub fn render_rays(
+        &self,
+        rays: &Rays,
+        neighbourhood: &Tensor,
+        near: f32,
+        far: f32,
+    ) -> Result<(Tensor, Tensor)> {
+        let code = self.audio_codes(neighbourhood)?;
+        let beams = self.encode(rays, near, far)?;
+        let codes = code
+            .broadcast_as((rays.len(), code.dim(1)?))?
+            .contiguous()?;
+        self.mlp.forward(&beams, &codes)
     }
 }
