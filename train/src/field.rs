@@ -11,7 +11,7 @@ use candle_core::{Result, Tensor};
 use candle_nn::VarBuilder;
 
 use crate::config::TeacherConfig;
-use crate::fused_field::{Affine, FieldOp, FieldPlan, TrunkStep};
+use crate::fused_field::{FieldOp, FieldPlan, Packer, TrunkStep};
 use crate::nn::{Dense, dense};
 
 /// One trunk layer: the hidden input, plus the point encoding and the audio code where the
@@ -97,36 +97,6 @@ fn add_per_ray(per_sample: &Tensor, per_ray: &Tensor, n_samples: usize) -> Resul
         .reshape((n, w))
 }
 
-/// Collects the flat parameter list of the fused op.
-struct Packer {
-    parts: Vec<Tensor>,
-    len: usize,
-}
-
-impl Packer {
-    fn push(&mut self, t: &Tensor) -> Result<usize> {
-        let at = self.len;
-        self.len += t.elem_count();
-        self.parts.push(t.flatten_all()?);
-        Ok(at)
-    }
-
-    fn affine(&mut self, layer: &Dense, with_bias: bool) -> Result<Affine> {
-        let (out, inp) = layer.weight.dims2()?;
-        let weight = self.push(&layer.weight)?;
-        let bias = match (&layer.bias, with_bias) {
-            (Some(b), true) => Some(self.push(b)?),
-            _ => None,
-        };
-        Ok(Affine {
-            weight,
-            bias,
-            out,
-            inp,
-        })
-    }
-}
-
 impl TeacherField {
     /// Raw densities and colours of every sample, through the fused op ([`FieldOp`]): one
     /// candle op for the whole per-sample network. With `train`, it keeps what its backward
@@ -147,10 +117,7 @@ impl TeacherField {
         train: bool,
     ) -> Result<(Tensor, Tensor)> {
         let n_rays = codes.dim(0)?;
-        let mut pack = Packer {
-            parts: Vec::new(),
-            len: 0,
-        };
+        let mut pack = Packer::default();
         let mut ray_terms = Vec::new();
         let mut ray_width = 0;
         let mut trunk = Vec::with_capacity(self.trunk.len());
@@ -158,7 +125,7 @@ impl TeacherField {
             let fed = matches!((&layer.points, &layer.audio), (Some(_), Some(_)));
             // The biases of fed layers travel with their per-ray term.
             let hidden = match &layer.hidden {
-                Some(h) => Some(pack.affine(h, !fed)?),
+                Some(h) => Some(pack.affine(&h.weight, h.bias.as_ref().filter(|_| !fed))?),
                 None => None,
             };
             let (points_affine, ray) = match (&layer.points, &layer.audio) {
@@ -171,7 +138,7 @@ impl TeacherField {
                     let off = ray_width;
                     ray_width += term.dim(1)?;
                     ray_terms.push(term);
-                    (Some(pack.affine(p, false)?), Some(off))
+                    (Some(pack.affine(&p.weight, None)?), Some(off))
                 }
                 _ => (None, None),
             };
@@ -181,14 +148,14 @@ impl TeacherField {
                 ray,
             });
         }
-        let density = pack.affine(&self.density, true)?;
-        let feature = pack.affine(&self.feature, true)?;
-        let color = pack.affine(&self.color_feature, false)?;
+        let density = pack.affine(&self.density.weight, self.density.bias.as_ref())?;
+        let feature = pack.affine(&self.feature.weight, self.feature.bias.as_ref())?;
+        let color = pack.affine(&self.color_feature.weight, None)?;
         let color_term = per_ray(&self.color_dir, dirs, self.color_feature.bias.as_ref())?;
         let color_ray = ray_width;
         ray_width += color_term.dim(1)?;
         ray_terms.push(color_term);
-        let rgb = pack.affine(&self.rgb, true)?;
+        let rgb = pack.affine(&self.rgb.weight, self.rgb.bias.as_ref())?;
         let plan = FieldPlan {
             trunk,
             density,
@@ -198,9 +165,9 @@ impl TeacherField {
             rgb,
             n_samples,
             ray_width,
-            n_params: pack.len,
+            n_params: pack.len(),
         };
-        let params = Tensor::cat(&pack.parts, 0)?;
+        let params = pack.tensor()?;
         let rays = Tensor::cat(&ray_terms, 1)?;
         let op = FieldOp::new(plan, train);
         let points = points.contiguous()?;

@@ -83,7 +83,51 @@ impl FieldOp {
     }
 }
 
-fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
+/// Collects the flat parameter tensor of a fused op: the variables, flattened and
+/// concatenated, so that candle routes each slice of the op's parameter gradient back to
+/// its variable.
+#[derive(Debug, Default)]
+pub(crate) struct Packer {
+    parts: Vec<Tensor>,
+    len: usize,
+}
+
+impl Packer {
+    fn push(&mut self, t: &Tensor) -> Result<usize> {
+        let at = self.len;
+        self.len += t.elem_count();
+        self.parts.push(t.flatten_all()?);
+        Ok(at)
+    }
+
+    /// Adds a layer's weight `[out, inp]` and optional bias `[out]`.
+    pub(crate) fn affine(&mut self, weight: &Tensor, bias: Option<&Tensor>) -> Result<Affine> {
+        let (out, inp) = weight.dims2()?;
+        let w = self.push(weight)?;
+        let bias = match bias {
+            Some(b) => Some(self.push(b)?),
+            None => None,
+        };
+        Ok(Affine {
+            weight: w,
+            bias,
+            out,
+            inp,
+        })
+    }
+
+    /// Values packed so far.
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// The flat parameter tensor `[len]`.
+    pub(crate) fn tensor(&self) -> Result<Tensor> {
+        Tensor::cat(&self.parts, 0)
+    }
+}
+
+pub(crate) fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
     let data = s.as_slice::<f32>()?;
     match l.contiguous_offsets() {
         Some((a, b)) => Ok(&data[a..b]),
@@ -91,7 +135,11 @@ fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]
     }
 }
 
-fn with_data<R>(t: &Tensor, what: &str, f: impl FnOnce(&[f32]) -> Result<R>) -> Result<R> {
+pub(crate) fn with_data<R>(
+    t: &Tensor,
+    what: &str,
+    f: impl FnOnce(&[f32]) -> Result<R>,
+) -> Result<R> {
     let t = t.contiguous()?;
     let (storage, layout) = t.storage_and_layout();
     match &*storage {
@@ -107,11 +155,11 @@ fn block(m: &[f32], width: usize, off: usize, w: usize) -> Vec<f32> {
         .collect()
 }
 
-fn weight<'a>(p: &'a [f32], a: &Affine) -> &'a [f32] {
+pub(crate) fn weight<'a>(p: &'a [f32], a: &Affine) -> &'a [f32] {
     &p[a.weight..a.weight + a.out * a.inp]
 }
 
-fn bias_or_zero(p: &[f32], a: &Affine) -> Vec<f32> {
+pub(crate) fn bias_or_zero(p: &[f32], a: &Affine) -> Vec<f32> {
     match a.bias {
         Some(b) => p[b..b + a.out].to_vec(),
         None => vec![0.0; a.out],
@@ -436,7 +484,7 @@ impl CustomOp3 for FieldOp {
 }
 
 /// Adds `g^T x` to the weight's gradient and `db` to the bias's.
-fn accumulate_affine(
+pub(crate) fn accumulate_affine(
     dp: &mut [f32],
     a: &Affine,
     g: &[f32],

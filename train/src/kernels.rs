@@ -72,6 +72,8 @@ struct Tile {
     relu: bool,
     /// Per tile row, the addend row at column `j0` (null: none).
     addend: [*const f32; MR],
+    /// A bias row at column `j0`, added to every row (null: none).
+    bias: *const f32,
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -116,6 +118,9 @@ mod avx512 {
                     }
                     if !t.addend[r].is_null() {
                         x = _mm512_add_ps(x, _mm512_maskz_loadu_ps(mask, t.addend[r].add(16 * v)));
+                    }
+                    if !t.bias.is_null() {
+                        x = _mm512_add_ps(x, _mm512_maskz_loadu_ps(mask, t.bias.add(16 * v)));
                     }
                     if t.relu {
                         x = _mm512_max_ps(x, zero);
@@ -182,6 +187,9 @@ unsafe fn tile_portable(t: &Tile) {
                 }
                 if !t.addend[r].is_null() {
                     x += *t.addend[r].add(j);
+                }
+                if !t.bias.is_null() {
+                    x += *t.bias.add(j);
                 }
                 if t.relu {
                     x = x.max(0.0);
@@ -252,6 +260,7 @@ unsafe fn gemm_rows(
     ldc: usize,
     accumulate: bool,
     addend: (*const f32, usize, Addend),
+    bias: *const f32,
     relu: bool,
     avx512: bool,
 ) {
@@ -287,6 +296,7 @@ unsafe fn gemm_rows(
                     accumulate,
                     relu,
                     addend: rows_addend,
+                    bias: if bias.is_null() { bias } else { bias.add(j0) },
                 }
             };
             // SAFETY: as above.
@@ -355,17 +365,64 @@ pub fn linear_forward(
         Addend::Full => m,
     };
     check("addend", addend.len(), add_rows * n);
-    // W^T, row-major [k, n], packed into panels.
-    let mut wt = vec![0.0f32; k * n];
-    for j in 0..n {
-        for p in 0..k {
-            wt[p * n + j] = w[j * k + p];
+    let packed = pack_weight(w, n, k);
+    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), None, relu);
+}
+
+/// The residual layer's forward: `y = act(x w^T + bias + residual)`, with a bias row and a
+/// full `[m, n]` residual added on the way out of the product.
+///
+/// # Shapes
+/// - `x`: `[m, k]`, `w`: `[n, k]`, `bias`: `[n]`, `residual`, `y`: `[m, n]`
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+#[allow(clippy::too_many_arguments)]
+pub fn linear_forward_residual(
+    x: &[f32],
+    m: usize,
+    k: usize,
+    w: &[f32],
+    n: usize,
+    bias: &[f32],
+    residual: &[f32],
+    relu: bool,
+    y: &mut [f32],
+) {
+    check("x", x.len(), m * k);
+    check("w", w.len(), n * k);
+    check("bias", bias.len(), n);
+    check("residual", residual.len(), m * n);
+    check("y", y.len(), m * n);
+    let packed = pack_weight(w, n, k);
+    gemm_parallel(
+        x,
+        m,
+        k,
+        &packed,
+        n,
+        y,
+        (residual, Addend::Full),
+        Some(bias),
+        relu,
+    );
+}
+
+/// `W^T` (`W` `[n, k]`, candle's `Linear` layout) packed into the column panels of
+/// [`pack_b`], read straight from `W`.
+fn pack_weight(w: &[f32], n: usize, k: usize) -> Vec<f32> {
+    let panels = n.div_ceil(NR);
+    let mut out = vec![0.0f32; panels * k * NR];
+    for q in 0..panels {
+        let j0 = q * NR;
+        let dst = &mut out[q * k * NR..(q + 1) * k * NR];
+        for j in j0..(j0 + NR).min(n) {
+            for (p, &v) in w[j * k..(j + 1) * k].iter().enumerate() {
+                dst[p * NR + j - j0] = v;
+            }
         }
     }
-    let mut packed = Vec::new();
-    // SAFETY: wt is [k, n] row-major.
-    unsafe { pack_b(wt.as_ptr(), n, k, n, &mut packed) };
-    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), relu);
+    out
 }
 
 /// `c = act(a b + addend)` for row-major `a` `[m, k]` and `b` packed by [`pack_b`], in
@@ -379,6 +436,7 @@ fn gemm_parallel(
     n: usize,
     c: &mut [f32],
     addend: (&[f32], Addend),
+    bias: Option<&[f32]>,
     relu: bool,
 ) {
     let avx512 = has_avx512();
@@ -388,11 +446,12 @@ fn gemm_parallel(
         SendConst(packed.as_ptr()),
         SendConst(addend.0.as_ptr()),
     );
+    let biasp = SendConst(bias.map_or(std::ptr::null(), |b| b.as_ptr()));
     let mode = addend.1;
     (0..m.div_ceil(ROW_CHUNK))
         .into_par_iter()
         .for_each(|chunk| {
-            let (cp, ap, bp, dp) = (cp, ap, bp, dp);
+            let (cp, ap, bp, dp, biasp) = (cp, ap, bp, dp, biasp);
             let i_lo = chunk * ROW_CHUNK;
             let i_hi = (i_lo + ROW_CHUNK).min(m);
             // SAFETY: the callers checked the shapes; tasks write disjoint row ranges of c.
@@ -412,6 +471,7 @@ fn gemm_parallel(
                     n,
                     false,
                     (dp.0, n, mode),
+                    biasp.0,
                     relu,
                     avx512,
                 )
@@ -430,7 +490,23 @@ pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32])
     let mut packed = Vec::new();
     // SAFETY: b is [k, n] row-major (checked above).
     unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
-    gemm_parallel(a, m, k, &packed, n, c, (&[], Addend::None), false);
+    gemm_parallel(a, m, k, &packed, n, c, (&[], Addend::None), None, false);
+}
+
+/// `c = a b + addend` for row-major `a` `[m, k]`, `b` `[k, n]` and a full `[m, n]` addend
+/// (the input gradient of a residual block: `g' W + g`).
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+pub fn matmul_add(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, add: &[f32], c: &mut [f32]) {
+    check("a", a.len(), m * k);
+    check("b", b.len(), k * n);
+    check("add", add.len(), m * n);
+    check("c", c.len(), m * n);
+    let mut packed = Vec::new();
+    // SAFETY: b is [k, n] row-major (checked above).
+    unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
+    gemm_parallel(a, m, k, &packed, n, c, (add, Addend::Full), None, false);
 }
 
 /// `c = a^T b` for row-major `a` `[m, n]` and `b` `[m, k]`, summed over the `m` rows (the
@@ -475,6 +551,7 @@ pub fn matmul_tn(a: &[f32], m: usize, n: usize, b: &[f32], k: usize, c: &mut [f3
                         k,
                         p0 > p_lo,
                         (std::ptr::null(), 0, Addend::None),
+                        std::ptr::null(),
                         false,
                         avx512,
                     )

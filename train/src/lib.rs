@@ -23,6 +23,7 @@ pub mod plot;
 pub mod render;
 pub mod sampler;
 pub mod student;
+pub mod student_op;
 pub mod teacher;
 pub mod trainer;
 

@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::config::AudioConfig;
+use crate::student_op::{StudentOp, StudentPlan};
 
 /// The student's shape.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -150,6 +151,56 @@ pub fn residual_mlp(cfg: &StudentConfig, vb: VarBuilder) -> Result<ResidualMlp> 
 }
 
 impl ResidualMlp {
+    /// The same function as [`ResidualMlp::forward`] through the fused op
+    /// ([`StudentOp`]): one candle op for the whole network. With `train`, it keeps what
+    /// its backward needs; gradients reach the weights and `codes`, not `beams`.
+    ///
+    /// # Shapes
+    /// - `beams`: `[n_rays, beam_dim]`; `codes`: `[n_rays, audio_dim]`
+    /// - returns segments `[n_rays, m, 3]` and pixels `[n_rays, 3]`
+    pub fn forward_fused(
+        &self,
+        beams: &Tensor,
+        codes: &Tensor,
+        train: bool,
+    ) -> Result<(Tensor, Tensor)> {
+        let n_rays = beams.dim(0)?;
+        let beam_dim = beams.dim(1)?;
+        let layer = |l: &Linear| -> Result<(Tensor, Tensor)> {
+            let b = l
+                .bias()
+                .ok_or_else(|| candle_core::Error::Msg("student layers have biases".into()))?;
+            Ok((l.weight().clone(), b.clone()))
+        };
+        let input = layer(&self.input)?;
+        let blocks = self
+            .body
+            .iter()
+            .map(|b| Ok([layer(&b.fc1)?, layer(&b.fc2)?]))
+            .collect::<Result<Vec<_>>>()?;
+        let block_refs: Vec<[(&Tensor, &Tensor); 2]> = blocks
+            .iter()
+            .map(|[a, b]| [(&a.0, &a.1), (&b.0, &b.1)])
+            .collect();
+        let output = layer(&self.output)?;
+        let (plan, params) = StudentPlan::pack(
+            (&input.0, &input.1),
+            &block_refs,
+            (&output.0, &output.1),
+            beam_dim,
+        )?;
+        let op = StudentOp::new(plan, train);
+        let (beams, codes) = (beams.contiguous()?, codes.contiguous()?);
+        let raw = if train {
+            beams.apply_op3(&codes, &params, op)?
+        } else {
+            beams.apply_op3_no_bwd(&codes, &params, &op)?
+        };
+        let segments = raw.reshape((n_rays, self.segments, 3))?;
+        let pixels = segments.sum(1)?;
+        Ok((segments, pixels))
+    }
+
     /// Segment colours and their sum, the pixel (Eq. 7). The segments are the network's raw
     /// outputs: a segment's colour is a weighted sum of sample colours, not bounded by a
     /// squashing function of its own.
