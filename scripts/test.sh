@@ -4,6 +4,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# The Python environment of the ONNX tests (onnx, onnxruntime, numpy in .venv).
+bash scripts/python_env.sh >/dev/null
+
 if cargo nextest --version >/dev/null 2>&1; then
   exec cargo nextest run --workspace --no-fail-fast "$@"
 else

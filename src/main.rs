@@ -3,6 +3,7 @@
 mod bench_cmd;
 mod demo_cmd;
 mod eval_cmd;
+mod export_cmd;
 mod progress;
 mod synth_cmd;
 mod train_cmd;
@@ -32,6 +33,8 @@ enum Command {
     Train(train_cmd::TrainCommand),
     /// Render held-out frames with a trained model and score them (PSNR, SSIM, mouth PSNR).
     Eval(eval_cmd::EvalArgs),
+    /// Export a run's trained student (with its audio encoder) as one ONNX model.
+    Export(export_cmd::ExportArgs),
     /// Measure training throughput (and, later, rendering speed against error).
     #[command(subcommand)]
     Bench(bench_cmd::BenchCommand),
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
         Command::Synth(args) => synth_cmd::run(args),
         Command::Train(cmd) => train_cmd::run(cmd),
         Command::Eval(args) => eval_cmd::run(args),
+        Command::Export(args) => export_cmd::run(args),
         Command::Bench(cmd) => bench_cmd::run(cmd),
     };
     match result {

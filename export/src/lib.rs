@@ -1,3 +1,22 @@
 //! nldf-export: the trained student and its audio encoder as one ONNX graph, written with
 //! prost message types (no protoc), plus the ONNX contract (names, shapes, opset, metadata
-//! keys) that nldf-infer and the tests import. Reads checkpoints written by nldf-train.
+//! keys) that nldf-infer and the tests import. Reads checkpoints written by nldf-train with
+//! the `safetensors` crate; it never depends on candle.
+//!
+//! [`onnx`] holds the message types, [`graph`] a small builder, [`contract`] the one source
+//! of truth for the model's interface, [`checkpoint`] reads `RUN/student/`, [`student`]
+//! builds and writes the graph ([`export_student`]) and [`load`] reads a model back with
+//! clear errors ([`read_model`]).
+
+pub mod checkpoint;
+pub mod contract;
+pub mod error;
+pub mod graph;
+pub mod load;
+pub mod onnx;
+pub mod student;
+
+pub use error::{Error, Result};
+pub use graph::WeightType;
+pub use load::{ExportedModel, read_model};
+pub use student::{ExportReport, export_student};

@@ -2,6 +2,7 @@
 
 mod audio;
 mod dataset;
+mod export;
 mod metrics;
 mod rendering;
 mod student;

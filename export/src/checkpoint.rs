@@ -1,0 +1,228 @@
+//! A trained student as nldf-train leaves it in `RUN/student/`, read without candle:
+//! `model.safetensors` (f32 weights, the step in its metadata), `config.json` (the resolved
+//! config, whose `model` field is the student's shape), `render.json` (the
+//! [`RenderSpec`]) and the background image it names.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use nldf_core::beam::BeamSpec;
+use nldf_core::image::ImageRgb;
+use nldf_core::render_spec::{RENDER_SPEC_FILE, RenderSpec};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Weights file of a student folder.
+pub const MODEL_FILE: &str = "model.safetensors";
+/// Resolved training config of a student folder.
+pub const CONFIG_FILE: &str = "config.json";
+
+/// The audio encoder's sizes (nldf-train's `AudioConfig`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AudioShape {
+    /// Features per audio frame, F.
+    pub n_features: usize,
+    /// Feature frames per window (AD-NeRF: 16).
+    pub window: usize,
+    /// Width of the audio code.
+    pub dim: usize,
+    /// Neighbouring frames fused by the attention.
+    pub att_frames: usize,
+}
+
+/// The student's shape as `config.json` stores it (nldf-train's `StudentConfig`; every field
+/// is required, since the trainer writes the resolved config).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StudentShape {
+    pub audio: AudioShape,
+    /// Beam points K and frequencies L.
+    pub beam: BeamSpec,
+    /// Linear layers: input, `(depth - 2) / 2` residual blocks of two, output.
+    pub depth: usize,
+    /// Hidden width.
+    pub width: usize,
+    /// Segments per ray, M.
+    pub segments: usize,
+    /// Whether AudioAttNet fuses the neighbourhood.
+    pub attention: bool,
+}
+
+impl StudentShape {
+    /// Residual blocks between the input and the output layer.
+    pub fn n_blocks(&self) -> usize {
+        self.depth.saturating_sub(2) / 2
+    }
+
+    fn check(&self) -> std::result::Result<(), String> {
+        let a = &self.audio;
+        if self.depth < 4 || !self.depth.is_multiple_of(2) {
+            return Err(format!(
+                "student depth must be even and >= 4, got {}",
+                self.depth
+            ));
+        }
+        if self.width == 0 || self.segments == 0 || self.beam.n_points < 2 {
+            return Err("student width, segments >= 1 and beam points >= 2 are required".into());
+        }
+        if a.n_features == 0 || a.window == 0 || a.dim == 0 || a.att_frames == 0 {
+            return Err("audio n_features, window, dim and att_frames must be positive".into());
+        }
+        Ok(())
+    }
+}
+
+/// One f32 tensor of the checkpoint.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Weight {
+    pub shape: Vec<usize>,
+    pub data: Vec<f32>,
+}
+
+/// A student folder, read and checked.
+#[derive(Debug, Clone)]
+pub struct StudentCheckpoint {
+    /// The folder.
+    pub dir: PathBuf,
+    /// The network's shape.
+    pub shape: StudentShape,
+    /// How to render frames of the scene.
+    pub spec: RenderSpec,
+    /// Training step of the weights.
+    pub step: u64,
+    /// The background, an 8-bit RGB PNG of the spec's image size.
+    pub background_png: Vec<u8>,
+    weights: HashMap<String, Weight>,
+}
+
+impl StudentCheckpoint {
+    /// Reads `dir` (`model.safetensors`, `config.json`, `render.json`, the background).
+    pub fn open(dir: &Path) -> Result<StudentCheckpoint> {
+        let config_path = dir.join(CONFIG_FILE);
+        let config: serde_json::Value = nldf_core::error::read_json(&config_path)?;
+        let model = config.get("model").ok_or_else(|| {
+            Error::invalid(&config_path, "has no `model` field (not a student config?)")
+        })?;
+        let shape: StudentShape = serde_json::from_value(model.clone()).map_err(|e| {
+            Error::invalid(
+                &config_path,
+                format!("`model` is not a student config: {e}"),
+            )
+        })?;
+        shape.check().map_err(|e| Error::invalid(&config_path, e))?;
+
+        let spec_path = dir.join(RENDER_SPEC_FILE);
+        let spec = RenderSpec::load(&spec_path)?;
+        if spec.att_frames != shape.audio.att_frames || spec.features.window != shape.audio.window {
+            return Err(Error::invalid(
+                &spec_path,
+                format!(
+                    "att_frames {} and window {} disagree with {}'s {} and {}",
+                    spec.att_frames,
+                    spec.features.window,
+                    config_path.display(),
+                    shape.audio.att_frames,
+                    shape.audio.window
+                ),
+            ));
+        }
+
+        let background_path = dir.join(&spec.background);
+        let background = ImageRgb::load(&background_path)?;
+        let k = &spec.intrinsics;
+        if (background.width, background.height) != (k.width, k.height) {
+            return Err(Error::invalid(
+                &background_path,
+                format!(
+                    "is {}x{}, the render spec's image is {}x{}",
+                    background.width, background.height, k.width, k.height
+                ),
+            ));
+        }
+        let mut background_png = Vec::new();
+        let encoder = image::codecs::png::PngEncoder::new(&mut background_png);
+        image::ImageEncoder::write_image(
+            encoder,
+            &background.to_rgb8(),
+            k.width,
+            k.height,
+            image::ExtendedColorType::Rgb8,
+        )
+        .map_err(|e| Error::invalid(&background_path, format!("cannot encode PNG: {e}")))?;
+
+        let (weights, step) = read_weights(&dir.join(MODEL_FILE))?;
+        Ok(StudentCheckpoint {
+            dir: dir.to_path_buf(),
+            shape,
+            spec,
+            step,
+            background_png,
+            weights,
+        })
+    }
+
+    /// The weight `name`, checked to have shape `shape`.
+    pub fn weight(&self, name: &str, shape: &[usize]) -> Result<&[f32]> {
+        let path = self.dir.join(MODEL_FILE);
+        let w = self
+            .weights
+            .get(name)
+            .ok_or_else(|| Error::invalid(&path, format!("lacks weight `{name}`")))?;
+        if w.shape != shape {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "weight `{name}` has shape {:?}, {} says {:?}",
+                    w.shape, CONFIG_FILE, shape
+                ),
+            ));
+        }
+        Ok(&w.data)
+    }
+}
+
+/// The f32 tensors of a safetensors file and the `step` of its metadata (0 when absent).
+fn read_weights(path: &Path) -> Result<(HashMap<String, Weight>, u64)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+        .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
+    let metadata = meta.metadata().clone().unwrap_or_default();
+    if let Some(kind) = metadata.get("kind")
+        && kind != "student"
+    {
+        return Err(Error::invalid(
+            path,
+            format!("holds a {kind}, not a student"),
+        ));
+    }
+    let step = match metadata.get("step") {
+        Some(s) => s
+            .parse()
+            .map_err(|_| Error::invalid(path, format!("metadata step `{s}` is not a number")))?,
+        None => 0,
+    };
+    let tensors = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| Error::invalid(path, format!("unreadable tensors: {e}")))?;
+    let mut weights = HashMap::new();
+    for (name, view) in tensors.iter() {
+        if view.dtype() != safetensors::Dtype::F32 {
+            return Err(Error::invalid(
+                path,
+                format!("tensor `{name}` is {:?}, expected F32", view.dtype()),
+            ));
+        }
+        let data = view
+            .data()
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        weights.insert(
+            name.to_string(),
+            Weight {
+                shape: view.shape().to_vec(),
+                data,
+            },
+        );
+    }
+    Ok((weights, step))
+}

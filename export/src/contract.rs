@@ -1,0 +1,362 @@
+//! The ONNX contract of an exported student, defined once: the graph's input and output
+//! names, element types and shapes, the symbolic ray axis, the IR and opset versions, and
+//! the `metadata_props` keys that carry everything a foreign runtime needs to render a frame.
+//! The exporter writes to it; nldf-infer, the tests and `examples/onnxruntime_render.py`
+//! read by it.
+//!
+//! # Graph
+//! - input [`INPUT_ORIGINS`] `rays_o`: f32 `[n_rays, 3]` ray origins (world space)
+//! - input [`INPUT_DIRECTIONS`] `rays_d`: f32 `[n_rays, 3]` un-normalised ray directions
+//!   (AD-NeRF's `get_rays`: a point at `t` is `o + t d`)
+//! - input [`INPUT_AUDIO`] `audio`: f32 `[att_frames, window, n_features]`, the windows of
+//!   the frame's neighbourhood (frames `f - att_frames/2 ..`, clamped at the ends of the
+//!   track); without attention only the centre window (index `att_frames / 2`) is used
+//! - output [`OUTPUT_RGB`] `rgb`: f32 `[n_rays, 3]`, the pixel colours (paper Eq. 7)
+//! - output [`OUTPUT_SEGMENTS`] `segments`: f32 `[n_rays, M, 3]`, the M segment colours whose
+//!   sum is `rgb`
+//!
+//! # Metadata
+//! Every value under [`keys`] is JSON (numbers, arrays, objects, `true`/`false`), except
+//! [`keys::FORMAT`], [`keys::BACKGROUND_FILE`], [`keys::WEIGHTS_CHECKSUM`] and
+//! [`keys::BACKGROUND_PNG`] (base64 of an 8-bit RGB PNG the size of the image), which are
+//! plain strings. Rays that miss the head's
+//! bounds (within `[near, far]`) take the background pixel instead of the network's colour.
+
+use std::collections::HashMap;
+
+use base64::Engine;
+use nldf_core::beam::BeamSpec;
+use nldf_core::encoding::MAX_COORD;
+use nldf_core::render_spec::RenderSpec;
+use serde::{Deserialize, Serialize};
+
+use crate::onnx::{GraphProto, StringStringEntryProto};
+
+/// ONNX IR version written (onnxruntime 1.31 reads up to 13, tract reads 9).
+pub const IR_VERSION: i64 = 9;
+/// Version of the default ONNX operator set the graph binds to.
+pub const OPSET: i64 = 17;
+/// `ModelProto.producer_name`.
+pub const PRODUCER: &str = "nldf";
+/// Name of the graph.
+pub const GRAPH_NAME: &str = "nldf_student";
+/// Symbolic name of the ray axis of the inputs and outputs.
+pub const RAY_AXIS: &str = "n_rays";
+
+/// Ray origins, f32 `[n_rays, 3]`.
+pub const INPUT_ORIGINS: &str = "rays_o";
+/// Ray directions, f32 `[n_rays, 3]`.
+pub const INPUT_DIRECTIONS: &str = "rays_d";
+/// The frame's audio neighbourhood, f32 `[att_frames, window, n_features]`.
+pub const INPUT_AUDIO: &str = "audio";
+/// Pixel colours, f32 `[n_rays, 3]`.
+pub const OUTPUT_RGB: &str = "rgb";
+/// Segment colours, f32 `[n_rays, M, 3]`.
+pub const OUTPUT_SEGMENTS: &str = "segments";
+
+/// Value of [`keys::FORMAT`] that marks a model as an nldf student.
+pub const FORMAT: &str = "nldf-student";
+/// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change.
+pub const CONTRACT_VERSION: u32 = 1;
+
+/// `metadata_props` keys.
+pub mod keys {
+    /// [`super::FORMAT`]: what the model is (plain string). Written first.
+    pub const FORMAT: &str = "nldf.format";
+    /// [`super::CONTRACT_VERSION`].
+    pub const CONTRACT: &str = "nldf.contract";
+    /// Image width and height in pixels.
+    pub const IMAGE_WIDTH: &str = "nldf.image_width";
+    pub const IMAGE_HEIGHT: &str = "nldf.image_height";
+    /// Focal length and principal point in pixels (AD-NeRF's `focal_len`, `cx`, `cy`).
+    pub const FOCAL: &str = "nldf.focal";
+    pub const CX: &str = "nldf.cx";
+    pub const CY: &str = "nldf.cy";
+    /// Beam range along each ray.
+    pub const NEAR: &str = "nldf.near";
+    pub const FAR: &str = "nldf.far";
+    /// Video frame rate the audio windows follow.
+    pub const FPS: &str = "nldf.fps";
+    /// Beam points K and positional-encoding frequencies L.
+    pub const BEAM_POINTS: &str = "nldf.beam_points";
+    pub const BEAM_FREQS: &str = "nldf.beam_freqs";
+    /// Coordinates are clamped to ± this before the encoding.
+    pub const MAX_COORD: &str = "nldf.max_coord";
+    /// Segments per ray, M.
+    pub const SEGMENTS: &str = "nldf.segments";
+    /// The audio input's `[att_frames, window, n_features]`.
+    pub const AUDIO_ATT_FRAMES: &str = "nldf.audio_att_frames";
+    pub const AUDIO_WINDOW: &str = "nldf.audio_window";
+    pub const AUDIO_FEATURES: &str = "nldf.audio_features";
+    /// Whether the neighbourhood is fused by attention (else only the centre window counts).
+    pub const AUDIO_ATTENTION: &str = "nldf.audio_attention";
+    /// The head's bounds, `[x, y, z]` each.
+    pub const BOUNDS_LO: &str = "nldf.bounds_lo";
+    pub const BOUNDS_HI: &str = "nldf.bounds_hi";
+    /// Camera-to-world matrix to render from by default, 4 rows of 4 (OpenGL axes).
+    pub const DEFAULT_POSE: &str = "nldf.default_pose";
+    /// Training step of the exported weights.
+    pub const STEP: &str = "nldf.step";
+    /// Network shape: `{"depth", "width", "audio_dim"}`.
+    pub const NETWORK: &str = "nldf.network";
+    /// The whole render spec (`render.json`) as JSON.
+    pub const RENDER_SPEC: &str = "nldf.render_spec";
+    /// The background's original file name (plain string).
+    pub const BACKGROUND_FILE: &str = "nldf.background_file";
+    /// FNV-1a 64 of the initializers' names and bytes, 16 hex digits (plain string): see
+    /// [`super::weights_checksum`].
+    pub const WEIGHTS_CHECKSUM: &str = "nldf.weights_checksum";
+    /// The background as base64 of an 8-bit RGB PNG (plain string). Written last.
+    pub const BACKGROUND_PNG: &str = "nldf.background_png";
+}
+
+/// Shape of the audio input and how the graph uses it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AudioInput {
+    /// Neighbouring frames given per rendered frame.
+    pub att_frames: usize,
+    /// Feature frames per window (AD-NeRF: 16).
+    pub window: usize,
+    /// Features per feature frame, F.
+    pub n_features: usize,
+    /// Fuse the neighbourhood with attention; without, only window `att_frames / 2` counts.
+    pub attention: bool,
+}
+
+impl AudioInput {
+    /// The input's shape, `[att_frames, window, n_features]`.
+    pub fn shape(&self) -> [usize; 3] {
+        [self.att_frames, self.window, self.n_features]
+    }
+
+    /// Values in one neighbourhood.
+    pub fn len(&self) -> usize {
+        self.att_frames * self.window * self.n_features
+    }
+
+    /// True when the input holds no values.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Sizes of the network, for reports and checks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NetworkShape {
+    /// Linear layers of the residual MLP.
+    pub depth: usize,
+    /// Hidden width.
+    pub width: usize,
+    /// Width of the audio code.
+    pub audio_dim: usize,
+}
+
+/// Everything an exported model's metadata says: what a runtime needs besides the graph.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelInfo {
+    /// Camera, range, bounds, background name, audio features, default pose.
+    pub spec: RenderSpec,
+    /// Beam points K and frequencies L.
+    pub beam: BeamSpec,
+    /// Segments per ray, M.
+    pub segments: usize,
+    /// The audio input.
+    pub audio: AudioInput,
+    /// The network's sizes.
+    pub network: NetworkShape,
+    /// Training step of the weights.
+    pub step: u64,
+    /// [`weights_checksum`] of the graph.
+    pub weights_checksum: u64,
+    /// The background image, an 8-bit RGB PNG of the image's size.
+    pub background_png: Vec<u8>,
+}
+
+fn json<T: Serialize + ?Sized>(v: &T) -> String {
+    // Plain numbers, arrays and derived structs always serialise.
+    serde_json::to_string(v).unwrap_or_default()
+}
+
+impl ModelInfo {
+    /// The metadata entries, in the order they are written ([`keys::FORMAT`] first, the
+    /// background last, so that a file cut short loses a required key).
+    pub fn to_metadata(&self) -> Vec<StringStringEntryProto> {
+        let s = &self.spec;
+        let k = &s.intrinsics;
+        let entries: Vec<(&str, String)> = vec![
+            (keys::FORMAT, FORMAT.to_string()),
+            (keys::CONTRACT, json(&CONTRACT_VERSION)),
+            (keys::IMAGE_WIDTH, json(&k.width)),
+            (keys::IMAGE_HEIGHT, json(&k.height)),
+            (keys::FOCAL, json(&k.focal)),
+            (keys::CX, json(&k.cx)),
+            (keys::CY, json(&k.cy)),
+            (keys::NEAR, json(&s.near)),
+            (keys::FAR, json(&s.far)),
+            (keys::FPS, json(&s.fps)),
+            (keys::BEAM_POINTS, json(&self.beam.n_points)),
+            (keys::BEAM_FREQS, json(&self.beam.n_freqs)),
+            (keys::MAX_COORD, json(&MAX_COORD)),
+            (keys::SEGMENTS, json(&self.segments)),
+            (keys::AUDIO_ATT_FRAMES, json(&self.audio.att_frames)),
+            (keys::AUDIO_WINDOW, json(&self.audio.window)),
+            (keys::AUDIO_FEATURES, json(&self.audio.n_features)),
+            (keys::AUDIO_ATTENTION, json(&self.audio.attention)),
+            (keys::BOUNDS_LO, json(&s.bounds.lo.to_array())),
+            (keys::BOUNDS_HI, json(&s.bounds.hi.to_array())),
+            (keys::DEFAULT_POSE, json(&s.default_pose)),
+            (keys::STEP, json(&self.step)),
+            (keys::NETWORK, json(&self.network)),
+            (keys::RENDER_SPEC, json(s)),
+            (keys::BACKGROUND_FILE, s.background.clone()),
+            (
+                keys::WEIGHTS_CHECKSUM,
+                format!("{:016x}", self.weights_checksum),
+            ),
+            (
+                keys::BACKGROUND_PNG,
+                base64::engine::general_purpose::STANDARD.encode(&self.background_png),
+            ),
+        ];
+        entries
+            .into_iter()
+            .map(|(key, value)| StringStringEntryProto {
+                key: Some(key.to_string()),
+                value: Some(value),
+            })
+            .collect()
+    }
+
+    /// Reads the metadata back; the error says which key is missing or malformed.
+    pub fn from_metadata(props: &[StringStringEntryProto]) -> Result<ModelInfo, MetadataError> {
+        let map: HashMap<&str, &str> = props
+            .iter()
+            .map(|p| {
+                (
+                    p.key.as_deref().unwrap_or_default(),
+                    p.value.as_deref().unwrap_or_default(),
+                )
+            })
+            .collect();
+        match map.get(keys::FORMAT) {
+            Some(&FORMAT) => {}
+            Some(other) => {
+                return Err(MetadataError::Foreign(format!(
+                    "`{}` is `{other}`",
+                    keys::FORMAT
+                )));
+            }
+            None => {
+                return Err(MetadataError::Foreign(format!(
+                    "no `{}` metadata",
+                    keys::FORMAT
+                )));
+            }
+        }
+        let get = |key: &str| {
+            map.get(key)
+                .copied()
+                .ok_or_else(|| MetadataError::Missing(key.to_string()))
+        };
+        fn parse<T: serde::de::DeserializeOwned>(key: &str, v: &str) -> Result<T, MetadataError> {
+            serde_json::from_str(v)
+                .map_err(|e| MetadataError::Malformed(key.to_string(), e.to_string()))
+        }
+        let value = |key: &str| -> Result<usize, MetadataError> { parse(key, get(key)?) };
+        let contract: u32 = parse(keys::CONTRACT, get(keys::CONTRACT)?)?;
+        if contract != CONTRACT_VERSION {
+            return Err(MetadataError::Malformed(
+                keys::CONTRACT.to_string(),
+                format!("contract version {contract}, this build reads {CONTRACT_VERSION}"),
+            ));
+        }
+        let spec: RenderSpec = parse(keys::RENDER_SPEC, get(keys::RENDER_SPEC)?)?;
+        spec.check()
+            .map_err(|e| MetadataError::Malformed(keys::RENDER_SPEC.to_string(), e))?;
+        let background_png = base64::engine::general_purpose::STANDARD
+            .decode(get(keys::BACKGROUND_PNG)?)
+            .map_err(|e| {
+                MetadataError::Malformed(keys::BACKGROUND_PNG.to_string(), e.to_string())
+            })?;
+        let checksum = get(keys::WEIGHTS_CHECKSUM)?;
+        let weights_checksum = u64::from_str_radix(checksum, 16).map_err(|e| {
+            MetadataError::Malformed(keys::WEIGHTS_CHECKSUM.to_string(), e.to_string())
+        })?;
+        let info = ModelInfo {
+            weights_checksum,
+            beam: BeamSpec {
+                n_points: value(keys::BEAM_POINTS)?,
+                n_freqs: value(keys::BEAM_FREQS)?,
+            },
+            segments: value(keys::SEGMENTS)?,
+            audio: AudioInput {
+                att_frames: value(keys::AUDIO_ATT_FRAMES)?,
+                window: value(keys::AUDIO_WINDOW)?,
+                n_features: value(keys::AUDIO_FEATURES)?,
+                attention: parse(keys::AUDIO_ATTENTION, get(keys::AUDIO_ATTENTION)?)?,
+            },
+            network: parse(keys::NETWORK, get(keys::NETWORK)?)?,
+            step: parse(keys::STEP, get(keys::STEP)?)?,
+            spec,
+            background_png,
+        };
+        // The flat keys are what foreign runtimes read: they must say what the spec says.
+        let k = &info.spec.intrinsics;
+        let flat: [(&str, f64); 8] = [
+            (keys::IMAGE_WIDTH, k.width.into()),
+            (keys::IMAGE_HEIGHT, k.height.into()),
+            (keys::FOCAL, k.focal.into()),
+            (keys::CX, k.cx.into()),
+            (keys::CY, k.cy.into()),
+            (keys::NEAR, info.spec.near.into()),
+            (keys::FAR, info.spec.far.into()),
+            (keys::AUDIO_ATT_FRAMES, info.spec.att_frames as f64),
+        ];
+        for (key, expected) in flat {
+            // Compared in f32, the precision both were written with.
+            let got: f32 = parse(key, get(key)?)?;
+            if got != expected as f32 {
+                return Err(MetadataError::Malformed(
+                    key.to_string(),
+                    format!("says {got}, the render spec says {expected}"),
+                ));
+            }
+        }
+        if info.beam.n_points < 2 || info.segments == 0 || info.audio.is_empty() {
+            return Err(MetadataError::Malformed(
+                keys::BEAM_POINTS.to_string(),
+                "needs K >= 2, M >= 1 and a non-empty audio input".into(),
+            ));
+        }
+        Ok(info)
+    }
+}
+
+/// FNV-1a (64-bit) over every initializer's name, a zero byte and its `raw_data`, in graph
+/// order: a flipped weight byte, which still decodes, changes it.
+pub fn weights_checksum(graph: &GraphProto) -> u64 {
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for t in &graph.initializer {
+        let name = t.name.as_deref().unwrap_or_default().as_bytes();
+        let raw = t.raw_data.as_deref().unwrap_or_default();
+        for &b in name.iter().chain(&[0u8]).chain(raw) {
+            h = (h ^ b as u64).wrapping_mul(PRIME);
+        }
+    }
+    h
+}
+
+/// What is wrong with a model's metadata.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MetadataError {
+    /// The model is not an nldf student (another exporter's model).
+    #[error("{0}")]
+    Foreign(String),
+    /// A required key is absent.
+    #[error("metadata lacks `{0}`")]
+    Missing(String),
+    /// A key's value does not parse or disagrees with the rest.
+    #[error("metadata `{0}`: {1}")]
+    Malformed(String, String),
+}

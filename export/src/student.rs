@@ -1,0 +1,396 @@
+//! The student as one ONNX graph: beam encoding from ray origins and directions (paper
+//! section 3.2), the audio encoder with its attention (AD-NeRF), the residual MLP and the
+//! segment sum (Eq. 7). It computes what nldf-train's `Student::render_rays` computes.
+
+use std::path::{Path, PathBuf};
+
+use nldf_core::encoding::MAX_COORD;
+
+use crate::checkpoint::StudentCheckpoint;
+use crate::contract::{
+    self, AudioInput, GRAPH_NAME, INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo,
+    NetworkShape, OUTPUT_RGB, OUTPUT_SEGMENTS, RAY_AXIS,
+};
+use crate::error::{Error, Result};
+use crate::graph::{Dim, GraphBuilder, WeightType, attr_float, attr_int, attr_ints};
+use crate::onnx::{DataType, GraphProto, ModelProto, OperatorSetIdProto};
+
+/// AD-NeRF's LeakyReLU slope.
+const SLOPE: f32 = 0.02;
+
+/// What [`export_student`] wrote.
+#[derive(Debug, Clone)]
+pub struct ExportReport {
+    /// The model file.
+    pub path: PathBuf,
+    /// Its size in bytes.
+    pub bytes: usize,
+    /// Values held by its initializers (weights and constants).
+    pub n_values: usize,
+    /// Its metadata.
+    pub info: ModelInfo,
+}
+
+/// Exports the student in `student_dir` (`RUN/student/`) to `out`, written atomically.
+/// With [`WeightType::F16`] the weights are stored in half precision and cast back to f32
+/// in the graph.
+pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Result<ExportReport> {
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    let (model, info, n_values) = student_model(&ckpt, weights)?;
+    let bytes = prost::Message::encode_to_vec(&model);
+    if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    nldf_core::error::write_atomic(out, &bytes)?;
+    Ok(ExportReport {
+        path: out.to_path_buf(),
+        bytes: bytes.len(),
+        n_values,
+        info,
+    })
+}
+
+/// The metadata of `ckpt`'s model whose graph is `graph`.
+pub fn model_info(ckpt: &StudentCheckpoint, graph: &GraphProto) -> ModelInfo {
+    let s = &ckpt.shape;
+    ModelInfo {
+        spec: ckpt.spec.clone(),
+        beam: s.beam,
+        segments: s.segments,
+        audio: AudioInput {
+            att_frames: s.audio.att_frames,
+            window: s.audio.window,
+            n_features: s.audio.n_features,
+            attention: s.attention,
+        },
+        network: NetworkShape {
+            depth: s.depth,
+            width: s.width,
+            audio_dim: s.audio.dim,
+        },
+        step: ckpt.step,
+        weights_checksum: contract::weights_checksum(graph),
+        background_png: ckpt.background_png.clone(),
+    }
+}
+
+/// The ONNX model of `ckpt`, its metadata and the number of values its initializers hold.
+pub fn student_model(
+    ckpt: &StudentCheckpoint,
+    weights: WeightType,
+) -> Result<(ModelProto, ModelInfo, usize)> {
+    let s = &ckpt.shape;
+    let mut g = GraphBuilder::new(weights);
+    let rays = Dim::Symbolic(RAY_AXIS.to_string());
+    let origins = g.input(
+        INPUT_ORIGINS,
+        DataType::Float,
+        &[rays.clone(), Dim::Fixed(3)],
+    );
+    let directions = g.input(
+        INPUT_DIRECTIONS,
+        DataType::Float,
+        &[rays.clone(), Dim::Fixed(3)],
+    );
+    let audio = g.input(
+        INPUT_AUDIO,
+        DataType::Float,
+        &[
+            Dim::Fixed(s.audio.att_frames),
+            Dim::Fixed(s.audio.window),
+            Dim::Fixed(s.audio.n_features),
+        ],
+    );
+    let beams = encode_beams(&mut g, ckpt, &origins, &directions);
+    let code = audio_code(&mut g, ckpt, &audio)?;
+    residual_mlp(&mut g, ckpt, &beams, &code)?;
+    g.output(OUTPUT_RGB, DataType::Float, &[rays.clone(), Dim::Fixed(3)]);
+    g.output(
+        OUTPUT_SEGMENTS,
+        DataType::Float,
+        &[rays, Dim::Fixed(s.segments), Dim::Fixed(3)],
+    );
+    let n_values = g.n_initializer_values();
+    let doc = format!(
+        "NLDF student: {} x {} residual MLP over beams of K = {} points with L = {} \
+         frequencies and a {}-d audio code, M = {} segments. Inputs {INPUT_ORIGINS} and \
+         {INPUT_DIRECTIONS} [{RAY_AXIS}, 3], {INPUT_AUDIO} [{}, {}, {}]; outputs {OUTPUT_RGB} \
+         [{RAY_AXIS}, 3] and {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3].",
+        s.depth,
+        s.width,
+        s.beam.n_points,
+        s.beam.n_freqs,
+        s.audio.dim,
+        s.segments,
+        s.audio.att_frames,
+        s.audio.window,
+        s.audio.n_features,
+        s.segments,
+    );
+    let graph = g.finish(GRAPH_NAME, &doc);
+    let info = model_info(ckpt, &graph);
+    let model = ModelProto {
+        ir_version: Some(contract::IR_VERSION),
+        opset_import: vec![OperatorSetIdProto {
+            domain: Some(String::new()),
+            version: Some(contract::OPSET),
+        }],
+        producer_name: Some(contract::PRODUCER.to_string()),
+        producer_version: Some(env!("CARGO_PKG_VERSION").to_string()),
+        domain: Some(String::new()),
+        model_version: Some(1),
+        doc_string: Some(doc.clone()),
+        graph: Some(graph),
+        metadata_props: info.to_metadata(),
+    };
+    Ok((model, info, n_values))
+}
+
+/// Beam encoding: points `x_k = o + t_k d` at the K evenly spaced `t_k` of
+/// `BeamSpec::t_value`, flattened to `[x_0, y_0, z_0, x_1, ...]`, clamped to
+/// `±MAX_COORD`, then `[x | sin(2^0 x) | cos(2^0 x) | ... | cos(2^(L-1) x)]`.
+///
+/// # Shapes
+/// - `origins`, `directions`: `[n_rays, 3]`
+/// - returns `beam.encoded` `[n_rays, 3 K (1 + 2 L)]`
+fn encode_beams(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    origins: &str,
+    directions: &str,
+) -> String {
+    let beam = ckpt.shape.beam;
+    let (near, far) = (ckpt.spec.near, ckpt.spec.far);
+    let (k, l) = (beam.n_points, beam.n_freqs);
+    let t: Vec<f32> = (0..k).map(|i| beam.t_value(i, near, far, 0.0)).collect();
+    let t = g.constant_f32("beam.t_vals", &[1, k, 1], &t);
+    let axis1 = g.constant_i64("beam.axis1", &[1], &[1]);
+    let o = g.node("Unsqueeze", "beam.origins", &[origins, &axis1], vec![]);
+    let d = g.node(
+        "Unsqueeze",
+        "beam.directions",
+        &[directions, &axis1],
+        vec![],
+    );
+    let td = g.node("Mul", "beam.offsets", &[&d, &t], vec![]);
+    let points = g.node("Add", "beam.points3", &[&o, &td], vec![]);
+    let flat_shape = g.constant_i64("beam.flat_shape", &[2], &[0, 3 * k as i64]);
+    let flat = g.node(
+        "Reshape",
+        "beam.points_flat",
+        &[&points, &flat_shape],
+        vec![],
+    );
+    let lo = g.constant_f32("beam.min_coord", &[], &[-MAX_COORD]);
+    let hi = g.constant_f32("beam.max_coord", &[], &[MAX_COORD]);
+    let x = g.node("Clip", "beam.points", &[&flat, &lo, &hi], vec![]);
+    if l == 0 {
+        return g.node("Identity", "beam.encoded", &[&x], vec![]);
+    }
+    let freqs: Vec<f32> = (0..l).map(|i| (1u64 << i) as f32).collect();
+    let freqs = g.constant_f32("beam.freqs", &[1, l, 1], &freqs);
+    let xu = g.node("Unsqueeze", "beam.points_u", &[&x, &axis1], vec![]);
+    let scaled = g.node("Mul", "beam.scaled", &[&xu, &freqs], vec![]);
+    let sin = g.node("Sin", "beam.sin", &[&scaled], vec![]);
+    let cos = g.node("Cos", "beam.cos", &[&scaled], vec![]);
+    let sincos = g.node(
+        "Concat",
+        "beam.sincos",
+        &[&sin, &cos],
+        vec![attr_int("axis", 2)],
+    );
+    let pe_shape = g.constant_i64("beam.pe_shape", &[2], &[0, (6 * k * l) as i64]);
+    let pe = g.node("Reshape", "beam.pe", &[&sincos, &pe_shape], vec![]);
+    g.node(
+        "Concat",
+        "beam.encoded",
+        &[&x, &pe],
+        vec![attr_int("axis", 1)],
+    )
+}
+
+/// `x W^T + b` with the checkpoint's Linear `name` (`weight` `[out, in]`, `bias` `[out]`).
+fn linear(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    name: &str,
+    x: &str,
+    in_dim: usize,
+    out_dim: usize,
+) -> Result<String> {
+    let w = ckpt.weight(&format!("{name}.weight"), &[out_dim, in_dim])?;
+    let b = ckpt.weight(&format!("{name}.bias"), &[out_dim])?;
+    let w = g.weight(&format!("{name}.weight"), &[out_dim, in_dim], w);
+    let b = g.weight(&format!("{name}.bias"), &[out_dim], b);
+    Ok(g.node("Gemm", name, &[x, &w, &b], vec![attr_int("transB", 1)]))
+}
+
+/// The checkpoint's Conv1d `name` (`weight` `[out, in, 3]`, padding 1) followed by
+/// LeakyReLU 0.02.
+fn conv_leaky(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    name: &str,
+    x: &str,
+    (in_dim, out_dim, stride): (usize, usize, usize),
+) -> Result<String> {
+    let w = ckpt.weight(&format!("{name}.weight"), &[out_dim, in_dim, 3])?;
+    let b = ckpt.weight(&format!("{name}.bias"), &[out_dim])?;
+    let w = g.weight(&format!("{name}.weight"), &[out_dim, in_dim, 3], w);
+    let b = g.weight(&format!("{name}.bias"), &[out_dim], b);
+    let y = g.node(
+        "Conv",
+        name,
+        &[x, &w, &b],
+        vec![
+            attr_ints("kernel_shape", &[3]),
+            attr_ints("strides", &[stride as i64]),
+            attr_ints("pads", &[1, 1]),
+            attr_ints("dilations", &[1]),
+            attr_int("group", 1),
+        ],
+    );
+    Ok(leaky(g, &format!("{name}.act"), &y))
+}
+
+fn leaky(g: &mut GraphBuilder, name: &str, x: &str) -> String {
+    g.node("LeakyRelu", name, &[x], vec![attr_float("alpha", SLOPE)])
+}
+
+/// The audio code of the frame: AudioNet over each window of the neighbourhood and
+/// AudioAttNet's weighted sum, or AudioNet over the centre window without attention.
+///
+/// # Shapes
+/// - `audio`: `[att_frames, window, n_features]`
+/// - returns `audio.code` `[1, dim]`
+fn audio_code(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, audio: &str) -> Result<String> {
+    let a = ckpt.shape.audio;
+    let seq = a.att_frames;
+    let windows = if ckpt.shape.attention {
+        audio.to_string()
+    } else {
+        let c = (seq / 2) as i64;
+        let starts = g.constant_i64("audio.centre_start", &[1], &[c]);
+        let ends = g.constant_i64("audio.centre_end", &[1], &[c + 1]);
+        let axes = g.constant_i64("audio.centre_axis", &[1], &[0]);
+        g.node(
+            "Slice",
+            "audio.centre",
+            &[audio, &starts, &ends, &axes],
+            vec![],
+        )
+    };
+    // AudioNet: [n, window, F] -> [n, F, window] -> convs -> mean over what is left.
+    let mut x = g.node(
+        "Transpose",
+        "audio.net.input",
+        &[&windows],
+        vec![attr_ints("perm", &[0, 2, 1])],
+    );
+    let channels = [a.n_features, 32, 32, 64, 64];
+    for i in 0..4 {
+        let name = format!("audio.net.convs.{i}");
+        x = conv_leaky(g, ckpt, &name, &x, (channels[i], channels[i + 1], 2))?;
+    }
+    let x = g.node(
+        "ReduceMean",
+        "audio.net.mean",
+        &[&x],
+        vec![attr_ints("axes", &[2]), attr_int("keepdims", 0)],
+    );
+    let x = linear(g, ckpt, "audio.net.fc1", &x, 64, 64)?;
+    let x = leaky(g, "audio.net.fc1.act", &x);
+    let codes = linear(g, ckpt, "audio.net.fc2", &x, 64, a.dim)?;
+    if !ckpt.shape.attention {
+        return Ok(g.node("Identity", "audio.code", &[&codes], vec![]));
+    }
+    // AudioAttNet: [seq, dim] -> [1, dim, seq] -> convs -> [1, seq] logits -> softmax.
+    let t = g.node(
+        "Transpose",
+        "audio.att.input_t",
+        &[&codes],
+        vec![attr_ints("perm", &[1, 0])],
+    );
+    let axis0 = g.constant_i64("audio.att.axis0", &[1], &[0]);
+    let mut y = g.node("Unsqueeze", "audio.att.input", &[&t, &axis0], vec![]);
+    let channels = [a.dim, 16, 8, 4, 2, 1];
+    for i in 0..5 {
+        let name = format!("audio.att.convs.{i}");
+        y = conv_leaky(g, ckpt, &name, &y, (channels[i], channels[i + 1], 1))?;
+    }
+    let shape = g.constant_i64("audio.att.logit_shape", &[2], &[1, seq as i64]);
+    let y = g.node("Reshape", "audio.att.logits_in", &[&y, &shape], vec![]);
+    let y = linear(g, ckpt, "audio.att.attention", &y, seq, seq)?;
+    let weights = g.node(
+        "Softmax",
+        "audio.att.weights",
+        &[&y],
+        vec![attr_int("axis", 1)],
+    );
+    Ok(g.node("MatMul", "audio.code", &[&weights, &codes], vec![]))
+}
+
+/// The residual MLP on `[beam | code]` and the segment sum. The input layer's weight is
+/// split by columns into its beam part and its audio part, so that the audio term is
+/// computed once per frame and broadcast over the rays instead of concatenating the code
+/// to every beam. Produces the graph outputs.
+///
+/// # Shapes
+/// - `beams`: `[n_rays, 3 K (1 + 2 L)]`; `code`: `[1, dim]`
+/// - outputs `segments` `[n_rays, M, 3]` and `rgb` `[n_rays, 3]`
+fn residual_mlp(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    beams: &str,
+    code: &str,
+) -> Result<()> {
+    let s = &ckpt.shape;
+    let w = s.width;
+    let beam_dim = s.beam.encoded_len();
+    let in_dim = beam_dim + s.audio.dim;
+    let weight = ckpt.weight("mlp.input.weight", &[w, in_dim])?;
+    let bias = ckpt.weight("mlp.input.bias", &[w])?;
+    let (mut w_beam, mut w_code) = (
+        Vec::with_capacity(w * beam_dim),
+        Vec::with_capacity(w * s.audio.dim),
+    );
+    for row in weight.chunks_exact(in_dim) {
+        w_beam.extend_from_slice(&row[..beam_dim]);
+        w_code.extend_from_slice(&row[beam_dim..]);
+    }
+    let w_beam = g.weight("mlp.input.weight.beam", &[w, beam_dim], &w_beam);
+    let w_code = g.weight("mlp.input.weight.audio", &[w, s.audio.dim], &w_code);
+    let bias = g.weight("mlp.input.bias", &[w], bias);
+    let audio_term = g.node(
+        "Gemm",
+        "mlp.input.audio",
+        &[code, &w_code, &bias],
+        vec![attr_int("transB", 1)],
+    );
+    let x = g.node(
+        "Gemm",
+        "mlp.input",
+        &[beams, &w_beam, &audio_term],
+        vec![attr_int("transB", 1)],
+    );
+    let mut h = g.node("Relu", "mlp.input.act", &[&x], vec![]);
+    for i in 0..s.n_blocks() {
+        let p = format!("mlp.body.{i}");
+        let y = linear(g, ckpt, &format!("{p}.fc1"), &h, w, w)?;
+        let y = g.node("Relu", &format!("{p}.fc1.act"), &[&y], vec![]);
+        let y = linear(g, ckpt, &format!("{p}.fc2"), &y, w, w)?;
+        let sum = g.node("Add", &format!("{p}.skip"), &[&h, &y], vec![]);
+        h = g.node("Relu", &format!("{p}.act"), &[&sum], vec![]);
+    }
+    let out = linear(g, ckpt, "mlp.output", &h, w, 3 * s.segments)?;
+    let shape = g.constant_i64("mlp.segment_shape", &[3], &[0, s.segments as i64, 3]);
+    let segments = g.node("Reshape", OUTPUT_SEGMENTS, &[&out, &shape], vec![]);
+    let axis1 = g.constant_i64("mlp.segment_axis", &[1], &[1]);
+    g.node(
+        "ReduceSum",
+        OUTPUT_RGB,
+        &[&segments, &axis1],
+        vec![attr_int("keepdims", 0)],
+    );
+    Ok(())
+}

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The project's Python environment for the ONNX tests and examples: `.venv` at the repository
+# root with onnx, onnxruntime (whose wheel also ships the libonnxruntime.so that the `ort`
+# crate loads), numpy and pillow. Idempotent: once the pinned versions are there it asks no
+# registry, so it runs offline.
+# Usage: scripts/python_env.sh   (prints the interpreter's path on success)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PYTHON=${PYTHON:-python3}
+VENV=.venv
+REQUIREMENTS=(onnx==1.23.2 onnxruntime==1.31.1 numpy pillow)
+
+want() {
+  "$VENV/bin/python" - <<'PY' 2>/dev/null
+import importlib.metadata as m
+import sys
+pins = {"onnx": "1.23.2", "onnxruntime": "1.31.1"}
+for name in ("onnx", "onnxruntime", "numpy", "pillow"):
+    version = m.version(name)
+    if name in pins and version != pins[name]:
+        sys.exit(1)
+PY
+}
+
+if [ ! -x "$VENV/bin/python" ]; then
+  "$PYTHON" -m venv "$VENV"
+fi
+if ! want; then
+  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check "${REQUIREMENTS[@]}"
+  want || { echo "scripts/python_env.sh: $VENV lacks onnx, onnxruntime, numpy or pillow" >&2; exit 1; }
+fi
+echo "$PWD/$VENV/bin/python"

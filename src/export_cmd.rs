@@ -1,0 +1,72 @@
+//! `nldf export`: writes a run's trained student (with its audio encoder) as one ONNX model
+//! whose metadata carries everything a foreign runtime needs to render a frame.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use nldf_export::{WeightType, export_student, read_model};
+
+#[derive(clap::Args, Debug)]
+pub struct ExportArgs {
+    /// Run folder (with a trained RUN/student).
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Output file (default RUN/model.onnx).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Store the weights in half precision (cast back to f32 in the graph): half the size.
+    #[arg(long)]
+    pub fp16: bool,
+}
+
+/// Runs `nldf export`.
+pub fn run(args: ExportArgs) -> Result<()> {
+    let student = args.run.join("student");
+    if !student.is_dir() {
+        bail!(
+            "{} has no trained student (expected {})",
+            args.run.display(),
+            student.display()
+        );
+    }
+    let out = args.out.unwrap_or_else(|| args.run.join("model.onnx"));
+    let weights = if args.fp16 {
+        WeightType::F16
+    } else {
+        WeightType::F32
+    };
+    let report = export_student(&student, &out, weights)
+        .with_context(|| format!("exporting the student in {}", student.display()))?;
+    // Read it back as every loader will, so that a bad file never leaves this command.
+    read_model(&out)?;
+    let info = &report.info;
+    let k = &info.spec.intrinsics;
+    println!(
+        "student at step {}: {} layers x {}, K = {}, L = {}, M = {}, audio [{}, {}, {}]{}; \
+         {}x{} image",
+        info.step,
+        info.network.depth,
+        info.network.width,
+        info.beam.n_points,
+        info.beam.n_freqs,
+        info.segments,
+        info.audio.att_frames,
+        info.audio.window,
+        info.audio.n_features,
+        if info.audio.attention {
+            " with attention"
+        } else {
+            ""
+        },
+        k.width,
+        k.height,
+    );
+    println!(
+        "wrote {} ({:.2} MB, {} weights in {})",
+        report.path.display(),
+        report.bytes as f64 / 1e6,
+        report.n_values,
+        if args.fp16 { "f16" } else { "f32" }
+    );
+    Ok(())
+}

@@ -1,0 +1,701 @@
+//! ONNX export: a seeded tiny student is exported and must agree with the candle reference
+//! (`Student::render_rays`) in tract and in Python onnxruntime, pass `onnx.checker` with
+//! `full_check`, render the same frame in `examples/onnxruntime_render.py` as in Rust, and
+//! every bad model file must get a one-line error naming it.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use candle_core::{DType, Device, Tensor};
+use glam::{Mat4, Vec3};
+use nldf_core::audio::{AudioWindows, FeatureConfig};
+use nldf_core::bounds::Bounds;
+use nldf_core::camera::{Camera, Intrinsics, look_at};
+use nldf_core::dataset::save_audio_npy;
+use nldf_core::image::ImageRgb;
+use nldf_core::rays::{Rays, rays_for_image};
+use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
+use nldf_export::contract::{self, ModelInfo};
+use nldf_export::onnx::{ModelProto, StringStringEntryProto};
+use nldf_export::{Error, WeightType, export_student, read_model};
+use nldf_train::audio_net::neighbourhood;
+use nldf_train::checkpoint::{save_tensors, weights};
+use nldf_train::nn::{init_seeded, new_varmap, sorted_vars};
+use nldf_train::student::{Student, StudentConfig, student};
+use prost::Message;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Parity tolerance of the issue: max abs difference on every output value.
+const TOL: f32 = 1e-4;
+
+/// A student run folder and the candle student whose weights it holds.
+struct Run {
+    _dir: tempfile::TempDir,
+    root: PathBuf,
+    student: Student,
+    varmap: candle_nn::VarMap,
+    spec: RenderSpec,
+}
+
+impl Run {
+    fn student_dir(&self) -> PathBuf {
+        self.root.join("student")
+    }
+
+    fn export(&self, weights: WeightType) -> PathBuf {
+        let out = self.root.join(match weights {
+            WeightType::F32 => "model.onnx",
+            WeightType::F16 => "model_fp16.onnx",
+        });
+        export_student(&self.student_dir(), &out, weights).unwrap();
+        out
+    }
+
+    /// Rounds every weight of the candle student to f16 and back (the fp16 model's
+    /// values).
+    fn round_weights_to_f16(&self) {
+        for (_, var) in sorted_vars(&self.varmap).unwrap() {
+            let rounded = var
+                .as_tensor()
+                .to_dtype(DType::F16)
+                .unwrap()
+                .to_dtype(DType::F32)
+                .unwrap();
+            var.set(&rounded).unwrap();
+        }
+    }
+}
+
+/// A 24 x 18 camera looking at a head in [-0.5, 0.5]^3 from about 2.2 away.
+fn spec_for(cfg: &StudentConfig) -> RenderSpec {
+    let c2w = look_at(Vec3::new(0.3, 0.2, 2.2), Vec3::ZERO, Vec3::Y);
+    RenderSpec {
+        intrinsics: Intrinsics {
+            focal: 30.0,
+            cx: 12.0,
+            cy: 9.0,
+            width: 24,
+            height: 18,
+        },
+        near: 1.4,
+        far: 3.0,
+        fps: 25.0,
+        bounds: Bounds {
+            lo: Vec3::splat(-0.5),
+            hi: Vec3::splat(0.5),
+        },
+        background: BACKGROUND_FILE.to_string(),
+        features: FeatureConfig {
+            n_mels: cfg.audio.n_features,
+            window: cfg.audio.window,
+            ..FeatureConfig::default()
+        },
+        att_frames: cfg.audio.att_frames,
+        default_pose: c2w.transpose().to_cols_array_2d(),
+    }
+}
+
+/// Writes `RUN/student/` for a seeded, untrained student of shape `cfg`, as the trainer
+/// leaves it: weights with step metadata, config.json, render.json and the background.
+fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("run");
+    let student_dir = root.join("student");
+    std::fs::create_dir_all(&student_dir).unwrap();
+    let (varmap, vb) = new_varmap();
+    let model = student(cfg, vb).unwrap();
+    init_seeded(&varmap, seed).unwrap();
+    let metadata = HashMap::from([
+        ("step".to_string(), "7".to_string()),
+        ("kind".to_string(), "student".to_string()),
+    ]);
+    save_tensors(
+        &student_dir.join("model.safetensors"),
+        &weights(&varmap).unwrap(),
+        metadata,
+    )
+    .unwrap();
+    let config = serde_json::json!({ "model": cfg, "seed": seed, "lr": 5e-4 });
+    std::fs::write(student_dir.join("config.json"), config.to_string()).unwrap();
+    let spec = spec_for(cfg);
+    spec.save(&student_dir.join(RENDER_SPEC_FILE)).unwrap();
+    let k = spec.intrinsics;
+    nldf_tests::pattern_image(k.width, k.height, 5)
+        .save_png(&student_dir.join(BACKGROUND_FILE))
+        .unwrap();
+    Run {
+        _dir: dir,
+        root,
+        student: model,
+        varmap,
+        spec,
+    }
+}
+
+/// `n` rays from points around the camera distance towards the head, some missing it.
+fn random_rays(n: usize, seed: u64) -> Rays {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut rays = Rays::with_capacity(n);
+    for _ in 0..n {
+        let o = Vec3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(1.5..2.5),
+        );
+        let target = Vec3::new(
+            rng.random_range(-0.8..0.8),
+            rng.random_range(-0.8..0.8),
+            rng.random_range(-0.8..0.8),
+        );
+        // Un-normalised, as camera rays are: unit depth along the view axis, give or take.
+        let d = (target - o).normalize() * rng.random_range(0.9..1.3);
+        rays.push(o, d);
+    }
+    rays
+}
+
+/// A random audio track of `n_frames` windows for `cfg`.
+fn random_audio(cfg: &StudentConfig, n_frames: usize, seed: u64) -> AudioWindows {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (window, n_features) = (cfg.audio.window, cfg.audio.n_features);
+    AudioWindows {
+        n_frames,
+        window,
+        n_features,
+        data: (0..n_frames * window * n_features)
+            .map(|_| rng.random_range(-1.0..1.0))
+            .collect(),
+    }
+}
+
+/// The candle reference: pixels `[n, 3]` and segments `[n, m, 3]`, flat.
+fn candle_render(run: &Run, rays: &Rays, audio: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let a = &run.student.cfg.audio;
+    let nb = Tensor::from_vec(
+        audio.to_vec(),
+        (1, a.att_frames, a.window, a.n_features),
+        &Device::Cpu,
+    )
+    .unwrap();
+    let (segments, pixels) = run
+        .student
+        .render_rays(rays, &nb, run.spec.near, run.spec.far)
+        .unwrap();
+    let flat = |t: Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    (flat(pixels), flat(segments))
+}
+
+/// The model at `path` run by tract with a concrete ray count: pixels and segments, flat.
+fn tract_render(
+    path: &Path,
+    rays: &Rays,
+    audio: &[f32],
+    shape: [usize; 3],
+) -> (Vec<f32>, Vec<f32>) {
+    use tract_onnx::prelude::*;
+    let n = rays.len();
+    let model = tract_onnx::onnx()
+        .model_for_path(path)
+        .unwrap()
+        .with_input_fact(0, f32::fact([n, 3]).into())
+        .unwrap()
+        .with_input_fact(1, f32::fact([n, 3]).into())
+        .unwrap()
+        .into_optimized()
+        .unwrap()
+        .into_runnable()
+        .unwrap();
+    let origins = Tensor::from_shape(&[n, 3], &rays.origins).unwrap();
+    let directions = Tensor::from_shape(&[n, 3], &rays.directions).unwrap();
+    let audio = Tensor::from_shape(&shape, audio).unwrap();
+    let out = model
+        .run(tvec!(origins.into(), directions.into(), audio.into()))
+        .unwrap();
+    let flat = |t: &TValue| -> Vec<f32> {
+        t.to_plain_array_view::<f32>()
+            .unwrap()
+            .iter()
+            .copied()
+            .collect()
+    };
+    (flat(&out[0]), flat(&out[1]))
+}
+
+fn max_diff(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len(), "output lengths");
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(
+            0.0,
+            |m, d| if d.is_nan() { f32::INFINITY } else { m.max(d) },
+        )
+}
+
+/// Shapes exercised: the tiny preset (attention on) and the paper's beam (K = 16, L = 10)
+/// on a narrow network without attention, other audio sizes.
+fn configs() -> Vec<StudentConfig> {
+    let mut paper_beam = StudentConfig::tiny();
+    paper_beam.beam = Default::default();
+    paper_beam.depth = 4;
+    paper_beam.width = 16;
+    paper_beam.attention = false;
+    paper_beam.audio.n_features = 5;
+    paper_beam.audio.att_frames = 4;
+    paper_beam.segments = 3;
+    vec![StudentConfig::tiny(), paper_beam]
+}
+
+#[test]
+fn export_tract_matches_candle_on_10000_rays() {
+    for (c, cfg) in configs().into_iter().enumerate() {
+        let run = write_run(&cfg, 11 + c as u64);
+        let path = run.export(WeightType::F32);
+        let rays = random_rays(10_000, 3);
+        let audio = neighbourhood(&random_audio(&cfg, 12, 4), 5, cfg.audio.att_frames);
+        let (want_rgb, want_seg) = candle_render(&run, &rays, &audio);
+        let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
+        let (rgb, seg) = tract_render(&path, &rays, &audio, shape);
+        let (d_rgb, d_seg) = (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg));
+        println!(
+            "config {c} (K {}, L {}, attention {}): tract vs candle, 10000 rays: max |rgb diff| \
+             {d_rgb:.2e}, max |segment diff| {d_seg:.2e}",
+            cfg.beam.n_points, cfg.beam.n_freqs, cfg.attention
+        );
+        assert!(d_rgb <= TOL && d_seg <= TOL, "{d_rgb} {d_seg}");
+        // The outputs must depend on the audio: another frame gives other colours.
+        let other = neighbourhood(&random_audio(&cfg, 12, 4), 9, cfg.audio.att_frames);
+        let (rgb2, _) = tract_render(&path, &rays, &other, shape);
+        assert!(
+            max_diff(&rgb, &rgb2) > 1e-4,
+            "audio does not reach the output"
+        );
+    }
+}
+
+#[test]
+fn export_fp16_weights_match_candle_with_rounded_weights() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 21);
+    let f32_path = run.export(WeightType::F32);
+    let f16_path = run.export(WeightType::F16);
+    let (f32_len, f16_len) = (
+        std::fs::metadata(&f32_path).unwrap().len(),
+        std::fs::metadata(&f16_path).unwrap().len(),
+    );
+    assert!(
+        (f16_len as f64) < 0.7 * f32_len as f64,
+        "{f16_len} vs {f32_len}"
+    );
+    run.round_weights_to_f16();
+    let rays = random_rays(2000, 5);
+    let audio = neighbourhood(&random_audio(&cfg, 10, 6), 3, cfg.audio.att_frames);
+    let (want_rgb, want_seg) = candle_render(&run, &rays, &audio);
+    let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
+    let (rgb, seg) = tract_render(&f16_path, &rays, &audio, shape);
+    let (d_rgb, d_seg) = (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg));
+    println!("fp16 weights: tract vs candle with f16-rounded weights: {d_rgb:.2e} {d_seg:.2e}");
+    assert!(d_rgb <= TOL && d_seg <= TOL, "{d_rgb} {d_seg}");
+}
+
+#[test]
+fn export_writes_the_contract() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 31);
+    let path = run.export(WeightType::F32);
+    let model = read_model(&path).unwrap();
+    assert_eq!(model.proto.ir_version, Some(contract::IR_VERSION));
+    const { assert!(contract::IR_VERSION <= 9) };
+    let opset = &model.proto.opset_import;
+    assert_eq!(opset.len(), 1);
+    assert_eq!(opset[0].version, Some(17));
+    let graph = model.proto.graph.as_ref().unwrap();
+    let names = |v: &[nldf_export::onnx::ValueInfoProto]| -> Vec<String> {
+        v.iter().map(|i| i.name.clone().unwrap()).collect()
+    };
+    assert_eq!(names(&graph.input), ["rays_o", "rays_d", "audio"]);
+    assert_eq!(names(&graph.output), ["rgb", "segments"]);
+    // Initializer names are the checkpoint's weight paths.
+    let inits: Vec<&str> = graph
+        .initializer
+        .iter()
+        .filter_map(|t| t.name.as_deref())
+        .collect();
+    for name in [
+        "mlp.body.1.fc2.weight",
+        "audio.att.attention.bias",
+        "audio.net.convs.3.weight",
+    ] {
+        assert!(inits.contains(&name), "{name} missing from {inits:?}");
+    }
+    let info = &model.info;
+    assert_eq!(info.spec, run.spec);
+    assert_eq!(info.step, 7);
+    assert_eq!(
+        (info.beam.n_points, info.beam.n_freqs, info.segments),
+        (4, 4, 4)
+    );
+    assert_eq!(info.audio.shape(), [8, 16, 29]);
+    assert!(info.audio.attention);
+    let background = image::load_from_memory(&info.background_png)
+        .unwrap()
+        .to_rgb8();
+    let want = ImageRgb::load(&run.student_dir().join(BACKGROUND_FILE)).unwrap();
+    assert_eq!(background.as_raw(), &want.to_rgb8());
+}
+
+/// A valid ONNX model (an Identity) with the given metadata.
+fn foreign_model(metadata: Vec<StringStringEntryProto>) -> Vec<u8> {
+    use nldf_export::graph::{Dim, GraphBuilder};
+    use nldf_export::onnx::{DataType, OperatorSetIdProto};
+    let mut g = GraphBuilder::new(WeightType::F32);
+    g.input("x", DataType::Float, &[Dim::Fixed(2)]);
+    g.node("Identity", "y", &["x"], vec![]);
+    g.output("y", DataType::Float, &[Dim::Fixed(2)]);
+    ModelProto {
+        ir_version: Some(8),
+        opset_import: vec![OperatorSetIdProto {
+            domain: Some(String::new()),
+            version: Some(17),
+        }],
+        graph: Some(g.finish("other", "")),
+        metadata_props: metadata,
+        ..Default::default()
+    }
+    .encode_to_vec()
+}
+
+#[test]
+fn export_bad_model_files_get_one_line_errors_naming_them() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 41);
+    let good = std::fs::read(run.export(WeightType::F32)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let check = |name: &str, bytes: &[u8]| -> Error {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let Err(err) = read_model(&path) else {
+            panic!("{name} was accepted")
+        };
+        let msg = err.to_string();
+        assert!(!msg.contains('\n'), "{name}: {msg}");
+        assert!(msg.contains(&path.display().to_string()), "{name}: {msg}");
+        println!("{name}: {msg}");
+        err
+    };
+    // Truncated anywhere: inside the graph, inside the metadata, one byte short.
+    for cut in [
+        1,
+        10,
+        good.len() / 3,
+        good.len() / 2,
+        good.len() - 1000,
+        good.len() - 1,
+    ] {
+        let err = check(&format!("cut_{cut}.onnx"), &good[..cut]);
+        assert!(matches!(err, Error::Corrupt { .. }), "cut {cut}: {err}");
+    }
+    // Corrupt: bytes overwritten in the middle, random bytes, an empty file, a PNG.
+    let mut flipped = good.clone();
+    let mid = flipped.len() / 2;
+    for b in &mut flipped[mid..mid + 64] {
+        *b = 0xff;
+    }
+    assert!(matches!(
+        check("flipped.onnx", &flipped),
+        Error::Corrupt { .. }
+    ));
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let noise: Vec<u8> = (0..4096).map(|_| rng.random()).collect();
+    let err = check("noise.onnx", &noise);
+    assert!(
+        matches!(err, Error::Corrupt { .. } | Error::Foreign { .. }),
+        "{err}"
+    );
+    assert!(matches!(check("empty.onnx", &[]), Error::Corrupt { .. }));
+    let png = std::fs::read(run.student_dir().join(BACKGROUND_FILE)).unwrap();
+    let err = check("image.onnx", &png);
+    assert!(
+        matches!(err, Error::Corrupt { .. } | Error::Foreign { .. }),
+        "{err}"
+    );
+    // Foreign: a valid ONNX model without nldf metadata, or another format's.
+    assert!(matches!(
+        check("foreign.onnx", &foreign_model(vec![])),
+        Error::Foreign { .. }
+    ));
+    let other = vec![StringStringEntryProto {
+        key: Some(contract::keys::FORMAT.to_string()),
+        value: Some("something-else".to_string()),
+    }];
+    assert!(matches!(
+        check("other.onnx", &foreign_model(other)),
+        Error::Foreign { .. }
+    ));
+    // nldf metadata on a graph without the contract's inputs.
+    let info = read_model(&run.root.join("model.onnx")).unwrap().info;
+    let err = check("wrong_graph.onnx", &foreign_model(info.to_metadata()));
+    assert!(matches!(err, Error::Corrupt { .. }), "{err}");
+    // A missing file.
+    let missing = dir.path().join("missing.onnx");
+    let msg = read_model(&missing).unwrap_err().to_string();
+    assert!(msg.contains("missing.onnx") && !msg.contains('\n'), "{msg}");
+}
+
+#[test]
+fn export_bad_checkpoints_name_their_file() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 51);
+    let out = run.root.join("x.onnx");
+    // A config whose width disagrees with the weights.
+    let mut wrong = cfg.clone();
+    wrong.width = 16;
+    let config = serde_json::json!({ "model": wrong });
+    std::fs::write(run.student_dir().join("config.json"), config.to_string()).unwrap();
+    let msg = export_student(&run.student_dir(), &out, WeightType::F32)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("model.safetensors") && msg.contains("shape"),
+        "{msg}"
+    );
+    // No config at all.
+    std::fs::remove_file(run.student_dir().join("config.json")).unwrap();
+    let msg = export_student(&run.student_dir(), &out, WeightType::F32)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("config.json"), "{msg}");
+    assert!(!out.exists());
+}
+
+/// The project's Python (`.venv`, made by `scripts/python_env.sh`) with onnx, onnxruntime
+/// and numpy, or `None` (after saying so) when it is missing outside CI. Under CI a missing
+/// environment fails the test.
+fn python() -> Option<PathBuf> {
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../.venv/bin/python");
+    let ok = Command::new(&venv)
+        .args(["-c", "import onnx, onnxruntime, numpy"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if ok {
+        return Some(venv);
+    }
+    let msg = format!(
+        "{} with onnx, onnxruntime and numpy is missing: run scripts/python_env.sh",
+        venv.display()
+    );
+    if std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0") {
+        panic!("{msg}");
+    }
+    eprintln!("SKIPPED (CI is unset): {msg}");
+    None
+}
+
+fn run_python(python: &Path, args: &[&str]) -> String {
+    let out = Command::new(python).args(args).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "python {args:?} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+fn write_npy(path: &Path, shape: &[u64], data: &[f32]) {
+    use npyz::WriterBuilder;
+    let mut buf = Vec::new();
+    let mut w = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(shape)
+        .writer(&mut buf)
+        .begin_nd()
+        .unwrap();
+    w.extend(data.iter().copied()).unwrap();
+    w.finish().unwrap();
+    std::fs::write(path, buf).unwrap();
+}
+
+fn read_npy(path: &Path) -> (Vec<u64>, Vec<f32>) {
+    let bytes = std::fs::read(path).unwrap();
+    let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
+    let shape = npy.shape().to_vec();
+    (shape, npy.into_vec::<f32>().unwrap())
+}
+
+const PYTHON_PARITY: &str = r#"
+import json, sys
+import numpy as np, onnx, onnxruntime as ort
+path, folder = sys.argv[1], sys.argv[2]
+model = onnx.load(path)
+onnx.checker.check_model(model, full_check=True)
+session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+feeds = {name: np.load(f"{folder}/{name}.npy") for name in ("rays_o", "rays_d", "audio")}
+rgb, segments = session.run(["rgb", "segments"], feeds)
+np.save(f"{folder}/rgb.npy", rgb)
+np.save(f"{folder}/segments.npy", segments)
+dims = [d.dim_param or d.dim_value for d in model.graph.input[0].type.tensor_type.shape.dim]
+print(json.dumps({"ir_version": model.ir_version, "opset": model.opset_import[0].version,
+                  "rays_o": dims, "onnxruntime": ort.__version__}))
+"#;
+
+#[test]
+fn export_passes_onnx_checker_and_python_onnxruntime_matches_candle() {
+    let Some(python) = python() else { return };
+    for (c, cfg) in configs().into_iter().enumerate() {
+        for weights in [WeightType::F32, WeightType::F16] {
+            let run = write_run(&cfg, 61 + c as u64);
+            let path = run.export(weights);
+            if weights == WeightType::F16 {
+                run.round_weights_to_f16();
+            }
+            let rays = random_rays(10_000, 7);
+            let audio = neighbourhood(&random_audio(&cfg, 9, 8), 0, cfg.audio.att_frames);
+            let folder = run.root.join("io");
+            std::fs::create_dir_all(&folder).unwrap();
+            let n = rays.len() as u64;
+            write_npy(&folder.join("rays_o.npy"), &[n, 3], &rays.origins);
+            write_npy(&folder.join("rays_d.npy"), &[n, 3], &rays.directions);
+            let a = &cfg.audio;
+            let shape = [a.att_frames as u64, a.window as u64, a.n_features as u64];
+            write_npy(&folder.join("audio.npy"), &shape, &audio);
+            let report = run_python(
+                &python,
+                &[
+                    "-c",
+                    PYTHON_PARITY,
+                    path.to_str().unwrap(),
+                    folder.to_str().unwrap(),
+                ],
+            );
+            let report: serde_json::Value = serde_json::from_str(report.trim()).unwrap();
+            assert_eq!(report["ir_version"], 9);
+            assert_eq!(report["opset"], 17);
+            assert_eq!(report["rays_o"], serde_json::json!(["n_rays", 3]));
+            let (want_rgb, want_seg) = candle_render(&run, &rays, &audio);
+            let (rgb_shape, rgb) = read_npy(&folder.join("rgb.npy"));
+            let (seg_shape, seg) = read_npy(&folder.join("segments.npy"));
+            assert_eq!(rgb_shape, [n, 3]);
+            assert_eq!(seg_shape, [n, cfg.segments as u64, 3]);
+            let (d_rgb, d_seg) = (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg));
+            println!(
+                "config {c}, {weights:?}: onnxruntime {} vs candle, 10000 rays: max |rgb diff| \
+                 {d_rgb:.2e}, max |segment diff| {d_seg:.2e}",
+                report["onnxruntime"]
+            );
+            assert!(d_rgb <= TOL && d_seg <= TOL, "{d_rgb} {d_seg}");
+        }
+    }
+}
+
+/// The Rust reference frame: rays through every pixel from the default pose; those that
+/// meet the head's bounds get the candle student's colour, the others the background.
+fn reference_frame(run: &Run, audio: &[f32]) -> Vec<f32> {
+    let spec = &run.spec;
+    let camera = Camera {
+        intrinsics: spec.intrinsics,
+        c2w: Mat4::from_cols_array_2d(&spec.default_pose).transpose(),
+    };
+    let rays = rays_for_image(&camera);
+    let background = ImageRgb::load(&run.student_dir().join(&spec.background)).unwrap();
+    let mut hit = Rays::default();
+    let mut hit_index = Vec::new();
+    for r in 0..rays.len() {
+        let (o, d) = (rays.origin(r), rays.direction(r));
+        if spec.bounds.intersect(o, d, spec.near, spec.far).is_some() {
+            hit.push(o, d);
+            hit_index.push(r);
+        }
+    }
+    assert!(
+        !hit_index.is_empty() && hit_index.len() < rays.len(),
+        "the test camera should see both head and background"
+    );
+    let (rgb, _) = candle_render(run, &hit, audio);
+    let mut frame = background.data.clone();
+    for (k, &r) in hit_index.iter().enumerate() {
+        frame[3 * r..3 * r + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
+    }
+    frame
+}
+
+#[test]
+fn export_python_example_renders_the_rust_reference_frame() {
+    let Some(python) = python() else { return };
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 71);
+    let path = run.export(WeightType::F32);
+    let track = random_audio(&cfg, 6, 9);
+    let aud = run.root.join("aud.npy");
+    save_audio_npy(&aud, &track).unwrap();
+    let frame_index = 1;
+    let want = reference_frame(
+        &run,
+        &neighbourhood(&track, frame_index, cfg.audio.att_frames),
+    );
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/onnxruntime_render.py");
+    let (out, png) = (run.root.join("frame.npy"), run.root.join("frame.png"));
+    run_python(
+        &python,
+        &[
+            example.to_str().unwrap(),
+            path.to_str().unwrap(),
+            "--audio",
+            aud.to_str().unwrap(),
+            "--frame",
+            &frame_index.to_string(),
+            "--out",
+            out.to_str().unwrap(),
+            "--png",
+            png.to_str().unwrap(),
+        ],
+    );
+    let (shape, got) = read_npy(&out);
+    let k = run.spec.intrinsics;
+    assert_eq!(shape, [k.height as u64, k.width as u64, 3]);
+    let d = max_diff(&got, &want);
+    println!(
+        "python example frame vs Rust reference ({}x{}): max |diff| {d:.2e}",
+        k.width, k.height
+    );
+    assert!(d <= TOL, "{d}");
+    let img = ImageRgb::load(&png).unwrap();
+    assert_eq!((img.width, img.height), (k.width, k.height));
+    // The example also refuses a model that nldf did not write.
+    let foreign = run.root.join("foreign.onnx");
+    std::fs::write(&foreign, foreign_model(vec![])).unwrap();
+    let status = Command::new(&python)
+        .args([example.to_str().unwrap(), foreign.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!status.status.success());
+    assert!(String::from_utf8_lossy(&status.stderr).contains("not an nldf model"));
+}
+
+#[test]
+fn export_metadata_round_trips_and_rejects_disagreement() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 81);
+    let path = run.export(WeightType::F32);
+    let info = read_model(&path).unwrap().info;
+    let props = info.to_metadata();
+    assert_eq!(props[0].key.as_deref(), Some(contract::keys::FORMAT));
+    assert_eq!(ModelInfo::from_metadata(&props).unwrap(), info);
+    let mut bad = props.clone();
+    for p in &mut bad {
+        if p.key.as_deref() == Some(contract::keys::FOCAL) {
+            p.value = Some("12.5".into());
+        }
+    }
+    let err = ModelInfo::from_metadata(&bad).unwrap_err().to_string();
+    assert!(err.contains(contract::keys::FOCAL), "{err}");
+    let missing: Vec<_> = props
+        .iter()
+        .filter(|p| p.key.as_deref() != Some(contract::keys::NEAR))
+        .cloned()
+        .collect();
+    let err = ModelInfo::from_metadata(&missing).unwrap_err().to_string();
+    assert!(err.contains(contract::keys::NEAR), "{err}");
+}
