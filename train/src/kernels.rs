@@ -15,6 +15,8 @@ const MR: usize = 6;
 const NR: usize = 64;
 /// Rows per parallel task of the row-parallel products.
 const ROW_CHUNK: usize = MR * 8;
+/// Reduction rows per pass over a row chunk, so that a `[KC, NR]` panel of B stays in L1.
+const KC: usize = 128;
 /// Rows per partial sum of the reductions over rows (fixed, for determinism).
 const REDUCE_CHUNK: usize = 2048;
 /// Rows of the reduction dimension kept hot in cache at a time in the weight gradient.
@@ -108,6 +110,19 @@ mod avx512 {
                     }
                 }
             }
+            finish::<R, V>(t, &acc, &masks);
+        }
+    }
+
+    /// Writes a tile's accumulators: `C (+)= acc (+ addend row) (+ bias)`, then ReLU.
+    #[target_feature(enable = "avx512f")]
+    unsafe fn finish<const R: usize, const V: usize>(
+        t: &Tile,
+        acc: &[[__m512; V]; R],
+        masks: &[__mmask16; 4],
+    ) {
+        // SAFETY: the caller guarantees that the tile's C, addend and bias cover it.
+        unsafe {
             let zero = _mm512_setzero_ps();
             for (r, acc_r) in acc.iter().enumerate() {
                 let crow = t.c.add(r * t.ldc);
@@ -131,6 +146,87 @@ mod avx512 {
         }
     }
 
+    /// The full 6 x 64 tile with named accumulators (an array of 24 vectors is spilled
+    /// to the stack by the compiler, which halves the rate).
+    #[target_feature(enable = "avx512f")]
+    unsafe fn kernel_full(t: &Tile) {
+        // SAFETY: as for `kernel`: the caller guarantees every address is inside its slice.
+        unsafe {
+            let mut c00 = _mm512_setzero_ps();
+            let mut c01 = _mm512_setzero_ps();
+            let mut c02 = _mm512_setzero_ps();
+            let mut c03 = _mm512_setzero_ps();
+            let mut c10 = _mm512_setzero_ps();
+            let mut c11 = _mm512_setzero_ps();
+            let mut c12 = _mm512_setzero_ps();
+            let mut c13 = _mm512_setzero_ps();
+            let mut c20 = _mm512_setzero_ps();
+            let mut c21 = _mm512_setzero_ps();
+            let mut c22 = _mm512_setzero_ps();
+            let mut c23 = _mm512_setzero_ps();
+            let mut c30 = _mm512_setzero_ps();
+            let mut c31 = _mm512_setzero_ps();
+            let mut c32 = _mm512_setzero_ps();
+            let mut c33 = _mm512_setzero_ps();
+            let mut c40 = _mm512_setzero_ps();
+            let mut c41 = _mm512_setzero_ps();
+            let mut c42 = _mm512_setzero_ps();
+            let mut c43 = _mm512_setzero_ps();
+            let mut c50 = _mm512_setzero_ps();
+            let mut c51 = _mm512_setzero_ps();
+            let mut c52 = _mm512_setzero_ps();
+            let mut c53 = _mm512_setzero_ps();
+            let (rs, cs) = (t.a.rs, t.a.cs);
+            for p in 0..t.k {
+                let brow = t.b.add(p * t.ldb);
+                let b0 = _mm512_loadu_ps(brow.add(0));
+                let b1 = _mm512_loadu_ps(brow.add(16));
+                let b2 = _mm512_loadu_ps(brow.add(32));
+                let b3 = _mm512_loadu_ps(brow.add(48));
+                let arow = t.a.ptr.add(p * cs);
+                let a0 = _mm512_set1_ps(*arow.add(0 * rs));
+                c00 = _mm512_fmadd_ps(a0, b0, c00);
+                c01 = _mm512_fmadd_ps(a0, b1, c01);
+                c02 = _mm512_fmadd_ps(a0, b2, c02);
+                c03 = _mm512_fmadd_ps(a0, b3, c03);
+                let a1 = _mm512_set1_ps(*arow.add(1 * rs));
+                c10 = _mm512_fmadd_ps(a1, b0, c10);
+                c11 = _mm512_fmadd_ps(a1, b1, c11);
+                c12 = _mm512_fmadd_ps(a1, b2, c12);
+                c13 = _mm512_fmadd_ps(a1, b3, c13);
+                let a2 = _mm512_set1_ps(*arow.add(2 * rs));
+                c20 = _mm512_fmadd_ps(a2, b0, c20);
+                c21 = _mm512_fmadd_ps(a2, b1, c21);
+                c22 = _mm512_fmadd_ps(a2, b2, c22);
+                c23 = _mm512_fmadd_ps(a2, b3, c23);
+                let a3 = _mm512_set1_ps(*arow.add(3 * rs));
+                c30 = _mm512_fmadd_ps(a3, b0, c30);
+                c31 = _mm512_fmadd_ps(a3, b1, c31);
+                c32 = _mm512_fmadd_ps(a3, b2, c32);
+                c33 = _mm512_fmadd_ps(a3, b3, c33);
+                let a4 = _mm512_set1_ps(*arow.add(4 * rs));
+                c40 = _mm512_fmadd_ps(a4, b0, c40);
+                c41 = _mm512_fmadd_ps(a4, b1, c41);
+                c42 = _mm512_fmadd_ps(a4, b2, c42);
+                c43 = _mm512_fmadd_ps(a4, b3, c43);
+                let a5 = _mm512_set1_ps(*arow.add(5 * rs));
+                c50 = _mm512_fmadd_ps(a5, b0, c50);
+                c51 = _mm512_fmadd_ps(a5, b1, c51);
+                c52 = _mm512_fmadd_ps(a5, b2, c52);
+                c53 = _mm512_fmadd_ps(a5, b3, c53);
+            }
+            let acc = [
+                [c00, c01, c02, c03],
+                [c10, c11, c12, c13],
+                [c20, c21, c22, c23],
+                [c30, c31, c32, c33],
+                [c40, c41, c42, c43],
+                [c50, c51, c52, c53],
+            ];
+            finish::<6, 4>(t, &acc, &[!0, !0, !0, !0]);
+        }
+    }
+
     macro_rules! dispatch {
         ($t:expr, $v:literal, $($r:literal)*) => {
             match $t.rows {
@@ -148,7 +244,9 @@ mod avx512 {
     pub unsafe fn tile(t: &Tile) {
         debug_assert!(t.rows >= 1 && t.rows <= MR && t.cols >= 1 && t.cols <= NR);
         unsafe {
-            if t.cols > 48 {
+            if t.cols == NR && t.rows == MR {
+                kernel_full(t)
+            } else if t.cols > 48 {
                 dispatch!(t, 4, 1 2 3 4 5 6)
             } else if t.cols > 32 {
                 dispatch!(t, 3, 1 2 3 4 5 6)
@@ -265,45 +363,60 @@ unsafe fn gemm_rows(
     avx512: bool,
 ) {
     let (add_ptr, add_ld, add_mode) = addend;
-    let mut j0 = 0;
-    while j0 < n {
-        let cols = NR.min(n - j0);
-        let mut i0 = i_lo;
-        while i0 < i_hi {
-            let rows = MR.min(i_hi - i0);
-            let mut rows_addend = [std::ptr::null::<f32>(); MR];
-            for (r, slot) in rows_addend.iter_mut().enumerate().take(rows) {
-                if let Some(row) = add_mode.row(i0 + r) {
-                    // SAFETY: the addend covers this row (caller's shape contract).
-                    *slot = unsafe { add_ptr.add(row * add_ld + j0) };
+    // The reduction runs in blocks of KC so that a B sub-panel `[KC, NR]` stays in L1 while
+    // every row tile of the chunk passes over it; the epilogue (addend, bias, ReLU) runs
+    // with the last block.
+    let mut k0 = 0;
+    while k0 < k.max(1) {
+        let kc = KC.min(k - k0);
+        let last = k0 + kc >= k;
+        let mut j0 = 0;
+        while j0 < n {
+            let cols = NR.min(n - j0);
+            let mut i0 = i_lo;
+            while i0 < i_hi {
+                let rows = MR.min(i_hi - i0);
+                let mut rows_addend = [std::ptr::null::<f32>(); MR];
+                if last {
+                    for (r, slot) in rows_addend.iter_mut().enumerate().take(rows) {
+                        if let Some(row) = add_mode.row(i0 + r) {
+                            // SAFETY: the addend covers this row (caller's shape contract).
+                            *slot = unsafe { add_ptr.add(row * add_ld + j0) };
+                        }
+                    }
                 }
+                // SAFETY: the offsets stay within the shapes the caller vouched for.
+                let t = unsafe {
+                    Tile {
+                        k: kc,
+                        a: StridedA {
+                            ptr: a.ptr.add(i0 * a.rs + k0 * a.cs),
+                            rs: a.rs,
+                            cs: a.cs,
+                        },
+                        b: b.add((j0 / NR) * k * NR + k0 * NR),
+                        ldb: NR,
+                        c: c.add(i0 * ldc + j0),
+                        ldc,
+                        rows,
+                        cols,
+                        accumulate: accumulate || k0 > 0,
+                        relu: relu && last,
+                        addend: rows_addend,
+                        bias: if bias.is_null() || !last {
+                            std::ptr::null()
+                        } else {
+                            bias.add(j0)
+                        },
+                    }
+                };
+                // SAFETY: as above.
+                unsafe { run_tile(&t, avx512) };
+                i0 += rows;
             }
-            // SAFETY: the offsets stay within the shapes the caller vouched for.
-            let t = unsafe {
-                Tile {
-                    k,
-                    a: StridedA {
-                        ptr: a.ptr.add(i0 * a.rs),
-                        rs: a.rs,
-                        cs: a.cs,
-                    },
-                    b: b.add((j0 / NR) * k * NR),
-                    ldb: NR,
-                    c: c.add(i0 * ldc + j0),
-                    ldc,
-                    rows,
-                    cols,
-                    accumulate,
-                    relu,
-                    addend: rows_addend,
-                    bias: if bias.is_null() { bias } else { bias.add(j0) },
-                }
-            };
-            // SAFETY: as above.
-            unsafe { run_tile(&t, avx512) };
-            i0 += rows;
+            j0 += cols;
         }
-        j0 += cols;
+        k0 += kc;
     }
 }
 
@@ -730,6 +843,7 @@ mod tests {
             (29, 17, 64),
             (130, 40, 17),
             (5000, 9, 40),
+            (50, 300, 70),
         ] {
             let a = values(m * k, 1);
             let b = values(k * n, 2);
@@ -756,6 +870,36 @@ mod tests {
                     (*x as f64 - y).abs() < 1e-4,
                     "matmul_tn {m}x{k}x{n}: {x} vs {y}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn the_residual_forward_and_the_residual_gradient_add_their_terms() {
+        // k spans several reduction blocks, so the epilogue must run once, at the end.
+        let (m, k, n) = (31, 2 * KC + 7, 70);
+        let x = values(m * k, 6);
+        let w = values(n * k, 7);
+        let bias = values(n, 8);
+        let res = values(m * n, 9);
+        let mut wt = vec![0.0; k * n];
+        for j in 0..n {
+            for p in 0..k {
+                wt[p * n + j] = w[j * k + p];
+            }
+        }
+        let base = reference(&x, m, k, &wt, n);
+        let mut y = vec![0.0; m * n];
+        linear_forward_residual(&x, m, k, &w, n, &bias, &res, true, &mut y);
+        let mut z = vec![0.0; m * n];
+        matmul_add(&x, m, k, &wt, n, &res, &mut z);
+        for i in 0..m {
+            for j in 0..n {
+                let e = i * n + j;
+                let want_y = (base[e] + bias[j] as f64 + res[e] as f64).max(0.0);
+                let want_z = base[e] + res[e] as f64;
+                assert!((y[e] as f64 - want_y).abs() < 1e-4, "residual ({i}, {j})");
+                assert!((z[e] as f64 - want_z).abs() < 1e-4, "matmul_add ({i}, {j})");
             }
         }
     }
