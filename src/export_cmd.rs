@@ -62,7 +62,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
         k.height,
     );
     println!(
-        "wrote {} ({:.2} MB, {} weights in {})",
+        "wrote {} ({:.2} MB, {} stored values, weights in {})",
         report.path.display(),
         report.bytes as f64 / 1e6,
         report.n_values,
