@@ -184,3 +184,23 @@ pub fn centre_attention(varmap: &candle_nn::VarMap, prefix: &str, att_frames: us
     let b = get("bias")?;
     b.set(&Tensor::from_vec(bias, att_frames, b.device())?)
 }
+
+/// The neighbourhoods of several frames as one tensor (see [`neighbourhood`]).
+///
+/// # Shapes
+/// - returns `[aud_ids.len(), seq, window, n_features]`
+pub fn neighbourhoods(
+    audio: &nldf_core::audio::AudioWindows,
+    aud_ids: &[usize],
+    seq: usize,
+) -> Result<Tensor> {
+    let flat: Vec<f32> = aud_ids
+        .iter()
+        .flat_map(|&f| neighbourhood(audio, f, seq))
+        .collect();
+    Tensor::from_vec(
+        flat,
+        (aud_ids.len(), seq, audio.window, audio.n_features),
+        &candle_core::Device::Cpu,
+    )
+}

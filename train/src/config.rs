@@ -204,3 +204,92 @@ pub struct TeacherRunConfig {
     pub model: TeacherConfig,
     pub train: TrainConfig,
 }
+
+/// How the student is trained (paper sections 3.4-3.5; R2L's public settings where the
+/// paper is silent).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct StudentTrainConfig {
+    /// Seed of the ray batches, the beam jitter and the initial weights.
+    pub seed: u64,
+    /// Training steps.
+    pub iters: usize,
+    /// Rays per step (paper: 4096).
+    pub batch_rays: usize,
+    /// Frames each step draws its rays from.
+    pub frames_per_batch: usize,
+    /// Fraction of rays inside `face_rect` (paper: 0.9); the rest come from the other
+    /// pixels whose rays hit the head's bounds.
+    pub face_fraction: f32,
+    /// Fraction of rays drawn from the mouth region when the dataset has parsing masks
+    /// (counted inside the face fraction; the teacher's setting).
+    pub mouth_fraction: f32,
+    /// Adam learning rate at step 0 (R2L: 5e-4).
+    pub lr: f64,
+    /// Steps over which the learning rate decays by 10x.
+    pub lr_decay_steps: usize,
+    /// Adam's moment decays and epsilon.
+    pub beta1: f64,
+    pub beta2: f64,
+    pub eps: f64,
+    /// Distil from the teacher's segment colours (Eq. 6); off: pixels only (Eq. 8).
+    pub distill: bool,
+    /// Weight of the segment loss, lambda of Eq. 9 (paper: 0.2).
+    pub lambda: f64,
+    /// Keep an active beam pool (paper section 3.5).
+    pub pool: bool,
+    /// Fraction of each batch's highest-loss beams that enter the pool, and the size of the
+    /// pool batch as a fraction of the batch (R2L: 0.2).
+    pub hard_ratio: f64,
+    /// Pool capacity in batches (R2L: 20).
+    pub pool_batches: usize,
+    /// Jitter the beam points along each ray while training (R2L).
+    pub jitter: bool,
+    /// Steps between lines of `log.csv`.
+    pub log_every: usize,
+    /// Steps between validations (0: only at the end).
+    pub val_every: usize,
+    /// Validation frames rendered each time.
+    pub val_frames: usize,
+    /// Steps between checkpoints (also at the end and on Ctrl-C).
+    pub checkpoint_every: usize,
+    /// Training seconds after which the run ends early (0: no limit).
+    pub time_budget_s: f64,
+}
+
+impl Default for StudentTrainConfig {
+    fn default() -> Self {
+        StudentTrainConfig {
+            seed: 0,
+            iters: 3000,
+            batch_rays: 4096,
+            frames_per_batch: 8,
+            face_fraction: 0.9,
+            mouth_fraction: 0.1,
+            lr: 5e-4,
+            lr_decay_steps: 3000,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+            distill: true,
+            lambda: 0.2,
+            pool: true,
+            hard_ratio: 0.2,
+            pool_batches: 20,
+            jitter: true,
+            log_every: 10,
+            val_every: 250,
+            val_frames: 4,
+            checkpoint_every: 250,
+            time_budget_s: 0.0,
+        }
+    }
+}
+
+/// Everything a student run needs, as saved in its `config.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default)]
+pub struct StudentRunConfig {
+    pub model: crate::student::StudentConfig,
+    pub train: StudentTrainConfig,
+}

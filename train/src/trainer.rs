@@ -22,7 +22,7 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::adam::{Adam, AdamParams};
-use crate::audio_net::neighbourhood;
+use crate::audio_net::neighbourhoods;
 use crate::checkpoint::{
     CONFIG_FILE, MODEL_FILE, STATE_FILE, load_json, load_tensors, restore_weights, save_json,
     save_tensors, step_of, weights,
@@ -183,31 +183,10 @@ impl TeacherRun {
     /// optimizer state) to continue training or to render.
     pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
         let mut run = Self::build(dir, load_json(&dir.join(CONFIG_FILE))?)?;
-        let model_path = dir.join(MODEL_FILE);
-        let (tensors, meta) = load_tensors(&model_path)?;
-        restore_weights(&model_path, &run.varmap, &tensors)?;
-        run.step = step_of(&model_path, &meta)?;
-        run.elapsed_before = meta
-            .get("elapsed_s")
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(0.0);
-        if optimizer {
-            let state_path = dir.join(STATE_FILE);
-            let (state, state_meta) = load_tensors(&state_path)?;
-            let state_step = step_of(&state_path, &state_meta)?;
-            if state_step != run.step {
-                return Err(Error::invalid(
-                    &state_path,
-                    format!(
-                        "is from step {state_step} but {MODEL_FILE} from step {}; the last checkpoint was cut short",
-                        run.step
-                    ),
-                ));
-            }
-            run.adam
-                .load_state(&state)
-                .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
-        }
+        let (step, elapsed) =
+            open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
+        run.step = step;
+        run.elapsed_before = elapsed;
         Ok(run)
     }
 
@@ -251,16 +230,10 @@ impl TeacherRun {
     /// # Shapes
     /// - returns `[frames.len(), audio_dim]`
     pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
-        let audio = &data.dataset.audio;
-        let seq = self.cfg.model.audio.att_frames;
-        let flat: Vec<f32> = aud_ids
-            .iter()
-            .flat_map(|&f| neighbourhood(audio, f, seq))
-            .collect();
-        let windows = Tensor::from_vec(
-            flat,
-            (aud_ids.len(), seq, audio.window, audio.n_features),
-            &Device::Cpu,
+        let windows = neighbourhoods(
+            &data.dataset.audio,
+            aud_ids,
+            self.cfg.model.audio.att_frames,
         )?;
         Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
     }
@@ -387,109 +360,252 @@ impl TeacherRun {
 
     /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.
     pub fn save(&self) -> Result<()> {
+        let title = format!(
+            "teacher {}x{}, {} rays/step",
+            self.cfg.model.depth, self.cfg.model.width, self.cfg.train.batch_rays
+        );
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        let meta = |kind: &str| {
-            [
-                ("step".to_string(), self.step.to_string()),
-                ("elapsed_s".to_string(), format!("{:.3}", self.elapsed())),
-                ("kind".to_string(), kind.to_string()),
-            ]
-            .into_iter()
-            .collect()
-        };
         save_json(&self.dir.join(CONFIG_FILE), &self.cfg)?;
-        save_tensors(
-            &self.dir.join(STATE_FILE),
-            &self.adam.state()?,
-            meta("optimizer"),
-        )?;
-        save_tensors(
-            &self.dir.join(MODEL_FILE),
-            &weights(&self.varmap)?,
-            meta("teacher"),
-        )?;
-        let log = self.dir.join("log.csv");
-        if log.is_file() {
-            let rows = crate::log::read_log(&log)?;
-            let title = format!(
-                "teacher {}x{}, {} rays/step",
-                self.cfg.model.depth, self.cfg.model.width, self.cfg.train.batch_rays
-            );
-            crate::plot::plot_training_curve(&self.dir.join(CURVE_FILE), &title, &rows)?;
-        }
-        Ok(())
+        save_checkpoint(&CheckpointParts {
+            dir: &self.dir,
+            kind: "teacher",
+            step: self.step,
+            elapsed: self.elapsed(),
+            varmap: &self.varmap,
+            adam: &self.adam,
+            title: &title,
+        })
     }
 
-    /// Trains until `cfg.train.iters` steps are done or `stop` is set, validating, logging to
-    /// `log.csv` and checkpointing as configured; always leaves a checkpoint of the last
-    /// step. Returns the final validation scores when it ran to the end.
+    /// Trains until `cfg.train.iters` steps are done or `stop` is set (see [`train_loop`]).
     pub fn train(
         &mut self,
         data: &TrainData,
         stop: &AtomicBool,
         on_event: &mut dyn FnMut(&Event),
     ) -> Result<Option<Scores>> {
-        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        let log_path = self.dir.join("log.csv");
-        let mut log = crate::log::CsvLog::open(&log_path, self.step)?;
-        let t = self.cfg.train.clone();
-        let mut last_val = None;
-        while self.step < t.iters {
-            if stop.load(Ordering::Relaxed) {
-                self.save()?;
-                on_event(&Event::Checkpoint {
-                    step: self.step,
-                    dir: self.dir.clone(),
-                });
-                return Ok(None);
-            }
-            let started = Instant::now();
-            let (loss, psnr) = self.train_step(data)?;
-            let rays_per_s = t.batch_rays as f64 / started.elapsed().as_secs_f64().max(1e-9);
-            on_event(&Event::Step {
-                step: self.step,
+        train_loop(self, data, stop, on_event)
+    }
+}
+
+impl TrainingRun for TeacherRun {
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn step(&self) -> usize {
+        self.step
+    }
+
+    fn schedule(&self) -> Schedule {
+        let t = &self.cfg.train;
+        Schedule {
+            iters: t.iters,
+            batch_rays: t.batch_rays,
+            log_every: t.log_every,
+            val_every: t.val_every,
+            val_frames: t.val_frames,
+            checkpoint_every: t.checkpoint_every,
+            time_budget_s: t.time_budget_s,
+        }
+    }
+
+    fn elapsed(&self) -> f64 {
+        TeacherRun::elapsed(self)
+    }
+
+    fn learning_rate(&self) -> f64 {
+        TeacherRun::learning_rate(self)
+    }
+
+    fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
+        TeacherRun::train_step(self, data)
+    }
+
+    fn validate(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        TeacherRun::validate(self, data, n)
+    }
+
+    fn save(&self) -> Result<()> {
+        TeacherRun::save(self)
+    }
+}
+
+/// When a training loop validates, logs, checkpoints and stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Schedule {
+    pub iters: usize,
+    pub batch_rays: usize,
+    pub log_every: usize,
+    pub val_every: usize,
+    pub val_frames: usize,
+    pub checkpoint_every: usize,
+    pub time_budget_s: f64,
+}
+
+/// A model being trained, as [`train_loop`] sees it (the teacher and the student).
+pub trait TrainingRun {
+    /// The run's folder.
+    fn dir(&self) -> &Path;
+    /// Steps done.
+    fn step(&self) -> usize;
+    fn schedule(&self) -> Schedule;
+    /// Training seconds so far, across resumes.
+    fn elapsed(&self) -> f64;
+    fn learning_rate(&self) -> f64;
+    /// One step; returns the batch's loss and PSNR.
+    fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)>;
+    /// Scores `n` validation frames.
+    fn validate(&self, data: &TrainData, n: usize) -> Result<Scores>;
+    /// Writes the checkpoint.
+    fn save(&self) -> Result<()>;
+}
+
+/// Trains until the schedule's steps are done, its time budget is spent or `stop` is set,
+/// validating, logging to `log.csv` and checkpointing as scheduled; always leaves a
+/// checkpoint of the last step. Returns the final validation scores when it ran to the end.
+pub fn train_loop(
+    run: &mut dyn TrainingRun,
+    data: &TrainData,
+    stop: &AtomicBool,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<Option<Scores>> {
+    let dir = run.dir().to_path_buf();
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    let mut log = crate::log::CsvLog::open(&dir.join("log.csv"), run.step())?;
+    let t = run.schedule();
+    let mut last_val = None;
+    while run.step() < t.iters {
+        if stop.load(Ordering::Relaxed) {
+            run.save()?;
+            on_event(&Event::Checkpoint {
+                step: run.step(),
+                dir: dir.clone(),
+            });
+            return Ok(None);
+        }
+        let started = Instant::now();
+        let (loss, psnr) = run.train_step(data)?;
+        let rays_per_s = t.batch_rays as f64 / started.elapsed().as_secs_f64().max(1e-9);
+        let step = run.step();
+        on_event(&Event::Step {
+            step,
+            loss,
+            psnr,
+            rays_per_s,
+        });
+        let out_of_time = t.time_budget_s > 0.0 && run.elapsed() >= t.time_budget_s;
+        let last = step == t.iters || out_of_time;
+        let validate_now = (t.val_every > 0 && step.is_multiple_of(t.val_every)) || last;
+        let scores = if validate_now {
+            let s = run.validate(data, t.val_frames)?;
+            on_event(&Event::Validation { step, scores: s });
+            last_val = Some(s);
+            Some(s)
+        } else {
+            None
+        };
+        if step.is_multiple_of(t.log_every.max(1)) || scores.is_some() {
+            log.row(
+                step,
+                run.elapsed(),
                 loss,
                 psnr,
+                run.learning_rate(),
                 rays_per_s,
-            });
-            let out_of_time = t.time_budget_s > 0.0 && self.elapsed() >= t.time_budget_s;
-            let last = self.step == t.iters || out_of_time;
-            let validate_now = (t.val_every > 0 && self.step.is_multiple_of(t.val_every)) || last;
-            let scores = if validate_now {
-                let s = self.validate(data, t.val_frames)?;
-                on_event(&Event::Validation {
-                    step: self.step,
-                    scores: s,
-                });
-                last_val = Some(s);
-                Some(s)
-            } else {
-                None
-            };
-            if self.step.is_multiple_of(t.log_every.max(1)) || scores.is_some() {
-                log.row(
-                    self.step,
-                    self.elapsed(),
-                    loss,
-                    psnr,
-                    self.learning_rate(),
-                    rays_per_s,
-                    scores,
-                )?;
-            }
-            if (t.checkpoint_every > 0 && self.step.is_multiple_of(t.checkpoint_every)) || last {
-                self.save()?;
-                on_event(&Event::Checkpoint {
-                    step: self.step,
-                    dir: self.dir.clone(),
-                });
-            }
-            if out_of_time {
-                break;
-            }
+                scores,
+            )?;
         }
-        Ok(last_val)
+        if (t.checkpoint_every > 0 && step.is_multiple_of(t.checkpoint_every)) || last {
+            run.save()?;
+            on_event(&Event::Checkpoint {
+                step,
+                dir: dir.clone(),
+            });
+        }
+        if out_of_time {
+            break;
+        }
     }
+    Ok(last_val)
+}
+
+/// What [`save_checkpoint`] writes.
+pub struct CheckpointParts<'a> {
+    pub dir: &'a Path,
+    /// `teacher` or `student`, in the safetensors metadata.
+    pub kind: &'a str,
+    pub step: usize,
+    pub elapsed: f64,
+    pub varmap: &'a VarMap,
+    pub adam: &'a Adam,
+    /// Title of the training-curve plot.
+    pub title: &'a str,
+}
+
+/// Writes the optimizer state, then the weights (each atomically, with the step in their
+/// metadata), and redraws the training curve from `log.csv`. The caller writes its config.
+pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
+    let dir = parts.dir;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let meta = |kind: &str| {
+        [
+            ("step".to_string(), parts.step.to_string()),
+            ("elapsed_s".to_string(), format!("{:.3}", parts.elapsed)),
+            ("kind".to_string(), kind.to_string()),
+        ]
+        .into_iter()
+        .collect()
+    };
+    save_tensors(
+        &dir.join(STATE_FILE),
+        &parts.adam.state()?,
+        meta("optimizer"),
+    )?;
+    save_tensors(
+        &dir.join(MODEL_FILE),
+        &weights(parts.varmap)?,
+        meta(parts.kind),
+    )?;
+    let log = dir.join("log.csv");
+    if log.is_file() {
+        let rows = crate::log::read_log(&log)?;
+        crate::plot::plot_training_curve(&dir.join(CURVE_FILE), parts.title, &rows)?;
+    }
+    Ok(())
+}
+
+/// Restores the weights in `dir` into `varmap` and, given `adam`, the optimizer state
+/// (checking that both come from the same step). Returns the step and the training seconds.
+pub fn open_checkpoint(
+    dir: &Path,
+    varmap: &VarMap,
+    adam: Option<&mut Adam>,
+) -> Result<(usize, f64)> {
+    let model_path = dir.join(MODEL_FILE);
+    let (tensors, meta) = load_tensors(&model_path)?;
+    restore_weights(&model_path, varmap, &tensors)?;
+    let step = step_of(&model_path, &meta)?;
+    let elapsed = meta
+        .get("elapsed_s")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.0);
+    if let Some(adam) = adam {
+        let state_path = dir.join(STATE_FILE);
+        let (state, state_meta) = load_tensors(&state_path)?;
+        let state_step = step_of(&state_path, &state_meta)?;
+        if state_step != step {
+            return Err(Error::invalid(
+                &state_path,
+                format!(
+                    "is from step {state_step} but {MODEL_FILE} from step {step}; the last checkpoint was cut short"
+                ),
+            ));
+        }
+        adam.load_state(&state)
+            .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
+    }
+    Ok((step, elapsed))
 }
 
 fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
