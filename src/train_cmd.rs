@@ -1,5 +1,5 @@
-//! `nldf train`: the teacher (and, later, the student) trainers with progress, logging,
-//! checkpoints and Ctrl-C handling.
+//! `nldf train`: the teacher and student trainers with progress, logging, checkpoints and
+//! Ctrl-C handling.
 
 use std::path::PathBuf;
 
@@ -12,6 +12,72 @@ use crate::progress::progress_bar;
 pub enum TrainCommand {
     /// Train the audio-conditioned NeRF teacher on a dataset.
     Teacher(TeacherArgs),
+    /// Distil the light-field student from a trained teacher (RUN/teacher) into RUN/student.
+    Student(StudentArgs),
+}
+
+/// Student depths of the paper's Table 3 (width 256), plus a tiny one for smoke runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StudentDepth {
+    #[value(name = "28")]
+    D28,
+    #[value(name = "50")]
+    D50,
+    #[value(name = "88")]
+    D88,
+    /// 6 x 32 with 4 beam points: tests and smoke runs.
+    Tiny,
+}
+
+impl StudentDepth {
+    /// The preset's network configuration.
+    pub fn config(self) -> nldf_train::student::StudentConfig {
+        use nldf_train::student::StudentConfig;
+        match self {
+            StudentDepth::D28 => StudentConfig::paper_d28(),
+            StudentDepth::D50 => StudentConfig::paper_d50(),
+            StudentDepth::D88 => StudentConfig::paper_d88(),
+            StudentDepth::Tiny => StudentConfig::tiny(),
+        }
+    }
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct StudentArgs {
+    /// Dataset folder the teacher was trained on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run folder: the teacher is read from RUN/teacher, the student goes to RUN/student.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Layers of the residual MLP at width 256 (paper Table 3).
+    #[arg(long, value_enum, default_value_t = StudentDepth::D88)]
+    pub depth: StudentDepth,
+    /// Hidden width (overrides the preset's 256).
+    #[arg(long)]
+    pub width: Option<usize>,
+    /// Train on pixels alone (Eq. 8), without the teacher's segment colours.
+    #[arg(long)]
+    pub no_distill: bool,
+    /// Train without the active beam pool.
+    #[arg(long)]
+    pub no_pool: bool,
+    /// JSON run configuration ({"model": {...}, "train": {...}}; missing fields take the
+    /// defaults; --depth, --width, --no-distill and --no-pool are ignored with it).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Total training steps (overrides the configuration; with --resume, extends the run).
+    #[arg(long)]
+    pub iters: Option<usize>,
+    /// Training time limit in minutes (the run validates and checkpoints when it is spent).
+    #[arg(long)]
+    pub minutes: Option<f64>,
+    /// Folder of the student inside RUN (default `student`).
+    #[arg(long, default_value = "student")]
+    pub name: String,
+    /// Continue the student from its last checkpoint.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 /// Teacher presets.
@@ -64,15 +130,187 @@ impl TeacherPreset {
 pub fn run(cmd: TrainCommand) -> Result<()> {
     match cmd {
         TrainCommand::Teacher(args) => run_teacher_with(args, None),
+        TrainCommand::Student(args) => run_student(args).map(|_| ()),
     }
+}
+
+/// Sets the returned flag on Ctrl-C (one handler per process, shared by every stage).
+fn stop_on_ctrl_c() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Arc, OnceLock};
+    static STOP: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    if let Some(s) = STOP.get() {
+        return Ok(s.clone());
+    }
+    let flag = Arc::new(AtomicBool::new(false));
+    let handler = flag.clone();
+    ctrlc::set_handler(move || handler.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(STOP.get_or_init(|| flag).clone())
+}
+
+/// Runs a training loop behind a progress bar labelled `what`; prints validations as they
+/// come and the final scores as JSON.
+fn train_with_progress(
+    what: &str,
+    run: &mut dyn nldf_train::trainer::TrainingRun,
+    data: &nldf_train::trainer::TrainData,
+) -> Result<Option<nldf_train::trainer::Scores>> {
+    use nldf_train::trainer::{Event, train_loop};
+    use std::sync::atomic::Ordering;
+    let stop = stop_on_ctrl_c()?;
+    let bar = progress_bar(run.schedule().iters as u64, what);
+    bar.set_position(run.step() as u64);
+    let mut last_val = String::new();
+    let scores = train_loop(run, data, &stop, &mut |e| match e {
+        Event::Step {
+            step,
+            loss,
+            psnr,
+            rays_per_s,
+        } => {
+            bar.set_position(*step as u64);
+            bar.set_message(format!(
+                "{what} loss {loss:.2e} psnr {psnr:.2} dB {rays_per_s:.0} rays/s{last_val}"
+            ));
+        }
+        Event::Validation { step, scores } => {
+            last_val = format!(" | val {:.2} dB", scores.psnr);
+            bar.println(format!(
+                "step {step}: validation PSNR {:.2} dB, SSIM {:.4}{}",
+                scores.psnr,
+                scores.ssim,
+                match (scores.face_psnr, scores.mouth_psnr) {
+                    (Some(f), Some(m)) => format!(", face {f:.2} dB, mouth {m:.2} dB"),
+                    _ => String::new(),
+                }
+            ));
+        }
+        Event::Checkpoint { .. } => {}
+    })?;
+    bar.finish_and_clear();
+    if stop.load(Ordering::Relaxed) {
+        println!(
+            "interrupted at step {}; checkpoint written, continue with --resume",
+            run.step()
+        );
+    }
+    if let Some(s) = scores {
+        println!(
+            "{}",
+            serde_json::to_string(
+                &serde_json::json!({"stage": what, "step": run.step(), "val": s})
+            )?
+        );
+    }
+    Ok(scores)
+}
+
+/// Trains (or resumes) a student; returns its final validation scores when it ran to the
+/// end.
+pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scores>> {
+    use nldf_train::config::StudentRunConfig;
+    use nldf_train::student_trainer::StudentRun;
+    use nldf_train::trainer::{TeacherRun, TrainData};
+
+    let dir = args.run.join(&args.name);
+    let teacher_dir = args.run.join("teacher");
+    let exists = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
+    if exists && !args.resume {
+        anyhow::bail!(
+            "{} already holds a student; pass --resume to continue it or choose another --run",
+            dir.display()
+        );
+    }
+    if args.resume && !exists {
+        anyhow::bail!("{} holds no student checkpoint to resume", dir.display());
+    }
+    let cfg = if args.resume {
+        None
+    } else {
+        let mut cfg = match &args.config {
+            Some(path) => nldf_train::checkpoint::load_json::<StudentRunConfig>(path)?,
+            None => {
+                let mut cfg = StudentRunConfig {
+                    model: args.depth.config(),
+                    ..StudentRunConfig::default()
+                };
+                if let Some(w) = args.width {
+                    cfg.model.width = w;
+                }
+                cfg.train.distill = !args.no_distill;
+                cfg.train.pool = !args.no_pool;
+                cfg
+            }
+        };
+        if let Some(n) = args.iters {
+            cfg.train.iters = n;
+            cfg.train.lr_decay_steps = n;
+        }
+        nldf_train::student_trainer::validate(&cfg).with_context(|| match &args.config {
+            Some(path) => format!("{}: invalid configuration", path.display()),
+            None => "invalid configuration".to_string(),
+        })?;
+        Some(cfg)
+    };
+    eprintln!("loading {}", args.data.display());
+    let data = TrainData::load(&args.data)?;
+    let teacher = if teacher_dir
+        .join(nldf_train::checkpoint::MODEL_FILE)
+        .is_file()
+    {
+        Some(TeacherRun::open(&teacher_dir, false)?)
+    } else {
+        None
+    };
+    let mut run = match cfg {
+        Some(cfg) => {
+            if cfg.train.distill && teacher.is_none() {
+                anyhow::bail!(
+                    "{} holds no teacher to distil from; train one with `nldf train teacher --run {}` or pass --no-distill",
+                    teacher_dir.display(),
+                    args.run.display()
+                );
+            }
+            StudentRun::create(&dir, cfg, &data, teacher.as_ref())?
+        }
+        None => {
+            let mut run = StudentRun::open(&dir, true)?;
+            if let Some(n) = args.iters {
+                run.cfg.train.iters = n;
+            }
+            eprintln!("resuming at step {}", run.step);
+            run
+        }
+    };
+    if let Some(m) = args.minutes {
+        run.cfg.train.time_budget_s = m * 60.0;
+    }
+    let bar = progress_bar(0, "teacher targets");
+    run.prepare(&data, teacher.as_ref(), &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    let scores = train_with_progress("student", &mut run, &data)?;
+    println!("wrote to {}:", dir.display());
+    for f in [
+        "config.json",
+        "render.json",
+        "model.safetensors",
+        "train_state.safetensors",
+        "log.csv",
+        "training_curve.png",
+    ] {
+        println!("  {}", dir.join(f).display());
+    }
+    Ok(scores)
 }
 
 /// Trains (or resumes) a teacher; `budget_s` caps its training time.
 pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> {
     use nldf_train::config::TeacherRunConfig;
-    use nldf_train::trainer::{Event, TeacherRun, TrainData};
-    use std::sync::Arc;
-    use std::sync::atomic::{AtomicBool, Ordering};
+    use nldf_train::trainer::{TeacherRun, TrainData};
 
     let dir = args.run.join("teacher");
     let exists = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
@@ -121,55 +359,7 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
     if let Some(b) = budget_s {
         run.cfg.train.time_budget_s = b;
     }
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
-            .context("installing the Ctrl-C handler")?;
-    }
-    let total = run.cfg.train.iters as u64;
-    let bar = progress_bar(total, "teacher");
-    bar.set_position(run.step as u64);
-    let mut last_val = String::new();
-    let scores = run.train(&data, &stop, &mut |e| match e {
-        Event::Step {
-            step,
-            loss,
-            psnr,
-            rays_per_s,
-        } => {
-            bar.set_position(*step as u64);
-            bar.set_message(format!(
-                "teacher loss {loss:.2e} psnr {psnr:.2} dB {rays_per_s:.0} rays/s{last_val}"
-            ));
-        }
-        Event::Validation { step, scores } => {
-            last_val = format!(" | val {:.2} dB", scores.psnr);
-            bar.println(format!(
-                "step {step}: validation PSNR {:.2} dB, SSIM {:.4}{}",
-                scores.psnr,
-                scores.ssim,
-                match (scores.face_psnr, scores.mouth_psnr) {
-                    (Some(f), Some(m)) => format!(", face {f:.2} dB, mouth {m:.2} dB"),
-                    _ => String::new(),
-                }
-            ));
-        }
-        Event::Checkpoint { .. } => {}
-    })?;
-    bar.finish_and_clear();
-    if stop.load(Ordering::Relaxed) {
-        println!(
-            "interrupted at step {}; checkpoint written, continue with --resume",
-            run.step
-        );
-    }
-    if let Some(s) = scores {
-        println!(
-            "{}",
-            serde_json::to_string(&serde_json::json!({"step": run.step, "val": s}))?
-        );
-    }
+    train_with_progress("teacher", &mut run, &data)?;
     println!("wrote to {}:", dir.display());
     for f in [
         "config.json",

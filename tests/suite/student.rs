@@ -149,3 +149,180 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
         );
     }
 }
+
+use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
+use nldf_train::pool::{BeamPool, PoolEntry};
+use nldf_train::student_trainer::StudentRun;
+use nldf_train::trainer::{TeacherRun, TrainData};
+
+fn entry(frame: u32, loss: f32) -> PoolEntry {
+    PoolEntry {
+        frame,
+        pixel: frame * 10,
+        loss,
+    }
+}
+
+#[test]
+fn the_pool_keeps_the_highest_loss_beams() {
+    let mut pool = BeamPool::new(6);
+    // 10 beams, the top 40 % (4) enter: losses 9, 8, 7, 6.
+    let batch: Vec<PoolEntry> = (0..10).map(|i| entry(i, i as f32)).collect();
+    assert_eq!(pool.offer(&batch, 0.4), 4);
+    let mut held: Vec<f32> = pool.entries.iter().map(|e| e.loss).collect();
+    held.sort_by(f32::total_cmp);
+    assert_eq!(held, vec![6.0, 7.0, 8.0, 9.0]);
+    // Next batch's top 4 are 20, 15, 5, 0.5: two fill the room, then 5 replaces nothing
+    // (the easiest entry, 6, is harder) and neither does 0.5.
+    let batch = vec![
+        entry(20, 20.0),
+        entry(21, 0.5),
+        entry(22, 15.0),
+        entry(23, 5.0),
+        entry(24, 0.1),
+    ];
+    pool.offer(&batch, 0.8);
+    let mut held: Vec<f32> = pool.entries.iter().map(|e| e.loss).collect();
+    held.sort_by(f32::total_cmp);
+    assert_eq!(held, vec![6.0, 7.0, 8.0, 9.0, 15.0, 20.0]);
+    // A full pool: harder newcomers replace the easiest entries, so that the pool holds
+    // the highest losses of old and new together (6.5 loses to 7 once 30 has taken 6's
+    // place).
+    let batch = vec![entry(30, 30.0), entry(31, 6.5), entry(32, 1.0)];
+    assert_eq!(pool.offer(&batch, 1.0), 1);
+    let mut held: Vec<f32> = pool.entries.iter().map(|e| e.loss).collect();
+    held.sort_by(f32::total_cmp);
+    assert_eq!(held, vec![7.0, 8.0, 9.0, 15.0, 20.0, 30.0]);
+    // New losses of drawn entries overwrite the records.
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let drawn = pool.draw(3, &mut rng);
+    assert_eq!(drawn.len(), 3);
+    pool.update(&drawn, &[0.0, 0.0, 0.0]);
+    assert!(pool.entries.iter().filter(|e| e.loss == 0.0).count() >= 1);
+}
+
+fn tiny_student_config(iters: usize) -> StudentRunConfig {
+    StudentRunConfig {
+        model: StudentConfig::tiny(),
+        train: StudentTrainConfig {
+            iters,
+            batch_rays: 256,
+            frames_per_batch: 2,
+            lr: 3e-3,
+            lr_decay_steps: iters,
+            pool_batches: 4,
+            val_every: 0,
+            val_frames: 2,
+            checkpoint_every: 0,
+            ..StudentTrainConfig::default()
+        },
+    }
+}
+
+/// A tiny teacher trained briefly on the tiny scene (shared by the student tests).
+fn tiny_teacher(data: &TrainData) -> (tempfile::TempDir, TeacherRun) {
+    let dir = tempfile::tempdir().unwrap();
+    let mut teacher =
+        TeacherRun::create(dir.path(), crate::teacher::tiny_run_config(150), data).unwrap();
+    for _ in 0..150 {
+        teacher.train_step(data).unwrap();
+    }
+    (dir, teacher)
+}
+
+#[test]
+fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_encoder() {
+    let data = TrainData::load(crate::teacher::tiny_scene()).unwrap();
+    let (_teacher_dir, teacher) = tiny_teacher(&data);
+    let dir = tempfile::tempdir().unwrap();
+    let mut run =
+        StudentRun::create(dir.path(), tiny_student_config(150), &data, Some(&teacher)).unwrap();
+    run.prepare(&data, Some(&teacher), &mut |_, _| {}).unwrap();
+    assert!(dir.path().join("targets.safetensors").is_file());
+    assert!(dir.path().join("render.json").is_file());
+    // The student's audio encoder starts as the teacher's.
+    let vars_of = |varmap: &candle_nn::VarMap, prefix: &str| -> Vec<(String, Vec<f32>)> {
+        let mut v: Vec<(String, Vec<f32>)> = varmap
+            .data()
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|(k, _)| k.starts_with(prefix))
+            .map(|(k, t)| {
+                (
+                    k.clone(),
+                    t.as_tensor().flatten_all().unwrap().to_vec1().unwrap(),
+                )
+            })
+            .collect();
+        v.sort_by(|a, b| a.0.cmp(&b.0));
+        v
+    };
+    let audio_of = |varmap: &candle_nn::VarMap| vars_of(varmap, "audio.");
+    assert_eq!(audio_of(&run.varmap), audio_of(&teacher.varmap));
+    let before = run.validate(&data, 2).unwrap();
+    let mut losses = Vec::new();
+    for _ in 0..150 {
+        let s = run.train_step(&data).unwrap();
+        assert!(s.loss.is_finite());
+        losses.push(s.loss);
+    }
+    let after = run.validate(&data, 2).unwrap();
+    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
+    let last: f64 = losses[140..].iter().sum::<f64>() / 10.0;
+    eprintln!(
+        "student loss {first:.4e} -> {last:.4e}, val PSNR {:.2} -> {:.2} dB",
+        before.psnr, after.psnr
+    );
+    assert!(last < 0.5 * first, "loss {first} -> {last}");
+    assert!(
+        after.psnr > before.psnr + 2.0,
+        "PSNR {} -> {}",
+        before.psnr,
+        after.psnr
+    );
+    assert!(!run.pool.entries.is_empty() && run.pool.entries.len() <= run.pool.capacity);
+
+    // A pool-only batch moves the light field but not the audio encoder.
+    let audio_before = audio_of(&run.varmap);
+    let mlp_before = vars_of(&run.varmap, "mlp.");
+    let loss = run.pool_step(&data, 64).unwrap();
+    assert!(loss.is_some_and(f64::is_finite));
+    assert_eq!(
+        audio_of(&run.varmap),
+        audio_before,
+        "a pool batch changed the audio encoder"
+    );
+    assert_ne!(
+        vars_of(&run.varmap, "mlp."),
+        mlp_before,
+        "a pool batch left the light field unchanged"
+    );
+}
+
+#[test]
+fn a_student_resumes_bit_exactly_with_its_pool() {
+    let data = TrainData::load(crate::teacher::tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = tiny_student_config(20);
+    cfg.train.distill = false;
+    let mut run = StudentRun::create(dir.path(), cfg, &data, None).unwrap();
+    run.prepare(&data, None, &mut |_, _| {}).unwrap();
+    for _ in 0..5 {
+        run.train_step(&data).unwrap();
+    }
+    run.save().unwrap();
+    let saved_pool = run.pool.clone();
+    let next: Vec<f64> = (0..2)
+        .map(|_| run.train_step(&data).unwrap().loss)
+        .collect();
+    let mut resumed = StudentRun::open(dir.path(), true).unwrap();
+    resumed.prepare(&data, None, &mut |_, _| {}).unwrap();
+    assert_eq!(resumed.step, 5);
+    assert!(!saved_pool.entries.is_empty());
+    assert_eq!(resumed.pool, saved_pool);
+    let again: Vec<f64> = (0..2)
+        .map(|_| resumed.train_step(&data).unwrap().loss)
+        .collect();
+    assert_eq!(next, again);
+}

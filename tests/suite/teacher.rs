@@ -185,7 +185,7 @@ fn samples_lie_inside_the_bounds_and_misses_are_skipped() {
 }
 
 /// A 32 x 32, 2 s synthetic scene shared by the training tests.
-fn tiny_scene() -> &'static Path {
+pub(crate) fn tiny_scene() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
         let dir = tempfile::Builder::new()
@@ -205,7 +205,7 @@ fn tiny_scene() -> &'static Path {
     })
 }
 
-fn tiny_run_config(iters: usize) -> TeacherRunConfig {
+pub(crate) fn tiny_run_config(iters: usize) -> TeacherRunConfig {
     TeacherRunConfig {
         model: TeacherConfig::tiny(),
         train: TrainConfig {

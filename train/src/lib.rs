@@ -20,10 +20,12 @@ pub mod kernels;
 pub mod log;
 pub mod nn;
 pub mod plot;
+pub mod pool;
 pub mod render;
 pub mod sampler;
 pub mod student;
 pub mod student_op;
+pub mod student_trainer;
 pub mod teacher;
 pub mod trainer;
 
