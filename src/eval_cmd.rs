@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use nldf_core::dataset::Split;
-use nldf_train::eval::eval_teacher;
+use nldf_train::eval::eval_models;
 use nldf_train::trainer::{TeacherRun, TrainData};
 
 use crate::progress::progress_bar;
@@ -38,6 +38,8 @@ pub struct EvalArgs {
 
 /// Runs `nldf eval`.
 pub fn run(args: EvalArgs) -> Result<()> {
+    use nldf_train::eval::FrameModel;
+    use nldf_train::student_trainer::StudentRun;
     let split = match args.split {
         SplitArg::Train => Split::Train,
         SplitArg::Val => Split::Val,
@@ -49,52 +51,73 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let teacher_dir = args.run.join("teacher");
     let teacher = TeacherRun::open(&teacher_dir, false)
         .with_context(|| format!("loading the teacher from {}", teacher_dir.display()))?;
+    // Every student folder of the run (RUN/student, and ablation variants beside it).
+    let mut students = Vec::new();
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(&args.run)
+        .with_context(|| format!("reading {}", args.run.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.join("render.json").is_file() && p.join(nldf_train::checkpoint::MODEL_FILE).is_file()
+        })
+        .collect();
+    dirs.sort();
+    for dir in dirs {
+        students.push(
+            StudentRun::open(&dir, false)
+                .with_context(|| format!("loading the student from {}", dir.display()))?,
+        );
+    }
     let data = TrainData::open(&args.data, false)?;
     let n = args
         .frames
         .unwrap_or(usize::MAX)
         .min(data.dataset.frames(split).len());
+    let mut models: Vec<&dyn FrameModel> = vec![&teacher];
+    models.extend(students.iter().map(|s| s as &dyn FrameModel));
     let bar = progress_bar(n as u64, "rendering");
-    let report = eval_teacher(&teacher, &data, split, args.frames, &out, &mut || {
-        bar.inc(1)
-    })?;
+    let evaluation = eval_models(&models, &data, split, args.frames, &out, &mut || bar.inc(1))?;
     bar.finish_and_clear();
     let opt = |v: Option<f64>| v.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into());
     println!(
-        "| model | split | step | frames | PSNR (dB) | SSIM | face PSNR (dB) | mouth PSNR (dB) | s / frame |"
+        "| model | split | step | frames | PSNR (dB) | SSIM | face PSNR (dB) | mouth PSNR (dB) | GMAC / frame | s / frame |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
-    println!(
-        "| {} | {} | {} | {} | {:.2} | {:.4} | {} | {} | {:.2} |",
-        report.model,
-        report.split,
-        report.step,
-        report.frames.len(),
-        report.psnr,
-        report.ssim,
-        opt(report.face_psnr),
-        opt(report.mouth_psnr),
-        report.render_s_per_frame
-    );
-    println!(
-        "{}",
-        serde_json::to_string(&serde_json::json!({
-            "model": report.model, "split": report.split, "step": report.step,
-            "psnr": report.psnr, "ssim": report.ssim, "face_psnr": report.face_psnr,
-            "mouth_psnr": report.mouth_psnr,
-            "frames": report.frames.len(),
-        }))?
-    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for r in &evaluation.models {
+        println!(
+            "| {} | {} | {} | {} | {:.2} | {:.4} | {} | {} | {:.2} | {:.2} |",
+            r.model,
+            r.split,
+            r.step,
+            r.frames.len(),
+            r.psnr,
+            r.ssim,
+            opt(r.face_psnr),
+            opt(r.mouth_psnr),
+            r.macs_per_frame / 1e9,
+            r.render_s_per_frame
+        );
+    }
+    let rows: Vec<serde_json::Value> = evaluation
+        .models
+        .iter()
+        .map(|r| {
+            serde_json::json!({
+                "model": r.model, "split": r.split, "step": r.step,
+                "psnr": r.psnr, "ssim": r.ssim, "face_psnr": r.face_psnr,
+                "mouth_psnr": r.mouth_psnr, "macs_per_frame": r.macs_per_frame,
+                "frames": r.frames.len(),
+            })
+        })
+        .collect();
+    println!("{}", serde_json::to_string(&rows)?);
     println!("wrote to {}:", out.display());
-    println!(
-        "  {}/ ({} PNG)",
-        out.join("teacher").display(),
-        report.frames.len()
-    );
-    for f in report
+    for m in &models {
+        println!("  {}/ ({} PNG)", out.join(m.label()).display(), n);
+    }
+    for f in evaluation
         .files
         .iter()
-        .filter(|f| !f.starts_with(out.join("teacher")))
+        .filter(|f| f.extension().is_some_and(|e| e == "json") || f.ends_with("grid.png"))
     {
         println!("  {}", f.display());
     }

@@ -1,5 +1,6 @@
 //! The `nldf` command line: a thin front end over the workspace's libraries.
 
+mod ablate_cmd;
 mod bench_cmd;
 mod demo_cmd;
 mod eval_cmd;
@@ -28,13 +29,16 @@ enum Command {
     /// Generate the synthetic talking head as an AD-NeRF dataset (frames, background, audio,
     /// audio features, camera poses, depth, parsing masks and scene.json ground truth).
     Synth(synth_cmd::SynthArgs),
-    /// Train a stage of the pipeline (the teacher NeRF).
+    /// Train a stage of the pipeline: the teacher NeRF, then the light-field student.
     #[command(subcommand)]
     Train(train_cmd::TrainCommand),
     /// Render held-out frames with a trained model and score them (PSNR, SSIM, mouth PSNR).
     Eval(eval_cmd::EvalArgs),
     /// Export a run's trained student (with its audio encoder) as one ONNX model.
     Export(export_cmd::ExportArgs),
+    /// The paper's ablations on one dataset: distillation, the beam pool, depth, and a
+    /// pixels-only student at the same total wall time.
+    Ablate(ablate_cmd::AblateArgs),
     /// Measure training throughput (and, later, rendering speed against error).
     #[command(subcommand)]
     Bench(bench_cmd::BenchCommand),
@@ -48,6 +52,7 @@ fn main() -> ExitCode {
         Command::Train(cmd) => train_cmd::run(cmd),
         Command::Eval(args) => eval_cmd::run(args),
         Command::Export(args) => export_cmd::run(args),
+        Command::Ablate(args) => ablate_cmd::run(args),
         Command::Bench(cmd) => bench_cmd::run(cmd),
     };
     match result {

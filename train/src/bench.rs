@@ -236,3 +236,66 @@ pub fn bench_teacher_step(
         kernel_matmul_gflop_s: kernel,
     })
 }
+
+/// Times `steps` student training steps after `warmup` untimed ones. The run must be
+/// prepared ([`crate::student_trainer::StudentRun::prepare`]). Pool beams count as rays:
+/// they pass through the network like the others.
+pub fn bench_student_step(
+    run: &mut crate::student_trainer::StudentRun,
+    data: &TrainData,
+    warmup: usize,
+    steps: usize,
+) -> Result<StepBench> {
+    for _ in 0..warmup {
+        run.train_step(data)?;
+    }
+    let cpu0 = cpu_seconds();
+    let start = Instant::now();
+    let mut rays = 0usize;
+    for _ in 0..steps {
+        let s = run.train_step(data)?;
+        rays += run.cfg.train.batch_rays + s.pool_beams;
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = cpu_seconds()
+        .zip(cpu0)
+        .map(|(b, a)| b - a)
+        .unwrap_or(f64::NAN);
+    let m = &run.cfg.model;
+    let per_step_rays = rays as f64 / steps.max(1) as f64;
+    let n = per_step_rays.round() as usize;
+    let layers = student_layers(m);
+    let fwd_flops: f64 = layers.iter().map(|&(i, o)| 2.0 * (n * i * o) as f64).sum();
+    let products: Vec<_> = layers
+        .iter()
+        .flat_map(|&(i, o)| layer_products(n, i, o))
+        .collect();
+    let matmul = candle_matmul_rate(&products)?;
+    let kernel = kernel_matmul_rate(&products)?;
+    let per_step = wall / steps.max(1) as f64;
+    let effective = 3.0 * fwd_flops / per_step / 1e9;
+    Ok(StepBench {
+        model: format!("student {}x{} (M = {})", m.depth, m.width, m.segments),
+        batch_rays: run.cfg.train.batch_rays,
+        hit_rays: per_step_rays,
+        samples_per_ray: 1,
+        steps,
+        seconds_per_step: per_step,
+        rays_per_s: per_step_rays / per_step,
+        forward_gflop_per_step: fwd_flops / 1e9,
+        effective_gflop_s: effective,
+        cores_busy: cpu / wall,
+        candle_matmul_gflop_s: matmul,
+        fraction_of_candle_matmul: effective / matmul,
+        kernel_matmul_gflop_s: kernel,
+    })
+}
+
+/// Dense layers `(in, out)` of the student.
+pub fn student_layers(cfg: &crate::student::StudentConfig) -> Vec<(usize, usize)> {
+    let w = cfg.width;
+    let mut layers = vec![(cfg.input_dim(), w)];
+    layers.extend(std::iter::repeat_n((w, w), 2 * cfg.n_blocks()));
+    layers.push((w, 3 * cfg.segments));
+    layers
+}

@@ -115,6 +115,37 @@ impl TeacherConfig {
         }
     }
 
+    /// Multiply-adds of the network per sample, counted as AD-NeRF computes it (the audio
+    /// code and view direction concatenated to every sample's input).
+    pub fn macs_per_sample(&self) -> usize {
+        let (w, input) = (self.width, self.pos_dim() + self.audio.dim);
+        let mut macs = 0;
+        for i in 0..self.depth {
+            if i > 0 {
+                macs += w * w;
+            }
+            if i == 0 || self.skips.contains(&(i - 1)) {
+                macs += input * w;
+            }
+        }
+        macs + w + w * w + (w + self.dir_dim()) * self.color_width + self.color_width * 3
+    }
+
+    /// Network evaluations per ray: the stratified samples, plus, with importance
+    /// sampling, the fine pass over all samples (AD-NeRF: 64 coarse + 192 fine).
+    pub fn evaluations_per_ray(&self) -> usize {
+        if self.n_importance == 0 {
+            self.n_samples
+        } else {
+            2 * self.n_samples + self.n_importance
+        }
+    }
+
+    /// Multiply-adds per rendered ray.
+    pub fn macs_per_ray(&self) -> usize {
+        self.macs_per_sample() * self.evaluations_per_ray()
+    }
+
     /// Width of the encoded point, `3 (1 + 2 L)`.
     pub fn pos_dim(&self) -> usize {
         3 * (1 + 2 * self.pos_freqs)

@@ -1,6 +1,7 @@
-//! Held-out evaluation: renders a split's frames with a trained model, scores them (PSNR,
-//! SSIM, mouth-region PSNR), and writes the renders, a side-by-side grid (ground truth |
-//! render | error heat map) and `metrics.json`.
+//! Held-out evaluation: renders a split's frames with trained models (the teacher, the
+//! student), scores them (PSNR, SSIM, head- and mouth-region PSNR), and writes the renders,
+//! a side-by-side grid (ground truth | each model's render and error heat map) and
+//! `metrics.json`.
 
 use std::path::{Path, PathBuf};
 
@@ -11,7 +12,88 @@ use serde::Serialize;
 
 use crate::checkpoint::save_json;
 use crate::error::{Error, Result};
+use crate::student_trainer::StudentRun;
 use crate::trainer::{TeacherRun, TrainData, region_psnrs};
+use nldf_core::dataset::Frame;
+
+/// A trained model that renders whole frames.
+pub trait FrameModel {
+    /// Short name: the folder of its renders (`teacher`, `student`).
+    fn label(&self) -> String;
+    /// What it is, for tables.
+    fn describe(&self) -> String;
+    /// Training steps done.
+    fn step(&self) -> usize;
+    /// Multiply-adds of one frame of `data` (rays that miss the head's bounds cost none).
+    fn macs_per_frame(&self, data: &TrainData, frame: &Frame) -> f64;
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb>;
+}
+
+/// Rays of a frame that hit the head's bounds.
+fn hit_rays(data: &TrainData, frame: &Frame) -> usize {
+    let ds = &data.dataset;
+    let rays = nldf_core::rays::rays_for_image(&ds.camera(frame));
+    (0..rays.len())
+        .filter(|&r| {
+            data.bounds
+                .intersect(rays.origin(r), rays.direction(r), ds.near, ds.far)
+                .is_some()
+        })
+        .count()
+}
+
+impl FrameModel for TeacherRun {
+    fn label(&self) -> String {
+        "teacher".into()
+    }
+    fn describe(&self) -> String {
+        let m = &self.cfg.model;
+        format!(
+            "teacher {}x{} ({} samples/ray)",
+            m.depth,
+            m.width,
+            m.n_samples + m.n_importance
+        )
+    }
+    fn step(&self) -> usize {
+        self.step
+    }
+    fn macs_per_frame(&self, data: &TrainData, frame: &Frame) -> f64 {
+        hit_rays(data, frame) as f64 * self.cfg.model.macs_per_ray() as f64
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        TeacherRun::render_frame(self, data, frame)
+    }
+}
+
+impl FrameModel for StudentRun {
+    fn label(&self) -> String {
+        self.dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "student".into())
+    }
+    fn describe(&self) -> String {
+        let m = &self.cfg.model;
+        let t = &self.cfg.train;
+        format!(
+            "student {}x{}{}{}",
+            m.depth,
+            m.width,
+            if t.distill { "" } else { ", pixels only" },
+            if t.pool { "" } else { ", no pool" }
+        )
+    }
+    fn step(&self) -> usize {
+        self.step
+    }
+    fn macs_per_frame(&self, data: &TrainData, frame: &Frame) -> f64 {
+        hit_rays(data, frame) as f64 * self.cfg.model.macs_per_ray() as f64
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        StudentRun::render_frame(self, data, frame)
+    }
+}
 
 /// Scores of one frame.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -36,6 +118,14 @@ pub struct EvalReport {
     pub mouth_psnr: Option<f64>,
     /// Seconds spent rendering, per frame.
     pub render_s_per_frame: f64,
+    /// Network multiply-adds per frame, on average (rays that miss the head cost none).
+    pub macs_per_frame: f64,
+}
+
+/// Everything one evaluation wrote.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Evaluation {
+    pub models: Vec<EvalReport>,
     /// Files written.
     pub files: Vec<PathBuf>,
 }
@@ -45,52 +135,66 @@ const GRID_ROWS: usize = 4;
 /// Gain of the error heat map (an absolute error of 0.25 is full scale).
 const ERROR_GAIN: f32 = 4.0;
 
-/// Evaluates the teacher of `run` on `split` (at most `max_frames`, spread evenly), writing
-/// into `out`: `teacher/<img_id>.png`, `grid.png` and `metrics.json`. `on_frame` is called
-/// after each rendered frame.
-pub fn eval_teacher(
-    run: &TeacherRun,
+/// Evaluates `models` on `split` (at most `max_frames`, spread evenly), writing into
+/// `out`: `<label>/<img_id>.png` per model, `grid.png` (ground truth, then each model's
+/// render and error map) and `metrics.json`. `on_frame` is called after each frame.
+pub fn eval_models(
+    models: &[&dyn FrameModel],
     data: &TrainData,
     split: Split,
     max_frames: Option<usize>,
     out: &Path,
     on_frame: &mut dyn FnMut(),
-) -> Result<EvalReport> {
+) -> Result<Evaluation> {
     let all = data.dataset.frames(split);
     if all.is_empty() {
         return Err(Error::Config(format!("the {split:?} split has no frames")));
     }
     let n = max_frames.unwrap_or(all.len()).clamp(1, all.len());
     let frames: Vec<_> = (0..n).map(|k| &all[k * all.len() / n]).collect();
-    let render_dir = out.join("teacher");
-    std::fs::create_dir_all(&render_dir).map_err(|e| Error::io(&render_dir, e))?;
-    let mut scores = Vec::with_capacity(n);
+    let mut scores: Vec<Vec<FrameScore>> = vec![Vec::with_capacity(n); models.len()];
+    let mut render_s = vec![0.0; models.len()];
+    let mut macs = vec![0.0; models.len()];
     let mut rows: Vec<Vec<ImageRgb>> = Vec::new();
     let mut files = Vec::new();
-    let mut render_s = 0.0;
+    for m in models {
+        let dir = out.join(m.label());
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    }
     for (k, frame) in frames.iter().enumerate() {
-        let started = std::time::Instant::now();
-        let render = run.render_frame(data, frame)?;
-        render_s += started.elapsed().as_secs_f64();
         let truth = data.dataset.load_image(frame)?;
         let regions = data.dataset.load_regions(frame)?;
-        let (face, mouth) = match &regions {
-            Some(r) => region_psnrs(&render, &truth, r)?,
-            None => (None, None),
-        };
-        scores.push(FrameScore {
-            img_id: frame.img_id,
-            psnr: psnr(&render, &truth)?,
-            ssim: ssim(&render, &truth)?,
-            face_psnr: face,
-            mouth_psnr: mouth,
-        });
-        let path = render_dir.join(format!("{}.png", frame.img_id));
-        render.save_png(&path)?;
-        files.push(path);
-        if k * GRID_ROWS / n != (k + 1) * GRID_ROWS / n || n <= GRID_ROWS {
-            let err = error_map(&render, &truth, ERROR_GAIN)?;
-            rows.push(vec![truth, render, err]);
+        let in_grid = k * GRID_ROWS / n != (k + 1) * GRID_ROWS / n || n <= GRID_ROWS;
+        let mut row = vec![truth.clone()];
+        for (mi, model) in models.iter().enumerate() {
+            let started = std::time::Instant::now();
+            let render = model.render_frame(data, frame)?;
+            render_s[mi] += started.elapsed().as_secs_f64();
+            macs[mi] += model.macs_per_frame(data, frame);
+            let (face, mouth) = match &regions {
+                Some(r) => region_psnrs(&render, &truth, r)?,
+                None => (None, None),
+            };
+            scores[mi].push(FrameScore {
+                img_id: frame.img_id,
+                psnr: psnr(&render, &truth)?,
+                ssim: ssim(&render, &truth)?,
+                face_psnr: face,
+                mouth_psnr: mouth,
+            });
+            let path = out
+                .join(model.label())
+                .join(format!("{}.png", frame.img_id));
+            render.save_png(&path)?;
+            files.push(path);
+            if in_grid {
+                let err = error_map(&render, &truth, ERROR_GAIN)?;
+                row.push(render);
+                row.push(err);
+            }
+        }
+        if in_grid {
+            rows.push(row);
         }
         on_frame();
     }
@@ -101,25 +205,28 @@ pub fn eval_teacher(
         let v: Vec<f64> = v.into_iter().filter(|x| x.is_finite()).collect();
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
-    let report = EvalReport {
-        model: format!(
-            "teacher {}x{} ({} samples/ray)",
-            run.cfg.model.depth, run.cfg.model.width, run.cfg.model.n_samples
-        ),
-        split: format!("{split:?}").to_lowercase(),
-        step: run.step,
-        psnr: finite_mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::INFINITY),
-        ssim: finite_mean(scores.iter().map(|s| s.ssim).collect()).unwrap_or(1.0),
-        face_psnr: finite_mean(scores.iter().filter_map(|s| s.face_psnr).collect()),
-        mouth_psnr: finite_mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
-        render_s_per_frame: render_s / n as f64,
-        frames: scores,
-        files: {
-            let mut f = files;
-            f.push(out.join("metrics.json"));
-            f
-        },
+    let reports: Vec<EvalReport> = models
+        .iter()
+        .zip(scores)
+        .enumerate()
+        .map(|(mi, (model, scores))| EvalReport {
+            model: model.describe(),
+            split: format!("{split:?}").to_lowercase(),
+            step: model.step(),
+            psnr: finite_mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::INFINITY),
+            ssim: finite_mean(scores.iter().map(|s| s.ssim).collect()).unwrap_or(1.0),
+            face_psnr: finite_mean(scores.iter().filter_map(|s| s.face_psnr).collect()),
+            mouth_psnr: finite_mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
+            render_s_per_frame: render_s[mi] / n as f64,
+            macs_per_frame: macs[mi] / n as f64,
+            frames: scores,
+        })
+        .collect();
+    files.push(out.join("metrics.json"));
+    let evaluation = Evaluation {
+        models: reports,
+        files,
     };
-    save_json(&out.join("metrics.json"), &report)?;
-    Ok(report)
+    save_json(&out.join("metrics.json"), &evaluation)?;
+    Ok(evaluation)
 }

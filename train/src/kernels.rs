@@ -184,12 +184,12 @@ mod avx512 {
                 let b2 = _mm512_loadu_ps(brow.add(32));
                 let b3 = _mm512_loadu_ps(brow.add(48));
                 let arow = t.a.ptr.add(p * cs);
-                let a0 = _mm512_set1_ps(*arow.add(0 * rs));
+                let a0 = _mm512_set1_ps(*arow);
                 c00 = _mm512_fmadd_ps(a0, b0, c00);
                 c01 = _mm512_fmadd_ps(a0, b1, c01);
                 c02 = _mm512_fmadd_ps(a0, b2, c02);
                 c03 = _mm512_fmadd_ps(a0, b3, c03);
-                let a1 = _mm512_set1_ps(*arow.add(1 * rs));
+                let a1 = _mm512_set1_ps(*arow.add(rs));
                 c10 = _mm512_fmadd_ps(a1, b0, c10);
                 c11 = _mm512_fmadd_ps(a1, b1, c11);
                 c12 = _mm512_fmadd_ps(a1, b2, c12);
@@ -894,9 +894,9 @@ mod tests {
         let mut z = vec![0.0; m * n];
         matmul_add(&x, m, k, &wt, n, &res, &mut z);
         for i in 0..m {
-            for j in 0..n {
+            for (j, &b) in bias.iter().enumerate() {
                 let e = i * n + j;
-                let want_y = (base[e] + bias[j] as f64 + res[e] as f64).max(0.0);
+                let want_y = (base[e] + b as f64 + res[e] as f64).max(0.0);
                 let want_z = base[e] + res[e] as f64;
                 assert!((y[e] as f64 - want_y).abs() < 1e-4, "residual ({i}, {j})");
                 assert!((z[e] as f64 - want_z).abs() < 1e-4, "matmul_add ({i}, {j})");

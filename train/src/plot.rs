@@ -29,8 +29,62 @@ fn register_font() {
     });
 }
 
+/// One line of a plot: PSNR (y) against wall-clock minutes (x).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    pub label: String,
+    pub color: (u8, u8, u8),
+    pub points: Vec<(f64, f64)>,
+    /// Thick with a dot per point (validation), or thin (training batches).
+    pub marked: bool,
+}
+
+/// A colour per series index (matplotlib's cycle).
+pub fn palette(i: usize) -> (u8, u8, u8) {
+    const COLORS: [(u8, u8, u8); 8] = [
+        (31, 119, 180),
+        (255, 127, 14),
+        (44, 160, 44),
+        (214, 39, 40),
+        (148, 103, 189),
+        (140, 86, 75),
+        (227, 119, 194),
+        (127, 127, 127),
+    ];
+    COLORS[i % COLORS.len()]
+}
+
 /// Draws PSNR against minutes for `rows` into `path` (written atomically), titled `title`.
 pub fn plot_training_curve(path: &Path, title: &str, rows: &[LogRow]) -> Result<()> {
+    let minutes = |r: &LogRow| r.elapsed_s / 60.0;
+    let mut series = vec![Series {
+        label: "training batch".into(),
+        color: (170, 170, 170),
+        points: rows.iter().map(|r| (minutes(r), r.psnr)).collect(),
+        marked: false,
+    }];
+    let picks: [(&str, usize, Pick); 3] = [
+        ("validation, whole image", 0, |r| r.val_psnr),
+        ("validation, head", 2, |r| r.val_face_psnr),
+        ("validation, mouth", 3, |r| r.val_mouth_psnr),
+    ];
+    for (label, color, pick) in picks {
+        series.push(Series {
+            label: label.into(),
+            color: palette(color),
+            points: rows
+                .iter()
+                .filter_map(|r| pick(r).map(|v| (minutes(r), v)))
+                .collect(),
+            marked: true,
+        });
+    }
+    plot_lines(path, title, &series)
+}
+
+/// Draws `series` (PSNR against wall-clock minutes) into `path` (written atomically);
+/// empty series are left out.
+pub fn plot_lines(path: &Path, title: &str, series: &[Series]) -> Result<()> {
     register_font();
     let (w, h) = SIZE;
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -38,14 +92,10 @@ pub fn plot_training_curve(path: &Path, title: &str, rows: &[LogRow]) -> Result<
     {
         let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let minutes = |r: &LogRow| r.elapsed_s / 60.0;
-        let x_max = rows.iter().map(minutes).fold(0.1f64, f64::max);
-        let values = rows.iter().flat_map(|r| {
-            [Some(r.psnr), r.val_psnr, r.val_face_psnr, r.val_mouth_psnr]
-                .into_iter()
-                .flatten()
-        });
-        let (lo, hi) = values
+        let all = || series.iter().flat_map(|s| s.points.iter().copied());
+        let x_max = all().map(|p| p.0).fold(0.1f64, f64::max);
+        let (lo, hi) = all()
+            .map(|p| p.1)
             .filter(|v| v.is_finite())
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                 (a.min(v), b.max(v))
@@ -69,48 +119,21 @@ pub fn plot_training_curve(path: &Path, title: &str, rows: &[LogRow]) -> Result<
             .label_style(("sans-serif", 14))
             .draw()
             .map_err(|e| fail(e.to_string()))?;
-        let train: Vec<(f64, f64)> = rows.iter().map(|r| (minutes(r), r.psnr)).collect();
-        chart
-            .draw_series(LineSeries::new(
-                train,
-                RGBColor(170, 170, 170).stroke_width(1),
-            ))
-            .map_err(|e| fail(e.to_string()))?
-            .label("training batch")
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RGBColor(170, 170, 170)));
-        let series: [(&str, RGBColor, Pick); 3] = [
-            ("validation, whole image", RGBColor(31, 119, 180), |r| {
-                r.val_psnr
-            }),
-            ("validation, head", RGBColor(44, 160, 44), |r| {
-                r.val_face_psnr
-            }),
-            ("validation, mouth", RGBColor(214, 39, 40), |r| {
-                r.val_mouth_psnr
-            }),
-        ];
-        for (label, color, pick) in series {
-            let points: Vec<(f64, f64)> = rows
-                .iter()
-                .filter_map(|r| pick(r).map(|v| (minutes(r), v)))
-                .collect();
-            if points.is_empty() {
-                continue;
-            }
+        for s in series.iter().filter(|s| !s.points.is_empty()) {
+            let color = RGBColor(s.color.0, s.color.1, s.color.2);
+            let width = if s.marked { 2 } else { 1 };
             chart
-                .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+                .draw_series(LineSeries::new(s.points.clone(), color.stroke_width(width)))
                 .map_err(|e| fail(e.to_string()))?
-                .label(label)
+                .label(s.label.as_str())
                 .legend(move |(x, y)| {
-                    PathElement::new([(x, y), (x + 20, y)], color.stroke_width(2))
+                    PathElement::new([(x, y), (x + 20, y)], color.stroke_width(width))
                 });
-            chart
-                .draw_series(
-                    points
-                        .into_iter()
-                        .map(|p| Circle::new(p, 3, color.filled())),
-                )
-                .map_err(|e| fail(e.to_string()))?;
+            if s.marked {
+                chart
+                    .draw_series(s.points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                    .map_err(|e| fail(e.to_string()))?;
+            }
         }
         chart
             .configure_series_labels()

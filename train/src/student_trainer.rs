@@ -512,8 +512,10 @@ impl StudentRun {
             } else {
                 &mut main_ids
             };
-            if !slot_of.contains_key(&(b.frame, *detached)) {
-                slot_of.insert((b.frame, *detached), ids.len() as u32);
+            if let std::collections::hash_map::Entry::Vacant(e) =
+                slot_of.entry((b.frame, *detached))
+            {
+                e.insert(ids.len() as u32);
                 ids.push(b.frame);
             }
         }
