@@ -769,8 +769,10 @@ pub fn relu_backward(
 /// Large scratch buffers kept between training steps: a fresh multi-megabyte allocation
 /// costs a page fault per 4 KiB page, more than the arithmetic that fills it.
 static POOL: std::sync::Mutex<Vec<Vec<f32>>> = std::sync::Mutex::new(Vec::new());
-/// Buffers the pool keeps at most.
-const POOL_SIZE: usize = 48;
+/// Buffers the pool keeps at most (the 88-layer student's backward holds about 90 at once).
+const POOL_SIZE: usize = 256;
+/// Values the pool keeps at most, over all its buffers (2 GiB of f32).
+const POOL_VALUES: usize = 1 << 29;
 
 /// A buffer of exactly `len` values from the pool. Its contents are unspecified (zeros or
 /// an earlier step's values): only for outputs that are written in full.
@@ -802,10 +804,11 @@ pub fn give_buffer(v: Vec<f32>) {
     if v.capacity() < 1 << 16 {
         return;
     }
-    if let Ok(mut pool) = POOL.lock()
-        && pool.len() < POOL_SIZE
-    {
-        pool.push(v);
+    if let Ok(mut pool) = POOL.lock() {
+        let held: usize = pool.iter().map(Vec::capacity).sum();
+        if pool.len() < POOL_SIZE && held + v.capacity() <= POOL_VALUES {
+            pool.push(v);
+        }
     }
 }
 
