@@ -134,6 +134,29 @@ pub fn run(cmd: TrainCommand) -> Result<()> {
     }
 }
 
+/// Refuses to overwrite a trained stage without `--resume`, or to resume a missing one.
+fn check_resume(dir: &std::path::Path, what: &str, resume: bool) -> Result<()> {
+    let exists = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
+    if exists && !resume {
+        anyhow::bail!(
+            "{} already holds a {what}; pass --resume to continue it or choose another --run",
+            dir.display()
+        );
+    }
+    if resume && !exists {
+        anyhow::bail!("{} holds no {what} checkpoint to resume", dir.display());
+    }
+    Ok(())
+}
+
+/// Prints the files a stage wrote.
+fn list_outputs(dir: &std::path::Path, files: &[&str]) {
+    println!("wrote to {}:", dir.display());
+    for f in files {
+        println!("  {}", dir.join(f).display());
+    }
+}
+
 /// Sets the returned flag on Ctrl-C (one handler per process, shared by every stage).
 fn stop_on_ctrl_c() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
     use std::sync::atomic::{AtomicBool, Ordering};
@@ -215,16 +238,7 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
 
     let dir = args.run.join(&args.name);
     let teacher_dir = args.run.join("teacher");
-    let exists = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
-    if exists && !args.resume {
-        anyhow::bail!(
-            "{} already holds a student; pass --resume to continue it or choose another --run",
-            dir.display()
-        );
-    }
-    if args.resume && !exists {
-        anyhow::bail!("{} holds no student checkpoint to resume", dir.display());
-    }
+    check_resume(&dir, "student", args.resume)?;
     let cfg = if args.resume {
         None
     } else {
@@ -293,17 +307,19 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
     })?;
     bar.finish_and_clear();
     let scores = train_with_progress("student", &mut run, &data)?;
-    println!("wrote to {}:", dir.display());
-    for f in [
-        "config.json",
-        "render.json",
-        "model.safetensors",
-        "train_state.safetensors",
-        "log.csv",
-        "training_curve.png",
-    ] {
-        println!("  {}", dir.join(f).display());
-    }
+    list_outputs(
+        &dir,
+        &[
+            "config.json",
+            "render.json",
+            "model.safetensors",
+            "train_state.safetensors",
+            "pool.safetensors",
+            "targets.safetensors",
+            "log.csv",
+            "training_curve.png",
+        ],
+    );
     Ok(scores)
 }
 
@@ -313,16 +329,7 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
     use nldf_train::trainer::{TeacherRun, TrainData};
 
     let dir = args.run.join("teacher");
-    let exists = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
-    if exists && !args.resume {
-        anyhow::bail!(
-            "{} already holds a teacher; pass --resume to continue it or choose another --run",
-            dir.display()
-        );
-    }
-    if args.resume && !exists {
-        anyhow::bail!("{} holds no teacher checkpoint to resume", dir.display());
-    }
+    check_resume(&dir, "teacher", args.resume)?;
     let cfg = if args.resume {
         None
     } else {
@@ -360,15 +367,15 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
         run.cfg.train.time_budget_s = b;
     }
     train_with_progress("teacher", &mut run, &data)?;
-    println!("wrote to {}:", dir.display());
-    for f in [
-        "config.json",
-        "model.safetensors",
-        "train_state.safetensors",
-        "log.csv",
-        "training_curve.png",
-    ] {
-        println!("  {}", dir.join(f).display());
-    }
+    list_outputs(
+        &dir,
+        &[
+            "config.json",
+            "model.safetensors",
+            "train_state.safetensors",
+            "log.csv",
+            "training_curve.png",
+        ],
+    );
     Ok(())
 }

@@ -179,6 +179,80 @@ pub fn kernel_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
     )
 }
 
+/// Runs `warmup` untimed calls of `step`, then `steps` timed ones; `step` returns how many
+/// rays it processed. Returns the timed rays, wall seconds and cores busy.
+fn timed_steps(
+    warmup: usize,
+    steps: usize,
+    mut step: impl FnMut() -> Result<usize>,
+) -> Result<(usize, f64, f64)> {
+    for _ in 0..warmup {
+        step()?;
+    }
+    let cpu0 = cpu_seconds();
+    let start = Instant::now();
+    let mut rays = 0;
+    for _ in 0..steps {
+        rays += step()?;
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = cpu_seconds()
+        .zip(cpu0)
+        .map(|(b, a)| b - a)
+        .unwrap_or(f64::NAN);
+    Ok((rays, wall, cpu / wall))
+}
+
+/// What a timed run of training steps measured, before the rates are worked out.
+struct Timed {
+    model: String,
+    batch_rays: usize,
+    /// Rays per step that reached the network.
+    rays_per_step: f64,
+    samples_per_ray: usize,
+    steps: usize,
+    wall: f64,
+    cores_busy: f64,
+    /// The dense layers `(in, out)` every row of the step passes through.
+    layers: Vec<(usize, usize)>,
+}
+
+impl Timed {
+    /// The benchmark's rates, with the matmul rates at the step's own shapes.
+    fn report(self) -> Result<StepBench> {
+        let rows = (self.rays_per_step * self.samples_per_ray as f64).round() as usize;
+        let fwd_flops: f64 = self
+            .layers
+            .iter()
+            .map(|&(i, o)| 2.0 * (rows * i * o) as f64)
+            .sum();
+        let products: Vec<_> = self
+            .layers
+            .iter()
+            .flat_map(|&(i, o)| layer_products(rows, i, o))
+            .collect();
+        let matmul = candle_matmul_rate(&products)?;
+        let kernel = kernel_matmul_rate(&products)?;
+        let per_step = self.wall / self.steps.max(1) as f64;
+        let effective = 3.0 * fwd_flops / per_step / 1e9;
+        Ok(StepBench {
+            model: self.model,
+            batch_rays: self.batch_rays,
+            hit_rays: self.rays_per_step,
+            samples_per_ray: self.samples_per_ray,
+            steps: self.steps,
+            seconds_per_step: per_step,
+            rays_per_s: self.batch_rays as f64 / per_step,
+            forward_gflop_per_step: fwd_flops / 1e9,
+            effective_gflop_s: effective,
+            cores_busy: self.cores_busy,
+            candle_matmul_gflop_s: matmul,
+            fraction_of_candle_matmul: effective / matmul,
+            kernel_matmul_gflop_s: kernel,
+        })
+    }
+}
+
 /// Times `steps` teacher training steps after `warmup` untimed ones.
 pub fn bench_teacher_step(
     run: &mut TeacherRun,
@@ -186,109 +260,53 @@ pub fn bench_teacher_step(
     warmup: usize,
     steps: usize,
 ) -> Result<StepBench> {
-    for _ in 0..warmup {
+    let (hits, wall, cores_busy) = timed_steps(warmup, steps, || {
         run.train_step(data)?;
-    }
-    let cpu0 = cpu_seconds();
-    let start = Instant::now();
-    let mut hits = 0usize;
-    for _ in 0..steps {
-        run.train_step(data)?;
-        hits += run.last_hit_rays;
-    }
-    let wall = start.elapsed().as_secs_f64();
-    let cpu = cpu_seconds()
-        .zip(cpu0)
-        .map(|(b, a)| b - a)
-        .unwrap_or(f64::NAN);
+        Ok(run.last_hit_rays)
+    })?;
     let cfg = &run.cfg;
-    let hit_rays = hits as f64 / steps.max(1) as f64;
-    let samples = (hit_rays * cfg.model.n_samples as f64).round() as usize;
-    let layers = teacher_sample_layers(&cfg.model);
-    let fwd_flops: f64 = layers
-        .iter()
-        .map(|&(i, o)| 2.0 * (samples * i * o) as f64)
-        .sum();
-    let products: Vec<_> = layers
-        .iter()
-        .flat_map(|&(i, o)| layer_products(samples, i, o))
-        .collect();
-    let matmul = candle_matmul_rate(&products)?;
-    let kernel = kernel_matmul_rate(&products)?;
-    let per_step = wall / steps.max(1) as f64;
-    let effective = 3.0 * fwd_flops / per_step / 1e9;
-    Ok(StepBench {
+    Timed {
         model: format!(
             "teacher {}x{} ({} samples/ray)",
             cfg.model.depth, cfg.model.width, cfg.model.n_samples
         ),
         batch_rays: cfg.train.batch_rays,
-        hit_rays,
+        rays_per_step: hits as f64 / steps.max(1) as f64,
         samples_per_ray: cfg.model.n_samples,
         steps,
-        seconds_per_step: per_step,
-        rays_per_s: cfg.train.batch_rays as f64 / per_step,
-        forward_gflop_per_step: fwd_flops / 1e9,
-        effective_gflop_s: effective,
-        cores_busy: cpu / wall,
-        candle_matmul_gflop_s: matmul,
-        fraction_of_candle_matmul: effective / matmul,
-        kernel_matmul_gflop_s: kernel,
-    })
+        wall,
+        cores_busy,
+        layers: teacher_sample_layers(&cfg.model),
+    }
+    .report()
 }
 
 /// Times `steps` student training steps after `warmup` untimed ones. The run must be
-/// prepared ([`crate::student_trainer::StudentRun::prepare`]). Pool beams count as rays:
-/// they pass through the network like the others.
+/// prepared ([`crate::student_trainer::StudentRun::prepare`]). Pool beams count as rays
+/// (in `hit_rays` and the FLOPs; `rays_per_s` counts the main batch only): they pass
+/// through the network like the others.
 pub fn bench_student_step(
     run: &mut crate::student_trainer::StudentRun,
     data: &TrainData,
     warmup: usize,
     steps: usize,
 ) -> Result<StepBench> {
-    for _ in 0..warmup {
-        run.train_step(data)?;
-    }
-    let cpu0 = cpu_seconds();
-    let start = Instant::now();
-    let mut rays = 0usize;
-    for _ in 0..steps {
-        let s = run.train_step(data)?;
-        rays += run.cfg.train.batch_rays + s.pool_beams;
-    }
-    let wall = start.elapsed().as_secs_f64();
-    let cpu = cpu_seconds()
-        .zip(cpu0)
-        .map(|(b, a)| b - a)
-        .unwrap_or(f64::NAN);
+    let batch = run.cfg.train.batch_rays;
+    let (rays, wall, cores_busy) = timed_steps(warmup, steps, || {
+        Ok(batch + run.train_step(data)?.pool_beams)
+    })?;
     let m = &run.cfg.model;
-    let per_step_rays = rays as f64 / steps.max(1) as f64;
-    let n = per_step_rays.round() as usize;
-    let layers = student_layers(m);
-    let fwd_flops: f64 = layers.iter().map(|&(i, o)| 2.0 * (n * i * o) as f64).sum();
-    let products: Vec<_> = layers
-        .iter()
-        .flat_map(|&(i, o)| layer_products(n, i, o))
-        .collect();
-    let matmul = candle_matmul_rate(&products)?;
-    let kernel = kernel_matmul_rate(&products)?;
-    let per_step = wall / steps.max(1) as f64;
-    let effective = 3.0 * fwd_flops / per_step / 1e9;
-    Ok(StepBench {
+    Timed {
         model: format!("student {}x{} (M = {})", m.depth, m.width, m.segments),
-        batch_rays: run.cfg.train.batch_rays,
-        hit_rays: per_step_rays,
+        batch_rays: batch,
+        rays_per_step: rays as f64 / steps.max(1) as f64,
         samples_per_ray: 1,
         steps,
-        seconds_per_step: per_step,
-        rays_per_s: per_step_rays / per_step,
-        forward_gflop_per_step: fwd_flops / 1e9,
-        effective_gflop_s: effective,
-        cores_busy: cpu / wall,
-        candle_matmul_gflop_s: matmul,
-        fraction_of_candle_matmul: effective / matmul,
-        kernel_matmul_gflop_s: kernel,
-    })
+        wall,
+        cores_busy,
+        layers: student_layers(m),
+    }
+    .report()
 }
 
 /// Dense layers `(in, out)` of the student.

@@ -18,7 +18,7 @@ const ROW_CHUNK: usize = MR * 8;
 /// Reduction rows per pass over a row chunk, so that a `[KC, NR]` panel of B stays in L1.
 const KC: usize = 128;
 /// Rows per partial sum of the reductions over rows (fixed, for determinism).
-const REDUCE_CHUNK: usize = 2048;
+const REDUCE_CHUNK: usize = 512;
 /// Rows of the reduction dimension kept hot in cache at a time in the weight gradient.
 const K_BLOCK: usize = 256;
 

@@ -19,7 +19,6 @@ use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr_from_mse;
 use nldf_core::rays::{Rays, rays_for_image};
-use nldf_core::region::Region;
 use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
 use rand::seq::index::sample as sample_indices;
 use rand::{Rng, SeedableRng};
@@ -36,7 +35,7 @@ use crate::pool::{BeamPool, PoolEntry};
 use crate::student::{Student, student};
 use crate::trainer::{
     CheckpointParts, Schedule, Scores, TeacherRun, TrainData, TrainingRun, open_checkpoint,
-    save_checkpoint, score_frames,
+    save_checkpoint, validate_frames,
 };
 
 /// The teacher's cached segment colours beside a student checkpoint.
@@ -641,22 +640,7 @@ impl StudentRun {
 
     /// Renders `n` validation frames spread evenly over the split and scores them.
     pub fn validate(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        let frames = data.dataset.frames(Split::Val);
-        let frames = if frames.is_empty() {
-            data.dataset.frames(Split::Train)
-        } else {
-            frames
-        };
-        let n = n.clamp(1, frames.len());
-        let mut pairs: Vec<(ImageRgb, ImageRgb, Option<Vec<Region>>)> = Vec::with_capacity(n);
-        for k in 0..n {
-            let frame = &frames[k * frames.len() / n];
-            let render = self.render_frame(data, frame)?;
-            let truth = data.dataset.load_image(frame)?;
-            let regions = data.dataset.load_regions(frame)?;
-            pairs.push((render, truth, regions));
-        }
-        score_frames(&pairs)
+        validate_frames(data, n, &|f| self.render_frame(data, f))
     }
 
     /// Writes the checkpoint: config, pool, optimizer state and weights.

@@ -127,6 +127,30 @@ pub fn region_psnrs(
     ))
 }
 
+/// Renders `n` validation frames spread evenly over the validation split (the training
+/// split when it is empty) with `render` and scores them.
+pub fn validate_frames(
+    data: &TrainData,
+    n: usize,
+    render: &dyn Fn(&Frame) -> Result<ImageRgb>,
+) -> Result<Scores> {
+    let frames = data.dataset.frames(Split::Val);
+    let frames = if frames.is_empty() {
+        data.dataset.frames(Split::Train)
+    } else {
+        frames
+    };
+    let n = n.clamp(1, frames.len().max(1));
+    let mut pairs = Vec::with_capacity(n);
+    for k in 0..n.min(frames.len()) {
+        let frame = &frames[k * frames.len() / n];
+        let truth = data.dataset.load_image(frame)?;
+        let regions = data.dataset.load_regions(frame)?;
+        pairs.push((render(frame)?, truth, regions));
+    }
+    score_frames(&pairs)
+}
+
 /// Scores of rendered frames against their ground truth and optional region masks.
 pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Result<Scores> {
     let (mut p, mut s) = (0.0, 0.0);
@@ -340,22 +364,7 @@ impl TeacherRun {
 
     /// Renders `n` validation frames spread evenly over the split and scores them.
     pub fn validate(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        let frames = data.dataset.frames(Split::Val);
-        let frames = if frames.is_empty() {
-            data.dataset.frames(Split::Train)
-        } else {
-            frames
-        };
-        let n = n.clamp(1, frames.len());
-        let mut pairs = Vec::with_capacity(n);
-        for k in 0..n {
-            let frame = &frames[k * frames.len() / n];
-            let render = self.render_frame(data, frame)?;
-            let truth = data.dataset.load_image(frame)?;
-            let regions = data.dataset.load_regions(frame)?;
-            pairs.push((render, truth, regions));
-        }
-        score_frames(&pairs)
+        validate_frames(data, n, &|f| self.render_frame(data, f))
     }
 
     /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.
