@@ -6,6 +6,7 @@ mod demo_cmd;
 mod eval_cmd;
 mod export_cmd;
 mod progress;
+mod render_cmd;
 mod synth_cmd;
 mod train_cmd;
 
@@ -36,6 +37,9 @@ enum Command {
     Eval(eval_cmd::EvalArgs),
     /// Export a run's trained student (with its audio encoder) as one ONNX model.
     Export(export_cmd::ExportArgs),
+    /// Render a talking-head video from an exported model and a WAV file (PNG frames, and
+    /// an MP4 with the audio when ffmpeg is on the PATH).
+    Render(render_cmd::RenderArgs),
     /// The paper's ablations on one dataset: distillation, the beam pool, depth, and a
     /// pixels-only student at the same total wall time.
     Ablate(ablate_cmd::AblateArgs),
@@ -52,6 +56,7 @@ fn main() -> ExitCode {
         Command::Train(cmd) => train_cmd::run(cmd),
         Command::Eval(args) => eval_cmd::run(args),
         Command::Export(args) => export_cmd::run(args),
+        Command::Render(args) => render_cmd::run(args),
         Command::Ablate(args) => ablate_cmd::run(args),
         Command::Bench(cmd) => bench_cmd::run(cmd),
     };

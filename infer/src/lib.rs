@@ -1,3 +1,27 @@
 //! nldf-infer: renders talking-head frames and video from an exported ONNX model on the CPU,
 //! with tract (default, pure Rust) or onnxruntime (the `ort` crate, loaded at run time).
-//! Builds on nldf-core for rays, beams and audio features; never depends on candle.
+//! Builds on nldf-core for rays, bounds and audio features and on nldf-export for the ONNX
+//! contract; never depends on candle.
+//!
+//! [`backend`] is the network behind one trait ([`tract_backend`], [`ort_backend`] with the
+//! `ort` feature, the library found by [`ort_library`]); [`frame`] renders one frame from a
+//! pose and an audio neighbourhood, sending only the rays that meet the head's bounds
+//! through the network; [`audio`] and [`poses`] make each frame's inputs; [`video`] renders
+//! a whole WAV into PNG frames and an MP4, written through a staging folder ([`output`]).
+
+pub mod audio;
+pub mod backend;
+pub mod error;
+pub mod frame;
+#[cfg(feature = "ort")]
+pub mod ort_backend;
+pub mod ort_library;
+pub mod output;
+pub mod poses;
+pub mod tract_backend;
+pub mod video;
+
+pub use backend::{Backend, BackendKind, BackendOptions, RayOutputs, backend_for, open_backend};
+pub use error::{Error, Result};
+pub use frame::{Frame, FrameRenderer};
+pub use video::{VideoJob, VideoPlan, VideoReport};

@@ -28,23 +28,23 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// Parity tolerance of the issue: max abs difference on every output value.
-const TOL: f32 = 1e-4;
+pub(crate) const TOL: f32 = 1e-4;
 
 /// A student run folder and the candle student whose weights it holds.
-struct Run {
+pub(crate) struct Run {
     _dir: tempfile::TempDir,
-    root: PathBuf,
-    student: Student,
+    pub(crate) root: PathBuf,
+    pub(crate) student: Student,
     varmap: candle_nn::VarMap,
-    spec: RenderSpec,
+    pub(crate) spec: RenderSpec,
 }
 
 impl Run {
-    fn student_dir(&self) -> PathBuf {
+    pub(crate) fn student_dir(&self) -> PathBuf {
         self.root.join("student")
     }
 
-    fn export(&self, weights: WeightType) -> PathBuf {
+    pub(crate) fn export(&self, weights: WeightType) -> PathBuf {
         let out = self.root.join(match weights {
             WeightType::F32 => "model.onnx",
             WeightType::F16 => "model_fp16.onnx",
@@ -99,7 +99,7 @@ fn spec_for(cfg: &StudentConfig) -> RenderSpec {
 
 /// Writes `RUN/student/` for a seeded, untrained student of shape `cfg`, as the trainer
 /// leaves it: weights with step metadata, config.json, render.json and the background.
-fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
+pub(crate) fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("run");
     let student_dir = root.join("student");
@@ -135,7 +135,7 @@ fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
 }
 
 /// `n` rays from points around the camera distance towards the head, some missing it.
-fn random_rays(n: usize, seed: u64) -> Rays {
+pub(crate) fn random_rays(n: usize, seed: u64) -> Rays {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut rays = Rays::with_capacity(n);
     for _ in 0..n {
@@ -157,7 +157,7 @@ fn random_rays(n: usize, seed: u64) -> Rays {
 }
 
 /// A random audio track of `n_frames` windows for `cfg`.
-fn random_audio(cfg: &StudentConfig, n_frames: usize, seed: u64) -> AudioWindows {
+pub(crate) fn random_audio(cfg: &StudentConfig, n_frames: usize, seed: u64) -> AudioWindows {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (window, n_features) = (cfg.audio.window, cfg.audio.n_features);
     AudioWindows {
@@ -171,7 +171,7 @@ fn random_audio(cfg: &StudentConfig, n_frames: usize, seed: u64) -> AudioWindows
 }
 
 /// The candle reference: pixels `[n, 3]` and segments `[n, m, 3]`, flat.
-fn candle_render(run: &Run, rays: &Rays, audio: &[f32]) -> (Vec<f32>, Vec<f32>) {
+pub(crate) fn candle_render(run: &Run, rays: &Rays, audio: &[f32]) -> (Vec<f32>, Vec<f32>) {
     let a = &run.student.cfg.audio;
     let nb = Tensor::from_vec(
         audio.to_vec(),
@@ -223,7 +223,7 @@ fn tract_render(
     (flat(&out[0]), flat(&out[1]))
 }
 
-fn max_diff(a: &[f32], b: &[f32]) -> f32 {
+pub(crate) fn max_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len(), "output lengths");
     a.iter()
         .zip(b)
@@ -236,7 +236,7 @@ fn max_diff(a: &[f32], b: &[f32]) -> f32 {
 
 /// Shapes exercised: the tiny preset (attention on) and the paper's beam (K = 16, L = 10)
 /// on a narrow network without attention, other audio sizes.
-fn configs() -> Vec<StudentConfig> {
+pub(crate) fn configs() -> Vec<StudentConfig> {
     let mut paper_beam = StudentConfig::tiny();
     paper_beam.beam = Default::default();
     paper_beam.depth = 4;
@@ -347,7 +347,7 @@ fn export_writes_the_contract() {
 }
 
 /// A valid ONNX model (an Identity) with the given metadata.
-fn foreign_model(metadata: Vec<StringStringEntryProto>) -> Vec<u8> {
+pub(crate) fn foreign_model(metadata: Vec<StringStringEntryProto>) -> Vec<u8> {
     use nldf_export::graph::{Dim, GraphBuilder};
     use nldf_export::onnx::{DataType, OperatorSetIdProto};
     let mut g = GraphBuilder::new(WeightType::F32);
@@ -473,7 +473,7 @@ fn export_bad_checkpoints_name_their_file() {
 /// The project's Python (`.venv`, made by `scripts/python_env.sh`) with onnx, onnxruntime
 /// and numpy, or `None` (after saying so) when it is missing outside CI. Under CI a missing
 /// environment fails the test.
-fn python() -> Option<PathBuf> {
+pub(crate) fn python() -> Option<PathBuf> {
     let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../.venv/bin/python");
     let ok = Command::new(&venv)
         .args(["-c", "import onnx, onnxruntime, numpy"])
@@ -493,7 +493,7 @@ fn python() -> Option<PathBuf> {
     None
 }
 
-fn run_python(python: &Path, args: &[&str]) -> String {
+pub(crate) fn run_python(python: &Path, args: &[&str]) -> String {
     let out = Command::new(python).args(args).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();
     assert!(
@@ -504,7 +504,7 @@ fn run_python(python: &Path, args: &[&str]) -> String {
     stdout
 }
 
-fn write_npy(path: &Path, shape: &[u64], data: &[f32]) {
+pub(crate) fn write_npy(path: &Path, shape: &[u64], data: &[f32]) {
     use npyz::WriterBuilder;
     let mut buf = Vec::new();
     let mut w = npyz::WriteOptions::new()
@@ -518,14 +518,14 @@ fn write_npy(path: &Path, shape: &[u64], data: &[f32]) {
     std::fs::write(path, buf).unwrap();
 }
 
-fn read_npy(path: &Path) -> (Vec<u64>, Vec<f32>) {
+pub(crate) fn read_npy(path: &Path) -> (Vec<u64>, Vec<f32>) {
     let bytes = std::fs::read(path).unwrap();
     let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
     let shape = npy.shape().to_vec();
     (shape, npy.into_vec::<f32>().unwrap())
 }
 
-const PYTHON_PARITY: &str = r#"
+pub(crate) const PYTHON_PARITY: &str = r#"
 import json, sys
 import numpy as np, onnx, onnxruntime as ort
 path, folder = sys.argv[1], sys.argv[2]

@@ -3,6 +3,8 @@
 mod audio;
 mod dataset;
 mod export;
+mod export_ort;
+mod infer;
 mod metrics;
 mod rendering;
 mod student;

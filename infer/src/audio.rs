@@ -1,0 +1,62 @@
+//! The audio input of each frame, made from a WAV file with the training code
+//! (`nldf_core::audio`) and the feature settings the model's metadata records.
+
+use std::path::Path;
+
+use nldf_core::audio::{AudioWindows, Waveform, audio_windows, read_wav};
+use nldf_export::contract::ModelInfo;
+
+use crate::error::{Error, Result};
+
+/// The feature windows of `wave` for `info`'s model: one `[window, n_features]` block per
+/// video frame at the model's fps.
+///
+/// # Shapes
+/// - returns `[n_video_frames, window, n_features]`
+pub fn windows_for(info: &ModelInfo, wave: &Waveform) -> Result<AudioWindows> {
+    let features = &info.spec.features;
+    if features.n_mels != info.audio.n_features || features.window != info.audio.window {
+        return Err(Error::Argument(format!(
+            "the model's feature settings make [{}, {}] windows but its audio input takes [{}, \
+             {}]",
+            features.window, features.n_mels, info.audio.window, info.audio.n_features
+        )));
+    }
+    Ok(audio_windows(wave, info.spec.fps, features)?)
+}
+
+/// Reads `path` and makes its feature windows for `info`'s model; a WAV too short for one
+/// video frame is an error naming the file.
+pub fn windows_from_wav(info: &ModelInfo, path: &Path) -> Result<AudioWindows> {
+    let wave = read_wav(path)?;
+    let windows = windows_for(info, &wave)?;
+    if windows.n_frames == 0 {
+        return Err(Error::Core(nldf_core::Error::invalid(
+            path,
+            format!(
+                "{:.3} s of audio is shorter than one video frame (1/{} s)",
+                wave.seconds(),
+                info.spec.fps
+            ),
+        )));
+    }
+    Ok(windows)
+}
+
+/// The neighbourhood of video frame `f`: the windows of frames `f - att_frames/2 ..`,
+/// clamped to the track (AD-NeRF's `smo_size` windows), as the model's audio input.
+///
+/// # Shapes
+/// - returns `[att_frames, window, n_features]` flat
+pub fn neighbourhood(audio: &AudioWindows, f: usize, att_frames: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(att_frames * audio.window * audio.n_features);
+    if audio.n_frames == 0 {
+        return out;
+    }
+    for s in 0..att_frames {
+        let g = (f as isize + s as isize - (att_frames / 2) as isize)
+            .clamp(0, audio.n_frames as isize - 1);
+        out.extend_from_slice(audio.frame(g as usize));
+    }
+    out
+}

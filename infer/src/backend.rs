@@ -1,0 +1,204 @@
+//! The network as a function of rays and audio, behind one trait so that the frame renderer
+//! does not care which runtime evaluates it: [`TractBackend`](crate::tract_backend) (pure
+//! Rust, the default) or the onnxruntime backend (cargo feature `ort`).
+
+use std::path::Path;
+
+use nldf_export::ExportedModel;
+use nldf_export::contract::ModelInfo;
+
+use crate::error::{Error, Result};
+
+/// Which runtime evaluates the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// tract: pure Rust, always built.
+    Tract,
+    /// onnxruntime through the `ort` crate, loaded at run time (cargo feature `ort`).
+    Ort,
+}
+
+impl BackendKind {
+    /// The runtime's name as the CLI spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Tract => "tract",
+            BackendKind::Ort => "ort",
+        }
+    }
+}
+
+impl std::fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How a backend runs the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BackendOptions {
+    /// Rays per network call: larger batches use the matrix units better, smaller ones
+    /// waste less on a frame's last, partial batch.
+    pub batch_size: usize,
+    /// Threads for the matrix products (1 = the calling thread only).
+    pub threads: usize,
+}
+
+impl Default for BackendOptions {
+    fn default() -> Self {
+        BackendOptions {
+            batch_size: 4096,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        }
+    }
+}
+
+impl BackendOptions {
+    /// Checks the options.
+    pub fn validate(&self) -> Result<()> {
+        if self.batch_size == 0 || self.batch_size > 1 << 20 {
+            return Err(Error::Argument(format!(
+                "batch size must be 1 to {}, got {}",
+                1 << 20,
+                self.batch_size
+            )));
+        }
+        if self.threads == 0 || self.threads > 1024 {
+            return Err(Error::Argument(format!(
+                "threads must be 1 to 1024, got {}",
+                self.threads
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The network's outputs for a set of rays.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RayOutputs {
+    /// Pixel colours, `[n_rays, 3]` (paper Eq. 7).
+    pub rgb: Vec<f32>,
+    /// Segment colours, `[n_rays, M, 3]`, summing to `rgb`.
+    pub segments: Vec<f32>,
+}
+
+/// A runtime holding one exported model.
+pub trait Backend {
+    /// Which runtime this is.
+    fn kind(&self) -> BackendKind;
+
+    /// The model's metadata.
+    fn info(&self) -> &ModelInfo;
+
+    /// Rays per network call.
+    fn batch_size(&self) -> usize;
+
+    /// Runs the network on one batch of at most [`Backend::batch_size`] rays with one audio
+    /// neighbourhood.
+    ///
+    /// # Shapes
+    /// - `origins`, `directions`: `[n_rays, 3]` flat, `n_rays <= batch_size`
+    /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_export::contract`)
+    /// - returns `rgb` `[n_rays, 3]` and `segments` `[n_rays, M, 3]`
+    fn run_batch(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs>;
+
+    /// Runs the network on any number of rays, batch by batch.
+    ///
+    /// # Shapes
+    /// - `origins`, `directions`: `[n_rays, 3]` flat
+    /// - `audio`: `[att_frames, window, n_features]` flat
+    /// - returns `rgb` `[n_rays, 3]` and `segments` `[n_rays, M, 3]`
+    fn run(&mut self, origins: &[f32], directions: &[f32], audio: &[f32]) -> Result<RayOutputs> {
+        check_inputs(self.info(), origins, directions, audio)?;
+        let n = origins.len() / 3;
+        let m = self.info().segments;
+        let mut out = RayOutputs {
+            rgb: Vec::with_capacity(3 * n),
+            segments: Vec::with_capacity(3 * m * n),
+        };
+        let batch = self.batch_size();
+        for start in (0..n).step_by(batch) {
+            let end = (start + batch).min(n);
+            let part = self.run_batch(
+                &origins[3 * start..3 * end],
+                &directions[3 * start..3 * end],
+                audio,
+            )?;
+            out.rgb.extend_from_slice(&part.rgb);
+            out.segments.extend_from_slice(&part.segments);
+        }
+        Ok(out)
+    }
+}
+
+/// Checks the lengths of a call's inputs against the model.
+pub fn check_inputs(
+    info: &ModelInfo,
+    origins: &[f32],
+    directions: &[f32],
+    audio: &[f32],
+) -> Result<()> {
+    if !origins.len().is_multiple_of(3) || origins.len() != directions.len() {
+        return Err(Error::Argument(format!(
+            "rays: origins hold {} values and directions {}, expected equal multiples of 3",
+            origins.len(),
+            directions.len()
+        )));
+    }
+    if audio.len() != info.audio.len() {
+        return Err(Error::Argument(format!(
+            "audio: expected {:?} = {} values, got {}",
+            info.audio.shape(),
+            info.audio.len(),
+            audio.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Opens the model at `path` (checked by `nldf_export::read_model`) in the runtime `kind`.
+pub fn open_backend(
+    path: &Path,
+    kind: BackendKind,
+    options: BackendOptions,
+) -> Result<Box<dyn Backend>> {
+    let model = nldf_export::read_model(path)?;
+    backend_for(&model, kind, options)
+}
+
+/// The runtime `kind` holding an already read model.
+pub fn backend_for(
+    model: &ExportedModel,
+    kind: BackendKind,
+    options: BackendOptions,
+) -> Result<Box<dyn Backend>> {
+    options.validate()?;
+    match kind {
+        BackendKind::Tract => Ok(Box::new(crate::tract_backend::TractBackend::new(
+            model, options,
+        )?)),
+        BackendKind::Ort => open_ort(model, options),
+    }
+}
+
+#[cfg(feature = "ort")]
+fn open_ort(model: &ExportedModel, options: BackendOptions) -> Result<Box<dyn Backend>> {
+    Ok(Box::new(crate::ort_backend::OrtBackend::new(
+        model, options,
+    )?))
+}
+
+#[cfg(not(feature = "ort"))]
+fn open_ort(_model: &ExportedModel, _options: BackendOptions) -> Result<Box<dyn Backend>> {
+    Err(Error::OrtLibrary(
+        "this build has no onnxruntime backend: rebuild with the cargo feature `ort` \
+         (e.g. `cargo build -p nldf-infer --features ort`) or use --backend tract"
+            .into(),
+    ))
+}

@@ -1,0 +1,137 @@
+//! One frame from a pose and an audio neighbourhood: rays through every pixel (AD-NeRF's
+//! `get_rays` with the model's intrinsics, optionally at another resolution), only the rays
+//! that meet the head's bounds within `[near, far]` go through the network, the others take
+//! the background pixel, as the student was trained.
+
+use glam::Mat4;
+use nldf_core::camera::{Camera, Intrinsics};
+use nldf_core::image::ImageRgb;
+use nldf_export::contract::ModelInfo;
+
+use crate::backend::Backend;
+use crate::error::{Error, Result};
+
+/// Largest image side `nldf render` accepts.
+pub const MAX_SIDE: u32 = 8192;
+
+/// The model's intrinsics at an image whose longer side is `size` pixels (the aspect ratio
+/// kept, focal and principal point scaled), or unchanged for `None`.
+pub fn intrinsics_at(info: &ModelInfo, size: Option<u32>) -> Result<Intrinsics> {
+    let k = info.spec.intrinsics;
+    let Some(size) = size else { return Ok(k) };
+    if size == 0 || size > MAX_SIDE {
+        return Err(Error::Argument(format!(
+            "image size must be 1 to {MAX_SIDE} pixels, got {size}"
+        )));
+    }
+    let long = k.width.max(k.height) as f64;
+    let scale = |v: u32| ((v as f64 * size as f64 / long).round() as u32).max(1);
+    Ok(k.resized(scale(k.width), scale(k.height)))
+}
+
+/// The background of the model's metadata, at `width` x `height` (bilinear when resized).
+pub fn background_at(info: &ModelInfo, width: u32, height: u32) -> Result<ImageRgb> {
+    let bad = |e: String| Error::Argument(format!("the model's background image: {e}"));
+    let img = image::load_from_memory(&info.background_png)
+        .map_err(|e| bad(e.to_string()))?
+        .to_rgb8();
+    let img = if img.dimensions() == (width, height) {
+        img
+    } else {
+        image::imageops::resize(&img, width, height, image::imageops::FilterType::Triangle)
+    };
+    Ok(ImageRgb::from_rgb8(width, height, img.as_raw()))
+}
+
+/// A rendered frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// The image, `[height, width, 3]` in [0, 1].
+    pub image: ImageRgb,
+    /// Pixels whose rays met the head's bounds (went through the network).
+    pub head_pixels: usize,
+}
+
+/// Renders frames of one model with one backend.
+pub struct FrameRenderer {
+    backend: Box<dyn Backend>,
+    intrinsics: Intrinsics,
+    background: ImageRgb,
+}
+
+impl std::fmt::Debug for FrameRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FrameRenderer")
+            .field("backend", &self.backend.kind())
+            .field("batch_size", &self.backend.batch_size())
+            .field("intrinsics", &self.intrinsics)
+            .finish()
+    }
+}
+
+impl FrameRenderer {
+    /// A renderer at the model's own size (`size` `None`) or with the longer side `size`.
+    pub fn new(backend: Box<dyn Backend>, size: Option<u32>) -> Result<FrameRenderer> {
+        let intrinsics = intrinsics_at(backend.info(), size)?;
+        let background = background_at(backend.info(), intrinsics.width, intrinsics.height)?;
+        Ok(FrameRenderer {
+            backend,
+            intrinsics,
+            background,
+        })
+    }
+
+    /// The model's metadata.
+    pub fn info(&self) -> &ModelInfo {
+        self.backend.info()
+    }
+
+    /// The intrinsics frames are rendered with.
+    pub fn intrinsics(&self) -> Intrinsics {
+        self.intrinsics
+    }
+
+    /// The backend, e.g. for its kind.
+    pub fn backend(&self) -> &dyn Backend {
+        self.backend.as_ref()
+    }
+
+    /// The frame seen from camera-to-world `c2w` with the audio neighbourhood `audio`.
+    ///
+    /// # Shapes
+    /// - `audio`: `[att_frames, window, n_features]` flat
+    /// - returns an image of the renderer's [`FrameRenderer::intrinsics`] size
+    pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
+        let camera = Camera {
+            intrinsics: self.intrinsics,
+            c2w,
+        };
+        let spec = &self.backend.info().spec;
+        let (bounds, near, far) = (spec.bounds, spec.near, spec.far);
+        let k = self.intrinsics;
+        let mut origins = Vec::new();
+        let mut directions = Vec::new();
+        let mut hit = Vec::new();
+        for j in 0..k.height {
+            for i in 0..k.width {
+                let (o, d) = camera.ray(i as f32, j as f32);
+                if bounds.intersect(o, d, near, far).is_some() {
+                    origins.extend_from_slice(&o.to_array());
+                    directions.extend_from_slice(&d.to_array());
+                    hit.push(j as usize * k.width as usize + i as usize);
+                }
+            }
+        }
+        let mut image = self.background.clone();
+        if !hit.is_empty() {
+            let out = self.backend.run(&origins, &directions, audio)?;
+            for (r, &p) in hit.iter().enumerate() {
+                image.data[3 * p..3 * p + 3].copy_from_slice(&out.rgb[3 * r..3 * r + 3]);
+            }
+        }
+        Ok(Frame {
+            image,
+            head_pixels: hit.len(),
+        })
+    }
+}

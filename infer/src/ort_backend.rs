@@ -1,0 +1,144 @@
+//! The onnxruntime backend (cargo feature `ort`): the `ort` crate with `load-dynamic`, so
+//! that nothing is downloaded at build time and the library is found at run time (see
+//! [`crate::ort_library`]). onnxruntime handles the symbolic ray axis well, so batches run
+//! at their own size without padding.
+
+use std::sync::OnceLock;
+
+use nldf_export::ExportedModel;
+use nldf_export::contract::{
+    INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
+};
+use ort::environment::Environment;
+use ort::session::Session;
+use ort::value::TensorRef;
+
+use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
+use crate::error::{Error, Result};
+use crate::ort_library::find_ort_library;
+
+const NAME: &str = "ort";
+
+/// onnxruntime allows one environment per process: made once, kept for the process's life.
+static ENVIRONMENT: OnceLock<std::result::Result<Environment, String>> = OnceLock::new();
+
+/// The process's onnxruntime environment, loading the library on first use.
+pub fn environment() -> Result<&'static Environment> {
+    let made = ENVIRONMENT.get_or_init(|| {
+        let path = find_ort_library().map_err(|e| e.to_string())?;
+        let builder = ort::init_from(&path).map_err(|e| {
+            format!(
+                "onnxruntime: cannot load {}: {e}; {}",
+                path.display(),
+                crate::ort_library::HOW_TO_GET
+            )
+        })?;
+        builder
+            .with_name("nldf")
+            .build()
+            .map_err(|e| format!("onnxruntime: {e}"))
+    });
+    match made {
+        Ok(env) => Ok(env),
+        Err(message) => Err(Error::OrtLibrary(
+            message
+                .strip_prefix("onnxruntime: ")
+                .unwrap_or(message)
+                .to_string(),
+        )),
+    }
+}
+
+/// onnxruntime holding one model.
+pub struct OrtBackend {
+    info: ModelInfo,
+    session: Session,
+    batch_size: usize,
+}
+
+impl std::fmt::Debug for OrtBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OrtBackend")
+            .field("batch_size", &self.batch_size)
+            .finish()
+    }
+}
+
+impl OrtBackend {
+    /// Loads the library (once per process) and makes a session for `model`.
+    pub fn new(model: &ExportedModel, options: BackendOptions) -> Result<OrtBackend> {
+        options.validate()?;
+        let env = environment()?;
+        let fail = |e: String| Error::backend(NAME, format!("{}: {e}", model.path.display()));
+        let session = Session::builder(env)
+            .map_err(|e| fail(e.to_string()))?
+            .with_intra_threads(options.threads)
+            .map_err(|e| fail(e.to_string()))?
+            .with_inter_threads(1)
+            .map_err(|e| fail(e.to_string()))?
+            .commit_from_memory(&model.bytes)
+            .map_err(|e| fail(e.to_string()))?;
+        Ok(OrtBackend {
+            info: model.info.clone(),
+            session,
+            batch_size: options.batch_size,
+        })
+    }
+}
+
+impl Backend for OrtBackend {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Ort
+    }
+
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+
+    fn batch_size(&self) -> usize {
+        self.batch_size
+    }
+
+    fn run_batch(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs> {
+        crate::backend::check_inputs(&self.info, origins, directions, audio)?;
+        let n = origins.len() / 3;
+        if n == 0 {
+            return Ok(RayOutputs::default());
+        }
+        let fail = |e: ort::Error| Error::backend(NAME, e);
+        let inputs = ort::inputs![
+            INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
+            INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
+            INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
+                .map_err(fail)?,
+        ];
+        let outputs = self.session.run(inputs).map_err(fail)?;
+        let m = self.info.segments;
+        let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {
+            let value = outputs
+                .get(name)
+                .ok_or_else(|| Error::backend(NAME, format!("no output `{name}`")))?;
+            let (_, data) = value.try_extract_tensor::<f32>().map_err(fail)?;
+            if data.len() != per_ray * n {
+                return Err(Error::backend(
+                    NAME,
+                    format!(
+                        "output `{name}` holds {} values, expected {}",
+                        data.len(),
+                        per_ray * n
+                    ),
+                ));
+            }
+            Ok(data.to_vec())
+        };
+        Ok(RayOutputs {
+            rgb: take(OUTPUT_RGB, 3)?,
+            segments: take(OUTPUT_SEGMENTS, 3 * m)?,
+        })
+    }
+}

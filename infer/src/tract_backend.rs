@@ -1,0 +1,171 @@
+//! The tract backend: pure Rust, always built. The graph is compiled for concrete ray
+//! counts (tract optimises a fixed shape much better than the symbolic `n_rays` axis): one
+//! plan for full batches and, made on demand, plans for partial batches rounded up to
+//! [`PLAN_GRANULE`] rays, so that a frame's last batch wastes little on padding. Matrix
+//! products run on a private thread pool of `threads` threads.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use nldf_export::ExportedModel;
+use nldf_export::contract::ModelInfo;
+use tract_onnx::prelude::*;
+
+use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
+use crate::error::{Error, Result};
+
+/// Partial batches are padded up to a multiple of this many rays.
+pub const PLAN_GRANULE: usize = 512;
+
+const NAME: &str = "tract";
+
+/// tract holding one model.
+pub struct TractBackend {
+    info: ModelInfo,
+    /// The parsed graph, before shapes are fixed.
+    model: InferenceModel,
+    /// Optimised plans by ray count.
+    plans: HashMap<usize, Arc<TypedRunnableModel>>,
+    batch_size: usize,
+    executor: tract_linalg::multithread::Executor,
+}
+
+impl std::fmt::Debug for TractBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TractBackend")
+            .field("batch_size", &self.batch_size)
+            .field("plans", &self.plans.keys().collect::<Vec<_>>())
+            .finish()
+    }
+}
+
+impl TractBackend {
+    /// Parses `model` and compiles the plan for full batches.
+    pub fn new(model: &ExportedModel, options: BackendOptions) -> Result<TractBackend> {
+        options.validate()?;
+        let parsed = tract_onnx::onnx()
+            .model_for_read(&mut &model.bytes[..])
+            .map_err(|e| Error::backend(NAME, format!("{}: {e}", model.path.display())))?;
+        let executor = if options.threads > 1 {
+            tract_linalg::multithread::Executor::multithread_with_name(
+                options.threads,
+                "nldf-tract",
+            )
+        } else {
+            tract_linalg::multithread::Executor::SingleThread
+        };
+        let mut backend = TractBackend {
+            info: model.info.clone(),
+            model: parsed,
+            plans: HashMap::new(),
+            batch_size: options.batch_size,
+            executor,
+        };
+        backend.plan(options.batch_size)?;
+        Ok(backend)
+    }
+
+    /// The plan for exactly `n_rays` rays, compiled on first use.
+    fn plan(&mut self, n_rays: usize) -> Result<Arc<TypedRunnableModel>> {
+        if let Some(plan) = self.plans.get(&n_rays) {
+            return Ok(plan.clone());
+        }
+        let audio = self.info.audio.shape();
+        let compile = || -> TractResult<Arc<TypedRunnableModel>> {
+            self.model
+                .clone()
+                .with_input_fact(0, f32::fact([n_rays, 3]).into())?
+                .with_input_fact(1, f32::fact([n_rays, 3]).into())?
+                .with_input_fact(2, f32::fact(audio).into())?
+                .into_optimized()?
+                .into_runnable()
+        };
+        let plan = compile().map_err(|e| Error::backend(NAME, format!("compiling: {e}")))?;
+        self.plans.insert(n_rays, plan.clone());
+        Ok(plan)
+    }
+
+    /// The padded ray count a batch of `n_rays` runs at.
+    fn padded(&self, n_rays: usize) -> usize {
+        n_rays
+            .div_ceil(PLAN_GRANULE)
+            .saturating_mul(PLAN_GRANULE)
+            .min(self.batch_size)
+            .max(n_rays)
+    }
+}
+
+impl Backend for TractBackend {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Tract
+    }
+
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+
+    fn batch_size(&self) -> usize {
+        self.batch_size
+    }
+
+    fn run_batch(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs> {
+        crate::backend::check_inputs(&self.info, origins, directions, audio)?;
+        let n = origins.len() / 3;
+        if n == 0 {
+            return Ok(RayOutputs::default());
+        }
+        let padded = self.padded(n);
+        let plan = self.plan(padded)?;
+        let pad = |v: &[f32]| -> Vec<f32> {
+            let mut out = Vec::with_capacity(3 * padded);
+            out.extend_from_slice(v);
+            out.resize(3 * padded, 0.0);
+            out
+        };
+        let tensor = |shape: &[usize], data: &[f32]| {
+            Tensor::from_shape(shape, data).map_err(|e| Error::backend(NAME, e))
+        };
+        let inputs = tvec!(
+            tensor(&[padded, 3], &pad(origins))?.into(),
+            tensor(&[padded, 3], &pad(directions))?.into(),
+            tensor(&self.info.audio.shape(), audio)?.into(),
+        );
+        let outputs =
+            tract_linalg::multithread::multithread_tract_scope(self.executor.clone(), || {
+                plan.run(inputs)
+            })
+            .map_err(|e| Error::backend(NAME, format!("running: {e}")))?;
+        let m = self.info.segments;
+        let take = |value: &TValue, per_ray: usize| -> Result<Vec<f32>> {
+            let view = value
+                .to_plain_array_view::<f32>()
+                .map_err(|e| Error::backend(NAME, e))?;
+            if view.len() != per_ray * padded {
+                return Err(Error::backend(
+                    NAME,
+                    format!(
+                        "an output holds {} values, expected {}",
+                        view.len(),
+                        per_ray * padded
+                    ),
+                ));
+            }
+            Ok(view.iter().take(per_ray * n).copied().collect())
+        };
+        let [rgb, segments] = outputs.as_slice() else {
+            return Err(Error::backend(
+                NAME,
+                format!("the graph gave {} outputs, expected 2", outputs.len()),
+            ));
+        };
+        Ok(RayOutputs {
+            rgb: take(rgb, 3)?,
+            segments: take(segments, 3 * m)?,
+        })
+    }
+}

@@ -1,0 +1,243 @@
+//! A talking-head video from a model and a WAV file: a plan that checks every input and the
+//! output folder before any frame is rendered, then one PNG per video frame (audio windows
+//! from the WAV, a pose per frame), and an MP4 with the audio muxed in when ffmpeg is on the
+//! PATH. Everything is written into a staging folder that replaces `out` only on success.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use glam::Mat4;
+use nldf_core::audio::AudioWindows;
+
+use crate::audio::{neighbourhood, windows_from_wav};
+use crate::backend::{BackendKind, BackendOptions, backend_for};
+use crate::error::{Error, Result};
+use crate::frame::FrameRenderer;
+use crate::output::Staging;
+use crate::poses::{default_track, pose_at, poses_from_transforms};
+
+/// File name of frame `f` in the output folder.
+pub fn frame_file_name(f: usize) -> String {
+    format!("frame_{f:05}.png")
+}
+
+/// The video's file name in the output folder.
+pub const VIDEO_FILE: &str = "video.mp4";
+
+/// What `nldf render` was asked to do.
+#[derive(Debug, Clone)]
+pub struct VideoJob {
+    /// The exported model (`.onnx` written by `nldf export`).
+    pub model: PathBuf,
+    /// The speech to animate, a WAV file.
+    pub audio: PathBuf,
+    /// A transforms json whose camera poses to follow; `None`: the default track.
+    pub poses: Option<PathBuf>,
+    /// The output folder (absent or empty).
+    pub out: PathBuf,
+    /// Which runtime runs the network.
+    pub backend: BackendKind,
+    /// Batch size and threads.
+    pub options: BackendOptions,
+    /// The image's longer side in pixels; `None`: the model's own size.
+    pub size: Option<u32>,
+    /// Mux an MP4 when ffmpeg is on the PATH.
+    pub mp4: bool,
+}
+
+/// A checked job, ready to render: the model is loaded in its runtime, the audio features
+/// and poses are made, and the staging folder exists.
+#[derive(Debug)]
+pub struct VideoPlan {
+    renderer: FrameRenderer,
+    windows: AudioWindows,
+    poses: Vec<Mat4>,
+    staging: Staging,
+    audio: PathBuf,
+    ffmpeg: Option<PathBuf>,
+    mp4_asked: bool,
+}
+
+/// Progress after each frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameProgress {
+    /// Frames done.
+    pub done: usize,
+    /// Frames in all.
+    pub total: usize,
+    /// Pixels of the last frame that went through the network.
+    pub head_pixels: usize,
+}
+
+/// What a finished render wrote and how fast it ran.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VideoReport {
+    /// The output folder.
+    pub out: PathBuf,
+    /// Every file written, frames first.
+    pub files: Vec<PathBuf>,
+    /// Frames rendered.
+    pub n_frames: usize,
+    /// Image size.
+    pub width: u32,
+    pub height: u32,
+    /// The video's frame rate.
+    pub fps: f32,
+    /// Seconds spent rendering frames (network, rays and assembly; PNG writing excluded).
+    pub render_seconds: f64,
+    /// Seconds spent writing PNGs.
+    pub write_seconds: f64,
+    /// Mean fraction of the pixels that went through the network.
+    pub head_fraction: f64,
+    /// The MP4, when ffmpeg was found and asked for.
+    pub video: Option<PathBuf>,
+    /// True when an MP4 was asked for but ffmpeg is not on the PATH.
+    pub ffmpeg_missing: bool,
+}
+
+impl VideoJob {
+    /// Checks every input and the output folder, loads the model in its runtime and makes
+    /// the audio features and poses; nothing is rendered yet.
+    pub fn plan(&self) -> Result<VideoPlan> {
+        let model = nldf_export::read_model(&self.model)?;
+        let windows = windows_from_wav(&model.info, &self.audio)?;
+        let poses = match &self.poses {
+            Some(path) => poses_from_transforms(path)?,
+            None => default_track(&model.info, windows.n_frames),
+        };
+        crate::frame::intrinsics_at(&model.info, self.size)?;
+        let staging = Staging::create(&self.out)?;
+        let renderer =
+            FrameRenderer::new(backend_for(&model, self.backend, self.options)?, self.size)?;
+        Ok(VideoPlan {
+            renderer,
+            windows,
+            poses,
+            staging,
+            audio: self.audio.clone(),
+            ffmpeg: if self.mp4 { ffmpeg_on_path() } else { None },
+            mp4_asked: self.mp4,
+        })
+    }
+}
+
+impl VideoPlan {
+    /// Frames the video will have (one per 1/fps of audio).
+    pub fn n_frames(&self) -> usize {
+        self.windows.n_frames
+    }
+
+    /// The renderer (its backend, size and metadata).
+    pub fn renderer(&self) -> &FrameRenderer {
+        &self.renderer
+    }
+
+    /// Whether an MP4 will be muxed.
+    pub fn will_mux(&self) -> bool {
+        self.ffmpeg.is_some()
+    }
+
+    /// Renders every frame into the staging folder, muxes the MP4 when ffmpeg was found, and
+    /// moves the folder into place. `on_frame` is called after each frame.
+    pub fn render(mut self, mut on_frame: impl FnMut(FrameProgress)) -> Result<VideoReport> {
+        let total = self.windows.n_frames;
+        let att = self.renderer.info().audio.att_frames;
+        let k = self.renderer.intrinsics();
+        let fps = self.renderer.info().spec.fps;
+        let mut files = Vec::with_capacity(total + 1);
+        let (mut render_seconds, mut write_seconds, mut head) = (0.0, 0.0, 0usize);
+        for f in 0..total {
+            let started = Instant::now();
+            let audio = neighbourhood(&self.windows, f, att);
+            let frame = self.renderer.render(pose_at(&self.poses, f), &audio)?;
+            render_seconds += started.elapsed().as_secs_f64();
+            let started = Instant::now();
+            let name = frame_file_name(f);
+            frame.image.save_png(&self.staging.path().join(&name))?;
+            write_seconds += started.elapsed().as_secs_f64();
+            files.push(PathBuf::from(name));
+            head += frame.head_pixels;
+            on_frame(FrameProgress {
+                done: f + 1,
+                total,
+                head_pixels: frame.head_pixels,
+            });
+        }
+        let mut video = None;
+        if let Some(ffmpeg) = &self.ffmpeg {
+            mux_mp4(ffmpeg, self.staging.path(), fps, &self.audio)?;
+            files.push(PathBuf::from(VIDEO_FILE));
+            video = Some(PathBuf::from(VIDEO_FILE));
+        }
+        let out = self.staging.finish()?;
+        Ok(VideoReport {
+            files: files.iter().map(|f| out.join(f)).collect(),
+            video: video.map(|v| out.join(v)),
+            out,
+            n_frames: total,
+            width: k.width,
+            height: k.height,
+            fps,
+            render_seconds,
+            write_seconds,
+            head_fraction: head as f64 / (total.max(1) * k.n_pixels()) as f64,
+            ffmpeg_missing: self.mp4_asked && self.ffmpeg.is_none(),
+        })
+    }
+}
+
+/// `ffmpeg` on the PATH, if any.
+pub fn ffmpeg_on_path() -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .map(|dir| dir.join("ffmpeg"))
+        .find(|p| p.is_file())
+}
+
+/// Muxes `folder/frame_%05d.png` at `fps` with the audio of `wav` into `folder/video.mp4`
+/// (H.264, or MPEG-4 part 2 when the ffmpeg build lacks libx264; AAC audio).
+pub fn mux_mp4(ffmpeg: &Path, folder: &Path, fps: f32, wav: &Path) -> Result<()> {
+    let out = folder.join(VIDEO_FILE);
+    let mut last_error = String::new();
+    for codec in ["libx264", "mpeg4"] {
+        let result = Command::new(ffmpeg)
+            .args(["-nostdin", "-y", "-loglevel", "error", "-framerate"])
+            .arg(format!("{fps}"))
+            .arg("-i")
+            .arg(folder.join("frame_%05d.png"))
+            .arg("-i")
+            .arg(wav)
+            .args([
+                "-map",
+                "0:v",
+                "-map",
+                "1:a",
+                "-vf",
+                "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+                "-c:v",
+                codec,
+                "-pix_fmt",
+                "yuv420p",
+                "-c:a",
+                "aac",
+                "-shortest",
+            ])
+            .arg(&out)
+            .output()
+            .map_err(|e| Error::io(ffmpeg, e))?;
+        if result.status.success() {
+            return Ok(());
+        }
+        last_error = String::from_utf8_lossy(&result.stderr)
+            .lines()
+            .next()
+            .unwrap_or("no message")
+            .to_string();
+    }
+    let _ = std::fs::remove_file(&out);
+    Err(Error::output(
+        &out,
+        format!("ffmpeg could not write the video: {last_error}"),
+    ))
+}

@@ -1,0 +1,116 @@
+//! `nldf render`: a talking-head video from an exported model and a WAV file, on the CPU
+//! with tract or onnxruntime: PNG frames, and an MP4 with the audio when ffmpeg is on the
+//! PATH.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use nldf_infer::backend::{BackendKind, BackendOptions};
+use nldf_infer::video::VideoJob;
+
+use crate::progress::progress_bar;
+
+/// The runtime that evaluates the network.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendArg {
+    /// tract, pure Rust (needs nothing installed).
+    Tract,
+    /// onnxruntime, loaded from ORT_DYLIB_PATH or the project's .venv.
+    Ort,
+}
+
+impl From<BackendArg> for BackendKind {
+    fn from(b: BackendArg) -> Self {
+        match b {
+            BackendArg::Tract => BackendKind::Tract,
+            BackendArg::Ort => BackendKind::Ort,
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// The exported model (`nldf export` writes RUN/model.onnx).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// The speech to animate: a WAV file (any rate, mono or stereo).
+    #[arg(long)]
+    pub audio: PathBuf,
+    /// A transforms json (AD-NeRF layout) whose camera poses to follow, played forwards and
+    /// backwards; default: a gentle sway around the model's default pose.
+    #[arg(long)]
+    pub poses: Option<PathBuf>,
+    /// Output folder, created (must be absent or empty).
+    #[arg(long, default_value = "render")]
+    pub out: PathBuf,
+    /// Runtime for the network.
+    #[arg(long, value_enum, default_value_t = BackendArg::Tract)]
+    pub backend: BackendArg,
+    /// The image's longer side in pixels (default: the model's training size).
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Rays per network call.
+    #[arg(long, default_value_t = BackendOptions::default().batch_size)]
+    pub batch: usize,
+    /// Threads for the network (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Write PNG frames only, no MP4.
+    #[arg(long)]
+    pub no_video: bool,
+}
+
+/// Runs `nldf render`.
+pub fn run(args: RenderArgs) -> Result<()> {
+    let options = BackendOptions {
+        batch_size: args.batch,
+        threads: args
+            .threads
+            .unwrap_or_else(|| BackendOptions::default().threads),
+    };
+    let job = VideoJob {
+        model: args.model,
+        audio: args.audio,
+        poses: args.poses,
+        out: args.out,
+        backend: args.backend.into(),
+        options,
+        size: args.size,
+        mp4: !args.no_video,
+    };
+    let plan = job.plan()?;
+    let k = plan.renderer().intrinsics();
+    let bar = progress_bar(plan.n_frames() as u64, "frames");
+    let report = plan.render(|p| bar.set_position(p.done as u64))?;
+    bar.finish_and_clear();
+    println!(
+        "{} frames of {}x{} at {} fps with {} ({} threads, batch {}): {:.2} frames/s rendering \
+         ({:.1} % of the pixels through the network), {:.2} s writing PNGs",
+        report.n_frames,
+        k.width,
+        k.height,
+        report.fps,
+        job.backend,
+        options.threads,
+        options.batch_size,
+        report.n_frames as f64 / report.render_seconds.max(1e-9),
+        100.0 * report.head_fraction,
+        report.write_seconds,
+    );
+    if report.ffmpeg_missing {
+        println!("ffmpeg is not on the PATH: wrote PNG frames only (no MP4)");
+    }
+    println!("wrote {}:", report.out.display());
+    let n = report.files.len();
+    for (i, f) in report.files.iter().enumerate() {
+        // Every file is listed; long frame lists are folded to their ends.
+        if n > 8 && (3..n - 3).contains(&i) {
+            if i == 3 {
+                println!("  ... {} more frames", n - 6);
+            }
+            continue;
+        }
+        println!("  {}", f.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,370 @@
+//! Inference (nldf-infer): frames rendered by the tract and onnxruntime backends agree with
+//! each other and with the candle student (PSNR >= 60 dB between any two), a WAV becomes
+//! PNG frames through the staging folder, and every bad input gets a one-line error with
+//! nothing written.
+
+use std::path::{Path, PathBuf};
+
+use glam::Mat4;
+use nldf_core::audio::{Waveform, n_video_frames, write_wav};
+use nldf_core::camera::{Camera, Intrinsics};
+use nldf_core::image::ImageRgb;
+use nldf_core::metrics::psnr;
+use nldf_core::rays::Rays;
+use nldf_export::WeightType;
+use nldf_export::read_model;
+use nldf_infer::audio::{neighbourhood, windows_from_wav};
+use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
+use nldf_infer::frame::{FrameRenderer, background_at};
+use nldf_infer::ort_library::find_ort_library_in;
+use nldf_infer::poses::{default_track, pose_at};
+use nldf_infer::video::{VideoJob, frame_file_name};
+use nldf_train::student::StudentConfig;
+
+use crate::export::{Run, candle_render, configs, foreign_model, random_audio, write_run};
+use crate::export_ort::ort_available;
+
+/// The issue's parity bound between any two renderers' frames.
+const MIN_PSNR: f64 = 60.0;
+
+/// The candle reference frame: every pixel's ray from `c2w` with `intrinsics`; rays that
+/// meet the head's bounds get the candle student's colour, the others the background.
+fn candle_frame(
+    run: &Run,
+    intrinsics: Intrinsics,
+    c2w: Mat4,
+    audio: &[f32],
+    background: &ImageRgb,
+) -> ImageRgb {
+    let spec = &run.spec;
+    let camera = Camera { intrinsics, c2w };
+    let rays = nldf_core::rays::rays_for_image(&camera);
+    let mut hit = Rays::default();
+    let mut hit_index = Vec::new();
+    for r in 0..rays.len() {
+        let (o, d) = (rays.origin(r), rays.direction(r));
+        if spec.bounds.intersect(o, d, spec.near, spec.far).is_some() {
+            hit.push(o, d);
+            hit_index.push(r);
+        }
+    }
+    let mut frame = background.clone();
+    if !hit.is_empty() {
+        let (rgb, _) = candle_render(run, &hit, audio);
+        for (k, &r) in hit_index.iter().enumerate() {
+            frame.data[3 * r..3 * r + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
+        }
+    }
+    frame
+}
+
+#[test]
+fn infer_frames_agree_across_tract_ort_and_candle() {
+    let with_ort = ort_available();
+    for (c, cfg) in configs().into_iter().enumerate() {
+        let run = write_run(&cfg, 101 + c as u64);
+        let path = run.export(WeightType::F32);
+        let model = read_model(&path).unwrap();
+        let info = &model.info;
+        let audio = neighbourhood(&random_audio(&cfg, 12, 15), 6, cfg.audio.att_frames);
+        let poses = [
+            ("default pose", default_track(info, 1)[0]),
+            ("track frame 40", default_track(info, 41)[40]),
+        ];
+        for size in [None, Some(40)] {
+            let mut kinds = vec![BackendKind::Tract];
+            if with_ort {
+                kinds.push(BackendKind::Ort);
+            }
+            // Batch 256: several batches per frame and a padded last one.
+            let options = BackendOptions {
+                batch_size: 256,
+                threads: 2,
+            };
+            let mut renderers: Vec<(BackendKind, FrameRenderer)> = kinds
+                .iter()
+                .map(|&k| {
+                    let backend = backend_for(&model, k, options).unwrap();
+                    (k, FrameRenderer::new(backend, size).unwrap())
+                })
+                .collect();
+            let k = renderers[0].1.intrinsics();
+            let background = background_at(info, k.width, k.height).unwrap();
+            for (pose_name, c2w) in poses {
+                let mut frames = vec![(
+                    "candle".to_string(),
+                    candle_frame(&run, k, c2w, &audio, &background),
+                )];
+                for (kind, renderer) in &mut renderers {
+                    let frame = renderer.render(c2w, &audio).unwrap();
+                    assert!(
+                        frame.head_pixels > 0 && frame.head_pixels < k.n_pixels(),
+                        "the test camera should see both head and background"
+                    );
+                    frames.push((kind.name().to_string(), frame.image));
+                }
+                for a in 0..frames.len() {
+                    for b in a + 1..frames.len() {
+                        let p = psnr(&frames[a].1, &frames[b].1).unwrap();
+                        println!(
+                            "config {c}, {}x{}, {pose_name}: {} vs {}: PSNR {p:.1} dB",
+                            k.width, k.height, frames[a].0, frames[b].0
+                        );
+                        assert!(p >= MIN_PSNR, "{} vs {}: {p} dB", frames[a].0, frames[b].0);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// A 16 kHz tone with a wobbling pitch, `seconds` long.
+fn write_test_wav(path: &Path, seconds: f32) {
+    let n = (16_000.0 * seconds) as usize;
+    let samples = (0..n)
+        .map(|i| {
+            let t = i as f32 / 16_000.0;
+            0.4 * (2.0 * std::f32::consts::PI * (220.0 + 80.0 * (3.0 * t).sin()) * t).sin()
+        })
+        .collect();
+    write_wav(
+        path,
+        &Waveform {
+            sample_rate: 16_000,
+            samples,
+        },
+    )
+    .unwrap();
+}
+
+fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
+    VideoJob {
+        model: model.to_path_buf(),
+        audio: audio.to_path_buf(),
+        poses: None,
+        out: out.to_path_buf(),
+        backend: BackendKind::Tract,
+        options: BackendOptions {
+            batch_size: 512,
+            threads: 1,
+        },
+        size: None,
+        mp4: false,
+    }
+}
+
+#[test]
+fn infer_render_video_writes_a_png_per_frame_through_staging() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 111);
+    let path = run.export(WeightType::F32);
+    let wav = run.root.join("speech.wav");
+    write_test_wav(&wav, 0.5);
+    let out = run.root.join("video");
+    let plan = job(&path, &wav, &out).plan().unwrap();
+    let want_frames = n_video_frames(8000, 16_000, run.spec.fps);
+    assert_eq!(plan.n_frames(), want_frames);
+    assert!(!out.exists(), "nothing appears before the render finishes");
+    let mut seen = 0;
+    let report = plan.render(|p| seen = p.done).unwrap();
+    assert_eq!((seen, report.n_frames), (want_frames, want_frames));
+    assert_eq!(report.out, out);
+    assert_eq!(report.files.len(), want_frames);
+    assert!(report.video.is_none());
+    for (f, file) in report.files.iter().enumerate() {
+        assert_eq!(*file, out.join(frame_file_name(f)));
+        assert!(file.is_file());
+    }
+    assert_no_staging(&run.root);
+    // Frame 3 is the candle student's frame for the WAV's audio and the default track.
+    let info = read_model(&path).unwrap().info;
+    let windows = windows_from_wav(&info, &wav).unwrap();
+    let audio = neighbourhood(&windows, 3, cfg.audio.att_frames);
+    let k = info.spec.intrinsics;
+    let background = background_at(&info, k.width, k.height).unwrap();
+    let c2w = default_track(&info, want_frames)[3];
+    let want = candle_frame(&run, k, c2w, &audio, &background).to_rgb8();
+    let got = ImageRgb::load(&report.files[3]).unwrap().to_rgb8();
+    let worst = want
+        .iter()
+        .zip(&got)
+        .map(|(a, b)| a.abs_diff(*b))
+        .max()
+        .unwrap();
+    println!("render: frame 3's PNG vs the candle frame: max 8-bit difference {worst}");
+    assert!(worst <= 1, "{worst}");
+    // An existing empty folder is replaced; rendering again into a full one is refused.
+    let empty = run.root.join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    job(&path, &wav, &empty)
+        .plan()
+        .unwrap()
+        .render(|_| {})
+        .unwrap();
+    assert!(empty.join(frame_file_name(0)).is_file());
+}
+
+/// No staging folder is left in `dir`.
+fn assert_no_staging(dir: &Path) {
+    let left: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().contains(".partial-"))
+        .collect();
+    assert!(left.is_empty(), "staging left behind: {left:?}");
+}
+
+#[test]
+fn infer_bad_inputs_get_one_line_errors_and_write_nothing() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 121);
+    let model = run.export(WeightType::F32);
+    let dir = run.root.join("bad");
+    std::fs::create_dir_all(&dir).unwrap();
+    let wav = dir.join("good.wav");
+    write_test_wav(&wav, 0.3);
+    let write = |name: &str, bytes: &[u8]| -> PathBuf {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let out = dir.join("out");
+    let check = |what: &str, job: VideoJob, needle: &str| {
+        let Err(err) = job.plan() else {
+            panic!("{what} was accepted")
+        };
+        let msg = err.to_string();
+        println!("{what}: {msg}");
+        nldf_tests::assert_one_line_naming(&msg, needle);
+        assert!(
+            !job.out.exists(),
+            "{what}: {} was created",
+            job.out.display()
+        );
+        let parent = job.out.parent().unwrap();
+        if parent.is_dir() {
+            assert_no_staging(parent);
+        }
+    };
+    // Broken WAVs: noise, a header cut short, an empty file, a missing file.
+    let good_wav = std::fs::read(&wav).unwrap();
+    for (name, bytes) in [
+        (
+            "noise.wav",
+            (0..999u32)
+                .map(|i| (i * 7919 % 251) as u8)
+                .collect::<Vec<u8>>(),
+        ),
+        ("cut.wav", good_wav[..30].to_vec()),
+        ("empty.wav", vec![]),
+    ] {
+        let p = write(name, &bytes);
+        check(name, job(&model, &p, &out), name);
+    }
+    check(
+        "missing.wav",
+        job(&model, &dir.join("missing.wav"), &out),
+        "missing.wav",
+    );
+    // A WAV shorter than one video frame.
+    let short = dir.join("short.wav");
+    write_test_wav(&short, 0.01);
+    check("short.wav", job(&model, &short, &out), "short.wav");
+    // A model without nldf metadata, and a truncated one.
+    let foreign = write("foreign.onnx", &foreign_model(vec![]));
+    check("foreign.onnx", job(&foreign, &wav, &out), "foreign.onnx");
+    let bytes = std::fs::read(&model).unwrap();
+    let cut = write("cut.onnx", &bytes[..bytes.len() / 2]);
+    check("cut.onnx", job(&cut, &wav, &out), "cut.onnx");
+    // Pose files: NaN (as Python's json writes it), a scaled matrix, no frames.
+    let rows = |m: [[f32; 4]; 4]| serde_json::to_string(&m).unwrap();
+    let transforms = |matrices: &[String]| {
+        let frames: Vec<String> = matrices
+            .iter()
+            .enumerate()
+            .map(|(i, m)| format!(r#"{{"img_id": {i}, "aud_id": {i}, "transform_matrix": {m}}}"#))
+            .collect();
+        format!(
+            r#"{{"focal_len": 30.0, "cx": 12.0, "cy": 9.0, "frames": [{}]}}"#,
+            frames.join(", ")
+        )
+    };
+    let pose = run.spec.default_pose;
+    let nan = rows(pose)
+        .replacen("1.0", "NaN", 1)
+        .replacen("2.2", "NaN", 1);
+    assert!(nan.contains("NaN"), "{nan}");
+    let mut scaled = pose;
+    scaled[0][0] *= 2.0;
+    for (name, text) in [
+        ("nan.json", transforms(&[rows(pose), nan])),
+        ("scaled.json", transforms(&[rows(pose), rows(scaled)])),
+        ("no_frames.json", transforms(&[])),
+    ] {
+        let p = write(name, text.as_bytes());
+        let mut j = job(&model, &wav, &out);
+        j.poses = Some(p);
+        check(name, j, name);
+    }
+    // Unwritable output folders: below a file, and a folder that already holds files.
+    let file = write("a_file", b"x");
+    check(
+        "output below a file",
+        job(&model, &wav, &file.join("out")),
+        "a_file",
+    );
+    let full = dir.join("full");
+    std::fs::create_dir(&full).unwrap();
+    std::fs::write(full.join("keep.txt"), b"x").unwrap();
+    let Err(err) = job(&model, &wav, &full).plan() else {
+        panic!("a full output folder was accepted")
+    };
+    nldf_tests::assert_one_line_naming(&err.to_string(), "full");
+    assert_eq!(std::fs::read_dir(&full).unwrap().count(), 1);
+    // A size out of range.
+    let mut j = job(&model, &wav, &out);
+    j.size = Some(0);
+    let msg = j.plan().unwrap_err().to_string();
+    assert!(msg.contains("size"), "{msg}");
+}
+
+#[test]
+fn infer_missing_onnxruntime_library_says_how_to_get_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("libonnxruntime.so.1.31.1");
+    let msg = find_ort_library_in(Some(missing.as_os_str()), &[])
+        .unwrap_err()
+        .to_string();
+    nldf_tests::assert_one_line_naming(&msg, "libonnxruntime.so.1.31.1");
+    assert!(
+        msg.contains("ORT_DYLIB_PATH") && msg.contains("python_env.sh"),
+        "{msg}"
+    );
+    let msg = find_ort_library_in(None, &[dir.path().to_path_buf()])
+        .unwrap_err()
+        .to_string();
+    nldf_tests::assert_one_line_naming(&msg, "ORT_DYLIB_PATH");
+    // The wheel's layout is found.
+    let capi = dir
+        .path()
+        .join(".venv/lib/python3.12/site-packages/onnxruntime/capi");
+    std::fs::create_dir_all(&capi).unwrap();
+    std::fs::write(capi.join("libonnxruntime.so.1.31.1"), b"").unwrap();
+    let found = find_ort_library_in(None, &[dir.path().to_path_buf()]).unwrap();
+    assert_eq!(found, capi.join("libonnxruntime.so.1.31.1"));
+}
+
+#[test]
+fn infer_pose_lists_play_forwards_then_backwards() {
+    let poses: Vec<Mat4> = (0..3)
+        .map(|i| Mat4::from_translation(glam::Vec3::X * i as f32))
+        .collect();
+    let order: Vec<usize> = (0..9)
+        .map(|f| {
+            let p = pose_at(&poses, f);
+            p.w_axis.x as usize
+        })
+        .collect();
+    assert_eq!(order, [0, 1, 2, 1, 0, 1, 2, 1, 0]);
+    assert_eq!(pose_at(&poses[..1], 5), poses[0]);
+}
