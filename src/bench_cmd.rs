@@ -162,7 +162,7 @@ fn teacher_step(args: TeacherStepArgs) -> Result<()> {
 fn markdown(m: &Machine, r: &StepBench) -> String {
     format!(
         "| {} | value |\n|---|---|\n\
-         | machine | {} ({} cores, {} rayon threads), commit {} |\n\
+         | machine | {} ({} cores, {} rayon threads), commit {}, load {} at the start |\n\
          | batch | {} rays, {:.0} hit the head's bounds, {} samples each |\n\
          | step time | {:.3} s |\n\
          | throughput | {:.0} rays/s |\n\
@@ -176,6 +176,9 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
         m.cores,
         m.rayon_threads,
         m.commit,
+        m.load_average_1m
+            .map(|l| format!("{l:.2}"))
+            .unwrap_or_else(|| "unknown".into()),
         r.batch_rays,
         r.hit_rays,
         r.samples_per_ray,

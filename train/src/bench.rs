@@ -20,6 +20,9 @@ pub struct Machine {
     pub rayon_threads: usize,
     pub commit: String,
     pub date_unix_s: u64,
+    /// `/proc/loadavg`'s one-minute load when the benchmark started (other work on the
+    /// machine skews every figure).
+    pub load_average_1m: Option<f64>,
 }
 
 impl Machine {
@@ -53,6 +56,9 @@ impl Machine {
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_secs())
                 .unwrap_or(0),
+            load_average_1m: std::fs::read_to_string("/proc/loadavg")
+                .ok()
+                .and_then(|t| t.split_whitespace().next()?.parse().ok()),
         }
     }
 }
