@@ -127,16 +127,13 @@ pub fn run(args: AblateArgs) -> Result<()> {
     let train = |table: &str, label: &str, name: &str, args: StudentArgs| -> Result<Row> {
         let dir = args.run.join(name);
         let done = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
-        let mut args = StudentArgs {
+        // A finished variant resumes with nothing left to do.
+        let args = StudentArgs {
             name: name.to_string(),
             resume: done,
             ..args
         };
         println!("== {table}: {label} -> {}", dir.display());
-        // A finished variant resumes with nothing left to do.
-        if done {
-            args.config = None;
-        }
         run_student(args)?;
         let run = StudentRun::open(&dir, false)?;
         let minutes = run.elapsed() / 60.0;

@@ -204,8 +204,6 @@ pub struct StudentRun {
     pub beams: Vec<FrameBeams>,
     /// Teacher segment colours per training frame, aligned with `beams` (distillation).
     pub targets: Vec<Vec<f32>>,
-    /// The last step's details.
-    pub last: Option<StudentStep>,
 }
 
 impl StudentRun {
@@ -287,7 +285,6 @@ impl StudentRun {
             started: Instant::now(),
             beams: Vec::new(),
             targets: Vec::new(),
-            last: None,
         })
     }
 
@@ -386,13 +383,11 @@ impl StudentRun {
             let n_mouth = n_mouth.min(count);
             let n_face = n_face.min(count - n_mouth);
             let n_rest = count - n_mouth - n_face;
-            let all: Vec<u32> = (0..fb.pixels.len() as u32).collect();
-            let rest = if !fb.other.is_empty() {
-                &fb.other
-            } else if !fb.face.is_empty() {
+            // `face` and `other` split a non-empty frame's pixels, so one of them has some.
+            let rest = if fb.other.is_empty() {
                 &fb.face
             } else {
-                &all
+                &fb.other
             };
             for (list, n) in [(&fb.mouth, n_mouth), (&fb.face, n_face), (rest, n_rest)] {
                 for _ in 0..n {
@@ -457,7 +452,6 @@ impl StudentRun {
             entered_pool: entered,
             pool_beams: pool_refs.len(),
         };
-        self.last = Some(step);
         Ok(step)
     }
 
