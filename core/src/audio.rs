@@ -251,34 +251,69 @@ pub fn resample(wave: &Waveform, rate: u32) -> Waveform {
             samples: wave.samples.clone(),
         };
     }
-    let ratio = rate as f64 / wave.sample_rate as f64;
-    let cutoff = 0.95 * 0.5 * ratio.min(1.0); // cycles per input sample
-    let half = SINC_ZEROS / (2.0 * cutoff); // kernel half width in input samples
-    let n_out = (wave.samples.len() as f64 * ratio).round() as usize;
-    let input = &wave.samples;
-    let samples = (0..n_out)
-        .map(|n| {
-            let x = n as f64 / ratio;
-            let lo = ((x - half).ceil().max(0.0)) as usize;
-            let hi = ((x + half).floor() as usize).min(input.len() - 1);
-            let mut acc = 0.0f64;
-            for (k, &s) in input.iter().enumerate().take(hi + 1).skip(lo) {
-                let u = x - k as f64;
-                let arg = 2.0 * cutoff * u;
-                let sinc = if arg.abs() < 1e-12 {
-                    1.0
-                } else {
-                    (PI * arg).sin() / (PI * arg)
-                };
-                let window = 0.5 + 0.5 * (PI * u / half).cos();
-                acc += s as f64 * 2.0 * cutoff * sinc * window;
-            }
-            acc as f32
-        })
+    let sinc = SincResampler::new(wave.sample_rate, rate);
+    let samples = (0..sinc.n_out(wave.samples.len()))
+        .map(|n| sinc.sample(&wave.samples, n))
         .collect();
     Waveform {
         sample_rate: rate,
         samples,
+    }
+}
+
+/// The windowed-sinc resampler of [`resample`], one output sample at a time, so that a
+/// stream can compute each output sample once every input sample it reads has arrived.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct SincResampler {
+    /// Output rate / input rate.
+    ratio: f64,
+    /// Low-pass cutoff in cycles per input sample.
+    cutoff: f64,
+    /// Kernel half width in input samples.
+    half: f64,
+}
+
+impl SincResampler {
+    pub(crate) fn new(from: u32, to: u32) -> SincResampler {
+        let ratio = to as f64 / from as f64;
+        let cutoff = 0.95 * 0.5 * ratio.min(1.0);
+        SincResampler {
+            ratio,
+            cutoff,
+            half: SINC_ZEROS / (2.0 * cutoff),
+        }
+    }
+
+    /// Output samples made from `n_in` input samples.
+    pub(crate) fn n_out(&self, n_in: usize) -> usize {
+        (n_in as f64 * self.ratio).round() as usize
+    }
+
+    /// Input samples that output sample `n` reads, counted from the start: it is final once
+    /// this many have arrived.
+    pub(crate) fn input_needed(&self, n: usize) -> usize {
+        (n as f64 / self.ratio + self.half).floor() as usize + 1
+    }
+
+    /// Output sample `n` of `input` (non-empty; samples past its end count as zero).
+    pub(crate) fn sample(&self, input: &[f32], n: usize) -> f32 {
+        let (cutoff, half) = (self.cutoff, self.half);
+        let x = n as f64 / self.ratio;
+        let lo = ((x - half).ceil().max(0.0)) as usize;
+        let hi = ((x + half).floor() as usize).min(input.len() - 1);
+        let mut acc = 0.0f64;
+        for (k, &s) in input.iter().enumerate().take(hi + 1).skip(lo) {
+            let u = x - k as f64;
+            let arg = 2.0 * cutoff * u;
+            let sinc = if arg.abs() < 1e-12 {
+                1.0
+            } else {
+                (PI * arg).sin() / (PI * arg)
+            };
+            let window = 0.5 + 0.5 * (PI * u / half).cos();
+            acc += s as f64 * 2.0 * cutoff * sinc * window;
+        }
+        acc as f32
     }
 }
 
@@ -339,41 +374,86 @@ pub fn n_video_frames(n_samples: usize, sample_rate: u32, fps: f32) -> usize {
 pub fn log_mel(wave: &Waveform, cfg: &FeatureConfig) -> Result<Vec<f32>> {
     cfg.validate()?;
     let wave = resample(wave, cfg.sample_rate);
-    let x = &wave.samples;
-    let filters = mel_filters(cfg);
-    let hann: Vec<f32> = (0..cfg.win)
-        .map(|i| (0.5 - 0.5 * (2.0 * PI * i as f64 / cfg.win as f64).cos()) as f32)
-        .collect();
-    let norm = {
-        let s: f32 = hann.iter().sum();
-        1.0 / (s * s)
-    };
-    let fft = RealFftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft);
-    let mut frame = fft.make_input_vec();
-    let mut spectrum = fft.make_output_vec();
-    let mut power = vec![0.0f32; cfg.n_fft / 2 + 1];
-    let n_frames = n_feature_frames(x.len(), cfg);
+    let mut front = MelFrontEnd::new(cfg)?;
+    let n_frames = n_feature_frames(wave.samples.len(), cfg);
     let mut out = Vec::with_capacity(n_frames * cfg.n_mels);
     for k in 0..n_frames {
-        let start = (k * cfg.hop) as isize - (cfg.win / 2) as isize;
-        frame.iter_mut().for_each(|v| *v = 0.0);
-        for (i, w) in hann.iter().enumerate() {
-            let s = start + i as isize;
-            if s >= 0 && (s as usize) < x.len() {
-                frame[i] = x[s as usize] * w;
-            }
-        }
-        fft.process(&mut frame, &mut spectrum)
-            .map_err(|e| Error::Argument(format!("FFT failed: {e}")))?;
-        for (p, c) in power.iter_mut().zip(&spectrum) {
-            *p = c.norm_sqr() * norm;
-        }
-        for filter in &filters {
-            let e: f32 = filter.iter().zip(&power).map(|(w, p)| w * p).sum();
-            out.push((e.max(1e-10).log10() + 5.0) / 5.0);
-        }
+        front.push_frame(&wave.samples, k, &mut out)?;
     }
     Ok(out)
+}
+
+/// The log-mel front end of [`log_mel`], one feature frame at a time.
+pub(crate) struct MelFrontEnd {
+    cfg: FeatureConfig,
+    filters: Vec<Vec<f32>>,
+    hann: Vec<f32>,
+    norm: f32,
+    fft: std::sync::Arc<dyn realfft::RealToComplex<f32>>,
+    frame: Vec<f32>,
+    spectrum: Vec<realfft::num_complex::Complex<f32>>,
+    power: Vec<f32>,
+}
+
+impl std::fmt::Debug for MelFrontEnd {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MelFrontEnd")
+            .field("cfg", &self.cfg)
+            .finish()
+    }
+}
+
+impl MelFrontEnd {
+    pub(crate) fn new(cfg: &FeatureConfig) -> Result<MelFrontEnd> {
+        cfg.validate()?;
+        let hann: Vec<f32> = (0..cfg.win)
+            .map(|i| (0.5 - 0.5 * (2.0 * PI * i as f64 / cfg.win as f64).cos()) as f32)
+            .collect();
+        let norm = {
+            let s: f32 = hann.iter().sum();
+            1.0 / (s * s)
+        };
+        let fft = RealFftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft);
+        Ok(MelFrontEnd {
+            cfg: cfg.clone(),
+            filters: mel_filters(cfg),
+            hann,
+            norm,
+            frame: fft.make_input_vec(),
+            spectrum: fft.make_output_vec(),
+            power: vec![0.0f32; cfg.n_fft / 2 + 1],
+            fft,
+        })
+    }
+
+    /// The first sample feature frame `k` reads (it reads `win` samples from there).
+    pub(crate) fn first_sample(&self, k: usize) -> isize {
+        (k * self.cfg.hop) as isize - (self.cfg.win / 2) as isize
+    }
+
+    /// Appends feature frame `k` of the signal `x` (`n_mels` values) to `out`; samples
+    /// outside `x` count as zero.
+    pub(crate) fn push_frame(&mut self, x: &[f32], k: usize, out: &mut Vec<f32>) -> Result<()> {
+        let start = self.first_sample(k);
+        self.frame.iter_mut().for_each(|v| *v = 0.0);
+        for (i, w) in self.hann.iter().enumerate() {
+            let s = start + i as isize;
+            if s >= 0 && (s as usize) < x.len() {
+                self.frame[i] = x[s as usize] * w;
+            }
+        }
+        self.fft
+            .process(&mut self.frame, &mut self.spectrum)
+            .map_err(|e| Error::Argument(format!("FFT failed: {e}")))?;
+        for (p, c) in self.power.iter_mut().zip(&self.spectrum) {
+            *p = c.norm_sqr() * self.norm;
+        }
+        for filter in &self.filters {
+            let e: f32 = filter.iter().zip(&self.power).map(|(w, p)| w * p).sum();
+            out.push((e.max(1e-10).log10() + 5.0) / 5.0);
+        }
+        Ok(())
+    }
 }
 
 /// AD-NeRF-shaped audio windows: for each video frame `i` at `fps` (see [`n_video_frames`]),
@@ -389,15 +469,9 @@ pub fn audio_windows(wave: &Waveform, fps: f32, cfg: &FeatureConfig) -> Result<A
     let feats = log_mel(wave, cfg)?;
     let n_feat = feats.len() / cfg.n_mels;
     let n_frames = n_video_frames(wave.samples.len(), wave.sample_rate, fps);
-    let per_video_frame = cfg.feature_rate() / fps as f64;
     let mut data = Vec::with_capacity(n_frames * cfg.window * cfg.n_mels);
     for i in 0..n_frames {
-        let centre = (i as f64 * per_video_frame).round() as isize;
-        for j in 0..cfg.window {
-            let k = (centre - (cfg.window / 2) as isize + j as isize).clamp(0, n_feat as isize - 1);
-            let k = k as usize;
-            data.extend_from_slice(&feats[k * cfg.n_mels..(k + 1) * cfg.n_mels]);
-        }
+        push_window(&feats, n_feat, i, fps, cfg, &mut data);
     }
     Ok(AudioWindows {
         n_frames,
@@ -405,4 +479,30 @@ pub fn audio_windows(wave: &Waveform, fps: f32, cfg: &FeatureConfig) -> Result<A
         n_features: cfg.n_mels,
         data,
     })
+}
+
+/// The unclamped feature frames of video frame `i`'s window: `window` frames centred on
+/// time `i / fps`, from the first to one past the last.
+pub(crate) fn window_span(i: usize, fps: f32, cfg: &FeatureConfig) -> (isize, isize) {
+    let per_video_frame = cfg.feature_rate() / fps as f64;
+    let centre = (i as f64 * per_video_frame).round() as isize;
+    let first = centre - (cfg.window / 2) as isize;
+    (first, first + cfg.window as isize)
+}
+
+/// Appends video frame `i`'s window (`[window, n_mels]`) of the feature frames `feats`
+/// (`[n_feat, n_mels]`) to `data`, each index clamped to the first and last frame.
+pub(crate) fn push_window(
+    feats: &[f32],
+    n_feat: usize,
+    i: usize,
+    fps: f32,
+    cfg: &FeatureConfig,
+    data: &mut Vec<f32>,
+) {
+    let (first, end) = window_span(i, fps, cfg);
+    for k in first..end {
+        let k = k.clamp(0, n_feat as isize - 1) as usize;
+        data.extend_from_slice(&feats[k * cfg.n_mels..(k + 1) * cfg.n_mels]);
+    }
 }

@@ -8,6 +8,7 @@
 //! (tract / onnxruntime) build on it; it never depends on them.
 
 pub mod audio;
+pub mod audio_stream;
 pub mod beam;
 pub mod bounds;
 pub mod camera;
