@@ -1,11 +1,13 @@
 //! `nldf render`: a talking-head video from an exported model and a WAV file, on the CPU
 //! with tract or onnxruntime: PNG frames, and an MP4 with the audio when ffmpeg is on the
-//! PATH.
+//! PATH. With `--stream`, the WAV is read as it arrives (stdin or a named pipe) and each
+//! frame is written as soon as its audio is in, with bounded latency.
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use nldf_infer::backend::{BackendKind, BackendOptions};
+use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob};
 use nldf_infer::video::VideoJob;
 
 use crate::progress::progress_bar;
@@ -33,7 +35,8 @@ pub struct RenderArgs {
     /// The exported model (`nldf export` writes RUN/model.onnx).
     #[arg(long)]
     pub model: PathBuf,
-    /// The speech to animate: a WAV file (any rate, mono or stereo).
+    /// The speech to animate: a WAV file (any rate, mono or stereo); with --stream, `-`
+    /// reads the WAV stream from stdin.
     #[arg(long)]
     pub audio: PathBuf,
     /// A transforms json (AD-NeRF layout) whose camera poses to follow, played forwards and
@@ -58,6 +61,15 @@ pub struct RenderArgs {
     /// Write PNG frames only, no MP4.
     #[arg(long)]
     pub no_video: bool,
+    /// Read the audio as a live WAV stream (`--audio -` for stdin, or a named pipe) and
+    /// write each frame as soon as its audio has arrived; frames the renderer cannot keep
+    /// up with are skipped so that latency stays bounded. Writes OUT/stream.json with the
+    /// latency of every frame.
+    #[arg(long)]
+    pub stream: bool,
+    /// With --stream: render every frame, however far behind the audio that falls.
+    #[arg(long, requires = "stream")]
+    pub no_drop: bool,
 }
 
 /// Runs `nldf render`.
@@ -68,6 +80,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
             .threads
             .unwrap_or_else(|| BackendOptions::default().threads),
     };
+    if args.stream {
+        return run_stream(args, options);
+    }
     let job = VideoJob {
         model: args.model,
         audio: args.audio,
@@ -112,5 +127,73 @@ pub fn run(args: RenderArgs) -> Result<()> {
         }
         println!("  {}", f.display());
     }
+    Ok(())
+}
+
+/// `nldf render --stream`.
+fn run_stream(args: RenderArgs, options: BackendOptions) -> Result<()> {
+    let job = StreamJob {
+        model: args.model,
+        poses: args.poses,
+        out: args.out,
+        backend: args.backend.into(),
+        options,
+        size: args.size,
+        drop_late: !args.no_drop,
+    };
+    let stdin = args.audio.as_os_str() == "-";
+    let name = if stdin {
+        "stdin".to_string()
+    } else {
+        args.audio.display().to_string()
+    };
+    let source: Box<dyn std::io::Read + Send> = if stdin {
+        Box::new(std::io::stdin())
+    } else {
+        Box::new(
+            std::fs::File::open(&args.audio)
+                .map_err(|e| anyhow::anyhow!("{}: cannot open: {e}", args.audio.display()))?,
+        )
+    };
+    let plan = job.plan()?;
+    let k = plan.renderer().intrinsics();
+    eprintln!(
+        "streaming {name} into {} ({}x{}, {}); waiting for audio",
+        job.out.display(),
+        k.width,
+        k.height,
+        job.backend
+    );
+    let bar = indicatif::ProgressBar::new_spinner();
+    let report = plan.run(source, &name, |frame, dropped| {
+        bar.set_message(format!(
+            "frame {} written, latency {:.0} ms, {dropped} skipped",
+            frame.index,
+            1e3 * frame.latency_s
+        ));
+        bar.tick();
+    })?;
+    bar.finish_and_clear();
+    let l = report.latency;
+    println!(
+        "{} of {} frames rendered from {:.2} s of audio ({} skipped to keep up) with {}; \
+         latency from a frame's audio to its PNG: mean {:.0} ms, median {:.0}, p95 {:.0}, \
+         max {:.0} (of which {:.0} ms is the features' lookahead)",
+        report.rendered(),
+        report.n_frames,
+        report.audio_seconds,
+        report.dropped,
+        report.backend,
+        l.mean_ms,
+        l.p50_ms,
+        l.p95_ms,
+        l.max_ms,
+        1e3 * report.lookahead_s
+    );
+    println!(
+        "wrote {} frames and {}",
+        report.rendered(),
+        report.out.join(STREAM_REPORT_FILE).display()
+    );
     Ok(())
 }

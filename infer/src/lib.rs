@@ -7,7 +7,8 @@
 //! `ort` feature, the library found by [`ort_library`]); [`frame`] renders one frame from a
 //! pose and an audio neighbourhood, sending only the rays that meet the head's bounds
 //! through the network; [`audio`] and [`poses`] make each frame's inputs; [`video`] renders
-//! a whole WAV into PNG frames and an MP4, written through a staging folder ([`output`]).
+//! a whole WAV into PNG frames and an MP4, written through a staging folder ([`output`]);
+//! [`stream`] renders audio that is still arriving, with bounded latency.
 
 pub mod audio;
 pub mod backend;
@@ -18,6 +19,7 @@ pub mod ort_backend;
 pub mod ort_library;
 pub mod output;
 pub mod poses;
+pub mod stream;
 pub mod tract_backend;
 pub mod video;
 

@@ -6,6 +6,23 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
+/// Checks that `target` is absent or an empty folder: an output folder nldf may fill.
+pub fn check_target(target: &Path) -> Result<()> {
+    if target.exists() {
+        if !target.is_dir() {
+            return Err(Error::output(target, "exists and is not a folder"));
+        }
+        let mut entries = std::fs::read_dir(target).map_err(|e| Error::io(target, e))?;
+        if entries.next().is_some() {
+            return Err(Error::output(
+                target,
+                "exists and is not empty; choose another --out or remove it",
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// A staging folder for `target`.
 #[derive(Debug)]
 pub struct Staging {
@@ -18,18 +35,7 @@ impl Staging {
     /// Checks that `target` is absent or an empty folder and makes the staging folder beside
     /// it (creating missing parents); an unusable place is an error naming it.
     pub fn create(target: &Path) -> Result<Staging> {
-        if target.exists() {
-            if !target.is_dir() {
-                return Err(Error::output(target, "exists and is not a folder"));
-            }
-            let mut entries = std::fs::read_dir(target).map_err(|e| Error::io(target, e))?;
-            if entries.next().is_some() {
-                return Err(Error::output(
-                    target,
-                    "exists and is not empty; choose another --out or remove it",
-                ));
-            }
-        }
+        check_target(target)?;
         let name = target
             .file_name()
             .ok_or_else(|| Error::output(target, "is not a folder name"))?;

@@ -67,21 +67,20 @@ pub fn pose_at(poses: &[Mat4], f: usize) -> Mat4 {
 /// sway (yaw within 4 degrees, pitch within 2, periods of about 5 to 9 seconds), one pose per
 /// video frame at the model's fps. Deterministic.
 pub fn default_track(info: &ModelInfo, n_frames: usize) -> Vec<Mat4> {
+    (0..n_frames).map(|f| default_pose(info, f)).collect()
+}
+
+/// Frame `f` of the [`default_track`], for tracks of unknown length (a stream).
+pub fn default_pose(info: &ModelInfo, f: usize) -> Mat4 {
     let spec = &info.spec;
     let start = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
     let centre = 0.5 * (spec.bounds.lo + spec.bounds.hi);
-    (0..n_frames)
-        .map(|f| {
-            let t = f as f32 / spec.fps;
-            let tau = std::f32::consts::TAU;
-            let yaw =
-                4f32.to_radians() * (0.7 * (tau * 0.11 * t).sin() + 0.3 * (tau * 0.19 * t).sin());
-            let pitch =
-                2f32.to_radians() * (tau * 0.13 * t + 0.5).sin() - 2f32.to_radians() * 0.5f32.sin();
-            let turn = Mat4::from_translation(centre)
-                * Mat4::from_quat(Quat::from_rotation_y(yaw) * Quat::from_rotation_x(pitch))
-                * Mat4::from_translation(-centre);
-            turn * start
-        })
-        .collect()
+    let t = f as f32 / spec.fps;
+    let tau = std::f32::consts::TAU;
+    let yaw = 4f32.to_radians() * (0.7 * (tau * 0.11 * t).sin() + 0.3 * (tau * 0.19 * t).sin());
+    let pitch = 2f32.to_radians() * (tau * 0.13 * t + 0.5).sin() - 2f32.to_radians() * 0.5f32.sin();
+    let turn = Mat4::from_translation(centre)
+        * Mat4::from_quat(Quat::from_rotation_y(yaw) * Quat::from_rotation_x(pitch))
+        * Mat4::from_translation(-centre);
+    turn * start
 }

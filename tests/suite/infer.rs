@@ -4,6 +4,7 @@
 //! nothing written.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use glam::Mat4;
 use nldf_core::audio::{Waveform, n_video_frames, write_wav};
@@ -18,6 +19,7 @@ use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::{FrameRenderer, background_at};
 use nldf_infer::ort_library::find_ort_library_in;
 use nldf_infer::poses::{default_track, pose_at};
+use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob, next_frame, paced_wav_stream};
 use nldf_infer::video::{VideoJob, frame_file_name};
 use nldf_train::student::StudentConfig;
 
@@ -367,4 +369,128 @@ fn infer_pose_lists_play_forwards_then_backwards() {
         .collect();
     assert_eq!(order, [0, 1, 2, 1, 0, 1, 2, 1, 0]);
     assert_eq!(pose_at(&poses[..1], 5), poses[0]);
+}
+
+/// `nldf render --stream` without skipping renders exactly the frames of a file render of
+/// the same audio, byte for byte, while the audio arrives in pieces faster than real time.
+#[test]
+fn infer_stream_renders_the_file_renders_frames_as_audio_arrives() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 112);
+    let path = run.export(WeightType::F32);
+    let wav = run.root.join("speech.wav");
+    write_test_wav(&wav, 0.6);
+    let file_out = run.root.join("file");
+    let file = job(&path, &wav, &file_out)
+        .plan()
+        .unwrap()
+        .render(|_| {})
+        .unwrap();
+    let stream_out = run.root.join("stream");
+    let plan = StreamJob {
+        model: path.clone(),
+        poses: None,
+        out: stream_out.clone(),
+        backend: BackendKind::Tract,
+        options: BackendOptions {
+            batch_size: 512,
+            threads: 1,
+        },
+        size: None,
+        drop_late: false,
+    }
+    .plan()
+    .unwrap();
+    let wave = nldf_core::audio::read_wav(&wav).unwrap();
+    // 20 ms pieces at 20x real time.
+    let source = paced_wav_stream(&wave, 20.0, Duration::from_millis(20)).unwrap();
+    let mut order = Vec::new();
+    let report = plan
+        .run(source, "test stream", |f, _| order.push(f.index))
+        .unwrap();
+    assert_eq!(report.n_frames, file.n_frames);
+    assert_eq!(report.dropped, 0);
+    assert_eq!(order, (0..file.n_frames).collect::<Vec<_>>());
+    for f in 0..file.n_frames {
+        let a = std::fs::read(file_out.join(frame_file_name(f))).unwrap();
+        let b = std::fs::read(stream_out.join(frame_file_name(f))).unwrap();
+        assert!(a == b, "frame {f} differs between the file and the stream");
+    }
+    // The lookahead of AD-NeRF's windows and 8-frame attention at 25 fps: 0.2725 s.
+    assert!(
+        (report.lookahead_s - 0.2725).abs() < 1e-9,
+        "{}",
+        report.lookahead_s
+    );
+    assert!(report.latency.max_ms >= report.latency.p50_ms && report.latency.p50_ms > 0.0);
+    let saved: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(stream_out.join(STREAM_REPORT_FILE)).unwrap())
+            .unwrap();
+    assert_eq!(saved["frames"].as_array().unwrap().len(), file.n_frames);
+}
+
+#[test]
+fn infer_stream_skips_to_the_newest_frame_only_when_asked() {
+    assert_eq!(next_frame(3, 3, true), None);
+    assert_eq!(next_frame(3, 4, true), Some((3, 0)));
+    assert_eq!(next_frame(3, 9, true), Some((8, 5)));
+    assert_eq!(next_frame(3, 9, false), Some((3, 0)));
+}
+
+#[test]
+fn infer_bad_streams_get_one_line_errors() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 113);
+    let path = run.export(WeightType::F32);
+    let stream_job = |out: &Path| StreamJob {
+        model: path.clone(),
+        poses: None,
+        out: out.to_path_buf(),
+        backend: BackendKind::Tract,
+        options: BackendOptions {
+            batch_size: 512,
+            threads: 1,
+        },
+        size: None,
+        drop_late: true,
+    };
+    let wave = Waveform {
+        sample_rate: 16_000,
+        samples: vec![0.1; 16_000],
+    };
+    let mut good = Vec::new();
+    let tmp = run.root.join("good.wav");
+    write_wav(&tmp, &wave).unwrap();
+    good.extend(std::fs::read(&tmp).unwrap());
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("empty", Vec::new(), "empty stream"),
+        ("not a WAV", b"ID3\x04 this is an mp3 file".to_vec(), "RIFF"),
+        ("cut in the header", good[..30].to_vec(), "header"),
+        (
+            "too short",
+            good[..44 + 2 * 100].to_vec(),
+            "shorter than one video frame",
+        ),
+    ];
+    for (what, bytes, needle) in cases {
+        let out = run.root.join(format!("out_{}", what.replace(' ', "_")));
+        let plan = stream_job(&out).plan().unwrap();
+        let err = plan
+            .run(Box::new(std::io::Cursor::new(bytes)), "stdin", |_, _| {})
+            .unwrap_err()
+            .to_string();
+        println!("{what}: {err}");
+        assert!(
+            err.starts_with("stdin: ") && err.contains(needle),
+            "{what}: {err}"
+        );
+        assert!(!err.contains('\n'));
+        assert!(!out.join(STREAM_REPORT_FILE).exists());
+    }
+    // A full output folder is refused before anything is read.
+    let full = run.root.join("full");
+    std::fs::create_dir(&full).unwrap();
+    std::fs::write(full.join("x"), b"x").unwrap();
+    let err = stream_job(&full).plan().unwrap_err().to_string();
+    assert!(err.contains("not empty"), "{err}");
 }
