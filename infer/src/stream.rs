@@ -296,7 +296,7 @@ impl StreamPlan {
                 if let Some(e) = r.error.take() {
                     return Err(bad(e));
                 }
-                arrivals.extend(r.arrivals.drain(..));
+                arrivals.append(&mut r.arrivals);
                 (r.samples[consumed..].to_vec(), r.ended, r.sample_rate)
             };
             consumed += samples.len();
