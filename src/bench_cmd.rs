@@ -9,6 +9,8 @@ use nldf_train::bench::{Machine, StepBench, bench_teacher_step};
 use nldf_train::config::TeacherRunConfig;
 use nldf_train::trainer::{TeacherRun, TrainData};
 
+use nldf_infer::backend::BackendOptions;
+
 use crate::train_cmd::TeacherPreset;
 
 #[derive(Subcommand, Debug)]
@@ -19,6 +21,56 @@ pub enum BenchCommand {
     /// Student training steps (88 x 256 by default, 4096 rays plus the pool batch):
     /// rays/s, effective GFLOP/s, cores busy, and the matmul rates at the same shapes.
     StudentStep(StudentStepArgs),
+    /// Rendering an exported model: ort whole frames against bare onnxruntime, tract
+    /// against ort, and frame time against the share of pixels the head covers.
+    Render(RenderBenchArgs),
+    /// `nldf render --stream` fed a WAV at real-time speed: the latency from each frame's
+    /// audio to its PNG.
+    Stream(StreamBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderBenchArgs {
+    /// The exported model (`nldf export`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Timed frames per measurement (the median is reported).
+    #[arg(long, default_value_t = 7)]
+    pub reps: usize,
+    /// Rays per network call.
+    #[arg(long, default_value_t = BackendOptions::default().batch_size)]
+    pub batch: usize,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Folder for render.json, render.md and render.png.
+    #[arg(long, default_value = "runs/bench")]
+    pub out: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct StreamBenchArgs {
+    /// The exported model (`nldf export`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Speech to stream (its first --seconds are used).
+    #[arg(long)]
+    pub audio: PathBuf,
+    /// Seconds of audio to stream.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Runtime for the network.
+    #[arg(long, value_enum, default_value_t = crate::render_cmd::BackendArg::Ort)]
+    pub backend: crate::render_cmd::BackendArg,
+    /// The image's longer side in pixels (default: the model's training size).
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Audio sent per write, in milliseconds (a microphone's buffer).
+    #[arg(long, default_value_t = 20)]
+    pub piece_ms: u64,
+    /// Folder for stream.json and stream.md (the frames go to a temporary folder).
+    #[arg(long, default_value = "runs/bench")]
+    pub out: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -65,6 +117,8 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
         BenchCommand::TeacherStep(args) => teacher_step(args),
         BenchCommand::StudentStep(args) => student_step(args),
+        BenchCommand::Render(args) => render(args),
+        BenchCommand::Stream(args) => stream(args),
     }
 }
 
@@ -99,15 +153,12 @@ fn write_report(
         "settings": settings,
         "result": result,
     });
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let stem = name.replace('-', "_");
-    let json = out.join(format!("{stem}.json"));
-    let md = out.join(format!("{stem}.md"));
-    nldf_core::error::write_json(&json, &report)?;
-    nldf_core::error::write_atomic(&md, markdown(machine, result).as_bytes())?;
-    print!("{}", markdown(machine, result));
-    println!("wrote {} and {}", json.display(), md.display());
-    Ok(())
+    write_bench_files(
+        out,
+        &name.replace('-', "_"),
+        &report,
+        &markdown(machine, result),
+    )
 }
 
 fn student_step(args: StudentStepArgs) -> Result<()> {
@@ -190,4 +241,221 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
         100.0 * r.fraction_of_candle_matmul,
         r.kernel_matmul_gflop_s
     )
+}
+
+/// Writes `report` as `out/{stem}.json` and `markdown` as `out/{stem}.md`, and prints the
+/// Markdown.
+fn write_bench_files(
+    out: &std::path::Path,
+    stem: &str,
+    report: &serde_json::Value,
+    markdown: &str,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let json = out.join(format!("{stem}.json"));
+    let md = out.join(format!("{stem}.md"));
+    nldf_core::error::write_json(&json, report)?;
+    nldf_core::error::write_atomic(&md, markdown.as_bytes())?;
+    print!("{markdown}");
+    println!("wrote {} and {}", json.display(), md.display());
+    Ok(())
+}
+
+fn render(args: RenderBenchArgs) -> Result<()> {
+    use nldf_infer::bench::{RenderBenchConfig, bench_render};
+    use nldf_train::plot::{Series, palette, plot_xy};
+    let machine = Machine::here();
+    let model = nldf_export::read_model(&args.model)?;
+    let cfg = RenderBenchConfig {
+        reps: args.reps,
+        options: BackendOptions {
+            batch_size: args.batch,
+            threads: args
+                .threads
+                .unwrap_or_else(|| BackendOptions::default().threads),
+        },
+        ..RenderBenchConfig::default()
+    };
+    let r = bench_render(&model, &cfg, |what| eprintln!("{what}"))?;
+    let ms = |s: f64| 1e3 * s;
+    let pct = |f: f64| 100.0 * f;
+    let mut md = format!(
+        "| render, {} x {} student, {}x{} frames | value |\n|---|---|\n\
+         | machine | {} ({} cores), commit {}, load {} at the start |\n\
+         | settings | batch {}, {} threads, median of {} frames after {} untimed |\n\
+         | default frame | head covers {:.1} % of the pixels ({} rays) |\n\
+         | bare onnxruntime, the same rays | {:.1} ms ({:.0} rays/s) |\n\
+         | ort whole frame | {:.1} ms ({:.0} rays/s, {:.2} frames/s) |\n\
+         | ort whole frame / bare | {:.1} % of the bare throughput |\n\
+         | tract whole frame | {:.1} ms ({:.2} frames/s) |\n\
+         | tract / ort | {:.2}x the time |\n\
+         | every pixel through the network (ort) | {:.1} ms ({} rays) |\n",
+        r.depth,
+        r.width,
+        r.image_width,
+        r.image_height,
+        machine.cpu,
+        machine.cores,
+        machine.commit,
+        machine
+            .load_average_1m
+            .map(|l| format!("{l:.2}"))
+            .unwrap_or_else(|| "unknown".into()),
+        cfg.options.batch_size,
+        cfg.options.threads,
+        cfg.reps,
+        cfg.warmup,
+        pct(r.ort_frame.head_fraction),
+        r.ort_frame.network_rays,
+        ms(r.bare_ort.seconds),
+        r.bare_ort.rays_per_s,
+        ms(r.ort_frame.seconds),
+        r.ort_frame.rays_per_s,
+        1.0 / r.ort_frame.seconds,
+        pct(r.ort_frame_over_bare),
+        ms(r.tract_frame.seconds),
+        1.0 / r.tract_frame.seconds,
+        r.tract_over_ort,
+        ms(r.full_frame.seconds),
+        r.full_frame.network_rays,
+    );
+    for t in &r.coverage {
+        md += &format!(
+            "| head on {:.1} % of the pixels (focal {:.0} px) | {:.1} ms, {:.1} % of every-pixel time |\n",
+            pct(t.head_fraction),
+            t.focal,
+            ms(t.seconds),
+            pct(t.seconds / r.full_frame.seconds)
+        );
+    }
+    if let Some((share, ratio)) = r.at_30_percent {
+        md += &format!(
+            "| at {:.1} % coverage | {:.1} % of the every-pixel frame time |\n",
+            pct(share),
+            pct(ratio)
+        );
+    }
+    let mut points: Vec<(f64, f64)> = r
+        .coverage
+        .iter()
+        .chain(std::iter::once(&r.ort_frame))
+        .map(|t| (pct(t.head_fraction), ms(t.seconds)))
+        .collect();
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let full = ms(r.full_frame.seconds);
+    let series = [
+        Series {
+            label: "ort, rays that miss the head skipped".into(),
+            color: palette(0),
+            points,
+            marked: true,
+        },
+        Series {
+            label: "ort, every pixel through the network".into(),
+            color: palette(1),
+            points: vec![(0.0, full), (100.0, full)],
+            marked: false,
+        },
+        Series {
+            label: "proportional to head pixels".into(),
+            color: palette(2),
+            points: vec![(0.0, 0.0), (100.0, full)],
+            marked: false,
+        },
+    ];
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let png = args.out.join("render.png");
+    plot_xy(
+        &png,
+        &format!(
+            "frame time against head coverage ({} x {}, {}x{})",
+            r.depth, r.width, r.image_width, r.image_height
+        ),
+        ("pixels the head covers (%)", "ms per frame"),
+        &series,
+    )?;
+    let report = serde_json::json!({
+        "bench": "render",
+        "machine": machine,
+        "model": args.model,
+        "result": r,
+    });
+    write_bench_files(&args.out, "render", &report, &md)?;
+    println!("wrote {}", png.display());
+    Ok(())
+}
+
+fn stream(args: StreamBenchArgs) -> Result<()> {
+    use nldf_infer::stream::{StreamJob, paced_wav_stream};
+    let machine = Machine::here();
+    if !(args.seconds.is_finite() && args.seconds > 0.0) {
+        anyhow::bail!("--seconds must be positive, got {}", args.seconds);
+    }
+    let wave = nldf_core::audio::read_wav(&args.audio)?;
+    let wave = wave.truncated((args.seconds * wave.sample_rate as f64) as usize);
+    let frames = tempfile::tempdir().context("creating a temporary folder")?;
+    let job = StreamJob {
+        model: args.model.clone(),
+        poses: None,
+        out: frames.path().join("frames"),
+        backend: args.backend.into(),
+        options: BackendOptions::default(),
+        size: args.size,
+        drop_late: true,
+    };
+    let plan = job.plan()?;
+    eprintln!(
+        "streaming {:.1} s of {} at real-time speed",
+        wave.seconds(),
+        args.audio.display()
+    );
+    let source = paced_wav_stream(
+        &wave,
+        1.0,
+        std::time::Duration::from_millis(args.piece_ms.max(1)),
+    )?;
+    let report = plan.run(source, "the paced stream", |_, _| {})?;
+    let l = report.latency;
+    let render_ms: Vec<f64> = report.frames.iter().map(|f| 1e3 * f.render_s).collect();
+    let mean_render = render_ms.iter().sum::<f64>() / render_ms.len().max(1) as f64;
+    let md = format!(
+        "| stream, {} | value |\n|---|---|\n\
+         | machine | {} ({} cores), commit {}, load {} at the start |\n\
+         | input | {:.1} s of {} at real-time speed, {} ms pieces, {}x{} frames |\n\
+         | frames | {} of {} rendered, {} skipped to keep up |\n\
+         | render time per frame | {:.1} ms mean |\n\
+         | features' lookahead | {:.0} ms |\n\
+         | latency, audio to PNG | mean {:.0} ms, median {:.0}, p95 {:.0}, max {:.0} |\n",
+        report.backend,
+        machine.cpu,
+        machine.cores,
+        machine.commit,
+        machine
+            .load_average_1m
+            .map(|l| format!("{l:.2}"))
+            .unwrap_or_else(|| "unknown".into()),
+        report.audio_seconds,
+        args.audio.display(),
+        args.piece_ms,
+        report.width,
+        report.height,
+        report.rendered(),
+        report.n_frames,
+        report.dropped,
+        mean_render,
+        1e3 * report.lookahead_s,
+        l.mean_ms,
+        l.p50_ms,
+        l.p95_ms,
+        l.max_ms,
+    );
+    let json = serde_json::json!({
+        "bench": "stream",
+        "machine": machine,
+        "model": args.model,
+        "settings": {"audio": args.audio, "seconds": args.seconds, "piece_ms": args.piece_ms, "size": args.size},
+        "result": report,
+    });
+    write_bench_files(&args.out, "stream", &json, &md)
 }

@@ -148,7 +148,8 @@ pub fn student_model(
 
 /// Beam encoding: points `x_k = o + t_k d` at the K evenly spaced `t_k` of
 /// `BeamSpec::t_value`, flattened to `[x_0, y_0, z_0, x_1, ...]`, clamped to
-/// `±MAX_COORD`, then `[x | sin(2^0 x) | cos(2^0 x) | ... | cos(2^(L-1) x)]`.
+/// `±MAX_COORD`, then `[x | sin(2^0 x) | cos(2^0 x) | ... | cos(2^(L-1) x)]`, the octaves
+/// above the first by the double-angle identities as `nldf_core::encoding` computes them.
 ///
 /// # Shapes
 /// - `origins`, `directions`: `[n_rays, 3]`
@@ -187,26 +188,29 @@ fn encode_beams(
     if l == 0 {
         return g.node("Identity", "beam.encoded", &[&x], vec![]);
     }
-    let freqs: Vec<f32> = (0..l).map(|i| (1u64 << i) as f32).collect();
-    let freqs = g.constant_f32("beam.freqs", &[1, l, 1], &freqs);
-    let xu = g.node("Unsqueeze", "beam.points_u", &[&x, &axis1], vec![]);
-    let scaled = g.node("Mul", "beam.scaled", &[&xu, &freqs], vec![]);
-    let sin = g.node("Sin", "beam.sin", &[&scaled], vec![]);
-    let cos = g.node("Cos", "beam.cos", &[&scaled], vec![]);
-    let sincos = g.node(
-        "Concat",
-        "beam.sincos",
-        &[&sin, &cos],
-        vec![attr_int("axis", 2)],
-    );
-    let pe_shape = g.constant_i64("beam.pe_shape", &[2], &[0, (6 * k * l) as i64]);
-    let pe = g.node("Reshape", "beam.pe", &[&sincos, &pe_shape], vec![]);
-    g.node(
-        "Concat",
-        "beam.encoded",
-        &[&x, &pe],
-        vec![attr_int("axis", 1)],
-    )
+    // sin and cos at the lowest octave, then the double-angle identities of
+    // `nldf_core::encoding::double_angle`, op for op: 2 transcendental ops per value
+    // instead of 2 L (runtimes without vectorised Sin/Cos spend most of a frame there).
+    let mut blocks = vec![x.clone()];
+    let mut s = g.node("Sin", "beam.sin0", &[&x], vec![]);
+    let mut c = g.node("Cos", "beam.cos0", &[&x], vec![]);
+    blocks.push(s.clone());
+    blocks.push(c.clone());
+    for octave in 1..l {
+        let p = g.node("Mul", &format!("beam.sc{octave}"), &[&s, &c], vec![]);
+        let diff = g.node("Sub", &format!("beam.c_minus_s{octave}"), &[&c, &s], vec![]);
+        let sum = g.node("Add", &format!("beam.c_plus_s{octave}"), &[&c, &s], vec![]);
+        s = g.node("Add", &format!("beam.sin{octave}"), &[&p, &p], vec![]);
+        c = g.node("Mul", &format!("beam.cos{octave}"), &[&diff, &sum], vec![]);
+        blocks.push(s.clone());
+        blocks.push(c.clone());
+    }
+    let refs: Vec<&str> = blocks.iter().map(String::as_str).collect();
+    let encoded = g.node("Concat", "beam.concat", &refs, vec![attr_int("axis", 1)]);
+    // The same clamp once more, a no-op on these values, keeps the features one tensor:
+    // tract splits a product whose input is a feature-axis Concat into one small product
+    // per block (21 for L = 10), several times slower than the single product.
+    g.node("Clip", "beam.encoded", &[&encoded, &lo, &hi], vec![])
 }
 
 /// `x W^T + b` with the checkpoint's Linear `name` (`weight` `[out, in]`, `bias` `[out]`).

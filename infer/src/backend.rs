@@ -36,7 +36,7 @@ impl std::fmt::Display for BackendKind {
 }
 
 /// How a backend runs the network.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub struct BackendOptions {
     /// Rays per network call: larger batches use the matrix units better, smaller ones
     /// waste less on a frame's last, partial batch.

@@ -48,7 +48,8 @@ pub fn background_at(info: &ModelInfo, width: u32, height: u32) -> Result<ImageR
 pub struct Frame {
     /// The image, `[height, width, 3]` in [0, 1].
     pub image: ImageRgb,
-    /// Pixels whose rays met the head's bounds (went through the network).
+    /// Pixels whose rays went through the network (those meeting the head's bounds, unless
+    /// skipping is off).
     pub head_pixels: usize,
 }
 
@@ -57,6 +58,19 @@ pub struct FrameRenderer {
     backend: Box<dyn Backend>,
     intrinsics: Intrinsics,
     background: ImageRgb,
+    /// Send only the rays that meet the head's bounds through the network.
+    skip_rays: bool,
+}
+
+/// The rays of a frame that go through the network.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FrameRays {
+    /// `[n, 3]` flat.
+    pub origins: Vec<f32>,
+    /// `[n, 3]` flat.
+    pub directions: Vec<f32>,
+    /// The pixel (row-major index) of each ray.
+    pub pixels: Vec<usize>,
 }
 
 impl std::fmt::Debug for FrameRenderer {
@@ -78,6 +92,7 @@ impl FrameRenderer {
             backend,
             intrinsics,
             background,
+            skip_rays: true,
         })
     }
 
@@ -96,12 +111,27 @@ impl FrameRenderer {
         self.backend.as_ref()
     }
 
-    /// The frame seen from camera-to-world `c2w` with the audio neighbourhood `audio`.
-    ///
-    /// # Shapes
-    /// - `audio`: `[att_frames, window, n_features]` flat
-    /// - returns an image of the renderer's [`FrameRenderer::intrinsics`] size
-    pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
+    /// Sets the focal length in pixels (the image size stays): a smaller focal length
+    /// zooms out, so the head covers fewer pixels at the same camera pose and depth range.
+    pub fn set_focal(&mut self, focal: f32) -> Result<()> {
+        if !(focal.is_finite() && focal > 0.0) {
+            return Err(Error::Argument(format!(
+                "focal length must be positive, got {focal}"
+            )));
+        }
+        self.intrinsics.focal = focal;
+        Ok(())
+    }
+
+    /// Whether rays that miss the head's bounds skip the network (the default) or every
+    /// pixel goes through it (to measure what the skipping saves).
+    pub fn set_skip_rays(&mut self, skip: bool) {
+        self.skip_rays = skip;
+    }
+
+    /// The rays of the frame seen from camera-to-world `c2w` that go through the network:
+    /// those meeting the head's bounds within `[near, far]`, or all with skipping off.
+    pub fn rays(&self, c2w: Mat4) -> FrameRays {
         let camera = Camera {
             intrinsics: self.intrinsics,
             c2w,
@@ -109,29 +139,37 @@ impl FrameRenderer {
         let spec = &self.backend.info().spec;
         let (bounds, near, far) = (spec.bounds, spec.near, spec.far);
         let k = self.intrinsics;
-        let mut origins = Vec::new();
-        let mut directions = Vec::new();
-        let mut hit = Vec::new();
+        let mut rays = FrameRays::default();
         for j in 0..k.height {
             for i in 0..k.width {
                 let (o, d) = camera.ray(i as f32, j as f32);
-                if bounds.intersect(o, d, near, far).is_some() {
-                    origins.extend_from_slice(&o.to_array());
-                    directions.extend_from_slice(&d.to_array());
-                    hit.push(j as usize * k.width as usize + i as usize);
+                if !self.skip_rays || bounds.intersect(o, d, near, far).is_some() {
+                    rays.origins.extend_from_slice(&o.to_array());
+                    rays.directions.extend_from_slice(&d.to_array());
+                    rays.pixels.push(j as usize * k.width as usize + i as usize);
                 }
             }
         }
+        rays
+    }
+
+    /// The frame seen from camera-to-world `c2w` with the audio neighbourhood `audio`.
+    ///
+    /// # Shapes
+    /// - `audio`: `[att_frames, window, n_features]` flat
+    /// - returns an image of the renderer's [`FrameRenderer::intrinsics`] size
+    pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
+        let rays = self.rays(c2w);
         let mut image = self.background.clone();
-        if !hit.is_empty() {
-            let out = self.backend.run(&origins, &directions, audio)?;
-            for (r, &p) in hit.iter().enumerate() {
+        if !rays.pixels.is_empty() {
+            let out = self.backend.run(&rays.origins, &rays.directions, audio)?;
+            for (r, &p) in rays.pixels.iter().enumerate() {
                 image.data[3 * p..3 * p + 3].copy_from_slice(&out.rgb[3 * r..3 * r + 3]);
             }
         }
         Ok(Frame {
             image,
-            head_pixels: hit.len(),
+            head_pixels: rays.pixels.len(),
         })
     }
 }

@@ -12,6 +12,8 @@
 
 pub mod audio;
 pub mod backend;
+#[cfg(feature = "ort")]
+pub mod bench;
 pub mod error;
 pub mod frame;
 #[cfg(feature = "ort")]

@@ -10,7 +10,7 @@ use nldf_export::contract::{
     INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
 };
 use ort::environment::Environment;
-use ort::session::Session;
+use ort::session::{Session, SessionOutputs};
 use ort::value::TensorRef;
 
 use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
@@ -86,6 +86,45 @@ impl OrtBackend {
     }
 }
 
+impl OrtBackend {
+    /// Runs the session on one batch and hands its outputs to `take`.
+    fn run_session<R>(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+        take: impl FnOnce(&SessionOutputs<'_>) -> Result<R>,
+    ) -> Result<R> {
+        let n = origins.len() / 3;
+        let fail = |e: ort::Error| Error::backend(NAME, e);
+        let inputs = ort::inputs![
+            INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
+            INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
+            INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
+                .map_err(fail)?,
+        ];
+        let outputs = self.session.run(inputs).map_err(fail)?;
+        take(&outputs)
+    }
+
+    /// Runs the session on `origins`/`directions` in batches of [`Backend::batch_size`]
+    /// rays, as [`Backend::run`] does, but keeps no output: the bare runtime's cost on
+    /// ready-made inputs, which `bench` compares whole frames against.
+    pub fn run_bare(&mut self, origins: &[f32], directions: &[f32], audio: &[f32]) -> Result<()> {
+        crate::backend::check_inputs(&self.info, origins, directions, audio)?;
+        let n = origins.len() / 3;
+        for start in (0..n).step_by(self.batch_size) {
+            let end = (start + self.batch_size).min(n);
+            let (o, d) = (
+                &origins[3 * start..3 * end],
+                &directions[3 * start..3 * end],
+            );
+            self.run_session(o, d, audio, |_| Ok(()))?;
+        }
+        Ok(())
+    }
+}
+
 impl Backend for OrtBackend {
     fn kind(&self) -> BackendKind {
         BackendKind::Ort
@@ -110,35 +149,31 @@ impl Backend for OrtBackend {
         if n == 0 {
             return Ok(RayOutputs::default());
         }
-        let fail = |e: ort::Error| Error::backend(NAME, e);
-        let inputs = ort::inputs![
-            INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
-            INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
-            INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
-                .map_err(fail)?,
-        ];
-        let outputs = self.session.run(inputs).map_err(fail)?;
         let m = self.info.segments;
-        let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {
-            let value = outputs
-                .get(name)
-                .ok_or_else(|| Error::backend(NAME, format!("no output `{name}`")))?;
-            let (_, data) = value.try_extract_tensor::<f32>().map_err(fail)?;
-            if data.len() != per_ray * n {
-                return Err(Error::backend(
-                    NAME,
-                    format!(
-                        "output `{name}` holds {} values, expected {}",
-                        data.len(),
-                        per_ray * n
-                    ),
-                ));
-            }
-            Ok(data.to_vec())
-        };
-        Ok(RayOutputs {
-            rgb: take(OUTPUT_RGB, 3)?,
-            segments: take(OUTPUT_SEGMENTS, 3 * m)?,
+        self.run_session(origins, directions, audio, |outputs| {
+            let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {
+                let value = outputs
+                    .get(name)
+                    .ok_or_else(|| Error::backend(NAME, format!("no output `{name}`")))?;
+                let (_, data) = value
+                    .try_extract_tensor::<f32>()
+                    .map_err(|e| Error::backend(NAME, e))?;
+                if data.len() != per_ray * n {
+                    return Err(Error::backend(
+                        NAME,
+                        format!(
+                            "output `{name}` holds {} values, expected {}",
+                            data.len(),
+                            per_ray * n
+                        ),
+                    ));
+                }
+                Ok(data.to_vec())
+            };
+            Ok(RayOutputs {
+                rgb: take(OUTPUT_RGB, 3)?,
+                segments: take(OUTPUT_SEGMENTS, 3 * m)?,
+            })
         })
     }
 }

@@ -85,6 +85,13 @@ pub fn plot_training_curve(path: &Path, title: &str, rows: &[LogRow]) -> Result<
 /// Draws `series` (PSNR against wall-clock minutes) into `path` (written atomically);
 /// empty series are left out.
 pub fn plot_lines(path: &Path, title: &str, series: &[Series]) -> Result<()> {
+    plot_xy(path, title, ("wall-clock minutes", "PSNR (dB)"), series)
+}
+
+/// Draws `series` into `path` (written atomically) with the axes labelled `axes` (x, y);
+/// x runs from 0, y spans the values with a margin of 5 % (at least 1). Empty series are
+/// left out.
+pub fn plot_xy(path: &Path, title: &str, axes: (&str, &str), series: &[Series]) -> Result<()> {
     register_font();
     let (w, h) = SIZE;
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -101,7 +108,8 @@ pub fn plot_lines(path: &Path, title: &str, series: &[Series]) -> Result<()> {
                 (a.min(v), b.max(v))
             });
         let (lo, hi) = if lo.is_finite() {
-            ((lo - 1.0).floor(), (hi + 1.0).ceil())
+            let margin = (0.05 * (hi - lo)).max(1.0);
+            ((lo - margin).floor(), (hi + margin).ceil())
         } else {
             (0.0, 40.0)
         };
@@ -114,8 +122,8 @@ pub fn plot_lines(path: &Path, title: &str, series: &[Series]) -> Result<()> {
             .map_err(|e| fail(e.to_string()))?;
         chart
             .configure_mesh()
-            .x_desc("wall-clock minutes")
-            .y_desc("PSNR (dB)")
+            .x_desc(axes.0)
+            .y_desc(axes.1)
             .label_style(("sans-serif", 14))
             .draw()
             .map_err(|e| fail(e.to_string()))?;
