@@ -69,6 +69,7 @@ pub fn run(args: AblateArgs) -> Result<()> {
         width: args.width,
         no_distill: false,
         no_pool: false,
+        pseudo_frames: None,
         config: None,
         iters: Some(args.iters),
         minutes: None,
@@ -96,6 +97,15 @@ pub fn run(args: AblateArgs) -> Result<()> {
             format!("ablate_d{d}_pixels"),
             StudentArgs {
                 no_distill: true,
+                ..base.clone()
+            },
+        ),
+        (
+            "1: distillation".into(),
+            format!("depth {d}, distilled, training frames only (no pseudo views)"),
+            format!("ablate_d{d}_nopseudo"),
+            StudentArgs {
+                pseudo_frames: Some(0),
                 ..base.clone()
             },
         ),

@@ -98,6 +98,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             width: None,
             no_distill: false,
             no_pool: false,
+            pseudo_frames: None,
             config: None,
             iters: Some(args.student_iters),
             minutes: Some(args.student_minutes),

@@ -62,8 +62,13 @@ pub struct StudentArgs {
     /// Train without the active beam pool.
     #[arg(long)]
     pub no_pool: bool,
+    /// Pseudo views rendered by the teacher besides the training frames (poses turned
+    /// about the head, audio codes of two frames mixed; default 256; 0 turns them off).
+    #[arg(long)]
+    pub pseudo_frames: Option<usize>,
     /// JSON run configuration ({"model": {...}, "train": {...}}; missing fields take the
-    /// defaults; --depth, --width, --no-distill and --no-pool are ignored with it).
+    /// defaults; --depth, --width, --no-distill, --no-pool and --pseudo-frames are ignored
+    /// with it).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Total training steps (overrides the configuration; with --resume, extends the run).
@@ -254,6 +259,9 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
                 }
                 cfg.train.distill = !args.no_distill;
                 cfg.train.pool = !args.no_pool;
+                if let Some(n) = args.pseudo_frames {
+                    cfg.train.pseudo_frames = n;
+                }
                 cfg
             }
         };

@@ -150,6 +150,7 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
     }
 }
 
+use nldf_core::dataset::Split;
 use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
 use nldf_train::pool::{BeamPool, PoolEntry};
 use nldf_train::student_trainer::StudentRun;
@@ -211,6 +212,7 @@ fn tiny_student_config(iters: usize) -> StudentRunConfig {
             lr: 3e-3,
             lr_decay_steps: iters,
             pool_batches: 4,
+            pseudo_frames: 6,
             val_every: 0,
             val_frames: 2,
             checkpoint_every: 0,
@@ -240,6 +242,20 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     run.prepare(&data, Some(&teacher), &mut |_, _| {}).unwrap();
     assert!(dir.path().join("targets.safetensors").is_file());
     assert!(dir.path().join("render.json").is_file());
+    // The training frames, then 6 pseudo views, each with the teacher's colours of every
+    // pixel whose ray meets the head.
+    let n_train = data.dataset.frames(Split::Train).len();
+    assert_eq!(run.views.len(), n_train + 6);
+    assert!(
+        run.views[..n_train]
+            .iter()
+            .all(|v| v.recorded && v.weight == 1.0)
+    );
+    assert!(run.views[n_train..].iter().all(|v| !v.recorded));
+    for (fb, t) in run.beams.iter().zip(&run.targets) {
+        assert_eq!(t.len(), 3 * run.cfg.model.segments * fb.pixels.len());
+    }
+    assert!(run.beams[n_train..].iter().all(|fb| !fb.pixels.is_empty()));
     // The student's audio encoder starts as the teacher's.
     let vars_of = |varmap: &candle_nn::VarMap, prefix: &str| -> Vec<(String, Vec<f32>)> {
         let mut v: Vec<(String, Vec<f32>)> = varmap

@@ -276,6 +276,17 @@ pub struct StudentTrainConfig {
     pub pool_batches: usize,
     /// Jitter the beam points along each ray while training (R2L).
     pub jitter: bool,
+    /// Views beyond the training frames whose teacher colours the student also learns
+    /// from (R2L's pseudo data; distillation only): each turns a training frame's pose
+    /// about the head's centre and mixes the audio codes of two training frames, so the
+    /// student sees the teacher's answer between the recorded poses and sounds, where the
+    /// held-out frames lie. 0: training frames only.
+    pub pseudo_frames: usize,
+    /// Share of each batch's frames drawn from the pseudo views.
+    pub pseudo_fraction: f32,
+    /// Largest turn of a pseudo view about the vertical and the horizontal axis, degrees.
+    pub pseudo_yaw_deg: f32,
+    pub pseudo_pitch_deg: f32,
     /// Steps between lines of `log.csv`.
     pub log_every: usize,
     /// Steps between validations (0: only at the end).
@@ -308,6 +319,10 @@ impl Default for StudentTrainConfig {
             hard_ratio: 0.2,
             pool_batches: 20,
             jitter: true,
+            pseudo_frames: 256,
+            pseudo_fraction: 0.5,
+            pseudo_yaw_deg: 6.0,
+            pseudo_pitch_deg: 3.0,
             log_every: 10,
             val_every: 250,
             val_frames: 4,

@@ -14,7 +14,9 @@ use std::time::Instant;
 
 use candle_core::{D, DType, Device, Tensor};
 use candle_nn::VarMap;
+use glam::{Mat4, Quat};
 use nldf_core::beam::{BeamSpec, encode_beams};
+use nldf_core::camera::Camera;
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr_from_mse;
@@ -28,7 +30,7 @@ use rayon::prelude::*;
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
 use crate::checkpoint::{CONFIG_FILE, load_json, load_tensors, save_json, save_tensors, step_of};
-use crate::config::StudentRunConfig;
+use crate::config::{StudentRunConfig, StudentTrainConfig};
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
@@ -59,24 +61,85 @@ pub struct FrameBeams {
     pub mouth: Vec<u32>,
 }
 
-/// The hit pixels of every training frame.
-pub fn frame_beams(data: &TrainData) -> Vec<FrameBeams> {
+/// A view the student learns from: a training frame, or a pseudo view (R2L's pseudo data)
+/// whose pose and audio lie between the training frames'.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    pub camera: Camera,
+    /// Audio ids whose codes are mixed: `weight code(a) + (1 - weight) code(b)`.
+    pub audio: (usize, usize),
+    pub weight: f32,
+    /// The training frame the view comes from (its face and mouth regions are used).
+    pub source: usize,
+    /// Whether the view is a training frame, with a ground-truth image.
+    pub recorded: bool,
+}
+
+/// The training frames as views, then `cfg.pseudo_frames` pseudo views (with distillation
+/// on): each a seeded training frame's camera turned about the head's centre by up to
+/// `pseudo_yaw_deg` and `pseudo_pitch_deg`, with the audio codes of two seeded training
+/// frames mixed by a uniform weight.
+pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
     let ds = &data.dataset;
-    let width = ds.intrinsics.width as usize;
-    ds.frames(Split::Train)
-        .par_iter()
+    let frames = ds.frames(Split::Train);
+    let mut views: Vec<View> = frames
+        .iter()
         .enumerate()
-        .map(|(fi, frame)| {
-            let camera = ds.camera(frame);
+        .map(|(fi, f)| View {
+            camera: ds.camera(f),
+            audio: (f.aud_id, f.aud_id),
+            weight: 1.0,
+            source: fi,
+            recorded: true,
+        })
+        .collect();
+    if !cfg.distill || frames.is_empty() {
+        return views;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5eed_5eed);
+    let centre = 0.5 * (data.bounds.lo + data.bounds.hi);
+    for _ in 0..cfg.pseudo_frames {
+        let source = rng.random_range(0..frames.len());
+        let other = rng.random_range(0..frames.len());
+        let weight: f32 = rng.random_range(0.0..=1.0);
+        let yaw = cfg.pseudo_yaw_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
+        let pitch = cfg.pseudo_pitch_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
+        let turn = Mat4::from_translation(centre)
+            * Mat4::from_quat(Quat::from_rotation_y(yaw) * Quat::from_rotation_x(pitch))
+            * Mat4::from_translation(-centre);
+        let base = ds.camera(&frames[source]);
+        views.push(View {
+            camera: Camera {
+                intrinsics: base.intrinsics,
+                c2w: turn * base.c2w,
+            },
+            audio: (frames[source].aud_id, frames[other].aud_id),
+            weight,
+            source,
+            recorded: false,
+        });
+    }
+    views
+}
+
+/// The hit pixels of every view; a view's face and mouth regions are its source frame's.
+pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
+    let ds = &data.dataset;
+    let frames = ds.frames(Split::Train);
+    let width = ds.intrinsics.width as usize;
+    views
+        .par_iter()
+        .map(|view| {
+            let frame = &frames[view.source];
             let mouth: std::collections::HashSet<(u32, u32)> = data
                 .mouth_pixels
-                .get(fi)
+                .get(view.source)
                 .map(|m| m.iter().copied().collect())
                 .unwrap_or_default();
             let mut fb = FrameBeams::default();
             for p in 0..ds.intrinsics.n_pixels() {
                 let (i, j) = ((p % width) as u32, (p / width) as u32);
-                let (o, d) = camera.ray(i as f32, j as f32);
+                let (o, d) = view.camera.ray(i as f32, j as f32);
                 if data.bounds.intersect(o, d, ds.near, ds.far).is_none() {
                     continue;
                 }
@@ -96,28 +159,49 @@ pub fn frame_beams(data: &TrainData) -> Vec<FrameBeams> {
         .collect()
 }
 
-/// The teacher's Eq. 5 segment colours of every hit pixel of every training frame
-/// (`[n_pixels, m, 3]` flat per frame). `progress(done, total)` is called per frame.
+/// `weight a + (1 - weight) b` row by row: the audio codes of views.
+///
+/// # Shapes
+/// - `a`, `b`: `[n, dim]`; `weights`: `n` values; returns `[n, dim]`
+fn mix_codes(a: &Tensor, b: &Tensor, weights: &[f32]) -> Result<Tensor> {
+    if weights.iter().all(|&w| w == 1.0) {
+        return Ok(a.clone());
+    }
+    let n = weights.len();
+    let w = Tensor::from_vec(weights.to_vec(), (n, 1), a.device())?;
+    let rest = Tensor::from_vec(
+        weights.iter().map(|w| 1.0 - w).collect::<Vec<f32>>(),
+        (n, 1),
+        a.device(),
+    )?;
+    Ok((a.broadcast_mul(&w)? + b.broadcast_mul(&rest)?)?)
+}
+
+/// The teacher's Eq. 5 segment colours of every hit pixel of every view (`[n_pixels, m,
+/// 3]` flat per view). `progress(done, total)` is called per view.
 pub fn teacher_targets(
     teacher: &TeacherRun,
     data: &TrainData,
+    views: &[View],
     beams: &[FrameBeams],
     m: usize,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<Vec<f32>>> {
     let ds = &data.dataset;
-    let frames = ds.frames(Split::Train);
-    let mut out = Vec::with_capacity(frames.len());
-    for (fi, (frame, fb)) in frames.iter().zip(beams).enumerate() {
-        let camera = ds.camera(frame);
+    let mut out = Vec::with_capacity(views.len());
+    for (vi, (view, fb)) in views.iter().zip(beams).enumerate() {
         let mut rays = Rays::with_capacity(fb.pixels.len());
         let mut bg = Vec::with_capacity(3 * fb.pixels.len());
         for &(i, j) in &fb.pixels {
-            let (o, d) = camera.ray(i as f32, j as f32);
+            let (o, d) = view.camera.ray(i as f32, j as f32);
             rays.push(o, d);
             bg.extend_from_slice(&ds.background.get(i, j));
         }
-        let code = teacher.audio_codes(data, &[frame.aud_id])?;
+        let code = mix_codes(
+            &teacher.audio_codes(data, &[view.audio.0])?,
+            &teacher.audio_codes(data, &[view.audio.1])?,
+            &[view.weight],
+        )?;
         out.push(teacher.teacher.segment_targets(
             &rays,
             &bg,
@@ -127,7 +211,7 @@ pub fn teacher_targets(
             ds.far,
             m,
         )?);
-        progress(fi + 1, frames.len());
+        progress(vi + 1, views.len());
     }
     Ok(out)
 }
@@ -200,9 +284,11 @@ pub struct StudentRun {
     elapsed_before: f64,
     started: Instant,
     pub pool: BeamPool,
-    /// Hit pixels per training frame (set by [`StudentRun::prepare`]).
+    /// The training frames, then the pseudo views (set by [`StudentRun::prepare`]).
+    pub views: Vec<View>,
+    /// Hit pixels per view.
     pub beams: Vec<FrameBeams>,
-    /// Teacher segment colours per training frame, aligned with `beams` (distillation).
+    /// Teacher segment colours per view, aligned with `beams` (distillation).
     pub targets: Vec<Vec<f32>>,
 }
 
@@ -283,15 +369,16 @@ impl StudentRun {
             step: 0,
             elapsed_before: 0.0,
             started: Instant::now(),
+            views: Vec::new(),
             beams: Vec::new(),
             targets: Vec::new(),
         })
     }
 
-    /// Finds every training frame's hit pixels and, when distilling, the teacher's segment
-    /// colours: read from `targets.safetensors` when it matches the teacher's step,
-    /// otherwise computed with `teacher` and cached. Writes `render.json` and the
-    /// background beside the checkpoint.
+    /// Makes the views (training frames and pseudo views), finds their hit pixels and,
+    /// when distilling, the teacher's segment colours: read from `targets.safetensors` when
+    /// it matches the views and the teacher's step, otherwise computed with `teacher` and
+    /// cached. Writes `render.json` and the background beside the checkpoint.
     pub fn prepare(
         &mut self,
         data: &TrainData,
@@ -299,7 +386,8 @@ impl StudentRun {
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        self.beams = frame_beams(data);
+        self.views = training_views(data, &self.cfg.train);
+        self.beams = frame_beams(data, &self.views);
         let spec =
             RenderSpec::of_dataset(&data.dataset, data.bounds, self.cfg.model.audio.att_frames);
         spec.save(&self.dir.join(RENDER_SPEC_FILE))?;
@@ -324,7 +412,7 @@ impl StudentRun {
                 path.display()
             ))
         })?;
-        self.targets = teacher_targets(teacher, data, &self.beams, m, progress)?;
+        self.targets = teacher_targets(teacher, data, &self.views, &self.beams, m, progress)?;
         save_targets(&path, &self.targets, m, teacher.step)
     }
 
@@ -352,21 +440,56 @@ impl StudentRun {
         Ok(self.student.audio_codes(&windows)?)
     }
 
+    /// Audio codes of views (mixed for pseudo views).
+    ///
+    /// # Shapes
+    /// - returns `[views.len(), audio_dim]`
+    fn view_codes(&self, data: &TrainData, views: &[u32]) -> Result<Tensor> {
+        let v: Vec<&View> = views.iter().map(|&i| &self.views[i as usize]).collect();
+        let a: Vec<usize> = v.iter().map(|v| v.audio.0).collect();
+        let weights: Vec<f32> = v.iter().map(|v| v.weight).collect();
+        let codes_a = self.audio_codes(data, &a)?;
+        if weights.iter().all(|&w| w == 1.0) {
+            return Ok(codes_a);
+        }
+        let b: Vec<usize> = v.iter().map(|v| v.audio.1).collect();
+        mix_codes(&codes_a, &self.audio_codes(data, &b)?, &weights)
+    }
+
     /// Draws the main batch: per picked frame, rays from the mouth, the face and the rest
     /// of the hit pixels in the configured proportions.
     fn draw_batch(&self, rng: &mut ChaCha8Rng) -> Vec<BeamRef> {
         let t = &self.cfg.train;
-        let usable: Vec<usize> = (0..self.beams.len())
-            .filter(|&f| !self.beams[f].pixels.is_empty())
-            .collect();
-        if usable.is_empty() {
+        let usable = |recorded: bool| -> Vec<usize> {
+            (0..self.beams.len())
+                .filter(|&f| self.views[f].recorded == recorded && !self.beams[f].pixels.is_empty())
+                .collect()
+        };
+        let (real, pseudo) = (usable(true), usable(false));
+        if real.is_empty() {
             return Vec::new();
         }
-        let n_frames = t.frames_per_batch.clamp(1, usable.len());
-        let picked = sample_indices(rng, usable.len(), n_frames).into_vec();
+        let n_frames = t.frames_per_batch.max(1);
+        let n_pseudo = if pseudo.is_empty() {
+            0
+        } else {
+            ((t.pseudo_fraction.clamp(0.0, 1.0) * n_frames as f32).round() as usize)
+                .min(n_frames - 1)
+                .min(pseudo.len())
+        };
+        let n_real = (n_frames - n_pseudo).min(real.len());
+        let n_frames = n_real + n_pseudo;
+        let mut chosen: Vec<usize> = sample_indices(rng, real.len(), n_real)
+            .into_iter()
+            .map(|u| real[u])
+            .collect();
+        chosen.extend(
+            sample_indices(rng, pseudo.len(), n_pseudo)
+                .into_iter()
+                .map(|u| pseudo[u]),
+        );
         let mut batch = Vec::with_capacity(t.batch_rays);
-        for (slot, &u) in picked.iter().enumerate() {
-            let fi = usable[u];
+        for (slot, &fi) in chosen.iter().enumerate() {
             let fb = &self.beams[fi];
             let count = t.batch_rays / n_frames + usize::from(slot < t.batch_rays % n_frames);
             let n_mouth = if fb.mouth.is_empty() {
@@ -487,7 +610,6 @@ impl StudentRun {
         update: bool,
     ) -> Result<StepOutput> {
         let ds = &data.dataset;
-        let frames = ds.frames(Split::Train);
         let t = &self.cfg.train;
         let m = self.cfg.model.segments;
         let distill = t.distill;
@@ -513,15 +635,12 @@ impl StudentRun {
             }
         }
         let n_main_frames = main_ids.len() as u32;
-        let aud = |ids: &[u32]| -> Vec<usize> {
-            ids.iter().map(|&f| frames[f as usize].aud_id).collect()
-        };
         let mut tables = Vec::new();
         if !main_ids.is_empty() {
-            tables.push(self.audio_codes(data, &aud(&main_ids))?);
+            tables.push(self.view_codes(data, &main_ids)?);
         }
         if !pool_ids.is_empty() {
-            tables.push(self.audio_codes(data, &aud(&pool_ids))?.detach());
+            tables.push(self.view_codes(data, &pool_ids)?.detach());
         }
         let table = Tensor::cat(&tables, 0)?;
         let n = all.len();
@@ -531,13 +650,29 @@ impl StudentRun {
         let mut row_of_ray = Vec::with_capacity(n);
         for (b, detached) in &all {
             let fi = b.frame as usize;
+            let view = &self.views[fi];
             let (i, j) = self.beams[fi].pixels[b.pixel as usize];
-            let (o, d) = ds.camera(&frames[fi]).ray(i as f32, j as f32);
+            let (o, d) = view.camera.ray(i as f32, j as f32);
             rays.push(o, d);
-            gt.extend_from_slice(&data.images[fi].get(i, j));
-            if distill {
+            let segs = if distill {
                 let p = b.pixel as usize;
-                tgt.extend_from_slice(&self.targets[fi][3 * m * p..3 * m * (p + 1)]);
+                let segs = &self.targets[fi][3 * m * p..3 * m * (p + 1)];
+                tgt.extend_from_slice(segs);
+                segs
+            } else {
+                &[]
+            };
+            if view.recorded {
+                gt.extend_from_slice(&data.images[fi].get(i, j));
+            } else {
+                // A pseudo view has no image: its pixel is the teacher's (Eq. 7).
+                let mut pixel = [0.0f32; 3];
+                for seg in segs.chunks_exact(3) {
+                    for (p, v) in pixel.iter_mut().zip(seg) {
+                        *p += v;
+                    }
+                }
+                gt.extend_from_slice(&pixel);
             }
             let slot = slot_of[&(b.frame, *detached)];
             row_of_ray.push(if *detached {
@@ -738,6 +873,16 @@ pub fn validate(cfg: &StudentRunConfig) -> Result<()> {
     if !(t.lambda.is_finite() && t.lambda >= 0.0 && (0.0..=1.0).contains(&t.hard_ratio)) {
         return Err(Error::Config(
             "lambda must be >= 0 and hard_ratio in [0, 1]".into(),
+        ));
+    }
+    let turn_ok = |deg: f32| deg.is_finite() && (0.0..=45.0).contains(&deg);
+    if !((0.0..=1.0).contains(&t.pseudo_fraction)
+        && turn_ok(t.pseudo_yaw_deg)
+        && turn_ok(t.pseudo_pitch_deg))
+    {
+        return Err(Error::Config(
+            "pseudo_fraction must be in [0, 1] and pseudo_yaw_deg, pseudo_pitch_deg in [0, 45]"
+                .into(),
         ));
     }
     Ok(())
