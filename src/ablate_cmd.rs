@@ -144,6 +144,9 @@ pub fn run(args: AblateArgs) -> Result<()> {
             ..args
         };
         println!("== {table}: {label} -> {}", dir.display());
+        if !args.no_distill {
+            share_targets(&args.run, &dir)?;
+        }
         run_student(args)?;
         let run = StudentRun::open(&dir, false)?;
         let minutes = run.elapsed() / 60.0;
@@ -248,5 +251,35 @@ fn write_reports(
         json.display(),
         png.display()
     );
+    Ok(())
+}
+
+/// Copies the teacher's cached segment colours of an earlier variant into `dir` when `dir`
+/// has none: variants with the same views reuse them instead of rendering the teacher
+/// again (the trainer checks that the cache fits its views and teacher, and renders anew
+/// when it does not).
+fn share_targets(run: &std::path::Path, dir: &std::path::Path) -> Result<()> {
+    use nldf_train::student_trainer::TARGETS_FILE;
+    if dir.join(TARGETS_FILE).is_file() {
+        return Ok(());
+    }
+    let Ok(entries) = std::fs::read_dir(run) else {
+        return Ok(());
+    };
+    let mut caches: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path().join(TARGETS_FILE)))
+        .filter(|p| p.is_file())
+        .collect();
+    caches.sort();
+    // The largest cache holds the most views: the pseudo views' when there are any.
+    let Some(source) = caches
+        .into_iter()
+        .max_by_key(|p| p.metadata().map(|m| m.len()).unwrap_or(0))
+    else {
+        return Ok(());
+    };
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::copy(&source, dir.join(TARGETS_FILE))
+        .with_context(|| format!("copying {} into {}", source.display(), dir.display()))?;
     Ok(())
 }

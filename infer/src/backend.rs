@@ -94,11 +94,11 @@ pub trait Backend {
     /// Rays per network call.
     fn batch_size(&self) -> usize;
 
-    /// Runs the network on one batch of at most [`Backend::batch_size`] rays with one audio
-    /// neighbourhood.
+    /// Runs the network on one batch of 1 to [`Backend::batch_size`] rays with one audio
+    /// neighbourhood; [`Backend::run`] has checked the inputs' lengths.
     ///
     /// # Shapes
-    /// - `origins`, `directions`: `[n_rays, 3]` flat, `n_rays <= batch_size`
+    /// - `origins`, `directions`: `[n_rays, 3]` flat, `1 <= n_rays <= batch_size`
     /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_export::contract`)
     /// - returns `rgb` `[n_rays, 3]` and `segments` `[n_rays, M, 3]`
     fn run_batch(

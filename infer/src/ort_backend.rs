@@ -144,11 +144,7 @@ impl Backend for OrtBackend {
         directions: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs> {
-        crate::backend::check_inputs(&self.info, origins, directions, audio)?;
         let n = origins.len() / 3;
-        if n == 0 {
-            return Ok(RayOutputs::default());
-        }
         let m = self.info.segments;
         self.run_session(origins, directions, audio, |outputs| {
             let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {

@@ -114,11 +114,7 @@ impl Backend for TractBackend {
         directions: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs> {
-        crate::backend::check_inputs(&self.info, origins, directions, audio)?;
         let n = origins.len() / 3;
-        if n == 0 {
-            return Ok(RayOutputs::default());
-        }
         let padded = self.padded(n);
         let plan = self.plan(padded)?;
         let pad = |v: &[f32]| -> Vec<f32> {

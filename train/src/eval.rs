@@ -24,8 +24,8 @@ pub trait FrameModel {
     fn describe(&self) -> String;
     /// Training steps done.
     fn step(&self) -> usize;
-    /// Multiply-adds of one frame of `data` (rays that miss the head's bounds cost none).
-    fn macs_per_frame(&self, data: &TrainData, frame: &Frame) -> f64;
+    /// Multiply-adds per ray that meets the head's bounds (the others cost none).
+    fn macs_per_ray(&self) -> f64;
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb>;
 }
 
@@ -58,8 +58,8 @@ impl FrameModel for TeacherRun {
     fn step(&self) -> usize {
         self.step
     }
-    fn macs_per_frame(&self, data: &TrainData, frame: &Frame) -> f64 {
-        hit_rays(data, frame) as f64 * self.cfg.model.macs_per_ray() as f64
+    fn macs_per_ray(&self) -> f64 {
+        self.cfg.model.macs_per_ray() as f64
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
         TeacherRun::render_frame(self, data, frame)
@@ -87,8 +87,8 @@ impl FrameModel for StudentRun {
     fn step(&self) -> usize {
         self.step
     }
-    fn macs_per_frame(&self, data: &TrainData, frame: &Frame) -> f64 {
-        hit_rays(data, frame) as f64 * self.cfg.model.macs_per_ray() as f64
+    fn macs_per_ray(&self) -> f64 {
+        self.cfg.model.macs_per_ray() as f64
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
         StudentRun::render_frame(self, data, frame)
@@ -166,11 +166,12 @@ pub fn eval_models(
         let regions = data.dataset.load_regions(frame)?;
         let in_grid = k * GRID_ROWS / n != (k + 1) * GRID_ROWS / n || n <= GRID_ROWS;
         let mut row = vec![truth.clone()];
+        let hits = hit_rays(data, frame) as f64;
         for (mi, model) in models.iter().enumerate() {
             let started = std::time::Instant::now();
             let render = model.render_frame(data, frame)?;
             render_s[mi] += started.elapsed().as_secs_f64();
-            macs[mi] += model.macs_per_frame(data, frame);
+            macs[mi] += hits * model.macs_per_ray();
             let (face, mouth) = match &regions {
                 Some(r) => region_psnrs(&render, &truth, r)?,
                 None => (None, None),

@@ -401,7 +401,13 @@ impl StudentRun {
         let path = self.dir.join(TARGETS_FILE);
         let teacher_step = teacher.map(|t| t.step);
         if path.is_file()
-            && let Some(cached) = load_targets(&path, &self.beams, m, teacher_step)?
+            && let Some(cached) = load_targets(
+                &path,
+                &self.beams,
+                m,
+                teacher_step,
+                &views_fingerprint(&self.views),
+            )?
         {
             self.targets = cached;
             return Ok(());
@@ -413,7 +419,13 @@ impl StudentRun {
             ))
         })?;
         self.targets = teacher_targets(teacher, data, &self.views, &self.beams, m, progress)?;
-        save_targets(&path, &self.targets, m, teacher.step)
+        save_targets(
+            &path,
+            &self.targets,
+            m,
+            teacher.step,
+            &views_fingerprint(&self.views),
+        )
     }
 
     /// Training seconds so far, across resumes.
@@ -888,7 +900,35 @@ pub fn validate(cfg: &StudentRunConfig) -> Result<()> {
     Ok(())
 }
 
-fn save_targets(path: &Path, targets: &[Vec<f32>], m: usize, teacher_step: usize) -> Result<()> {
+/// A fingerprint of the views (poses, audio and mixing weights), stored with the cached
+/// targets so that a cache made for other views is never used (FNV-1a over their bits).
+fn views_fingerprint(views: &[View]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |v: u64| {
+        for b in v.to_le_bytes() {
+            h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    for v in views {
+        v.camera
+            .c2w
+            .to_cols_array()
+            .iter()
+            .for_each(|x| eat(x.to_bits() as u64));
+        eat(v.audio.0 as u64);
+        eat(v.audio.1 as u64);
+        eat(v.weight.to_bits() as u64);
+    }
+    format!("{h:016x}")
+}
+
+fn save_targets(
+    path: &Path,
+    targets: &[Vec<f32>],
+    m: usize,
+    teacher_step: usize,
+    views: &str,
+) -> Result<()> {
     let mut tensors = HashMap::new();
     for (f, t) in targets.iter().enumerate() {
         let rows = t.len() / (3 * m);
@@ -901,23 +941,26 @@ fn save_targets(path: &Path, targets: &[Vec<f32>], m: usize, teacher_step: usize
         ("teacher_step".to_string(), teacher_step.to_string()),
         ("segments".to_string(), m.to_string()),
         ("frames".to_string(), targets.len().to_string()),
+        ("views".to_string(), views.to_string()),
     ]
     .into_iter()
     .collect();
     save_tensors(path, &tensors, meta)
 }
 
-/// The cached targets when they fit the frames, `m` and (when known) the teacher's step.
+/// The cached targets when they fit the views, `m` and (when known) the teacher's step.
 fn load_targets(
     path: &Path,
     beams: &[FrameBeams],
     m: usize,
     teacher_step: Option<usize>,
+    views: &str,
 ) -> Result<Option<Vec<Vec<f32>>>> {
     let (tensors, meta) = load_tensors(path)?;
     let get = |k: &str| meta.get(k).and_then(|v| v.parse::<usize>().ok());
     let fits = get("segments") == Some(m)
         && get("frames") == Some(beams.len())
+        && meta.get("views").map(String::as_str) == Some(views)
         && teacher_step.is_none_or(|s| get("teacher_step") == Some(s));
     if !fits {
         return Ok(None);
