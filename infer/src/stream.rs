@@ -187,8 +187,11 @@ fn check_out(out: &Path) -> Result<()> {
 #[derive(Debug, Default)]
 struct Received {
     sample_rate: Option<u32>,
+    /// Samples not yet taken by the renderer.
     samples: Vec<f32>,
-    /// `(samples received so far, when)` after each read.
+    /// Samples received so far.
+    total: usize,
+    /// `(samples received so far, when)` after each read, not yet taken.
     arrivals: Vec<(usize, Instant)>,
     ended: bool,
     error: Option<String>,
@@ -216,7 +219,8 @@ fn read_stream(mut source: Box<dyn Read + Send>, shared: Shared) {
                     r.sample_rate = decoder.format().map(|f| f.sample_rate);
                 }
                 r.samples.extend_from_slice(&samples);
-                let n = r.samples.len();
+                r.total += samples.len();
+                let n = r.total;
                 r.arrivals.push((n, now));
             }
             Ok(None) => r.ended = true,
@@ -274,7 +278,6 @@ impl StreamPlan {
         let att = info.audio.att_frames;
         let ahead = lookahead_frames(att);
         let mut mel: Option<FeatureStream> = None;
-        let mut consumed = 0usize;
         let mut arrivals: Vec<(usize, Instant)> = Vec::new();
         let mut next = 0usize;
         let mut dropped = 0usize;
@@ -288,7 +291,7 @@ impl StreamPlan {
                 let mut r = lock
                     .lock()
                     .map_err(|_| bad("the stream reader failed".into()))?;
-                while !can_render && r.samples.len() == consumed && !r.ended && r.error.is_none() {
+                while !can_render && r.samples.is_empty() && !r.ended && r.error.is_none() {
                     r = cond
                         .wait(r)
                         .map_err(|_| bad("the stream reader failed".into()))?;
@@ -297,9 +300,8 @@ impl StreamPlan {
                     return Err(bad(e));
                 }
                 arrivals.append(&mut r.arrivals);
-                (r.samples[consumed..].to_vec(), r.ended, r.sample_rate)
+                (std::mem::take(&mut r.samples), r.ended, r.sample_rate)
             };
-            consumed += samples.len();
             if mel.is_none()
                 && let Some(rate) = rate
             {
@@ -335,9 +337,10 @@ impl StreamPlan {
                 let written = Instant::now();
                 let instant_sample =
                     (f as f64 * m.input_rate() as f64 / fps as f64).ceil() as usize;
+                // The read that brought the frame's instant (the last one if it never came).
+                let k = arrivals.partition_point(|(n, _)| *n <= instant_sample);
                 let heard = arrivals
-                    .iter()
-                    .find(|(n, _)| *n > instant_sample)
+                    .get(k)
                     .or(arrivals.last())
                     .map_or(started, |(_, t)| *t);
                 let record = StreamFrame {
