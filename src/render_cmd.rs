@@ -61,6 +61,9 @@ pub struct RenderArgs {
     /// Write PNG frames only, no MP4.
     #[arg(long)]
     pub no_video: bool,
+    /// The ffmpeg binary that muxes the MP4 (default: `ffmpeg` on the PATH).
+    #[arg(long)]
+    pub ffmpeg: Option<PathBuf>,
     /// Read the audio as a live WAV stream (`--audio -` for stdin, or a named pipe) and
     /// write each frame as soon as its audio has arrived; frames the renderer cannot keep
     /// up with are skipped so that latency stays bounded. Writes OUT/stream.json with the
@@ -92,6 +95,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
         options,
         size: args.size,
         mp4: !args.no_video,
+        ffmpeg: args.ffmpeg,
     };
     let plan = job.plan()?;
     let k = plan.renderer().intrinsics();

@@ -42,8 +42,10 @@ pub struct VideoJob {
     pub options: BackendOptions,
     /// The image's longer side in pixels; `None`: the model's own size.
     pub size: Option<u32>,
-    /// Mux an MP4 when ffmpeg is on the PATH.
+    /// Mux an MP4 when ffmpeg is found.
     pub mp4: bool,
+    /// The ffmpeg binary; `None`: `ffmpeg` on the PATH.
+    pub ffmpeg: Option<PathBuf>,
 }
 
 /// A checked job, ready to render: the model is loaded in its runtime, the audio features
@@ -107,6 +109,17 @@ impl VideoJob {
             None => default_track(&model.info, windows.n_frames),
         };
         crate::frame::intrinsics_at(&model.info, self.size)?;
+        let ffmpeg = match (&self.ffmpeg, self.mp4) {
+            (_, false) => None,
+            (Some(path), true) if path.is_file() => Some(path.clone()),
+            (Some(path), true) => {
+                return Err(Error::Argument(format!(
+                    "{}: no ffmpeg binary there",
+                    path.display()
+                )));
+            }
+            (None, true) => ffmpeg_on_path(),
+        };
         let staging = Staging::create(&self.out)?;
         let renderer =
             FrameRenderer::new(backend_for(&model, self.backend, self.options)?, self.size)?;
@@ -116,7 +129,7 @@ impl VideoJob {
             poses,
             staging,
             audio: self.audio.clone(),
-            ffmpeg: if self.mp4 { ffmpeg_on_path() } else { None },
+            ffmpeg,
             mp4_asked: self.mp4,
         })
     }

@@ -152,6 +152,7 @@ fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
         },
         size: None,
         mp4: false,
+        ffmpeg: None,
     }
 }
 
@@ -493,4 +494,93 @@ fn infer_bad_streams_get_one_line_errors() {
     std::fs::write(full.join("x"), b"x").unwrap();
     let err = stream_job(&full).plan().unwrap_err().to_string();
     assert!(err.contains("not empty"), "{err}");
+}
+
+/// The ffmpeg binary of the `.venv`'s imageio-ffmpeg wheel (scripts/python_env.sh); `None`
+/// (a skip) only outside CI.
+fn venv_ffmpeg() -> Option<PathBuf> {
+    let py = crate::export::python()?;
+    let out = std::process::Command::new(&py)
+        .args([
+            "-c",
+            "import imageio_ffmpeg; print(imageio_ffmpeg.get_ffmpeg_exe())",
+        ])
+        .output()
+        .unwrap();
+    if out.status.success() {
+        return Some(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()));
+    }
+    let msg = "the .venv lacks imageio-ffmpeg: run scripts/python_env.sh";
+    if std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0") {
+        panic!("{msg}");
+    }
+    eprintln!("SKIPPED (CI is unset): {msg}");
+    None
+}
+
+/// With ffmpeg, `nldf render` also writes `video.mp4`: one video frame per PNG at the
+/// model's fps and the WAV as its audio, as ffmpeg itself reads it back.
+#[test]
+fn infer_render_muxes_an_mp4_with_the_audio_when_ffmpeg_is_there() {
+    let Some(ffmpeg) = venv_ffmpeg() else { return };
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 114);
+    let path = run.export(WeightType::F32);
+    let wav = run.root.join("speech.wav");
+    write_test_wav(&wav, 1.0);
+    let out = run.root.join("video");
+    let report = VideoJob {
+        mp4: true,
+        ffmpeg: Some(ffmpeg.clone()),
+        ..job(&path, &wav, &out)
+    }
+    .plan()
+    .unwrap()
+    .render(|_| {})
+    .unwrap();
+    let video = report
+        .video
+        .clone()
+        .expect("an MP4 was asked for and ffmpeg given");
+    assert_eq!(video, out.join("video.mp4"));
+    assert!(!report.ffmpeg_missing);
+    // Decode every frame; count them and read the streams ffmpeg reports.
+    let probe = std::process::Command::new(&ffmpeg)
+        .args(["-nostdin", "-i"])
+        .arg(&video)
+        .args(["-map", "0:v", "-f", "null", "-"])
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&probe.stderr);
+    assert!(
+        probe.status.success(),
+        "ffmpeg cannot decode the video:\n{log}"
+    );
+    let k = read_model(&path).unwrap().info.spec.intrinsics;
+    // Odd sizes are padded to even ones for yuv420p.
+    let size = format!("{}x{}", k.width.div_ceil(2) * 2, k.height.div_ceil(2) * 2);
+    assert!(log.contains("Video:") && log.contains(&size), "{log}");
+    assert!(log.contains("Audio: aac"), "{log}");
+    let frames: usize = log
+        .rsplit("frame=")
+        .next()
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no frame count in:\n{log}"));
+    println!(
+        "mp4: {frames} frames of {size} with AAC audio, {} PNG frames",
+        report.n_frames
+    );
+    assert_eq!(frames, report.n_frames);
+    // A named ffmpeg that is not there is an error before anything is written.
+    let err = VideoJob {
+        mp4: true,
+        ffmpeg: Some(run.root.join("no-ffmpeg")),
+        ..job(&path, &wav, &run.root.join("video2"))
+    }
+    .plan()
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("no ffmpeg binary"), "{err}");
+    assert!(!run.root.join("video2").exists());
 }
