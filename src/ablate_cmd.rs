@@ -101,15 +101,6 @@ pub fn run(args: AblateArgs) -> Result<()> {
             },
         ),
         (
-            "1: distillation".into(),
-            format!("depth {d}, distilled, training frames only (no pseudo views)"),
-            format!("ablate_d{d}_nopseudo"),
-            StudentArgs {
-                pseudo_frames: Some(0),
-                ..base.clone()
-            },
-        ),
-        (
             "2: beam pool".into(),
             format!("depth {d}, distilled, no pool"),
             format!("ablate_d{d}_nopool"),
@@ -271,10 +262,10 @@ fn share_targets(run: &std::path::Path, dir: &std::path::Path) -> Result<()> {
         .filter(|p| p.is_file())
         .collect();
     caches.sort();
-    // The largest cache holds the most views: the pseudo views' when there are any.
+    // The newest: the one rendered for this ablation's first distilled variant.
     let Some(source) = caches
         .into_iter()
-        .max_by_key(|p| p.metadata().map(|m| m.len()).unwrap_or(0))
+        .max_by_key(|p| p.metadata().and_then(|m| m.modified()).ok())
     else {
         return Ok(());
     };

@@ -63,7 +63,7 @@ pub struct StudentArgs {
     #[arg(long)]
     pub no_pool: bool,
     /// Pseudo views rendered by the teacher besides the training frames (poses turned
-    /// about the head, audio codes of two frames mixed; default 256; 0 turns them off).
+    /// about the head, audio codes of two frames mixed; default 0: none).
     #[arg(long)]
     pub pseudo_frames: Option<usize>,
     /// JSON run configuration ({"model": {...}, "train": {...}}; missing fields take the
