@@ -213,7 +213,7 @@ fn teacher_step(args: TeacherStepArgs) -> Result<()> {
 fn markdown(m: &Machine, r: &StepBench) -> String {
     format!(
         "| {} | value |\n|---|---|\n\
-         | machine | {} ({} cores, {} rayon threads), commit {}, load {} at the start |\n\
+         | machine | {}, {} rayon threads |\n\
          | batch | {} rays, {:.0} hit the head's bounds, {} samples each |\n\
          | step time | {:.3} s |\n\
          | throughput | {:.0} rays/s |\n\
@@ -223,13 +223,8 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
          | step rate / matmul rate | {:.1} % |\n\
          | nldf kernel matmul at the same shapes | {:.1} GFLOP/s |\n",
         r.model,
-        m.cpu,
-        m.cores,
+        machine_cell(m),
         m.rayon_threads,
-        m.commit,
-        m.load_average_1m
-            .map(|l| format!("{l:.2}"))
-            .unwrap_or_else(|| "unknown".into()),
         r.batch_rays,
         r.hit_rays,
         r.samples_per_ray,
@@ -240,6 +235,19 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
         r.candle_matmul_gflop_s,
         100.0 * r.fraction_of_candle_matmul,
         r.kernel_matmul_gflop_s
+    )
+}
+
+/// The machine as a table cell: CPU, cores, commit and the load when the benchmark began.
+fn machine_cell(m: &Machine) -> String {
+    format!(
+        "{} ({} cores), commit {}, load {} at the start",
+        m.cpu,
+        m.cores,
+        m.commit,
+        m.load_average_1m
+            .map(|l| format!("{l:.2}"))
+            .unwrap_or_else(|| "unknown".into())
     )
 }
 
@@ -281,7 +289,7 @@ fn render(args: RenderBenchArgs) -> Result<()> {
     let pct = |f: f64| 100.0 * f;
     let mut md = format!(
         "| render, {} x {} student, {}x{} frames | value |\n|---|---|\n\
-         | machine | {} ({} cores), commit {}, load {} at the start |\n\
+         | machine | {} |\n\
          | settings | batch {}, {} threads, median of {} frames after {} untimed |\n\
          | default frame | head covers {:.1} % of the pixels ({} rays) |\n\
          | bare onnxruntime, the same rays | {:.1} ms ({:.0} rays/s) |\n\
@@ -294,13 +302,7 @@ fn render(args: RenderBenchArgs) -> Result<()> {
         r.width,
         r.image_width,
         r.image_height,
-        machine.cpu,
-        machine.cores,
-        machine.commit,
-        machine
-            .load_average_1m
-            .map(|l| format!("{l:.2}"))
-            .unwrap_or_else(|| "unknown".into()),
+        machine_cell(&machine),
         cfg.options.batch_size,
         cfg.options.threads,
         cfg.reps,
@@ -421,20 +423,14 @@ fn stream(args: StreamBenchArgs) -> Result<()> {
     let mean_render = render_ms.iter().sum::<f64>() / render_ms.len().max(1) as f64;
     let md = format!(
         "| stream, {} | value |\n|---|---|\n\
-         | machine | {} ({} cores), commit {}, load {} at the start |\n\
+         | machine | {} |\n\
          | input | {:.1} s of {} at real-time speed, {} ms pieces, {}x{} frames |\n\
          | frames | {} of {} rendered, {} skipped to keep up |\n\
          | render time per frame | {:.1} ms mean |\n\
          | features' lookahead | {:.0} ms |\n\
          | latency, audio to PNG | mean {:.0} ms, median {:.0}, p95 {:.0}, max {:.0} |\n",
         report.backend,
-        machine.cpu,
-        machine.cores,
-        machine.commit,
-        machine
-            .load_average_1m
-            .map(|l| format!("{l:.2}"))
-            .unwrap_or_else(|| "unknown".into()),
+        machine_cell(&machine),
         report.audio_seconds,
         args.audio.display(),
         args.piece_ms,

@@ -139,6 +139,21 @@ fn write_test_wav(path: &Path, seconds: f32) {
     .unwrap();
 }
 
+/// A tiny exported student (seed `seed`) and a WAV of `seconds` beside it.
+fn tiny_model_and_wav(seed: u64, seconds: f32) -> (Run, PathBuf, PathBuf) {
+    let run = write_run(&StudentConfig::tiny(), seed);
+    let path = run.export(WeightType::F32);
+    let wav = run.root.join("speech.wav");
+    write_test_wav(&wav, seconds);
+    (run, path, wav)
+}
+
+/// Small batches on one thread: several batches per frame, quick to compile.
+const TEST_OPTIONS: BackendOptions = BackendOptions {
+    batch_size: 512,
+    threads: 1,
+};
+
 fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
     VideoJob {
         model: model.to_path_buf(),
@@ -146,10 +161,7 @@ fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
         poses: None,
         out: out.to_path_buf(),
         backend: BackendKind::Tract,
-        options: BackendOptions {
-            batch_size: 512,
-            threads: 1,
-        },
+        options: TEST_OPTIONS,
         size: None,
         mp4: false,
         ffmpeg: None,
@@ -159,10 +171,7 @@ fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
 #[test]
 fn infer_render_video_writes_a_png_per_frame_through_staging() {
     let cfg = StudentConfig::tiny();
-    let run = write_run(&cfg, 111);
-    let path = run.export(WeightType::F32);
-    let wav = run.root.join("speech.wav");
-    write_test_wav(&wav, 0.5);
+    let (run, path, wav) = tiny_model_and_wav(111, 0.5);
     let out = run.root.join("video");
     let plan = job(&path, &wav, &out).plan().unwrap();
     let want_frames = n_video_frames(8000, 16_000, run.spec.fps);
@@ -372,15 +381,23 @@ fn infer_pose_lists_play_forwards_then_backwards() {
     assert_eq!(pose_at(&poses[..1], 5), poses[0]);
 }
 
+fn stream_job(model: &Path, out: &Path, drop_late: bool) -> StreamJob {
+    StreamJob {
+        model: model.to_path_buf(),
+        poses: None,
+        out: out.to_path_buf(),
+        backend: BackendKind::Tract,
+        options: TEST_OPTIONS,
+        size: None,
+        drop_late,
+    }
+}
+
 /// `nldf render --stream` without skipping renders exactly the frames of a file render of
 /// the same audio, byte for byte, while the audio arrives in pieces faster than real time.
 #[test]
 fn infer_stream_renders_the_file_renders_frames_as_audio_arrives() {
-    let cfg = StudentConfig::tiny();
-    let run = write_run(&cfg, 112);
-    let path = run.export(WeightType::F32);
-    let wav = run.root.join("speech.wav");
-    write_test_wav(&wav, 0.6);
+    let (run, path, wav) = tiny_model_and_wav(112, 0.6);
     let file_out = run.root.join("file");
     let file = job(&path, &wav, &file_out)
         .plan()
@@ -388,20 +405,7 @@ fn infer_stream_renders_the_file_renders_frames_as_audio_arrives() {
         .render(|_| {})
         .unwrap();
     let stream_out = run.root.join("stream");
-    let plan = StreamJob {
-        model: path.clone(),
-        poses: None,
-        out: stream_out.clone(),
-        backend: BackendKind::Tract,
-        options: BackendOptions {
-            batch_size: 512,
-            threads: 1,
-        },
-        size: None,
-        drop_late: false,
-    }
-    .plan()
-    .unwrap();
+    let plan = stream_job(&path, &stream_out, false).plan().unwrap();
     let wave = nldf_core::audio::read_wav(&wav).unwrap();
     // 20 ms pieces at 20x real time.
     let source = paced_wav_stream(&wave, 20.0, Duration::from_millis(20)).unwrap();
@@ -443,18 +447,7 @@ fn infer_bad_streams_get_one_line_errors() {
     let cfg = StudentConfig::tiny();
     let run = write_run(&cfg, 113);
     let path = run.export(WeightType::F32);
-    let stream_job = |out: &Path| StreamJob {
-        model: path.clone(),
-        poses: None,
-        out: out.to_path_buf(),
-        backend: BackendKind::Tract,
-        options: BackendOptions {
-            batch_size: 512,
-            threads: 1,
-        },
-        size: None,
-        drop_late: true,
-    };
+    let stream_job = |out: &Path| stream_job(&path, out, true);
     let wave = Waveform {
         sample_rate: 16_000,
         samples: vec![0.1; 16_000],
@@ -523,11 +516,7 @@ fn venv_ffmpeg() -> Option<PathBuf> {
 #[test]
 fn infer_render_muxes_an_mp4_with_the_audio_when_ffmpeg_is_there() {
     let Some(ffmpeg) = venv_ffmpeg() else { return };
-    let cfg = StudentConfig::tiny();
-    let run = write_run(&cfg, 114);
-    let path = run.export(WeightType::F32);
-    let wav = run.root.join("speech.wav");
-    write_test_wav(&wav, 1.0);
+    let (run, path, wav) = tiny_model_and_wav(114, 1.0);
     let out = run.root.join("video");
     let report = VideoJob {
         mp4: true,
