@@ -1,7 +1,7 @@
 //! Pinhole cameras in AD-NeRF's convention: intrinsics in pixels and a 4x4 camera-to-world
 //! matrix with OpenGL axes (the camera looks along its -z axis, +y is up in the image).
 
-use glam::{Mat3, Mat4, Vec3, Vec4};
+use glam::{Mat3, Mat4, Quat, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 
 /// Pinhole intrinsics in pixels (AD-NeRF's `focal_len`, `cx`, `cy`) and the image size.
@@ -83,6 +83,15 @@ impl Camera {
         let k = &self.intrinsics;
         Some((k.cx + k.focal * pc.x / z, k.cy - k.focal * pc.y / z, z))
     }
+}
+
+/// The rigid transform turning the world about `centre`: `yaw` radians about the vertical
+/// (y) axis after `pitch` radians about the horizontal (x) axis. A camera-to-world matrix
+/// `c2w` seen from the turned place is `turn_about(..) * c2w`.
+pub fn turn_about(centre: Vec3, yaw: f32, pitch: f32) -> Mat4 {
+    Mat4::from_translation(centre)
+        * Mat4::from_quat(Quat::from_rotation_y(yaw) * Quat::from_rotation_x(pitch))
+        * Mat4::from_translation(-centre)
 }
 
 /// A camera-to-world matrix at `eye` looking at `target`, OpenGL axes.

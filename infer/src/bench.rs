@@ -95,6 +95,12 @@ pub struct RenderBench {
     pub at_30_percent: Option<(f64, f64)>,
 }
 
+/// The median of non-empty `v`.
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
 /// Median seconds of `reps` calls of `f` after `warmup` untimed ones.
 fn median_seconds(warmup: usize, reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     for _ in 0..warmup {
@@ -106,8 +112,7 @@ fn median_seconds(warmup: usize, reps: usize, mut f: impl FnMut() -> Result<()>)
         f()?;
         times.push(t.elapsed().as_secs_f64());
     }
-    times.sort_by(f64::total_cmp);
-    Ok(times[times.len() / 2])
+    Ok(median(times))
 }
 
 /// Sets and returns the focal length at which the head covers about `target` of the pixels
@@ -180,10 +185,6 @@ pub fn bench_render(
             frame_times.push(f);
         }
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     let bare_ort = timing("bare onnxruntime", &ort, median(bare_times), n_rays);
     let ort_frame = timing("ort frame", &ort, median(frame_times), n_rays);
     drop(bare);

@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use glam::{Mat4, Quat};
-use nldf_core::camera::rigid_problem;
+use glam::Mat4;
+use nldf_core::camera::{rigid_problem, turn_about};
 use nldf_core::dataset::{RIGID_TOL, TransformsFile};
 use nldf_export::contract::ModelInfo;
 
@@ -79,8 +79,5 @@ pub fn default_pose(info: &ModelInfo, f: usize) -> Mat4 {
     let tau = std::f32::consts::TAU;
     let yaw = 4f32.to_radians() * (0.7 * (tau * 0.11 * t).sin() + 0.3 * (tau * 0.19 * t).sin());
     let pitch = 2f32.to_radians() * (tau * 0.13 * t + 0.5).sin() - 2f32.to_radians() * 0.5f32.sin();
-    let turn = Mat4::from_translation(centre)
-        * Mat4::from_quat(Quat::from_rotation_y(yaw) * Quat::from_rotation_x(pitch))
-        * Mat4::from_translation(-centre);
-    turn * start
+    turn_about(centre, yaw, pitch) * start
 }

@@ -14,9 +14,8 @@ use std::time::Instant;
 
 use candle_core::{D, DType, Device, Tensor};
 use candle_nn::VarMap;
-use glam::{Mat4, Quat};
 use nldf_core::beam::{BeamSpec, encode_beams};
-use nldf_core::camera::Camera;
+use nldf_core::camera::{Camera, turn_about};
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr_from_mse;
@@ -104,14 +103,11 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         let weight: f32 = rng.random_range(0.0..=1.0);
         let yaw = cfg.pseudo_yaw_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
         let pitch = cfg.pseudo_pitch_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
-        let turn = Mat4::from_translation(centre)
-            * Mat4::from_quat(Quat::from_rotation_y(yaw) * Quat::from_rotation_x(pitch))
-            * Mat4::from_translation(-centre);
         let base = ds.camera(&frames[source]);
         views.push(View {
             camera: Camera {
                 intrinsics: base.intrinsics,
-                c2w: turn * base.c2w,
+                c2w: turn_about(centre, yaw, pitch) * base.c2w,
             },
             audio: (frames[source].aud_id, frames[other].aud_id),
             weight,
@@ -159,22 +155,25 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
         .collect()
 }
 
-/// `weight a + (1 - weight) b` row by row: the audio codes of views.
+/// The audio codes of `views`: `weight code(a) + (1 - weight) code(b)` row by row, with
+/// `codes(ids)` the encoder's codes of audio ids (`[ids.len(), dim]`). Recorded frames
+/// (weight 1) need only their own code, so the second encoder call is made only for
+/// batches holding a pseudo view.
 ///
 /// # Shapes
-/// - `a`, `b`: `[n, dim]`; `weights`: `n` values; returns `[n, dim]`
-fn mix_codes(a: &Tensor, b: &Tensor, weights: &[f32]) -> Result<Tensor> {
-    if weights.iter().all(|&w| w == 1.0) {
-        return Ok(a.clone());
+/// - returns `[views.len(), dim]`
+fn codes_of_views(views: &[&View], codes: impl Fn(&[usize]) -> Result<Tensor>) -> Result<Tensor> {
+    let a: Vec<usize> = views.iter().map(|v| v.audio.0).collect();
+    let codes_a = codes(&a)?;
+    if views.iter().all(|v| v.weight == 1.0) {
+        return Ok(codes_a);
     }
-    let n = weights.len();
-    let w = Tensor::from_vec(weights.to_vec(), (n, 1), a.device())?;
-    let rest = Tensor::from_vec(
-        weights.iter().map(|w| 1.0 - w).collect::<Vec<f32>>(),
-        (n, 1),
-        a.device(),
-    )?;
-    Ok((a.broadcast_mul(&w)? + b.broadcast_mul(&rest)?)?)
+    let b: Vec<usize> = views.iter().map(|v| v.audio.1).collect();
+    let n = views.len();
+    let dev = codes_a.device().clone();
+    let w = Tensor::from_vec(views.iter().map(|v| v.weight).collect(), (n, 1), &dev)?;
+    let rest = Tensor::from_vec(views.iter().map(|v| 1.0 - v.weight).collect(), (n, 1), &dev)?;
+    Ok((codes_a.broadcast_mul(&w)? + codes(&b)?.broadcast_mul(&rest)?)?)
 }
 
 /// The teacher's Eq. 5 segment colours of every hit pixel of every view (`[n_pixels, m,
@@ -197,11 +196,7 @@ pub fn teacher_targets(
             rays.push(o, d);
             bg.extend_from_slice(&ds.background.get(i, j));
         }
-        let code = mix_codes(
-            &teacher.audio_codes(data, &[view.audio.0])?,
-            &teacher.audio_codes(data, &[view.audio.1])?,
-            &[view.weight],
-        )?;
+        let code = codes_of_views(&[view], |ids| teacher.audio_codes(data, ids))?;
         out.push(teacher.teacher.segment_targets(
             &rays,
             &bg,
@@ -400,14 +395,9 @@ impl StudentRun {
         let m = self.cfg.model.segments;
         let path = self.dir.join(TARGETS_FILE);
         let teacher_step = teacher.map(|t| t.step);
+        let fingerprint = views_fingerprint(&self.views);
         if path.is_file()
-            && let Some(cached) = load_targets(
-                &path,
-                &self.beams,
-                m,
-                teacher_step,
-                &views_fingerprint(&self.views),
-            )?
+            && let Some(cached) = load_targets(&path, &self.beams, m, teacher_step, &fingerprint)?
         {
             self.targets = cached;
             return Ok(());
@@ -419,13 +409,7 @@ impl StudentRun {
             ))
         })?;
         self.targets = teacher_targets(teacher, data, &self.views, &self.beams, m, progress)?;
-        save_targets(
-            &path,
-            &self.targets,
-            m,
-            teacher.step,
-            &views_fingerprint(&self.views),
-        )
+        save_targets(&path, &self.targets, m, teacher.step, &fingerprint)
     }
 
     /// Training seconds so far, across resumes.
@@ -458,14 +442,7 @@ impl StudentRun {
     /// - returns `[views.len(), audio_dim]`
     fn view_codes(&self, data: &TrainData, views: &[u32]) -> Result<Tensor> {
         let v: Vec<&View> = views.iter().map(|&i| &self.views[i as usize]).collect();
-        let a: Vec<usize> = v.iter().map(|v| v.audio.0).collect();
-        let weights: Vec<f32> = v.iter().map(|v| v.weight).collect();
-        let codes_a = self.audio_codes(data, &a)?;
-        if weights.iter().all(|&w| w == 1.0) {
-            return Ok(codes_a);
-        }
-        let b: Vec<usize> = v.iter().map(|v| v.audio.1).collect();
-        mix_codes(&codes_a, &self.audio_codes(data, &b)?, &weights)
+        codes_of_views(&v, |ids| self.audio_codes(data, ids))
     }
 
     /// Draws the main batch: per picked frame, rays from the mouth, the face and the rest
