@@ -417,10 +417,9 @@ impl StudentRun {
         self.elapsed_before + self.started.elapsed().as_secs_f64()
     }
 
-    /// The learning rate at the current step: `lr 0.1^(step / lr_decay_steps)`.
+    /// The learning rate at the current step ([`StudentTrainConfig::learning_rate`]).
     pub fn learning_rate(&self) -> f64 {
-        let t = &self.cfg.train;
-        t.lr * 0.1f64.powf(self.step as f64 / t.lr_decay_steps.max(1) as f64)
+        self.cfg.train.learning_rate(self.step)
     }
 
     /// Audio codes of frames.
