@@ -328,6 +328,8 @@ fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
     for (cfg, n_rays, n_samples) in [
         (TeacherConfig::tiny(), 7, 5),
         (TeacherConfig::small(), 13, 9),
+        // Many blocks of whole rays, the last one partial, over several spans.
+        (TeacherConfig::small(), 200, 9),
     ] {
         let (varmap, vb) = new_varmap();
         let field = teacher_field(&cfg, vb).unwrap();

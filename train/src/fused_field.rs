@@ -8,13 +8,20 @@
 //! and the optimizer: they enter as one flat tensor (a `cat` of the variables, so gradients
 //! flow back to each), and the per-ray terms (audio code and view direction projections, with
 //! the biases of the layers they enter) are computed by candle before the op.
+//!
+//! Both passes run layer by layer over blocks of whole rays (about 256 samples), so that a
+//! block's activations and gradients stay in the core's L2 cache between layers: only the
+//! kept activations go to memory, written once by the forward and read once by the backward.
+//! The backward stores each input gradient already masked by the ReLU of the layer below.
 
 use std::sync::Mutex;
 
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
 
+use rayon::prelude::*;
+
 use crate::kernels::{
-    Addend, give_buffer, linear_forward, matmul, matmul_tn, relu_backward, take_buffer,
+    Addend, Epilogue, Packed, block_product, block_weight_grad, give_buffer, matmul_tn, take_buffer,
 };
 
 /// A weight `[out, inp]` (and bias `[out]`) inside the flat parameter tensor.
@@ -148,13 +155,6 @@ pub(crate) fn with_data<R>(
     }
 }
 
-/// Column block `[.., off..off + w]` of a `[rows, width]` matrix, contiguous.
-fn block(m: &[f32], width: usize, off: usize, w: usize) -> Vec<f32> {
-    m.chunks_exact(width)
-        .flat_map(|row| row[off..off + w].iter().copied())
-        .collect()
-}
-
 pub(crate) fn weight<'a>(p: &'a [f32], a: &Affine) -> &'a [f32] {
     &p[a.weight..a.weight + a.out * a.inp]
 }
@@ -166,9 +166,188 @@ pub(crate) fn bias_or_zero(p: &[f32], a: &Affine) -> Vec<f32> {
     }
 }
 
+/// Rows per block of the blocked passes, rounded to whole rays: a block's activations
+/// (`[rows, width]` per layer) stay in the core's L2 cache from one layer to the next.
+const BLOCK_ROWS: usize = 256;
+/// Partial weight gradients of the backward, summed in order: a fixed number, so that the
+/// result does not depend on the thread count.
+const SPANS: usize = 16;
+
+/// The op's weights packed for the kernels once per pass.
+struct PackedPlan {
+    /// Per trunk layer: the hidden and the points weight, `W^T` (forward) or `W` (backward).
+    trunk: Vec<(Option<Packed>, Option<Packed>)>,
+    density: Packed,
+    feature: Packed,
+    color: Packed,
+    rgb: Packed,
+}
+
+impl PackedPlan {
+    /// `W^T` of every layer (`transposed`) for the forward, or `W` for the input gradients.
+    fn new(plan: &FieldPlan, params: &[f32], transposed: bool) -> PackedPlan {
+        let pack = |a: &Affine| {
+            if transposed {
+                Packed::weight_t(weight(params, a), a.out, a.inp)
+            } else {
+                Packed::rows(weight(params, a), a.out, a.inp)
+            }
+        };
+        PackedPlan {
+            trunk: plan
+                .trunk
+                .iter()
+                .map(|s| (s.hidden.as_ref().map(pack), s.points.as_ref().map(pack)))
+                .collect(),
+            density: pack(&plan.density),
+            feature: pack(&plan.feature),
+            color: pack(&plan.color),
+            rgb: pack(&plan.rgb),
+        }
+    }
+}
+
+/// The bias of `a` as a slice of the parameters (none: no bias).
+fn bias_of<'a>(p: &'a [f32], a: &Affine) -> Option<&'a [f32]> {
+    a.bias.map(|b| &p[b..b + a.out])
+}
+
+/// Output width of a trunk layer.
+fn trunk_width(step: &TrunkStep) -> Result<usize> {
+    step.hidden
+        .or(step.points)
+        .map(|a| a.out)
+        .ok_or_else(|| candle_core::Error::Msg("fused field: empty trunk layer".into()))
+}
+
+/// One block's activations: each trunk layer's output, the feature and the colour layer.
+struct BlockActs<'a> {
+    trunk: Vec<&'a mut [f32]>,
+    feature: &'a mut [f32],
+    color: &'a mut [f32],
+}
+
 impl FieldOp {
-    /// The forward pass on raw slices; returns `[n, 4]` (raw density, raw rgb) and the
-    /// activations.
+    /// Rays per block of the blocked passes.
+    fn rays_per_block(&self) -> usize {
+        (BLOCK_ROWS / self.plan.n_samples.max(1)).max(1)
+    }
+
+    /// The forward pass over one block of whole rays: `rows` rows of `points`, the per-ray
+    /// terms of those rays, outputs into `acts` and `out` (`[rows, 4]`: raw density, raw
+    /// rgb).
+    #[allow(clippy::too_many_arguments)]
+    fn forward_block(
+        &self,
+        w: &PackedPlan,
+        params: &[f32],
+        points: &[f32],
+        rays: &[f32],
+        rows: usize,
+        acts: &mut BlockActs<'_>,
+        out: &mut [f32],
+    ) -> Result<()> {
+        let plan = &self.plan;
+        let group = Addend::Group(plan.n_samples);
+        let rw = plan.ray_width;
+        let mut in_width = 0;
+        for (i, (step, (wh, wp))) in plan.trunk.iter().zip(&w.trunk).enumerate() {
+            let width = trunk_width(step)?;
+            let (done, rest) = acts.trunk.split_at_mut(i);
+            let y = &mut *rest[0];
+            let prev = done.last().map(|x| &**x);
+            match (step.hidden, wh, wp, step.ray, prev) {
+                // relu(points W_p^T + ray term), the ray term carrying the bias.
+                (None, None, Some(wp), Some(off), _) => block_product(
+                    points,
+                    wp.k(),
+                    rows,
+                    wp,
+                    y,
+                    width,
+                    Epilogue {
+                        addend: Some((&rays[off..], rw, group)),
+                        relu: true,
+                        ..Epilogue::default()
+                    },
+                ),
+                // relu(x W_h^T + points W_p^T + ray term).
+                (Some(_), Some(wh), Some(wp), Some(off), Some(x)) => {
+                    block_product(
+                        points,
+                        wp.k(),
+                        rows,
+                        wp,
+                        y,
+                        width,
+                        Epilogue {
+                            addend: Some((&rays[off..], rw, group)),
+                            ..Epilogue::default()
+                        },
+                    );
+                    block_product(
+                        x,
+                        in_width,
+                        rows,
+                        wh,
+                        y,
+                        width,
+                        Epilogue {
+                            accumulate: true,
+                            relu: true,
+                            ..Epilogue::default()
+                        },
+                    );
+                }
+                // relu(x W_h^T + b_h).
+                (Some(h), Some(wh), None, _, Some(x)) => block_product(
+                    x,
+                    in_width,
+                    rows,
+                    wh,
+                    y,
+                    width,
+                    Epilogue {
+                        bias: bias_of(params, &h),
+                        relu: true,
+                        ..Epilogue::default()
+                    },
+                ),
+                _ => candle_core::bail!("fused field: a trunk layer lacks its input"),
+            }
+            in_width = width;
+        }
+        let h = acts
+            .trunk
+            .last()
+            .map(|h| &**h)
+            .ok_or_else(|| candle_core::Error::Msg("fused field: empty trunk".into()))?;
+        let (d, f, c, r) = (&plan.density, &plan.feature, &plan.color, &plan.rgb);
+        let bias = |a: &Affine| Epilogue {
+            bias: bias_of(params, a),
+            ..Epilogue::default()
+        };
+        block_product(h, in_width, rows, &w.density, out, 4, bias(d));
+        block_product(h, in_width, rows, &w.feature, acts.feature, f.out, bias(f));
+        block_product(
+            acts.feature,
+            f.out,
+            rows,
+            &w.color,
+            acts.color,
+            c.out,
+            Epilogue {
+                addend: Some((&rays[plan.color_ray..], rw, group)),
+                relu: true,
+                ..Epilogue::default()
+            },
+        );
+        block_product(acts.color, c.out, rows, &w.rgb, &mut out[1..], 4, bias(r));
+        Ok(())
+    }
+
+    /// The forward pass on raw slices, in parallel over blocks of rays; returns `[n, 4]`
+    /// (raw density, raw rgb) and, when kept, the activations.
     fn run(
         &self,
         points: &[f32],
@@ -177,7 +356,6 @@ impl FieldOp {
         n: usize,
     ) -> Result<(Vec<f32>, Stash)> {
         let plan = &self.plan;
-        let group = Addend::Group(plan.n_samples);
         let pos_dim = plan
             .trunk
             .first()
@@ -186,146 +364,366 @@ impl FieldOp {
             .ok_or_else(|| {
                 candle_core::Error::Msg("fused field: the first layer takes no points".into())
             })?;
-        let mut stash = Stash::default();
-        let mut prev: Option<Vec<f32>> = None;
-        for step in &plan.trunk {
-            let width =
-                step.hidden.or(step.points).map(|a| a.out).ok_or_else(|| {
-                    candle_core::Error::Msg("fused field: empty trunk layer".into())
-                })?;
-            let mut y = take_buffer(n * width);
-            match (step.hidden, step.points, step.ray, prev.as_deref()) {
-                (None, Some(p), Some(off), _) => {
-                    let term = block(rays, plan.ray_width, off, width);
-                    linear_forward(
-                        points,
-                        n,
-                        pos_dim,
-                        weight(params, &p),
-                        width,
-                        &term,
-                        group,
-                        true,
-                        &mut y,
-                    );
-                }
-                (Some(h), Some(p), Some(off), Some(x)) => {
-                    let term = block(rays, plan.ray_width, off, width);
-                    let mut z = take_buffer(n * width);
-                    linear_forward(
-                        points,
-                        n,
-                        pos_dim,
-                        weight(params, &p),
-                        width,
-                        &term,
-                        group,
-                        false,
-                        &mut z,
-                    );
-                    linear_forward(
-                        x,
-                        n,
-                        h.inp,
-                        weight(params, &h),
-                        width,
-                        &z,
-                        Addend::Full,
-                        true,
-                        &mut y,
-                    );
-                }
-                (Some(h), None, _, Some(x)) => {
-                    let b = bias_or_zero(params, &h);
-                    linear_forward(
-                        x,
-                        n,
-                        h.inp,
-                        weight(params, &h),
-                        width,
-                        &b,
-                        Addend::Row,
-                        true,
-                        &mut y,
-                    );
-                }
-                _ => candle_core::bail!("fused field: a trunk layer lacks its input"),
-            }
-            if let Some(p) = prev.take() {
-                if self.keep {
-                    stash.trunk.push(p);
-                } else {
-                    give_buffer(p);
-                }
-            }
-            prev = Some(y);
-        }
-        let h = prev.ok_or_else(|| candle_core::Error::Msg("fused field: empty trunk".into()))?;
-        let (d, f, c, r) = (&plan.density, &plan.feature, &plan.color, &plan.rgb);
-        let mut density = vec![0.0f32; n];
-        linear_forward(
-            &h,
-            n,
-            d.inp,
-            weight(params, d),
-            1,
-            &bias_or_zero(params, d),
-            Addend::Row,
-            false,
-            &mut density,
-        );
-        let mut feature = take_buffer(n * f.out);
-        linear_forward(
-            &h,
-            n,
-            f.inp,
-            weight(params, f),
-            f.out,
-            &bias_or_zero(params, f),
-            Addend::Row,
-            false,
-            &mut feature,
-        );
-        let term = block(rays, plan.ray_width, plan.color_ray, c.out);
-        let mut color = take_buffer(n * c.out);
-        linear_forward(
-            &feature,
-            n,
-            c.inp,
-            weight(params, c),
-            c.out,
-            &term,
-            group,
-            true,
-            &mut color,
-        );
-        let mut rgb = vec![0.0f32; n * 3];
-        linear_forward(
-            &color,
-            n,
-            r.inp,
-            weight(params, r),
-            3,
-            &bias_or_zero(params, r),
-            Addend::Row,
-            false,
-            &mut rgb,
-        );
+        let widths = plan
+            .trunk
+            .iter()
+            .map(trunk_width)
+            .collect::<Result<Vec<_>>>()?;
+        let (f_out, c_out, rw) = (plan.feature.out, plan.color.out, plan.ray_width);
+        let w = PackedPlan::new(plan, params, true);
+        let rays_per_block = self.rays_per_block();
+        let rb = rays_per_block * plan.n_samples;
         let mut out = vec![0.0f32; n * 4];
-        for (i, o) in out.chunks_exact_mut(4).enumerate() {
-            o[0] = density[i];
-            o[1..].copy_from_slice(&rgb[3 * i..3 * i + 3]);
-        }
+        let jobs = out
+            .chunks_mut(rb * 4)
+            .zip(points.chunks(rb * pos_dim))
+            .zip(rays.chunks(rays_per_block * rw))
+            .map(|((o, p), r)| (o, p, r));
         if self.keep {
-            stash.trunk.push(h);
-            stash.feature = feature;
-            stash.color = color;
+            let mut stash = Stash {
+                trunk: widths.iter().map(|&wd| take_buffer(n * wd)).collect(),
+                feature: take_buffer(n * f_out),
+                color: take_buffer(n * c_out),
+            };
+            let mut blocks: Vec<BlockActs<'_>> = stash
+                .feature
+                .chunks_mut(rb * f_out)
+                .zip(stash.color.chunks_mut(rb * c_out))
+                .map(|(feature, color)| BlockActs {
+                    trunk: Vec::with_capacity(widths.len()),
+                    feature,
+                    color,
+                })
+                .collect();
+            for (buf, &wd) in stash.trunk.iter_mut().zip(&widths) {
+                for (b, chunk) in blocks.iter_mut().zip(buf.chunks_mut(rb * wd)) {
+                    b.trunk.push(chunk);
+                }
+            }
+            blocks
+                .into_par_iter()
+                .zip(jobs.collect::<Vec<_>>())
+                .try_for_each(|(mut acts, (o, p, r))| {
+                    self.forward_block(&w, params, p, r, o.len() / 4, &mut acts, o)
+                })?;
+            Ok((out, stash))
         } else {
-            give_buffer(h);
-            give_buffer(feature);
-            give_buffer(color);
+            jobs.collect::<Vec<_>>().into_par_iter().try_for_each_init(
+                || {
+                    (
+                        widths
+                            .iter()
+                            .map(|&wd| vec![0.0f32; rb * wd])
+                            .collect::<Vec<_>>(),
+                        vec![0.0f32; rb * f_out],
+                        vec![0.0f32; rb * c_out],
+                    )
+                },
+                |(trunk, feature, color), (o, p, r)| {
+                    let rows = o.len() / 4;
+                    let mut acts = BlockActs {
+                        trunk: trunk.iter_mut().map(|t| &mut t[..]).collect(),
+                        feature,
+                        color,
+                    };
+                    self.forward_block(&w, params, p, r, rows, &mut acts, o)
+                },
+            )?;
+            Ok((out, Stash::default()))
         }
-        Ok((out, stash))
+    }
+}
+
+/// `acc[j] += sum_i g[i * ld + j]` over `rows` rows of `n` values (a bias gradient).
+fn add_col_sums(g: &[f32], ld: usize, rows: usize, n: usize, acc: &mut [f32]) {
+    for row in g.chunks(ld).take(rows) {
+        for (a, v) in acc[..n].iter_mut().zip(&row[..n]) {
+            *a += v;
+        }
+    }
+}
+
+/// Per ray, the sum of its `group` rows of `g` (`[rows, n]`, contiguous) added to its row
+/// of `dr` (stride `ld`) at column `off`: the gradient of a per-ray term.
+fn add_group_sums(g: &[f32], n: usize, group: usize, dr: &mut [f32], ld: usize, off: usize) {
+    for (rows, d) in g.chunks(group * n).zip(dr.chunks_mut(ld)) {
+        let d = &mut d[off..off + n];
+        for row in rows.chunks_exact(n) {
+            for (a, v) in d.iter_mut().zip(row) {
+                *a += v;
+            }
+        }
+    }
+}
+
+/// Where an affine layer's weight lies in the flat parameters.
+fn weight_range(a: &Affine) -> std::ops::Range<usize> {
+    a.weight..a.weight + a.out * a.inp
+}
+
+/// Adds a bias gradient (column sums of `g`) to the bias of `a`, if it has one.
+fn add_bias_grad(dp: &mut [f32], a: &Affine, g: &[f32], ld: usize, rows: usize) {
+    if let Some(b) = a.bias {
+        add_col_sums(g, ld, rows, a.out, &mut dp[b..b + a.out]);
+    }
+}
+
+/// The epilogue that zeroes a product where `gate <= 0` (the ReLU mask of the layer
+/// whose output `gate` is).
+fn gated(gate: &[f32]) -> Epilogue<'_> {
+    Epilogue {
+        gate: Some(gate),
+        ..Epilogue::default()
+    }
+}
+
+/// The backward's scratch for one span of blocks.
+#[derive(Default)]
+struct BackScratch {
+    g_color: Vec<f32>,
+    g_feature: Vec<f32>,
+    g_h: Vec<f32>,
+    g_x: Vec<f32>,
+    packed: Vec<f32>,
+}
+
+/// `v` resized to `len` values (contents unspecified: the products overwrite them).
+fn sized(v: &mut Vec<f32>, len: usize) -> &mut [f32] {
+    if v.len() < len {
+        v.resize(len, 0.0);
+    }
+    &mut v[..len]
+}
+
+impl FieldOp {
+    /// The backward of one block of `rows` rows (whole rays) starting at row `r0`: adds
+    /// the weight and bias gradients to `dp` and the per-ray term gradients to `dr` (the
+    /// block's rays, `[rows / n_samples, ray_width]`). `g` is the block's output gradient
+    /// `[rows, 4]` and `pts` its points.
+    ///
+    /// Every input gradient is stored already multiplied by the ReLU mask of the layer
+    /// below (the gate of [`block_product`]), so it is never read back to be masked.
+    #[allow(clippy::too_many_arguments)]
+    fn backward_block(
+        &self,
+        w: &PackedPlan,
+        stash: &Stash,
+        r0: usize,
+        rows: usize,
+        g: &[f32],
+        pts: &[f32],
+        dp: &mut [f32],
+        dr: &mut [f32],
+        s: &mut BackScratch,
+    ) -> Result<()> {
+        let plan = &self.plan;
+        let (d, f, c, r) = (&plan.density, &plan.feature, &plan.color, &plan.rgb);
+        let (ns, rw) = (plan.n_samples, plan.ray_width);
+        let of = |buf: &[f32], width: usize| -> std::ops::Range<usize> {
+            debug_assert!(buf.len() >= (r0 + rows) * width);
+            r0 * width..(r0 + rows) * width
+        };
+        let color = &stash.color[of(&stash.color, c.out)];
+        let feature = &stash.feature[of(&stash.feature, f.out)];
+        let last = stash
+            .trunk
+            .len()
+            .checked_sub(1)
+            .ok_or_else(|| candle_core::Error::Msg("fused field: empty stash".into()))?;
+        let width = f.inp;
+        let h = &stash.trunk[last][of(&stash.trunk[last], width)];
+        // rgb = color W_r^T + b_r (columns 1..4 of g).
+        block_weight_grad(
+            &g[1..],
+            4,
+            3,
+            color,
+            c.out,
+            c.out,
+            rows,
+            &mut dp[weight_range(r)],
+            &mut s.packed,
+        );
+        add_bias_grad(dp, r, &g[1..], 4, rows);
+        let g_color = sized(&mut s.g_color, rows * c.out);
+        block_product(&g[1..], 4, rows, &w.rgb, g_color, c.out, gated(color));
+        // color = relu(feature W_c^T + ray term).
+        add_group_sums(g_color, c.out, ns, dr, rw, plan.color_ray);
+        block_weight_grad(
+            g_color,
+            c.out,
+            c.out,
+            feature,
+            f.out,
+            f.out,
+            rows,
+            &mut dp[weight_range(c)],
+            &mut s.packed,
+        );
+        let g_feature = sized(&mut s.g_feature, rows * f.out);
+        block_product(
+            g_color,
+            c.out,
+            rows,
+            &w.color,
+            g_feature,
+            f.out,
+            Epilogue::default(),
+        );
+        // feature = h W_f^T + b_f, density = h W_d^T + b_d (column 0 of g).
+        block_weight_grad(
+            g_feature,
+            f.out,
+            f.out,
+            h,
+            width,
+            width,
+            rows,
+            &mut dp[weight_range(f)],
+            &mut s.packed,
+        );
+        add_bias_grad(dp, f, g_feature, f.out, rows);
+        block_weight_grad(
+            g,
+            4,
+            1,
+            h,
+            width,
+            width,
+            rows,
+            &mut dp[weight_range(d)],
+            &mut s.packed,
+        );
+        add_bias_grad(dp, d, g, 4, rows);
+        let mut g_h = std::mem::take(&mut s.g_h);
+        let mut g_x = std::mem::take(&mut s.g_x);
+        {
+            let gh = sized(&mut g_h, rows * width);
+            block_product(
+                g_feature,
+                f.out,
+                rows,
+                &w.feature,
+                gh,
+                width,
+                Epilogue::default(),
+            );
+            block_product(
+                g,
+                4,
+                rows,
+                &w.density,
+                gh,
+                width,
+                Epilogue {
+                    accumulate: true,
+                    gate: Some(h),
+                    ..Epilogue::default()
+                },
+            );
+        }
+        // The trunk, last layer first; `g_h` is the gradient of the layer's pre-activation.
+        // A fed layer's per-ray term (which carries its bias) gets the group sums, a plain
+        // layer's bias the column sums.
+        for (i, (step, (wh, _))) in plan.trunk.iter().zip(&w.trunk).enumerate().rev() {
+            let w_out = trunk_width(step)?;
+            let gh = &g_h[..rows * w_out];
+            if let (Some(pa), Some(off)) = (step.points, step.ray) {
+                add_group_sums(gh, w_out, ns, dr, rw, off);
+                block_weight_grad(
+                    gh,
+                    w_out,
+                    w_out,
+                    pts,
+                    pa.inp,
+                    pa.inp,
+                    rows,
+                    &mut dp[weight_range(&pa)],
+                    &mut s.packed,
+                );
+            }
+            if let (Some(hid), Some(wh)) = (step.hidden, wh) {
+                let below = &stash.trunk[i - 1];
+                let x = &below[of(below, hid.inp)];
+                if step.points.is_none() {
+                    add_bias_grad(dp, &hid, gh, w_out, rows);
+                }
+                block_weight_grad(
+                    gh,
+                    w_out,
+                    w_out,
+                    x,
+                    hid.inp,
+                    hid.inp,
+                    rows,
+                    &mut dp[weight_range(&hid)],
+                    &mut s.packed,
+                );
+                let gx = sized(&mut g_x, rows * hid.inp);
+                block_product(gh, w_out, rows, wh, gx, hid.inp, gated(x));
+                std::mem::swap(&mut g_h, &mut g_x);
+            }
+        }
+        s.g_h = g_h;
+        s.g_x = g_x;
+        Ok(())
+    }
+
+    /// The backward on raw slices, in parallel over [`SPANS`] spans of whole blocks: each
+    /// span sums its blocks' weight gradients in order into its own partial, and the
+    /// partials are added in span order. Returns the parameter and per-ray term gradients.
+    fn backward(
+        &self,
+        stash: &Stash,
+        g: &[f32],
+        params: &[f32],
+        pts: &[f32],
+        n: usize,
+        n_rays: usize,
+    ) -> Result<(Vec<f32>, Vec<f32>)> {
+        let plan = &self.plan;
+        let pos_dim = pts.len() / n.max(1);
+        let w = PackedPlan::new(plan, params, false);
+        let rays_per_block = self.rays_per_block();
+        let n_blocks = n_rays.div_ceil(rays_per_block);
+        let span_rays = n_blocks.div_ceil(SPANS).max(1) * rays_per_block;
+        let rw = plan.ray_width;
+        let mut dr = vec![0.0f32; n_rays * rw];
+        let partials = dr
+            .par_chunks_mut(span_rays * rw)
+            .enumerate()
+            .map(|(span, dr)| -> Result<Vec<f32>> {
+                let mut dp = vec![0.0f32; plan.n_params];
+                let mut scratch = BackScratch::default();
+                let q_lo = span * span_rays;
+                let q_hi = (q_lo + span_rays).min(n_rays);
+                let mut q0 = q_lo;
+                while q0 < q_hi {
+                    let q1 = (q0 + rays_per_block).min(q_hi);
+                    let (r0, r1) = (q0 * plan.n_samples, q1 * plan.n_samples);
+                    self.backward_block(
+                        &w,
+                        stash,
+                        r0,
+                        r1 - r0,
+                        &g[r0 * 4..r1 * 4],
+                        &pts[r0 * pos_dim..r1 * pos_dim],
+                        &mut dp,
+                        &mut dr[(q0 - q_lo) * rw..(q1 - q_lo) * rw],
+                        &mut scratch,
+                    )?;
+                    q0 = q1;
+                }
+                Ok(dp)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let mut dp = vec![0.0f32; plan.n_params];
+        for part in &partials {
+            for (d, v) in dp.iter_mut().zip(part) {
+                *d += v;
+            }
+        }
+        Ok((dp, dr))
     }
 }
 
@@ -390,87 +788,13 @@ impl CustomOp3 for FieldOp {
             .ok_or_else(|| {
                 candle_core::Error::Msg("fused field: backward without a kept forward".into())
             })?;
-        let plan = &self.plan;
         let n = points.dim(0)?;
         let n_rays = rays.dim(0)?;
-        let group = Addend::Group(plan.n_samples);
         let dev = points.device();
-        let mut dp = vec![0.0f32; plan.n_params];
-        let mut dr = vec![0.0f32; n_rays * plan.ray_width];
-        let add_block = |dr: &mut [f32], off: usize, w: usize, g: &[f32]| {
-            for (row, src) in dr.chunks_exact_mut(plan.ray_width).zip(g.chunks_exact(w)) {
-                for (d, s) in row[off..off + w].iter_mut().zip(src) {
-                    *d += s;
-                }
-            }
-        };
-        with_data(grad, "grad", |g| {
+        let (dp, dr) = with_data(grad, "grad", |g| {
             with_data(params, "params", |p| {
                 with_data(points, "points", |pts| {
-                    let (d, f, c, r) = (&plan.density, &plan.feature, &plan.color, &plan.rgb);
-                    let mut g_density: Vec<f32> = g.chunks_exact(4).map(|o| o[0]).collect();
-                    let mut g_rgb: Vec<f32> = g
-                        .chunks_exact(4)
-                        .flat_map(|o| o[1..].iter().copied())
-                        .collect();
-                    let h = stash
-                        .trunk
-                        .last()
-                        .ok_or_else(|| candle_core::Error::Msg("empty stash".into()))?;
-                    // rgb = color W_r^T + b_r
-                    let db = relu_backward(&mut g_rgb, &[], n, 3, false, Addend::Row);
-                    accumulate_affine(&mut dp, r, &g_rgb, &stash.color, n, Some(&db));
-                    let mut g_color = take_buffer(n * c.out);
-                    matmul(&g_rgb, n, 3, weight(p, r), c.out, &mut g_color);
-                    // color = relu(feature W_c^T + ray term)
-                    let d_term = relu_backward(&mut g_color, &stash.color, n, c.out, true, group);
-                    add_block(&mut dr, plan.color_ray, c.out, &d_term);
-                    accumulate_affine(&mut dp, c, &g_color, &stash.feature, n, None);
-                    let mut g_feature = take_buffer(n * f.out);
-                    matmul(&g_color, n, c.out, weight(p, c), f.out, &mut g_feature);
-                    give_buffer(g_color);
-                    // feature = h W_f^T + b_f, density = h W_d^T + b_d
-                    let db_f = relu_backward(&mut g_feature, &[], n, f.out, false, Addend::Row);
-                    accumulate_affine(&mut dp, f, &g_feature, h, n, Some(&db_f));
-                    let db_d = relu_backward(&mut g_density, &[], n, 1, false, Addend::Row);
-                    accumulate_affine(&mut dp, d, &g_density, h, n, Some(&db_d));
-                    let width = f.inp;
-                    let mut g_h = take_buffer(n * width);
-                    matmul(&g_feature, n, f.out, weight(p, f), width, &mut g_h);
-                    give_buffer(g_feature);
-                    let wd = weight(p, d);
-                    for (row, &gd) in g_h.chunks_exact_mut(width).zip(&g_density) {
-                        for (x, w) in row.iter_mut().zip(wd) {
-                            *x += gd * w;
-                        }
-                    }
-                    // The trunk, last layer first. A fed layer's addend (its per-ray term,
-                    // which carries its bias) gets the group sums; a plain layer's bias the
-                    // row sums.
-                    for (i, step) in plan.trunk.iter().enumerate().rev() {
-                        let y = &stash.trunk[i];
-                        let w_out = step.hidden.or(step.points).map(|a| a.out).unwrap_or(width);
-                        let mode = match (step.points, step.hidden) {
-                            (Some(_), _) => group,
-                            (None, Some(hid)) if hid.bias.is_some() => Addend::Row,
-                            _ => Addend::None,
-                        };
-                        let d_add = relu_backward(&mut g_h, y, n, w_out, true, mode);
-                        if let (Some(pa), Some(off)) = (step.points, step.ray) {
-                            accumulate_affine(&mut dp, &pa, &g_h, pts, n, None);
-                            add_block(&mut dr, off, w_out, &d_add);
-                        }
-                        if let Some(hid) = step.hidden {
-                            let x = &stash.trunk[i - 1];
-                            let db = (mode == Addend::Row).then_some(&d_add);
-                            accumulate_affine(&mut dp, &hid, &g_h, x, n, db);
-                            let mut g_x = take_buffer(n * hid.inp);
-                            matmul(&g_h, n, w_out, weight(p, &hid), hid.inp, &mut g_x);
-                            give_buffer(std::mem::replace(&mut g_h, g_x));
-                        }
-                    }
-                    give_buffer(g_h);
-                    Ok(())
+                    self.backward(&stash, g, p, pts, n, n_rays)
                 })
             })
         })?;

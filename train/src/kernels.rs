@@ -76,6 +76,9 @@ struct Tile {
     addend: [*const f32; MR],
     /// A bias row at column `j0`, added to every row (null: none).
     bias: *const f32,
+    /// Per tile row, a row at column `j0` of the ReLU output whose sign gates the result:
+    /// `C = 0` where it is `<= 0` (null: no gate). Applied last, after ReLU.
+    gate: [*const f32; MR],
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -139,6 +142,10 @@ mod avx512 {
                     }
                     if t.relu {
                         x = _mm512_max_ps(x, zero);
+                    }
+                    if !t.gate[r].is_null() {
+                        let y = _mm512_maskz_loadu_ps(mask, t.gate[r].add(16 * v));
+                        x = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(y, zero), x);
                     }
                     _mm512_mask_storeu_ps(crow.add(16 * v), mask, x);
                 }
@@ -292,6 +299,9 @@ unsafe fn tile_portable(t: &Tile) {
                 if t.relu {
                     x = x.max(0.0);
                 }
+                if !t.gate[r].is_null() && *t.gate[r].add(j) <= 0.0 {
+                    x = 0.0;
+                }
                 *crow.add(j) = x;
             }
         }
@@ -360,6 +370,7 @@ unsafe fn gemm_rows(
     addend: (*const f32, usize, Addend),
     bias: *const f32,
     relu: bool,
+    gate: *const f32,
     avx512: bool,
 ) {
     let (add_ptr, add_ld, add_mode) = addend;
@@ -377,6 +388,13 @@ unsafe fn gemm_rows(
             while i0 < i_hi {
                 let rows = MR.min(i_hi - i0);
                 let mut rows_addend = [std::ptr::null::<f32>(); MR];
+                let mut rows_gate = [std::ptr::null::<f32>(); MR];
+                if last && !gate.is_null() {
+                    for (r, slot) in rows_gate.iter_mut().enumerate().take(rows) {
+                        // SAFETY: the gate has C's shape and row stride (caller's contract).
+                        *slot = unsafe { gate.add((i0 + r) * ldc + j0) };
+                    }
+                }
                 if last {
                     for (r, slot) in rows_addend.iter_mut().enumerate().take(rows) {
                         if let Some(row) = add_mode.row(i0 + r) {
@@ -403,6 +421,7 @@ unsafe fn gemm_rows(
                         accumulate: accumulate || k0 > 0,
                         relu: relu && last,
                         addend: rows_addend,
+                        gate: rows_gate,
                         bias: if bias.is_null() || !last {
                             std::ptr::null()
                         } else {
@@ -479,7 +498,7 @@ pub fn linear_forward(
     };
     check("addend", addend.len(), add_rows * n);
     let packed = pack_weight(w, n, k);
-    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), None, relu);
+    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), None, relu, None);
 }
 
 /// The residual layer's forward: `y = act(x w^T + bias + residual)`, with a bias row and a
@@ -518,6 +537,7 @@ pub fn linear_forward_residual(
         (residual, Addend::Full),
         Some(bias),
         relu,
+        None,
     );
 }
 
@@ -551,8 +571,10 @@ fn gemm_parallel(
     addend: (&[f32], Addend),
     bias: Option<&[f32]>,
     relu: bool,
+    gate: Option<&[f32]>,
 ) {
     let avx512 = has_avx512();
+    let gatep = SendConst(gate.map_or(std::ptr::null(), |g| g.as_ptr()));
     let cp = SendPtr(c.as_mut_ptr());
     let (ap, bp, dp) = (
         SendConst(a.as_ptr()),
@@ -564,7 +586,7 @@ fn gemm_parallel(
     (0..m.div_ceil(ROW_CHUNK))
         .into_par_iter()
         .for_each(|chunk| {
-            let (cp, ap, bp, dp, biasp) = (cp, ap, bp, dp, biasp);
+            let (cp, ap, bp, dp, biasp, gatep) = (cp, ap, bp, dp, biasp, gatep);
             let i_lo = chunk * ROW_CHUNK;
             let i_hi = (i_lo + ROW_CHUNK).min(m);
             // SAFETY: the callers checked the shapes; tasks write disjoint row ranges of c.
@@ -586,6 +608,7 @@ fn gemm_parallel(
                     (dp.0, n, mode),
                     biasp.0,
                     relu,
+                    gatep.0,
                     avx512,
                 )
             };
@@ -603,7 +626,18 @@ pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32])
     let mut packed = Vec::new();
     // SAFETY: b is [k, n] row-major (checked above).
     unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
-    gemm_parallel(a, m, k, &packed, n, c, (&[], Addend::None), None, false);
+    gemm_parallel(
+        a,
+        m,
+        k,
+        &packed,
+        n,
+        c,
+        (&[], Addend::None),
+        None,
+        false,
+        None,
+    );
 }
 
 /// `c = a b + addend` for row-major `a` `[m, k]`, `b` `[k, n]` and a full `[m, n]` addend
@@ -619,7 +653,18 @@ pub fn matmul_add(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, add: &[f32
     let mut packed = Vec::new();
     // SAFETY: b is [k, n] row-major (checked above).
     unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
-    gemm_parallel(a, m, k, &packed, n, c, (add, Addend::Full), None, false);
+    gemm_parallel(
+        a,
+        m,
+        k,
+        &packed,
+        n,
+        c,
+        (add, Addend::Full),
+        None,
+        false,
+        None,
+    );
 }
 
 /// `c = a^T b` for row-major `a` `[m, n]` and `b` `[m, k]`, summed over the `m` rows (the
@@ -666,6 +711,7 @@ pub fn matmul_tn(a: &[f32], m: usize, n: usize, b: &[f32], k: usize, c: &mut [f3
                         (std::ptr::null(), 0, Addend::None),
                         std::ptr::null(),
                         false,
+                        std::ptr::null(),
                         avx512,
                     )
                 };
@@ -763,6 +809,191 @@ pub fn relu_backward(
                 });
             db
         }
+    }
+}
+
+/// A right-hand operand `B` `[k, n]` packed once into the kernel's column panels, for
+/// products over many row blocks (see [`block_product`]).
+#[derive(Debug, Clone, Default)]
+pub struct Packed {
+    data: Vec<f32>,
+    k: usize,
+    n: usize,
+}
+
+impl Packed {
+    /// `B = W^T` for a weight `W` `[n, k]` (candle's `Linear` layout): the forward operand.
+    ///
+    /// # Panics
+    /// If `w` is shorter than `[n, k]` (a caller bug).
+    pub fn weight_t(w: &[f32], n: usize, k: usize) -> Packed {
+        check("w", w.len(), n * k);
+        Packed {
+            data: pack_weight(w, n, k),
+            k,
+            n,
+        }
+    }
+
+    /// `B = b` for a row-major `b` `[k, n]` (a weight `[out, inp]` read as the input
+    /// gradient's operand: `k = out`, `n = inp`).
+    ///
+    /// # Panics
+    /// If `b` is shorter than `[k, n]` (a caller bug).
+    pub fn rows(b: &[f32], k: usize, n: usize) -> Packed {
+        check("b", b.len(), k * n);
+        let mut data = Vec::new();
+        // SAFETY: b is [k, n] row-major (checked above).
+        unsafe { pack_b(b.as_ptr(), n, k, n, &mut data) };
+        Packed { data, k, n }
+    }
+
+    /// Rows of `B` (the reduction length).
+    pub fn k(&self) -> usize {
+        self.k
+    }
+}
+
+/// What [`block_product`] does on the way out, per output element `C[i, j]`, in this
+/// order: add the old `C` (`accumulate`), the addend row of `i`, the bias; clamp at zero
+/// (`relu`); zero it where `gate[i, j] <= 0` (the gate has C's shape and row stride).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Epilogue<'a> {
+    pub accumulate: bool,
+    /// `(values, row stride, layout)`; rows are counted from the block's first row.
+    pub addend: Option<(&'a [f32], usize, Addend)>,
+    pub bias: Option<&'a [f32]>,
+    pub relu: bool,
+    pub gate: Option<&'a [f32]>,
+}
+
+/// Checks that `rows` rows of `cols` values at row stride `ld` fit in `len` values.
+fn check_strided(name: &str, len: usize, rows: usize, cols: usize, ld: usize) {
+    if rows > 0 && cols > 0 {
+        check(name, len, (rows - 1) * ld + cols);
+    }
+}
+
+/// One row block's product on the calling thread (the caller parallelises over blocks):
+/// `C[i, j] = epilogue(sum_p a[i * lda + p] B[p, j])` for `rows` rows, `C` at row stride
+/// `ldc`.
+///
+/// # Shapes
+/// - `a`: `rows` rows of `b.k` values at stride `lda`; `c` (and the gate): `rows` rows of
+///   `b.n` values at stride `ldc`
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+pub fn block_product(
+    a: &[f32],
+    lda: usize,
+    rows: usize,
+    b: &Packed,
+    c: &mut [f32],
+    ldc: usize,
+    epi: Epilogue<'_>,
+) {
+    check_strided("a", a.len(), rows, b.k, lda);
+    check_strided("c", c.len(), rows, b.n, ldc);
+    if let Some(g) = epi.gate {
+        check_strided("gate", g.len(), rows, b.n, ldc);
+    }
+    if let Some(bias) = epi.bias {
+        check("bias", bias.len(), b.n);
+    }
+    let (add_ptr, add_ld, add_mode) = match epi.addend {
+        Some((v, ld, mode)) => {
+            if let Some(last) = rows.checked_sub(1).and_then(|r| mode.row(r)) {
+                check_strided("addend", v.len(), last + 1, b.n, ld);
+            }
+            (v.as_ptr(), ld, mode)
+        }
+        None => (std::ptr::null(), 0, Addend::None),
+    };
+    if rows == 0 || b.n == 0 {
+        return;
+    }
+    // SAFETY: every operand's extent was checked above against the shapes used.
+    unsafe {
+        gemm_rows(
+            0,
+            rows,
+            b.n,
+            b.k,
+            StridedA {
+                ptr: a.as_ptr(),
+                rs: lda,
+                cs: 1,
+            },
+            b.data.as_ptr(),
+            c.as_mut_ptr(),
+            ldc,
+            epi.accumulate,
+            (add_ptr, add_ld, add_mode),
+            epi.bias.map_or(std::ptr::null(), <[f32]>::as_ptr),
+            epi.relu,
+            epi.gate.map_or(std::ptr::null(), <[f32]>::as_ptr),
+            has_avx512(),
+        )
+    };
+}
+
+/// One row block's weight gradient on the calling thread: `acc += g^T x`, `acc` `[n, k]`
+/// row-major, summed over the block's `rows` rows in order. `scratch` holds the packed
+/// `x` between calls.
+///
+/// # Shapes
+/// - `g`: `rows` rows of `n` values at stride `ldg`; `x`: `rows` rows of `k` at stride `ldx`
+///
+/// # Panics
+/// If a slice is shorter than its shape (a caller bug).
+#[allow(clippy::too_many_arguments)]
+pub fn block_weight_grad(
+    g: &[f32],
+    ldg: usize,
+    n: usize,
+    x: &[f32],
+    ldx: usize,
+    k: usize,
+    rows: usize,
+    acc: &mut [f32],
+    scratch: &mut Vec<f32>,
+) {
+    check_strided("g", g.len(), rows, n, ldg);
+    check_strided("x", x.len(), rows, k, ldx);
+    check("acc", acc.len(), n * k);
+    if rows == 0 || n == 0 || k == 0 {
+        return;
+    }
+    let avx512 = has_avx512();
+    let mut p0 = 0;
+    while p0 < rows {
+        let kb = K_BLOCK.min(rows - p0);
+        // SAFETY: rows p0..p0 + kb of g and x exist and acc is [n, k] (checked above).
+        unsafe {
+            pack_b(x.as_ptr().add(p0 * ldx), ldx, kb, k, scratch);
+            gemm_rows(
+                0,
+                n,
+                k,
+                kb,
+                StridedA {
+                    ptr: g.as_ptr().add(p0 * ldg),
+                    rs: 1,
+                    cs: ldg,
+                },
+                scratch.as_ptr(),
+                acc.as_mut_ptr(),
+                k,
+                true,
+                (std::ptr::null(), 0, Addend::None),
+                std::ptr::null(),
+                false,
+                std::ptr::null(),
+                avx512,
+            )
+        };
+        p0 += kb;
     }
 }
 
