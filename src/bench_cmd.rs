@@ -221,7 +221,8 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
          | cores busy | {:.2} |\n\
          | candle matmul at the same shapes | {:.1} GFLOP/s |\n\
          | step rate / matmul rate | {:.1} % |\n\
-         | nldf kernel matmul at the same shapes | {:.1} GFLOP/s |\n",
+         | nldf kernel matmul at the same shapes | {:.1} GFLOP/s |\n\
+         | machine's f32 register peak (all threads) | {} |\n",
         r.model,
         machine_cell(m),
         m.rayon_threads,
@@ -234,7 +235,11 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
         r.cores_busy,
         r.candle_matmul_gflop_s,
         100.0 * r.fraction_of_candle_matmul,
-        r.kernel_matmul_gflop_s
+        r.kernel_matmul_gflop_s,
+        match (r.register_peak_gflop_s, r.fraction_of_register_peak) {
+            (Some(p), Some(f)) => format!("{p:.1} GFLOP/s (step at {:.1} %)", 100.0 * f),
+            _ => "not measured (no FMA vectors)".into(),
+        }
     )
 }
 

@@ -120,6 +120,10 @@ pub struct StepBench {
     /// nldf's own kernel ([`crate::kernels::matmul`]) alone on the same shapes: the
     /// ceiling of the fused step.
     pub kernel_matmul_gflop_s: f64,
+    /// The machine's f32 register peak ([`register_peak_gflop_s`]), if measured.
+    pub register_peak_gflop_s: Option<f64>,
+    /// `effective_gflop_s / register_peak_gflop_s`.
+    pub fraction_of_register_peak: Option<f64>,
 }
 
 /// Calls `f` once untimed, then repeatedly until 0.2 s have passed; returns the timed calls
@@ -185,6 +189,101 @@ pub fn kernel_matmul_rate(products: &[(usize, usize, usize)]) -> Result<f64> {
     )
 }
 
+/// Independent multiply-add chains per thread in [`register_peak_gflop_s`]: enough to
+/// cover the FMA latency times the FMA ports of current x86 cores.
+const FMA_CHAINS: usize = 12;
+
+/// Iterations of the FMA loop between clock reads.
+const FMA_ROUNDS: usize = 1 << 20;
+
+#[cfg(target_arch = "x86_64")]
+mod fma_loop {
+    use super::{FMA_CHAINS, FMA_ROUNDS};
+    use std::arch::x86_64::*;
+
+    /// `FMA_ROUNDS` rounds of `FMA_CHAINS` 16-lane multiply-adds; returns a value that
+    /// depends on all of them (so that none is optimised away).
+    ///
+    /// # Safety
+    /// The CPU supports AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn avx512() -> f32 {
+        let (b, c) = (_mm512_set1_ps(0.999_999), _mm512_set1_ps(1e-7));
+        let mut acc = [_mm512_setzero_ps(); FMA_CHAINS];
+        for _ in 0..FMA_ROUNDS {
+            for a in acc.iter_mut() {
+                *a = _mm512_fmadd_ps(*a, b, c);
+            }
+        }
+        acc.iter().map(|&a| _mm512_reduce_add_ps(a)).sum()
+    }
+
+    /// The same with 8-lane AVX2 multiply-adds.
+    ///
+    /// # Safety
+    /// The CPU supports AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn avx2() -> f32 {
+        let (b, c) = (_mm256_set1_ps(0.999_999), _mm256_set1_ps(1e-7));
+        let mut acc = [_mm256_setzero_ps(); FMA_CHAINS];
+        for _ in 0..FMA_ROUNDS {
+            for a in acc.iter_mut() {
+                *a = _mm256_fmadd_ps(*a, b, c);
+            }
+        }
+        let mut lanes = [0.0f32; 8];
+        let mut sum = 0.0;
+        for a in acc {
+            // SAFETY: `lanes` holds 8 values.
+            unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), a) };
+            sum += lanes.iter().sum::<f32>();
+        }
+        sum
+    }
+}
+
+/// The machine's register peak for f32: every rayon thread runs independent vector
+/// multiply-add chains (AVX-512 where the CPU has it, else AVX2 with FMA) for about 0.2 s;
+/// returns their FLOPs over the wall time. The ceiling no matrix product can pass. `None`
+/// on CPUs without FMA vectors.
+pub fn register_peak_gflop_s() -> Option<f64> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let lanes = if std::arch::is_x86_feature_detected!("avx512f") {
+            16
+        } else if std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            8
+        } else {
+            return None;
+        };
+        let round = || {
+            // SAFETY: the features each loop needs were detected above.
+            unsafe {
+                if lanes == 16 {
+                    fma_loop::avx512()
+                } else {
+                    fma_loop::avx2()
+                }
+            }
+        };
+        std::hint::black_box(round());
+        let start = Instant::now();
+        let mut loops = 0usize;
+        while start.elapsed().as_secs_f64() < 0.2 {
+            let sums = rayon::broadcast(|_| std::hint::black_box(round()));
+            loops += sums.len();
+        }
+        let flops = (loops * FMA_ROUNDS * FMA_CHAINS * lanes * 2) as f64;
+        Some(flops / start.elapsed().as_secs_f64() / 1e9)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        None
+    }
+}
+
 /// Runs `warmup` untimed calls of `step`, then `steps` timed ones; `step` returns how many
 /// rays it processed. Returns the timed rays, wall seconds and cores busy.
 fn timed_steps(
@@ -239,6 +338,7 @@ impl Timed {
             .collect();
         let matmul = candle_matmul_rate(&products)?;
         let kernel = kernel_matmul_rate(&products)?;
+        let peak = register_peak_gflop_s();
         let per_step = self.wall / self.steps.max(1) as f64;
         let effective = 3.0 * fwd_flops / per_step / 1e9;
         Ok(StepBench {
@@ -255,6 +355,8 @@ impl Timed {
             candle_matmul_gflop_s: matmul,
             fraction_of_candle_matmul: effective / matmul,
             kernel_matmul_gflop_s: kernel,
+            register_peak_gflop_s: peak,
+            fraction_of_register_peak: peak.map(|p| effective / p),
         })
     }
 }
