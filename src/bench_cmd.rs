@@ -214,7 +214,7 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
     format!(
         "| {} | value |\n|---|---|\n\
          | machine | {}, {} rayon threads |\n\
-         | batch | {} rays, {:.0} hit the head's bounds, {} samples each |\n\
+         | batch | {} rays, {:.0} hit the head's bounds, {} samples each{} |\n\
          | step time | {:.3} s |\n\
          | throughput | {:.0} rays/s |\n\
          | effective rate (3 x forward FLOPs) | {:.1} GFLOP/s |\n\
@@ -229,6 +229,14 @@ fn markdown(m: &Machine, r: &StepBench) -> String {
         r.batch_rays,
         r.hit_rays,
         r.samples_per_ray,
+        if r.coarse_samples_per_ray > 0 {
+            format!(
+                " (placed by a forward-only pass over {})",
+                r.coarse_samples_per_ray
+            )
+        } else {
+            String::new()
+        },
         r.seconds_per_step,
         r.rays_per_s,
         r.effective_gflop_s,

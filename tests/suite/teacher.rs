@@ -383,6 +383,18 @@ fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
             out
         };
         let (fused, plain) = (run(true), run(false));
+        // Without a backward to come, the op keeps nothing and computes the same values.
+        let (d, c) = field
+            .forward(&points, &codes, &dirs, n_samples, false)
+            .unwrap();
+        assert_eq!(
+            d.flatten_all().unwrap().to_vec1::<f32>().unwrap(),
+            fused[0].1
+        );
+        assert_eq!(
+            c.flatten_all().unwrap().to_vec1::<f32>().unwrap(),
+            fused[1].1
+        );
         for ((name, a), (_, b)) in fused.iter().zip(&plain) {
             assert_eq!(a.len(), b.len(), "{name}");
             assert!(!a.is_empty(), "{name} has no gradient");

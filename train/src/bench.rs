@@ -103,13 +103,18 @@ pub struct StepBench {
     pub batch_rays: usize,
     /// Rays that hit the head's bounds per step (only these reach the network), on average.
     pub hit_rays: f64,
+    /// Samples per ray that the step trains on (forward and backward).
     pub samples_per_ray: usize,
+    /// Samples per ray of a forward-only pass before it (the coarse pass that places
+    /// importance samples; 0 without one).
+    pub coarse_samples_per_ray: usize,
     pub steps: usize,
     pub seconds_per_step: f64,
     pub rays_per_s: f64,
     /// Forward FLOPs per step of the per-sample layers (2 per multiply-add).
     pub forward_gflop_per_step: f64,
-    /// 3 x forward FLOPs (forward, input and weight gradients) per second.
+    /// 3 x forward FLOPs (forward, input and weight gradients) of the trained samples, plus
+    /// the forward FLOPs of the coarse pass, per second.
     pub effective_gflop_s: f64,
     /// CPU seconds per wall second during the timed steps.
     pub cores_busy: f64,
@@ -315,6 +320,7 @@ struct Timed {
     /// Rays per step that reached the network.
     rays_per_step: f64,
     samples_per_ray: usize,
+    coarse_samples_per_ray: usize,
     steps: usize,
     wall: f64,
     cores_busy: f64,
@@ -340,12 +346,15 @@ impl Timed {
         let kernel = kernel_matmul_rate(&products)?;
         let peak = register_peak_gflop_s();
         let per_step = self.wall / self.steps.max(1) as f64;
-        let effective = 3.0 * fwd_flops / per_step / 1e9;
+        let coarse_flops =
+            fwd_flops * self.coarse_samples_per_ray as f64 / self.samples_per_ray.max(1) as f64;
+        let effective = (3.0 * fwd_flops + coarse_flops) / per_step / 1e9;
         Ok(StepBench {
             model: self.model,
             batch_rays: self.batch_rays,
             hit_rays: self.rays_per_step,
             samples_per_ray: self.samples_per_ray,
+            coarse_samples_per_ray: self.coarse_samples_per_ray,
             steps: self.steps,
             seconds_per_step: per_step,
             rays_per_s: self.batch_rays as f64 / per_step,
@@ -374,13 +383,25 @@ pub fn bench_teacher_step(
     })?;
     let cfg = &run.cfg;
     Timed {
-        model: format!(
-            "teacher {}x{} ({} samples/ray)",
-            cfg.model.depth, cfg.model.width, cfg.model.n_samples
-        ),
+        model: if cfg.model.n_importance > 0 {
+            format!(
+                "teacher {}x{} ({} + {} samples/ray)",
+                cfg.model.depth, cfg.model.width, cfg.model.n_samples, cfg.model.n_importance
+            )
+        } else {
+            format!(
+                "teacher {}x{} ({} samples/ray)",
+                cfg.model.depth, cfg.model.width, cfg.model.n_samples
+            )
+        },
         batch_rays: cfg.train.batch_rays,
         rays_per_step: hits as f64 / steps.max(1) as f64,
-        samples_per_ray: cfg.model.n_samples,
+        samples_per_ray: cfg.model.n_samples + cfg.model.n_importance,
+        coarse_samples_per_ray: if cfg.model.n_importance > 0 {
+            cfg.model.n_samples
+        } else {
+            0
+        },
         steps,
         wall,
         cores_busy,
@@ -409,6 +430,7 @@ pub fn bench_student_step(
         batch_rays: batch,
         rays_per_step: rays as f64 / steps.max(1) as f64,
         samples_per_ray: 1,
+        coarse_samples_per_ray: 0,
         steps,
         wall,
         cores_busy,
