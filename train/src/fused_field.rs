@@ -250,6 +250,23 @@ impl FieldOp {
         let plan = &self.plan;
         let group = Addend::Group(plan.n_samples);
         let rw = plan.ray_width;
+        // y = act(points W_p^T + the ray term at column `off`).
+        let points_term = |wp: &Packed, off: usize, y: &mut [f32], width: usize, relu: bool| {
+            let addend = Some((&rays[off..], rw, group));
+            block_product(
+                points,
+                wp.k(),
+                rows,
+                wp,
+                y,
+                width,
+                Epilogue {
+                    addend,
+                    relu,
+                    ..Epilogue::default()
+                },
+            )
+        };
         let mut in_width = 0;
         for (i, (step, (wh, wp))) in plan.trunk.iter().zip(&w.trunk).enumerate() {
             let width = trunk_width(step)?;
@@ -258,33 +275,10 @@ impl FieldOp {
             let prev = done.last().map(|x| &**x);
             match (step.hidden, wh, wp, step.ray, prev) {
                 // relu(points W_p^T + ray term), the ray term carrying the bias.
-                (None, None, Some(wp), Some(off), _) => block_product(
-                    points,
-                    wp.k(),
-                    rows,
-                    wp,
-                    y,
-                    width,
-                    Epilogue {
-                        addend: Some((&rays[off..], rw, group)),
-                        relu: true,
-                        ..Epilogue::default()
-                    },
-                ),
+                (None, None, Some(wp), Some(off), _) => points_term(wp, off, y, width, true),
                 // relu(x W_h^T + points W_p^T + ray term).
                 (Some(_), Some(wh), Some(wp), Some(off), Some(x)) => {
-                    block_product(
-                        points,
-                        wp.k(),
-                        rows,
-                        wp,
-                        y,
-                        width,
-                        Epilogue {
-                            addend: Some((&rays[off..], rw, group)),
-                            ..Epilogue::default()
-                        },
-                    );
+                    points_term(wp, off, y, width, false);
                     block_product(
                         x,
                         in_width,

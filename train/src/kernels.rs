@@ -677,46 +677,24 @@ pub fn matmul_tn(a: &[f32], m: usize, n: usize, b: &[f32], k: usize, c: &mut [f3
     check("a", a.len(), m * n);
     check("b", b.len(), m * k);
     check("c", c.len(), n * k);
-    let avx512 = has_avx512();
-    let (ap, bp) = (SendConst(a.as_ptr()), SendConst(b.as_ptr()));
     let partials: Vec<Vec<f32>> = (0..m.div_ceil(REDUCE_CHUNK))
         .into_par_iter()
         .map(|chunk| {
-            let (ap, bp) = (ap, bp);
             let mut part = vec![0.0f32; n * k];
             let mut packed = Vec::new();
             let p_lo = chunk * REDUCE_CHUNK;
-            let p_hi = (p_lo + REDUCE_CHUNK).min(m);
-            let mut p0 = p_lo;
-            while p0 < p_hi {
-                let kb = K_BLOCK.min(p_hi - p0);
-                // SAFETY: rows p0..p0+kb of a and b exist (shapes checked above); `part`
-                // is this task's own [n, k] buffer.
-                unsafe {
-                    pack_b(bp.0.add(p0 * k), k, kb, k, &mut packed);
-                    gemm_rows(
-                        0,
-                        n,
-                        k,
-                        kb,
-                        StridedA {
-                            ptr: ap.0.add(p0 * n),
-                            rs: 1,
-                            cs: n,
-                        },
-                        packed.as_ptr(),
-                        part.as_mut_ptr(),
-                        k,
-                        p0 > p_lo,
-                        (std::ptr::null(), 0, Addend::None),
-                        std::ptr::null(),
-                        false,
-                        std::ptr::null(),
-                        avx512,
-                    )
-                };
-                p0 += kb;
-            }
+            let rows = REDUCE_CHUNK.min(m - p_lo);
+            block_weight_grad(
+                &a[p_lo * n..],
+                n,
+                n,
+                &b[p_lo * k..],
+                k,
+                k,
+                rows,
+                &mut part,
+                &mut packed,
+            );
             part
         })
         .collect();
@@ -1104,6 +1082,70 @@ mod tests {
                     (*x as f64 - y).abs() < 1e-4,
                     "matmul_tn {m}x{k}x{n}: {x} vs {y}"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn a_gated_block_product_accumulates_then_zeroes_where_the_gate_is_not_positive() {
+        // k spans several reduction blocks, and `a` and `c` have row strides wider than
+        // their rows, as column windows of wider matrices.
+        let (m, k, n, lda, ldc) = (20, KC + 9, 70, KC + 12, 75);
+        let a = values(m * lda, 21);
+        let b = values(k * n, 22);
+        let old = values(m * ldc, 23);
+        let gate = values(m * ldc, 24);
+        let dense: Vec<f32> = (0..m)
+            .flat_map(|i| a[i * lda..i * lda + k].to_vec())
+            .collect();
+        let want = reference(&dense, m, k, &b, n);
+        let mut c = old.clone();
+        block_product(
+            &a,
+            lda,
+            m,
+            &Packed::rows(&b, k, n),
+            &mut c,
+            ldc,
+            Epilogue {
+                accumulate: true,
+                gate: Some(&gate),
+                ..Epilogue::default()
+            },
+        );
+        for i in 0..m {
+            for j in 0..ldc {
+                let (got, at) = (c[i * ldc + j], i * ldc + j);
+                if j >= n {
+                    assert_eq!(got, old[at], "column {j} is outside the product");
+                } else if gate[at] <= 0.0 {
+                    assert_eq!(got, 0.0, "gated ({i}, {j})");
+                } else {
+                    let x = want[i * n + j] + old[at] as f64;
+                    assert!((got as f64 - x).abs() < 1e-4, "({i}, {j}): {got} vs {x}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_block_weight_gradient_adds_g_transposed_x_from_strided_rows() {
+        // More rows than one pass over K_BLOCK; g is a column window (stride 4, offset 1),
+        // as the colour gradient is read from the op's [rows, 4] output gradient.
+        let (rows, n, k) = (K_BLOCK + 37, 3, 19);
+        let g4 = values(rows * 4, 31);
+        let x = values(rows * k, 32);
+        let start = values(n * k, 33);
+        let mut acc = start.clone();
+        block_weight_grad(&g4[1..], 4, n, &x, k, k, rows, &mut acc, &mut Vec::new());
+        for j in 0..n {
+            for p in 0..k {
+                let want = start[j * k + p] as f64
+                    + (0..rows)
+                        .map(|i| g4[i * 4 + 1 + j] as f64 * x[i * k + p] as f64)
+                        .sum::<f64>();
+                let got = acc[j * k + p] as f64;
+                assert!((got - want).abs() < 1e-3, "({j}, {p}): {got} vs {want}");
             }
         }
     }
