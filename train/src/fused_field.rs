@@ -513,19 +513,17 @@ impl FieldOp {
         let plan = &self.plan;
         let (d, f, c, r) = (&plan.density, &plan.feature, &plan.color, &plan.rgb);
         let (ns, rw) = (plan.n_samples, plan.ray_width);
-        let of = |buf: &[f32], width: usize| -> std::ops::Range<usize> {
-            debug_assert!(buf.len() >= (r0 + rows) * width);
-            r0 * width..(r0 + rows) * width
-        };
-        let color = &stash.color[of(&stash.color, c.out)];
-        let feature = &stash.feature[of(&stash.feature, f.out)];
+        // This block's rows of a kept activation `[n, width]`.
+        let of = |width: usize| r0 * width..(r0 + rows) * width;
+        let color = &stash.color[of(c.out)];
+        let feature = &stash.feature[of(f.out)];
         let last = stash
             .trunk
             .len()
             .checked_sub(1)
             .ok_or_else(|| candle_core::Error::Msg("fused field: empty stash".into()))?;
         let width = f.inp;
-        let h = &stash.trunk[last][of(&stash.trunk[last], width)];
+        let h = &stash.trunk[last][of(width)];
         // rgb = color W_r^T + b_r (columns 1..4 of g).
         block_weight_grad(
             &g[1..],
@@ -638,7 +636,7 @@ impl FieldOp {
             }
             if let (Some(hid), Some(wh)) = (step.hidden, wh) {
                 let below = &stash.trunk[i - 1];
-                let x = &below[of(below, hid.inp)];
+                let x = &below[of(hid.inp)];
                 if step.points.is_none() {
                     add_bias_grad(dp, &hid, gh, w_out, rows);
                 }
