@@ -155,15 +155,22 @@ pub(crate) fn with_data<R>(
     }
 }
 
+/// Where an affine layer's weight lies in the flat parameters.
+fn weight_range(a: &Affine) -> std::ops::Range<usize> {
+    a.weight..a.weight + a.out * a.inp
+}
+
 pub(crate) fn weight<'a>(p: &'a [f32], a: &Affine) -> &'a [f32] {
-    &p[a.weight..a.weight + a.out * a.inp]
+    &p[weight_range(a)]
+}
+
+/// The bias of `a` as a slice of the parameters (none: no bias).
+fn bias_of<'a>(p: &'a [f32], a: &Affine) -> Option<&'a [f32]> {
+    a.bias.map(|b| &p[b..b + a.out])
 }
 
 pub(crate) fn bias_or_zero(p: &[f32], a: &Affine) -> Vec<f32> {
-    match a.bias {
-        Some(b) => p[b..b + a.out].to_vec(),
-        None => vec![0.0; a.out],
-    }
+    bias_of(p, a).map_or_else(|| vec![0.0; a.out], <[f32]>::to_vec)
 }
 
 /// Rows per block of the blocked passes, rounded to whole rays: a block's activations
@@ -207,11 +214,6 @@ impl PackedPlan {
     }
 }
 
-/// The bias of `a` as a slice of the parameters (none: no bias).
-fn bias_of<'a>(p: &'a [f32], a: &Affine) -> Option<&'a [f32]> {
-    a.bias.map(|b| &p[b..b + a.out])
-}
-
 /// Output width of a trunk layer.
 fn trunk_width(step: &TrunkStep) -> Result<usize> {
     step.hidden
@@ -231,6 +233,18 @@ impl FieldOp {
     /// Rays per block of the blocked passes.
     fn rays_per_block(&self) -> usize {
         (BLOCK_ROWS / self.plan.n_samples.max(1)).max(1)
+    }
+
+    /// Width of the encoded points, which the first trunk layer takes.
+    fn pos_dim(&self) -> Result<usize> {
+        self.plan
+            .trunk
+            .first()
+            .and_then(|s| s.points)
+            .map(|a| a.inp)
+            .ok_or_else(|| {
+                candle_core::Error::Msg("fused field: the first layer takes no points".into())
+            })
     }
 
     /// The forward pass over one block of whole rays: `rows` rows of `points`, the per-ray
@@ -350,14 +364,7 @@ impl FieldOp {
         n: usize,
     ) -> Result<(Vec<f32>, Stash)> {
         let plan = &self.plan;
-        let pos_dim = plan
-            .trunk
-            .first()
-            .and_then(|s| s.points)
-            .map(|a| a.inp)
-            .ok_or_else(|| {
-                candle_core::Error::Msg("fused field: the first layer takes no points".into())
-            })?;
+        let pos_dim = self.pos_dim()?;
         let widths = plan
             .trunk
             .iter()
@@ -448,11 +455,6 @@ fn add_group_sums(g: &[f32], n: usize, group: usize, dr: &mut [f32], ld: usize, 
             }
         }
     }
-}
-
-/// Where an affine layer's weight lies in the flat parameters.
-fn weight_range(a: &Affine) -> std::ops::Range<usize> {
-    a.weight..a.weight + a.out * a.inp
 }
 
 /// Adds a bias gradient (column sums of `g`) to the bias of `a`, if it has one.
@@ -670,11 +672,10 @@ impl FieldOp {
         g: &[f32],
         params: &[f32],
         pts: &[f32],
-        n: usize,
         n_rays: usize,
     ) -> Result<(Vec<f32>, Vec<f32>)> {
         let plan = &self.plan;
-        let pos_dim = pts.len() / n.max(1);
+        let pos_dim = self.pos_dim()?;
         let w = PackedPlan::new(plan, params, false);
         let rays_per_block = self.rays_per_block();
         let n_blocks = n_rays.div_ceil(rays_per_block);
@@ -780,13 +781,12 @@ impl CustomOp3 for FieldOp {
             .ok_or_else(|| {
                 candle_core::Error::Msg("fused field: backward without a kept forward".into())
             })?;
-        let n = points.dim(0)?;
         let n_rays = rays.dim(0)?;
         let dev = points.device();
         let (dp, dr) = with_data(grad, "grad", |g| {
             with_data(params, "params", |p| {
                 with_data(points, "points", |pts| {
-                    self.backward(&stash, g, p, pts, n, n_rays)
+                    self.backward(&stash, g, p, pts, n_rays)
                 })
             })
         })?;
@@ -810,7 +810,7 @@ pub(crate) fn accumulate_affine(
 ) {
     let mut dw = vec![0.0f32; a.out * a.inp];
     matmul_tn(g, n, a.out, x, a.inp, &mut dw);
-    for (d, v) in dp[a.weight..a.weight + a.out * a.inp].iter_mut().zip(&dw) {
+    for (d, v) in dp[weight_range(a)].iter_mut().zip(&dw) {
         *d += v;
     }
     if let (Some(b), Some(db)) = (a.bias, db) {

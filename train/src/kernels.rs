@@ -498,7 +498,7 @@ pub fn linear_forward(
     };
     check("addend", addend.len(), add_rows * n);
     let packed = pack_weight(w, n, k);
-    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), None, relu, None);
+    gemm_parallel(x, m, k, &packed, n, y, (addend, mode), None, relu);
 }
 
 /// The residual layer's forward: `y = act(x w^T + bias + residual)`, with a bias row and a
@@ -537,7 +537,6 @@ pub fn linear_forward_residual(
         (residual, Addend::Full),
         Some(bias),
         relu,
-        None,
     );
 }
 
@@ -571,10 +570,8 @@ fn gemm_parallel(
     addend: (&[f32], Addend),
     bias: Option<&[f32]>,
     relu: bool,
-    gate: Option<&[f32]>,
 ) {
     let avx512 = has_avx512();
-    let gatep = SendConst(gate.map_or(std::ptr::null(), |g| g.as_ptr()));
     let cp = SendPtr(c.as_mut_ptr());
     let (ap, bp, dp) = (
         SendConst(a.as_ptr()),
@@ -586,7 +583,7 @@ fn gemm_parallel(
     (0..m.div_ceil(ROW_CHUNK))
         .into_par_iter()
         .for_each(|chunk| {
-            let (cp, ap, bp, dp, biasp, gatep) = (cp, ap, bp, dp, biasp, gatep);
+            let (cp, ap, bp, dp, biasp) = (cp, ap, bp, dp, biasp);
             let i_lo = chunk * ROW_CHUNK;
             let i_hi = (i_lo + ROW_CHUNK).min(m);
             // SAFETY: the callers checked the shapes; tasks write disjoint row ranges of c.
@@ -608,7 +605,7 @@ fn gemm_parallel(
                     (dp.0, n, mode),
                     biasp.0,
                     relu,
-                    gatep.0,
+                    std::ptr::null(),
                     avx512,
                 )
             };
@@ -626,18 +623,7 @@ pub fn matmul(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, c: &mut [f32])
     let mut packed = Vec::new();
     // SAFETY: b is [k, n] row-major (checked above).
     unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
-    gemm_parallel(
-        a,
-        m,
-        k,
-        &packed,
-        n,
-        c,
-        (&[], Addend::None),
-        None,
-        false,
-        None,
-    );
+    gemm_parallel(a, m, k, &packed, n, c, (&[], Addend::None), None, false);
 }
 
 /// `c = a b + addend` for row-major `a` `[m, k]`, `b` `[k, n]` and a full `[m, n]` addend
@@ -653,18 +639,7 @@ pub fn matmul_add(a: &[f32], m: usize, k: usize, b: &[f32], n: usize, add: &[f32
     let mut packed = Vec::new();
     // SAFETY: b is [k, n] row-major (checked above).
     unsafe { pack_b(b.as_ptr(), n, k, n, &mut packed) };
-    gemm_parallel(
-        a,
-        m,
-        k,
-        &packed,
-        n,
-        c,
-        (add, Addend::Full),
-        None,
-        false,
-        None,
-    );
+    gemm_parallel(a, m, k, &packed, n, c, (add, Addend::Full), None, false);
 }
 
 /// `c = a^T b` for row-major `a` `[m, n]` and `b` `[m, k]`, summed over the `m` rows (the
@@ -706,88 +681,47 @@ pub fn matmul_tn(a: &[f32], m: usize, n: usize, b: &[f32], k: usize, c: &mut [f3
     }
 }
 
-/// The ReLU backward mask and the addend's gradient, in one pass: sets `g *= (y > 0)` in
-/// place (nothing without ReLU) and returns the gradient of the addend (`[n]` row sums,
-/// `[m / group, n]` group sums, a copy of `g` for a full addend, empty for none).
+/// The ReLU backward mask and the bias gradient, in one pass: sets `g *= (y > 0)` in place
+/// (nothing without ReLU) and returns the bias gradient, the `[n]` column sums of `g`
+/// (partial sums over fixed chunks of rows, added in chunk order).
 ///
 /// # Shapes
 /// - `g`, `y`: `[m, n]` (`y` unused without ReLU)
-pub fn relu_backward(
-    g: &mut [f32],
-    y: &[f32],
-    m: usize,
-    n: usize,
-    relu: bool,
-    mode: Addend,
-) -> Vec<f32> {
+pub fn relu_backward(g: &mut [f32], y: &[f32], m: usize, n: usize, relu: bool) -> Vec<f32> {
     check("g", g.len(), m * n);
     if relu {
         check("y", y.len(), m * n);
     }
     let n1 = n.max(1);
-    let mask = |g: &mut [f32], y: &[f32]| {
-        if relu {
-            for (g, &y) in g.iter_mut().zip(y) {
-                if y <= 0.0 {
-                    *g = 0.0;
+    let partials: Vec<Vec<f32>> = g[..m * n]
+        .par_chunks_mut(REDUCE_CHUNK * n1)
+        .enumerate()
+        .map(|(c, g)| {
+            if relu {
+                let lo = c * REDUCE_CHUNK * n1;
+                let len = g.len();
+                for (g, &y) in g.iter_mut().zip(&y[lo..lo + len]) {
+                    if y <= 0.0 {
+                        *g = 0.0;
+                    }
                 }
             }
-        }
-    };
-    let y_rows = |lo: usize, len: usize| if relu { &y[lo..lo + len] } else { &y[..0] };
-    match mode {
-        Addend::None | Addend::Full => {
-            g[..m * n]
-                .par_chunks_mut(REDUCE_CHUNK * n1)
-                .enumerate()
-                .for_each(|(c, g)| mask(g, y_rows(c * REDUCE_CHUNK * n1, g.len())));
-            if mode == Addend::Full {
-                g[..m * n].to_vec()
-            } else {
-                Vec::new()
-            }
-        }
-        Addend::Row => {
-            let partials: Vec<Vec<f32>> = g[..m * n]
-                .par_chunks_mut(REDUCE_CHUNK * n1)
-                .enumerate()
-                .map(|(c, g)| {
-                    mask(g, y_rows(c * REDUCE_CHUNK * n1, g.len()));
-                    let mut s = vec![0.0f32; n];
-                    for row in g.chunks(n1) {
-                        for (s, v) in s.iter_mut().zip(row) {
-                            *s += v;
-                        }
-                    }
-                    s
-                })
-                .collect();
-            let mut db = vec![0.0f32; n];
-            for p in &partials {
-                for (d, v) in db.iter_mut().zip(p) {
-                    *d += v;
+            let mut s = vec![0.0f32; n];
+            for row in g.chunks(n1) {
+                for (s, v) in s.iter_mut().zip(row) {
+                    *s += v;
                 }
             }
-            db
-        }
-        Addend::Group(group) => {
-            let group = group.max(1);
-            let mut db = vec![0.0f32; m.div_ceil(group) * n];
-            db.par_chunks_mut(n1)
-                .zip(g[..m * n].par_chunks_mut(group * n1))
-                .enumerate()
-                .with_min_len(16)
-                .for_each(|(r, (d, g))| {
-                    mask(g, y_rows(r * group * n1, g.len()));
-                    for row in g.chunks(n1) {
-                        for (d, v) in d.iter_mut().zip(row) {
-                            *d += v;
-                        }
-                    }
-                });
-            db
+            s
+        })
+        .collect();
+    let mut db = vec![0.0f32; n];
+    for p in &partials {
+        for (d, v) in db.iter_mut().zip(p) {
+            *d += v;
         }
     }
+    db
 }
 
 /// A right-hand operand `B` `[k, n]` packed once into the kernel's column panels, for

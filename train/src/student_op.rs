@@ -266,7 +266,7 @@ impl CustomOp3 for StudentOp {
                 let missing = || candle_core::Error::Msg("student op: empty stash".into());
                 // out = h W_o^T + b_o
                 let mut g_out = g.to_vec();
-                let db = relu_backward(&mut g_out, &[], n, o.out, false, Addend::Row);
+                let db = relu_backward(&mut g_out, &[], n, o.out, false);
                 let h_last = stash.layers.pop().ok_or_else(missing)?;
                 accumulate_affine(&mut dp, o, &g_out, &h_last, n, Some(&db));
                 let mut g_h = take_buffer(n * o.inp);
@@ -277,11 +277,11 @@ impl CustomOp3 for StudentOp {
                     let (f1, f2) = (&block.fc1, &block.fc2);
                     let a = stash.layers.pop().ok_or_else(missing)?;
                     let h = stash.layers.pop().ok_or_else(missing)?;
-                    let db2 = relu_backward(&mut g_h, &y, n, f2.out, true, Addend::Row);
+                    let db2 = relu_backward(&mut g_h, &y, n, f2.out, true);
                     accumulate_affine(&mut dp, f2, &g_h, &a, n, Some(&db2));
                     let mut g_a = take_buffer(n * f2.inp);
                     matmul(&g_h, n, f2.out, weight(p, f2), f2.inp, &mut g_a);
-                    let db1 = relu_backward(&mut g_a, &a, n, f1.out, true, Addend::Row);
+                    let db1 = relu_backward(&mut g_a, &a, n, f1.out, true);
                     accumulate_affine(&mut dp, f1, &g_a, &h, n, Some(&db1));
                     let mut g_in = take_buffer(n * f1.inp);
                     matmul_add(&g_a, n, f1.out, weight(p, f1), f1.inp, &g_h, &mut g_in);
@@ -292,7 +292,7 @@ impl CustomOp3 for StudentOp {
                 }
                 // h_0 = relu(x W_in^T + b_in); the codes' gradient is g W_in[:, beam..].
                 let i = &plan.input;
-                let db0 = relu_backward(&mut g_h, &y, n, i.out, true, Addend::Row);
+                let db0 = relu_backward(&mut g_h, &y, n, i.out, true);
                 accumulate_affine(&mut dp, i, &g_h, &stash.x, n, Some(&db0));
                 let (b, c) = (plan.beam_dim, plan.code_dim);
                 let w_codes: Vec<f32> = weight(p, i)
