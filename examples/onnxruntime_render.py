@@ -163,7 +163,13 @@ def main() -> int:
     if raw.get("nldf.format") != "nldf-student":
         print(f"{args.model}: not an nldf model (no nldf.format metadata)", file=sys.stderr)
         return 1
-    plain = {"nldf.format", "nldf.background_file", "nldf.background_png", "nldf.weights_checksum"}
+    plain = {
+        "nldf.format",
+        "nldf.audio_front_end",
+        "nldf.background_file",
+        "nldf.background_png",
+        "nldf.weights_checksum",
+    }
     meta = {k: (v if k in plain else json.loads(v)) for k, v in raw.items()}
 
     width, height = meta["nldf.image_width"], meta["nldf.image_height"]

@@ -60,7 +60,8 @@ pub fn run(args: AblateArgs) -> Result<()> {
     let teacher = TeacherRun::open(&teacher_dir, false)
         .with_context(|| format!("loading the teacher from {}", teacher_dir.display()))?;
     let teacher_minutes = teacher.elapsed() / 60.0;
-    let data = TrainData::open(&args.data, false)?;
+    let audio = nldf_core::dataset::AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
+    let data = TrainData::open_with(&args.data, false, &audio)?;
     let n_val = data.dataset.frames(Split::Val).len().max(1);
     let base = StudentArgs {
         data: args.data.clone(),
@@ -232,9 +233,9 @@ fn write_reports(
     let png = run.join("ablation.png");
     nldf_train::plot::plot_lines(&png, "student validation PSNR against wall time", &series)?;
     let md_path = run.join("ablation.md");
-    nldf_core::error::write_atomic(&md_path, md.as_bytes())?;
+    nldf_core::files::write_atomic(&md_path, md.as_bytes())?;
     let json = run.join("ablation.json");
-    nldf_core::error::write_json(&json, &rows)?;
+    nldf_core::files::write_json(&json, &rows)?;
     print!("{md}");
     println!(
         "wrote {}, {} and {}",

@@ -275,8 +275,8 @@ fn write_bench_files(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let json = out.join(format!("{stem}.json"));
     let md = out.join(format!("{stem}.md"));
-    nldf_core::error::write_json(&json, report)?;
-    nldf_core::error::write_atomic(&md, markdown.as_bytes())?;
+    nldf_core::files::write_json(&json, report)?;
+    nldf_core::files::write_atomic(&md, markdown.as_bytes())?;
     print!("{markdown}");
     println!("wrote {} and {}", json.display(), md.display());
     Ok(())
@@ -289,12 +289,7 @@ fn render(args: RenderBenchArgs) -> Result<()> {
     let model = nldf_export::read_model(&args.model)?;
     let cfg = RenderBenchConfig {
         reps: args.reps,
-        options: BackendOptions {
-            batch_size: args.batch,
-            threads: args
-                .threads
-                .unwrap_or_else(|| BackendOptions::default().threads),
-        },
+        options: crate::render_cmd::backend_options(args.batch, args.threads)?,
         ..RenderBenchConfig::default()
     };
     let r = bench_render(&model, &cfg, |what| eprintln!("{what}"))?;

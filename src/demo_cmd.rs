@@ -79,6 +79,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             config: None,
             iters: None,
             resume,
+            audio_features: crate::train_cmd::AudioFeaturesArg::Auto,
         },
         Some(args.minutes * 60.0),
     )?;

@@ -67,7 +67,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
                 .with_context(|| format!("loading the student from {}", dir.display()))?,
         );
     }
-    let data = TrainData::open(&args.data, false)?;
+    let audio = nldf_core::dataset::AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
+    let data = TrainData::open_with(&args.data, false, &audio)?;
+    crate::train_cmd::say_audio(&data);
     let n = args
         .frames
         .unwrap_or(usize::MAX)
@@ -105,7 +107,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
                 "model": r.model, "split": r.split, "step": r.step,
                 "psnr": r.psnr, "ssim": r.ssim, "face_psnr": r.face_psnr,
                 "mouth_psnr": r.mouth_psnr, "macs_per_frame": r.macs_per_frame,
-                "frames": r.frames.len(),
+                "frames": r.frames.len(), "non_finite_frames": r.non_finite_frames,
             })
         })
         .collect();
@@ -120,6 +122,22 @@ pub fn run(args: EvalArgs) -> Result<()> {
         .filter(|f| f.extension().is_some_and(|e| e == "json") || f.ends_with("grid.png"))
     {
         println!("  {}", f.display());
+    }
+    let broken: Vec<String> = evaluation
+        .models
+        .iter()
+        .filter(|r| r.non_finite_frames > 0)
+        .map(|r| {
+            format!(
+                "{} rendered {} of {} frames with NaN or infinite pixels",
+                r.model,
+                r.non_finite_frames,
+                r.frames.len()
+            )
+        })
+        .collect();
+    if !broken.is_empty() {
+        anyhow::bail!("{}; their scores are void", broken.join("; "));
     }
     Ok(())
 }

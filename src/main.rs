@@ -5,6 +5,7 @@ mod bench_cmd;
 mod demo_cmd;
 mod eval_cmd;
 mod export_cmd;
+mod features_cmd;
 mod progress;
 mod render_cmd;
 mod synth_cmd;
@@ -33,6 +34,9 @@ enum Command {
     /// Train a stage of the pipeline: the teacher NeRF, then the light-field student.
     #[command(subcommand)]
     Train(train_cmd::TrainCommand),
+    /// Make a WAV file's audio features with nldf's front end, as an AD-NeRF `aud.npy` with
+    /// its settings in `aud.json` beside it.
+    Features(features_cmd::FeaturesArgs),
     /// Render held-out frames with a trained model and score them (PSNR, SSIM, mouth PSNR).
     Eval(eval_cmd::EvalArgs),
     /// Export a run's trained student (with its audio encoder) as one ONNX model.
@@ -48,12 +52,40 @@ enum Command {
     Bench(bench_cmd::BenchCommand),
 }
 
+/// A command-line mistake as one line: clap's message and its hints (`[possible values:
+/// ...]`, `tip: ...`) without the usage block, then where to look.
+fn one_line(e: &clap::Error) -> String {
+    let text = e.render().to_string();
+    let mut parts = Vec::new();
+    for line in text.lines().map(str::trim) {
+        if line.starts_with("Usage:") {
+            break;
+        }
+        if !line.is_empty() && !line.starts_with("For more information") {
+            parts.push(line.trim_start_matches("error: "));
+        }
+    }
+    format!("{} (see --help)", parts.join(" "))
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) if !e.use_stderr() => {
+            // --help and --version.
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            return ExitCode::from(2);
+        }
+    };
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::run(args),
         Command::Synth(args) => synth_cmd::run(args),
         Command::Train(cmd) => train_cmd::run(cmd),
+        Command::Features(args) => features_cmd::run(args),
         Command::Eval(args) => eval_cmd::run(args),
         Command::Export(args) => export_cmd::run(args),
         Command::Render(args) => render_cmd::run(args),

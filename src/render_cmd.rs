@@ -36,9 +36,14 @@ pub struct RenderArgs {
     #[arg(long)]
     pub model: PathBuf,
     /// The speech to animate: a WAV file (any rate, mono or stereo); with --stream, `-`
-    /// reads the WAV stream from stdin.
-    #[arg(long)]
-    pub audio: PathBuf,
+    /// reads the WAV stream from stdin. With --features it is only the video's sound.
+    #[arg(long, required_unless_present = "features")]
+    pub audio: Option<PathBuf>,
+    /// Ready-made audio feature windows to render from (an `aud.npy`, [N, 16, F], one per
+    /// video frame), made by the front end the model was trained on: a model trained on
+    /// another front end's features than nldf's (AD-NeRF's DeepSpeech) needs them.
+    #[arg(long, conflicts_with = "stream")]
+    pub features: Option<PathBuf>,
     /// A transforms json (AD-NeRF layout) whose camera poses to follow, played forwards and
     /// backwards; default: a gentle sway around the model's default pose.
     #[arg(long)]
@@ -75,20 +80,49 @@ pub struct RenderArgs {
     pub no_drop: bool,
 }
 
+/// The backend options of `--batch` and `--threads` (default: all cores), checked with the
+/// flags named.
+pub fn backend_options(batch: usize, threads: Option<usize>) -> Result<BackendOptions> {
+    let options = BackendOptions {
+        batch_size: batch,
+        threads: threads.unwrap_or_else(|| BackendOptions::default().threads),
+    };
+    let limits = BackendOptions::LIMITS;
+    if !(1..=limits.batch_size).contains(&options.batch_size) {
+        anyhow::bail!("--batch must be 1 to {}, got {batch}", limits.batch_size);
+    }
+    if !(1..=limits.threads).contains(&options.threads) {
+        anyhow::bail!(
+            "--threads must be 1 to {}, got {}",
+            limits.threads,
+            options.threads
+        );
+    }
+    Ok(options)
+}
+
+/// Checks `--size` (the image's longer side) with the flag named.
+pub fn check_size(size: Option<u32>) -> Result<()> {
+    let max = nldf_infer::frame::MAX_SIDE;
+    match size {
+        Some(s) if !(1..=max).contains(&s) => {
+            anyhow::bail!("--size must be 1 to {max} pixels, got {s}")
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Runs `nldf render`.
 pub fn run(args: RenderArgs) -> Result<()> {
-    let options = BackendOptions {
-        batch_size: args.batch,
-        threads: args
-            .threads
-            .unwrap_or_else(|| BackendOptions::default().threads),
-    };
+    let options = backend_options(args.batch, args.threads)?;
+    check_size(args.size)?;
     if args.stream {
         return run_stream(args, options);
     }
     let job = VideoJob {
         model: args.model,
         audio: args.audio,
+        features: args.features,
         poses: args.poses,
         out: args.out,
         backend: args.backend.into(),
@@ -145,18 +179,21 @@ fn run_stream(args: RenderArgs, options: BackendOptions) -> Result<()> {
         size: args.size,
         drop_late: !args.no_drop,
     };
-    let stdin = args.audio.as_os_str() == "-";
+    let audio = args
+        .audio
+        .ok_or_else(|| anyhow::anyhow!("--stream needs --audio (a WAV file, or - for stdin)"))?;
+    let stdin = audio.as_os_str() == "-";
     let name = if stdin {
         "stdin".to_string()
     } else {
-        args.audio.display().to_string()
+        audio.display().to_string()
     };
     let source: Box<dyn std::io::Read + Send> = if stdin {
         Box::new(std::io::stdin())
     } else {
         Box::new(
-            std::fs::File::open(&args.audio)
-                .map_err(|e| anyhow::anyhow!("{}: cannot open: {e}", args.audio.display()))?,
+            std::fs::File::open(&audio)
+                .map_err(|e| anyhow::anyhow!("{}: cannot open: {e}", audio.display()))?,
         )
     };
     let plan = job.plan()?;

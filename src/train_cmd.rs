@@ -117,6 +117,47 @@ pub struct TeacherArgs {
     /// Continue the run in RUN/teacher from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
+    /// Which audio features to train on: `auto` (the default) takes nldf's own log-mel
+    /// features, from aud.npy when aud.json says nldf made it, otherwise computed from
+    /// aud.wav; `wav` always computes them from aud.wav; `npy` takes aud.npy as it is
+    /// (e.g. AD-NeRF's DeepSpeech features, which then must be given to every render).
+    #[arg(long, value_enum, default_value_t = AudioFeaturesArg::Auto)]
+    pub audio_features: AudioFeaturesArg,
+}
+
+/// Which audio features a teacher trains on.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AudioFeaturesArg {
+    /// nldf's own features: aud.npy when nldf made it, else computed from aud.wav.
+    Auto,
+    /// nldf's features computed from aud.wav.
+    Wav,
+    /// aud.npy as it is, whichever front end made it.
+    Npy,
+}
+
+impl AudioFeaturesArg {
+    /// The dataset reading this choice asks for.
+    pub fn choice(self) -> nldf_core::dataset::AudioChoice {
+        use nldf_core::audio::{FeatureConfig, FeatureSource};
+        use nldf_core::dataset::AudioChoice;
+        match self {
+            AudioFeaturesArg::Auto => AudioChoice::Auto,
+            AudioFeaturesArg::Wav => {
+                AudioChoice::Matching(FeatureSource::Nldf(FeatureConfig::default()))
+            }
+            AudioFeaturesArg::Npy => AudioChoice::Npy,
+        }
+    }
+}
+
+/// Prints which audio features a stage reads, and from which file.
+pub fn say_audio(data: &nldf_train::trainer::TrainData) {
+    eprintln!(
+        "audio features: {} from {}",
+        data.dataset.audio_source.describe(),
+        data.dataset.audio_file.display()
+    );
 }
 
 impl TeacherPreset {
@@ -237,6 +278,7 @@ fn train_with_progress(
 /// Trains (or resumes) a student; returns its final validation scores when it ran to the
 /// end.
 pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scores>> {
+    use nldf_core::dataset::AudioChoice;
     use nldf_train::config::StudentRunConfig;
     use nldf_train::student_trainer::StudentRun;
     use nldf_train::trainer::{TeacherRun, TrainData};
@@ -248,7 +290,7 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
         None
     } else {
         let mut cfg = match &args.config {
-            Some(path) => nldf_train::checkpoint::load_json::<StudentRunConfig>(path)?,
+            Some(path) => nldf_train::config::read_config::<StudentRunConfig>(path)?,
             None => {
                 let mut cfg = StudentRunConfig {
                     model: args.depth.config(),
@@ -269,14 +311,12 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
             cfg.train.iters = n;
             cfg.train.lr_decay_steps = n;
         }
-        nldf_train::student_trainer::validate(&cfg).with_context(|| match &args.config {
+        cfg.check().with_context(|| match &args.config {
             Some(path) => format!("{}: invalid configuration", path.display()),
             None => "invalid configuration".to_string(),
         })?;
         Some(cfg)
     };
-    eprintln!("loading {}", args.data.display());
-    let data = TrainData::load(&args.data)?;
     let teacher = if teacher_dir
         .join(nldf_train::checkpoint::MODEL_FILE)
         .is_file()
@@ -285,6 +325,18 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
     } else {
         None
     };
+    eprintln!("loading {}", args.data.display());
+    // The teacher's audio features, or a resumed student's own.
+    let audio = match (&teacher, &cfg) {
+        (Some(t), _) => AudioChoice::Matching(t.cfg.model.audio.features.clone()),
+        (None, None) => {
+            let c: StudentRunConfig = nldf_train::config::read_config(&dir.join("config.json"))?;
+            AudioChoice::Matching(c.model.audio.features)
+        }
+        (None, Some(_)) => AudioChoice::Auto,
+    };
+    let data = TrainData::open_with(&args.data, true, &audio)?;
+    say_audio(&data);
     let mut run = match cfg {
         Some(cfg) => {
             if cfg.train.distill && teacher.is_none() {
@@ -342,7 +394,7 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
         None
     } else {
         let mut cfg = match &args.config {
-            Some(path) => nldf_train::checkpoint::load_json::<TeacherRunConfig>(path)?,
+            Some(path) => nldf_train::config::read_config::<TeacherRunConfig>(path)?,
             None => TeacherRunConfig {
                 model: args.preset.config(),
                 ..TeacherRunConfig::default()
@@ -351,7 +403,7 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
         if let Some(n) = args.iters {
             cfg.train.iters = n;
         }
-        nldf_train::trainer::validate(&cfg).with_context(|| match &args.config {
+        cfg.check().with_context(|| match &args.config {
             Some(path) => format!("{}: invalid configuration", path.display()),
             None => "invalid configuration".to_string(),
         })?;
@@ -359,7 +411,15 @@ pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> 
     };
 
     eprintln!("loading {}", args.data.display());
-    let data = TrainData::load(&args.data)?;
+    let audio = match &cfg {
+        Some(_) => args.audio_features.choice(),
+        None => {
+            let c: TeacherRunConfig = nldf_train::config::read_config(&dir.join("config.json"))?;
+            nldf_core::dataset::AudioChoice::Matching(c.model.audio.features)
+        }
+    };
+    let data = TrainData::open_with(&args.data, true, &audio)?;
+    say_audio(&data);
     let mut run = match cfg {
         Some(cfg) => TeacherRun::create(&dir, cfg, &data)?,
         None => {

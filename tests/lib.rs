@@ -1,4 +1,7 @@
-//! Shared helpers for the workspace test suite: small hand-made datasets and assertions.
+//! Shared helpers for the workspace test suite: small hand-made datasets, assertions and the
+//! readers' fuzzing harnesses ([`fuzz`]).
+
+pub mod fuzz;
 
 use std::path::Path;
 
@@ -87,4 +90,10 @@ pub fn assert_one_line_naming(message: &str, needle: &str) {
         message.contains(needle),
         "error {message:?} does not name {needle:?}"
     );
+}
+
+/// True under CI (`CI` set to anything but empty, `0` or `false`): a test whose tool
+/// (Python, onnxruntime, ffmpeg) is missing then fails instead of skipping.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
 }

@@ -16,7 +16,8 @@ use std::path::Path;
 use realfft::RealFftPlanner;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, Result, write_atomic};
+use crate::error::{Error, Result};
+use crate::files::write_atomic;
 
 /// Mono audio samples in [-1, 1] at `sample_rate` Hz.
 #[derive(Debug, Clone, PartialEq)]
@@ -152,6 +153,75 @@ impl FeatureConfig {
             ));
         }
         Ok(())
+    }
+}
+
+/// Which front end made a set of audio features. A model records it, so that it is only
+/// ever driven by features made the way it was trained on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "front_end", rename_all = "lowercase", deny_unknown_fields)]
+pub enum FeatureSource {
+    /// nldf's log-mel front end ([`audio_windows`]) with these settings: nldf makes the
+    /// same features from any WAV file.
+    Nldf(FeatureConfig),
+    /// Another front end (AD-NeRF's DeepSpeech logits, say): nldf cannot make these from a
+    /// WAV, so a model trained on them renders only from windows made the same way.
+    Foreign {
+        /// What is known of the front end.
+        description: String,
+        /// Features per feature frame, the F of `[N, window, F]`.
+        n_features: usize,
+        /// Feature frames per window.
+        window: usize,
+    },
+}
+
+impl Default for FeatureSource {
+    fn default() -> Self {
+        FeatureSource::Nldf(FeatureConfig::default())
+    }
+}
+
+impl FeatureSource {
+    /// Features per feature frame, F.
+    pub fn n_features(&self) -> usize {
+        match self {
+            FeatureSource::Nldf(cfg) => cfg.n_mels,
+            FeatureSource::Foreign { n_features, .. } => *n_features,
+        }
+    }
+
+    /// Feature frames per window.
+    pub fn window(&self) -> usize {
+        match self {
+            FeatureSource::Nldf(cfg) => cfg.window,
+            FeatureSource::Foreign { window, .. } => *window,
+        }
+    }
+
+    /// nldf's settings, when nldf made the features.
+    pub fn nldf(&self) -> Option<&FeatureConfig> {
+        match self {
+            FeatureSource::Nldf(cfg) => Some(cfg),
+            FeatureSource::Foreign { .. } => None,
+        }
+    }
+
+    /// One line saying what the features are, for messages.
+    pub fn describe(&self) -> String {
+        match self {
+            FeatureSource::Nldf(cfg) => format!(
+                "nldf log-mel features ({} mels, {}-frame windows at {} Hz)",
+                cfg.n_mels,
+                cfg.window,
+                cfg.feature_rate()
+            ),
+            FeatureSource::Foreign {
+                description,
+                n_features,
+                window,
+            } => format!("{description} ({window} x {n_features} windows)"),
+        }
     }
 }
 
@@ -463,12 +533,26 @@ impl MelFrontEnd {
 /// # Shapes
 /// - returns `[n_video_frames, window, n_mels]`
 pub fn audio_windows(wave: &Waveform, fps: f32, cfg: &FeatureConfig) -> Result<AudioWindows> {
+    let n_frames = n_video_frames(wave.samples.len(), wave.sample_rate, fps);
+    audio_windows_for_frames(wave, fps, cfg, n_frames)
+}
+
+/// [`audio_windows`] for exactly `n_frames` video frames: windows past the end of the audio
+/// repeat its last feature frames (each index is clamped, as at the ends of every track).
+///
+/// # Shapes
+/// - returns `[n_frames, window, n_mels]`
+pub fn audio_windows_for_frames(
+    wave: &Waveform,
+    fps: f32,
+    cfg: &FeatureConfig,
+    n_frames: usize,
+) -> Result<AudioWindows> {
     if !(fps.is_finite() && fps > 0.0) {
         return Err(Error::Argument(format!("fps must be positive, got {fps}")));
     }
     let feats = log_mel(wave, cfg)?;
     let n_feat = feats.len() / cfg.n_mels;
-    let n_frames = n_video_frames(wave.samples.len(), wave.sample_rate, fps);
     let mut data = Vec::with_capacity(n_frames * cfg.window * cfg.n_mels);
     for i in 0..n_frames {
         push_window(&feats, n_feat, i, fps, cfg, &mut data);

@@ -9,7 +9,7 @@ use crate::rays::Rays;
 
 /// How a beam is sampled and encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct BeamSpec {
     /// Points per beam, K (R2L and the paper: 16).
     pub n_points: usize,

@@ -1,6 +1,7 @@
 //! Volume compositing along one ray (paper Eq. 3-4) and the light-segment colours the student
-//! is distilled to (Eq. 5): an f64 reference written as plainly as the equations, and the
-//! f32 path that production code mirrors (log-space transmittance, `expm1`, no division).
+//! is distilled to (Eq. 5, segments as equal t-intervals of the ray's sampled span): an f64
+//! reference written as plainly as the equations, and the f32 path that production code
+//! mirrors (log-space transmittance, `expm1`, no division).
 //!
 //! With densities `sigma_k >= 0`, spacings `delta_k` and colours `c_k`:
 //! `T_k = exp(-sum_{j<k} sigma_j delta_j)`, `w_k = T_k (1 - exp(-sigma_k delta_k))`,
@@ -19,10 +20,24 @@ pub struct Composite<F> {
     pub opacity: F,
 }
 
-/// Index range of segment `i` of `m` over `n` samples: `[i n / m, (i + 1) n / m)` (integer
-/// division, so `n` need not be a multiple of `m`; with `n = m N'` every segment holds N').
-pub fn segment_range(i: usize, m: usize, n: usize) -> std::ops::Range<usize> {
-    (i * n / m)..((i + 1) * n / m)
+/// The segment, of `m`, that a sample at `t` belongs to on a ray sampled over `span =
+/// (t0, t1)`: segments are `m` equal t-intervals of the span, `floor(m (t - t0) / (t1 - t0))`
+/// clamped to `0..m`, so that their boundaries lie at the same depths whatever the sample
+/// density (importance samples crowd where the density is, and a split by sample count
+/// would follow them). With `n = m N'` stratified samples, one per equal bin, segment `i`
+/// holds bins `i N'..(i + 1) N'`: the paper's split in order into groups of N/M.
+pub fn segment_of(t: f64, span: (f64, f64), m: usize) -> usize {
+    let (t0, t1) = span;
+    let length = t1 - t0;
+    if m <= 1 || !(length > 0.0) {
+        return 0;
+    }
+    let s = (m as f64 * (t - t0) / length).floor();
+    if s.is_nan() || s < 0.0 {
+        0
+    } else {
+        (s as usize).min(m - 1)
+    }
 }
 
 /// The f64 reference of Eq. 3-4: transmittance as a running product of `exp(-sigma delta)`.
@@ -58,24 +73,27 @@ pub fn composite_f64(
     }
 }
 
-/// The f64 reference of Eq. 5: segment `i`'s colour is `sum_{k in segment i} w_k c_k` with
-/// the weights of the whole ray (transmittance from the ray's start), so the segments sum to
-/// the pixel.
+/// The f64 reference of Eq. 5: segment `i`'s colour is `sum w_k c_k` over the samples in
+/// its t-interval ([`segment_of`]), with the weights of the whole ray (transmittance from
+/// the ray's start), so the segments sum to the pixel.
 ///
 /// # Shapes
-/// - `weights`: `[n_samples]`; `colors`: `[n_samples]` of RGB; returns `[m]` of RGB
-pub fn segment_colors_f64(weights: &[f64], colors: &[[f64; 3]], m: usize) -> Vec<[f64; 3]> {
-    (0..m)
-        .map(|i| {
-            let mut seg = [0.0; 3];
-            for k in segment_range(i, m, weights.len()) {
-                for c in 0..3 {
-                    seg[c] += weights[k] * colors[k][c];
-                }
-            }
-            seg
-        })
-        .collect()
+/// - `weights`, `t_vals`: `[n_samples]`; `colors`: `[n_samples]` of RGB; returns `[m]` of RGB
+pub fn segment_colors_f64(
+    weights: &[f64],
+    colors: &[[f64; 3]],
+    t_vals: &[f64],
+    span: (f64, f64),
+    m: usize,
+) -> Vec<[f64; 3]> {
+    let mut out = vec![[0.0; 3]; m.max(1)];
+    for k in 0..weights.len() {
+        let seg = &mut out[segment_of(t_vals[k], span, m)];
+        for c in 0..3 {
+            seg[c] += weights[k] * colors[k][c];
+        }
+    }
+    out
 }
 
 /// The f32 compositing path: `sigma` clamped to >= 0 (NaN counts as 0), the optical depth
@@ -135,14 +153,22 @@ pub fn composite_weights(densities: &[f32], deltas: &[f32], weights: &mut [f32])
 /// The f32 segment colours of Eq. 5 (see [`segment_colors_f64`]).
 ///
 /// # Shapes
-/// - `weights`: `[n_samples]`; `colors`: `[n_samples, 3]` flat; returns `[m, 3]` flat
-pub fn segment_colors(weights: &[f32], colors: &[f32], m: usize) -> Vec<f32> {
+/// - `weights`, `t_vals`: `[n_samples]`; `colors`: `[n_samples, 3]` flat; returns `[m, 3]`
+///   flat
+pub fn segment_colors(
+    weights: &[f32],
+    colors: &[f32],
+    t_vals: &[f32],
+    span: (f32, f32),
+    m: usize,
+) -> Vec<f32> {
+    let m = m.max(1);
+    let span = (span.0 as f64, span.1 as f64);
     let mut out = vec![0.0f32; 3 * m];
-    for i in 0..m {
-        for k in segment_range(i, m, weights.len()) {
-            for c in 0..3 {
-                out[3 * i + c] += weights[k] * colors[3 * k + c];
-            }
+    for k in 0..weights.len() {
+        let i = segment_of(t_vals[k] as f64, span, m);
+        for c in 0..3 {
+            out[3 * i + c] += weights[k] * colors[3 * k + c];
         }
     }
     out

@@ -1,4 +1,4 @@
-//! Datasets in AD-NeRF's layout (DESIGN.md section 2): `transforms_{train,val}.json` with
+//! Datasets in AD-NeRF's layout: `transforms_{train,val}.json` with
 //! AD-NeRF's field names, frames under `head_imgs/` (or `ori_imgs/`, `gt_imgs/`), the static
 //! background `bc.png|jpg`, audio windows `aud.npy` `[N, 16, F]` and optional `parsing/`
 //! region masks. Loading validates everything it can without decoding every frame, and every
@@ -10,12 +10,38 @@ use std::path::{Path, PathBuf};
 use glam::Mat4;
 use serde::{Deserialize, Serialize};
 
-use crate::audio::AudioWindows;
+use crate::audio::{
+    AudioWindows, FeatureConfig, FeatureSource, audio_windows_for_frames, n_video_frames, read_wav,
+};
 use crate::camera::{Camera, Intrinsics, rigid_problem};
-use crate::error::{Error, Result, read_json, write_atomic, write_json};
+use crate::error::{Error, Result};
+use crate::files::{read_json, write_atomic, write_json};
 use crate::image::{ImageRgb, save_png_bytes};
 use crate::rays::Rect;
 use crate::region::Region;
+
+/// The audio feature windows, `[N, 16, F]` (AD-NeRF's name).
+pub const AUDIO_NPY: &str = "aud.npy";
+/// The source audio, mono (ours; AD-NeRF's preprocessing leaves it too).
+pub const AUDIO_WAV: &str = "aud.wav";
+/// What made `aud.npy` (ours): a [`FeatureSource`] as JSON. Without it, `aud.npy` holds
+/// another front end's features (AD-NeRF's DeepSpeech logits, say).
+pub const AUDIO_SOURCE_FILE: &str = "aud.json";
+
+/// Which audio features a dataset is read with.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum AudioChoice {
+    /// nldf's own features: `aud.npy` when `aud.json` says nldf made it, otherwise
+    /// computed from `aud.wav` with the default settings when there is one, otherwise
+    /// `aud.npy` as it is (another front end's, which a model then needs at render time).
+    #[default]
+    Auto,
+    /// `aud.npy` as it is, whichever front end made it.
+    Npy,
+    /// Features made as a trained run's were: `aud.npy` when it was made that way,
+    /// otherwise, for nldf's features, computed from `aud.wav`.
+    Matching(FeatureSource),
+}
 
 /// Folders searched for frames, in order.
 pub const IMAGE_DIRS: [&str; 3] = ["head_imgs", "ori_imgs", "gt_imgs"];
@@ -74,6 +100,11 @@ impl TransformsFile {
         read_json(path)
     }
 
+    /// Parses a transforms file's text; `path` names it in errors.
+    pub fn parse(path: &Path, text: &str) -> Result<TransformsFile> {
+        serde_json::from_str(text).map_err(|e| Error::invalid(path, format!("bad JSON: {e}")))
+    }
+
     /// Writes the file atomically, pretty-printed.
     pub fn save(&self, path: &Path) -> Result<()> {
         write_json(path, self)
@@ -125,7 +156,12 @@ pub struct Dataset {
     pub far: f32,
     pub fps: f32,
     pub background: ImageRgb,
+    /// One feature window per row of the audio track (see [`AudioChoice`]).
     pub audio: AudioWindows,
+    /// Which front end made `audio`.
+    pub audio_source: FeatureSource,
+    /// The file `audio` was read or computed from (`aud.npy` or `aud.wav`).
+    pub audio_file: PathBuf,
     pub train: Vec<Frame>,
     pub val: Vec<Frame>,
 }
@@ -138,10 +174,16 @@ fn find_with_ext(dir: &Path, stem: &str) -> Option<PathBuf> {
 }
 
 impl Dataset {
-    /// Loads and validates the dataset at `root`: both transforms files, the background,
-    /// `aud.npy`, and that every frame's image (and parsing mask, if `parsing/` exists)
-    /// is present and every matrix is a finite rigid transform.
+    /// Loads and validates the dataset at `root` with nldf's own audio features where it can
+    /// ([`AudioChoice::Auto`]; see [`Dataset::load_with`]).
     pub fn load(root: &Path) -> Result<Dataset> {
+        Self::load_with(root, &AudioChoice::Auto)
+    }
+
+    /// Loads and validates the dataset at `root`: both transforms files, the background,
+    /// the audio features `audio` says, and that every frame's image (and parsing mask, if
+    /// `parsing/` exists) is present and every matrix is a finite rigid transform.
+    pub fn load_with(root: &Path, audio: &AudioChoice) -> Result<Dataset> {
         if !root.is_dir() {
             return Err(Error::invalid(root, "dataset folder does not exist"));
         }
@@ -177,7 +219,21 @@ impl Dataset {
             height,
         };
 
-        let audio = load_audio_npy(&root.join("aud.npy"))?;
+        let fps = train_file.fps.unwrap_or(25.0);
+        if !(fps.is_finite() && fps > 0.0) {
+            return Err(Error::invalid(
+                &train_path,
+                format!("fps must be positive, got {fps}"),
+            ));
+        }
+        let n_audio_frames = train_file
+            .frames
+            .iter()
+            .chain(&val_file.frames)
+            .map(|f| f.aud_id.max(0) as usize + 1)
+            .max()
+            .unwrap_or(0);
+        let (audio, audio_source, audio_file) = load_audio(root, audio, fps, n_audio_frames)?;
         let image_dir = IMAGE_DIRS
             .iter()
             .map(|d| root.join(d))
@@ -229,13 +285,6 @@ impl Dataset {
                 format!("ray bounds must satisfy 0 < near < far, got near {near}, far {far}"),
             ));
         }
-        let fps = train_file.fps.unwrap_or(25.0);
-        if !(fps.is_finite() && fps > 0.0) {
-            return Err(Error::invalid(
-                &train_path,
-                format!("fps must be positive, got {fps}"),
-            ));
-        }
         Ok(Dataset {
             root: root.to_path_buf(),
             intrinsics,
@@ -244,6 +293,8 @@ impl Dataset {
             fps,
             background,
             audio,
+            audio_source,
+            audio_file,
             train,
             val,
         })
@@ -395,11 +446,140 @@ fn validate_frame(
     })
 }
 
-/// AD-NeRF's ray bounds: the mean camera distance to the origin minus 0.2 and plus 0.4.
+/// The audio features of the dataset at `root` as `choice` says (see [`AudioChoice`]),
+/// their source and the file they came from. From `aud.wav`, the windows cover the audio
+/// and at least `n_frames` video frames at `fps` (a recording a frame short of its video
+/// repeats its last window).
+pub fn load_audio(
+    root: &Path,
+    choice: &AudioChoice,
+    fps: f32,
+    n_frames: usize,
+) -> Result<(AudioWindows, FeatureSource, PathBuf)> {
+    let npy = root.join(AUDIO_NPY);
+    let wav = root.join(AUDIO_WAV);
+    let sidecar = read_audio_source(root)?;
+    let from_npy = || -> Result<(AudioWindows, FeatureSource, PathBuf)> {
+        let windows = load_audio_npy(&npy)?;
+        let source = match &sidecar {
+            Some(source) => {
+                if (source.n_features(), source.window()) != (windows.n_features, windows.window) {
+                    return Err(Error::invalid(
+                        root.join(AUDIO_SOURCE_FILE),
+                        format!(
+                            "describes {} x {} windows but {AUDIO_NPY} holds {} x {}",
+                            source.window(),
+                            source.n_features(),
+                            windows.window,
+                            windows.n_features
+                        ),
+                    ));
+                }
+                source.clone()
+            }
+            None => FeatureSource::Foreign {
+                description: format!(
+                    "{AUDIO_NPY} without {AUDIO_SOURCE_FILE}: another front end's features \
+                     (AD-NeRF's DeepSpeech logits, say)"
+                ),
+                n_features: windows.n_features,
+                window: windows.window,
+            },
+        };
+        Ok((windows, source, npy.clone()))
+    };
+    let from_wav = |cfg: &FeatureConfig| -> Result<(AudioWindows, FeatureSource, PathBuf)> {
+        let wave = read_wav(&wav)?;
+        let have = n_video_frames(wave.samples.len(), wave.sample_rate, fps);
+        if have + 1 < n_frames {
+            return Err(Error::invalid(
+                &wav,
+                format!(
+                    "{:.2} s of audio make {have} video frames at {fps} fps, but the \
+                     transforms use aud_id up to {}",
+                    wave.seconds(),
+                    n_frames - 1
+                ),
+            ));
+        }
+        let windows = audio_windows_for_frames(&wave, fps, cfg, have.max(n_frames))
+            .map_err(|e| Error::invalid(&wav, e.to_string()))?;
+        Ok((windows, FeatureSource::Nldf(cfg.clone()), wav.clone()))
+    };
+    let npy_is = |want: &FeatureSource| sidecar.as_ref() == Some(want) && npy.is_file();
+    match choice {
+        AudioChoice::Npy => from_npy(),
+        AudioChoice::Auto => {
+            let ours = matches!(sidecar, Some(FeatureSource::Nldf(_)));
+            if (ours && npy.is_file()) || !wav.is_file() {
+                from_npy()
+            } else {
+                from_wav(&FeatureConfig::default())
+            }
+        }
+        AudioChoice::Matching(want) => match want {
+            _ if npy_is(want) => from_npy(),
+            FeatureSource::Nldf(cfg) if wav.is_file() => from_wav(cfg),
+            FeatureSource::Nldf(_) => Err(Error::invalid(
+                &wav,
+                format!(
+                    "is missing, and {AUDIO_NPY} does not hold the run's features ({})",
+                    want.describe()
+                ),
+            )),
+            FeatureSource::Foreign { .. } => {
+                let loaded = from_npy()?;
+                if (loaded.0.n_features, loaded.0.window) != (want.n_features(), want.window()) {
+                    return Err(Error::invalid(
+                        &npy,
+                        format!(
+                            "holds {} x {} windows, the run was trained on {}",
+                            loaded.0.window,
+                            loaded.0.n_features,
+                            want.describe()
+                        ),
+                    ));
+                }
+                Ok(loaded)
+            }
+        },
+    }
+}
+
+/// `aud.json` of the dataset at `root`, when it has one.
+pub fn read_audio_source(root: &Path) -> Result<Option<FeatureSource>> {
+    let path = root.join(AUDIO_SOURCE_FILE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let source: FeatureSource = read_json(&path)?;
+    if let FeatureSource::Nldf(cfg) = &source {
+        cfg.validate()
+            .map_err(|e| Error::invalid(&path, e.to_string()))?;
+    }
+    Ok(Some(source))
+}
+
+/// Writes audio windows as `aud.npy` and their source as `aud.json` into `dir`, each
+/// atomically.
+pub fn save_audio_features(
+    dir: &Path,
+    windows: &AudioWindows,
+    source: &FeatureSource,
+) -> Result<()> {
+    save_audio_npy(&dir.join(AUDIO_NPY), windows)?;
+    write_json(&dir.join(AUDIO_SOURCE_FILE), source)
+}
+
+/// AD-NeRF's ray bounds: the mean depth of the head's origin along the cameras' viewing
+/// axes, minus 0.2 and plus 0.4 (AD-NeRF's preprocessing writes `near = mean_z - 0.2`,
+/// `far = mean_z + 0.4`, with `mean_z` the mean z of the tracked head translations in camera
+/// space). For a camera-to-world matrix that depth is `z_axis . translation`, which is the
+/// camera's distance to the origin only when the camera looks straight at it.
 pub fn ad_nerf_bounds(frames: &[Frame]) -> (f32, f32) {
     let mean = frames
         .iter()
-        .map(|f| f.c2w.w_axis.truncate().length())
+        .map(|f| f.c2w.z_axis.truncate().dot(f.c2w.w_axis.truncate()))
         .sum::<f32>()
         / frames.len().max(1) as f32;
     ((mean - 0.2).max(1e-3), mean + 0.4)
@@ -408,7 +588,12 @@ pub fn ad_nerf_bounds(frames: &[Frame]) -> (f32, f32) {
 /// Reads `aud.npy`: a C-order float32 (or float64) array of shape `[N, 16, F]`, all finite.
 pub fn load_audio_npy(path: &Path) -> Result<AudioWindows> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let npy = npyz::NpyFile::new(Cursor::new(&bytes[..]))
+    parse_audio_npy(path, &bytes)
+}
+
+/// [`load_audio_npy`] on bytes already read; `path` names them in errors.
+pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
+    let npy = npyz::NpyFile::new(Cursor::new(bytes))
         .map_err(|e| Error::invalid(path, format!("not a .npy file: {e}")))?;
     let shape: Vec<u64> = npy.shape().to_vec();
     if shape.len() != 3 || shape[1] != 16 || shape[2] == 0 {
@@ -424,6 +609,30 @@ pub fn load_audio_npy(path: &Path) -> Result<AudioWindows> {
         ));
     }
     let dtype = npy.dtype().descr();
+    let item = match dtype.as_str() {
+        "'<f4'" => 4u64,
+        "'<f8'" => 8,
+        other => {
+            return Err(Error::invalid(
+                path,
+                format!("expected float32 data, got dtype {other}"),
+            ));
+        }
+    };
+    // The shape must fit the bytes there are before anything is allocated for it.
+    shape
+        .iter()
+        .try_fold(item, |acc, &d| acc.checked_mul(d))
+        .filter(|&n| n <= bytes.len() as u64)
+        .ok_or_else(|| {
+            Error::invalid(
+                path,
+                format!(
+                    "shape {shape:?} needs more data than the file's {} bytes",
+                    bytes.len()
+                ),
+            )
+        })?;
     let data: Vec<f32> = match dtype.as_str() {
         "'<f4'" => npy.into_vec::<f32>(),
         "'<f8'" => npy

@@ -2,7 +2,8 @@
 
 use std::path::Path;
 
-use crate::error::{Error, Result, write_atomic};
+use crate::error::{Error, Result};
+use crate::files::write_atomic;
 
 /// An RGB image, row-major, `data` is `[height, width, 3]` in [0, 1].
 #[derive(Debug, Clone, PartialEq)]
@@ -37,6 +38,11 @@ impl ImageRgb {
     pub fn set(&mut self, i: u32, j: u32, rgb: [f32; 3]) {
         let o = 3 * (j as usize * self.width as usize + i as usize);
         self.data[o..o + 3].copy_from_slice(&rgb);
+    }
+
+    /// Values that are NaN or infinite (a render that holds any is not a picture).
+    pub fn non_finite_values(&self) -> usize {
+        self.data.iter().filter(|v| !v.is_finite()).count()
     }
 
     /// Number of pixels.

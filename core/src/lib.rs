@@ -16,6 +16,7 @@ pub mod composite;
 pub mod dataset;
 pub mod encoding;
 pub mod error;
+pub mod files;
 pub mod image;
 pub mod metrics;
 pub mod rays;

@@ -15,8 +15,21 @@ fn check_same_size(a: &ImageRgb, b: &ImageRgb) -> Result<()> {
     Ok(())
 }
 
+/// PSNRs are reported up to this many dB: identical images would otherwise score infinity.
+pub const PSNR_CAP: f64 = 100.0;
+
+/// `psnr` capped at [`PSNR_CAP`], with a NaN kept as NaN: `f64::min` would turn a NaN into
+/// the cap, scoring a broken frame as a perfect one.
+pub fn cap_psnr(psnr: f64) -> f64 {
+    if psnr.is_nan() {
+        psnr
+    } else {
+        psnr.min(PSNR_CAP)
+    }
+}
+
 /// PSNR in dB from a mean squared error on a [0, 1] scale: `-10 log10(mse)`;
-/// `f64::INFINITY` for identical images (callers print it as `inf`).
+/// `f64::INFINITY` for identical images (callers print it as `inf`), NaN for a NaN error.
 pub fn psnr_from_mse(mse: f64) -> f64 {
     if mse <= 0.0 {
         f64::INFINITY

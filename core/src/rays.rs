@@ -35,8 +35,8 @@ impl Rect {
     pub fn clipped(&self, width: u32, height: u32) -> Option<Rect> {
         let x0 = self.x.max(0);
         let y0 = self.y.max(0);
-        let x1 = (self.x + self.w).min(width as i64);
-        let y1 = (self.y + self.h).min(height as i64);
+        let x1 = self.x.saturating_add(self.w).min(width as i64);
+        let y1 = self.y.saturating_add(self.h).min(height as i64);
         (x1 > x0 && y1 > y0).then_some(Rect {
             x: x0,
             y: y0,
@@ -48,7 +48,10 @@ impl Rect {
     /// True if pixel (`i`, `j`) lies inside.
     pub fn contains(&self, i: u32, j: u32) -> bool {
         let (i, j) = (i as i64, j as i64);
-        i >= self.x && i < self.x + self.w && j >= self.y && j < self.y + self.h
+        i >= self.x
+            && i < self.x.saturating_add(self.w)
+            && j >= self.y
+            && j < self.y.saturating_add(self.h)
     }
 }
 

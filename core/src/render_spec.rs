@@ -7,11 +7,12 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::audio::FeatureConfig;
+use crate::audio::FeatureSource;
 use crate::bounds::Bounds;
 use crate::camera::Intrinsics;
 use crate::dataset::{Dataset, Split};
-use crate::error::{Error, Result, read_json, write_json};
+use crate::error::{Error, Result};
+use crate::files::{read_json, write_json};
 
 /// File name of the spec beside a student checkpoint.
 pub const RENDER_SPEC_FILE: &str = "render.json";
@@ -32,9 +33,10 @@ pub struct RenderSpec {
     pub bounds: Bounds,
     /// The background image's file name, relative to the spec's folder.
     pub background: String,
-    /// Audio features as the training data was made (`aud.npy` from `nldf synth` uses the
-    /// defaults; a dataset with DeepSpeech features cannot be reproduced from a WAV).
-    pub features: FeatureConfig,
+    /// Which front end made the training data's audio features: nldf's own (a WAV is
+    /// turned into the same features at render time) or another one (AD-NeRF's DeepSpeech,
+    /// say), whose features a render must be given.
+    pub features: FeatureSource,
     /// Neighbouring audio frames the attention fuses (the model's `att_frames`).
     pub att_frames: usize,
     /// A camera-to-world matrix (row-major, OpenGL axes) to render from when no pose track
@@ -66,11 +68,7 @@ impl RenderSpec {
             fps: dataset.fps,
             bounds,
             background: BACKGROUND_FILE.to_string(),
-            features: FeatureConfig {
-                n_mels: dataset.audio.n_features,
-                window: dataset.audio.window,
-                ..FeatureConfig::default()
-            },
+            features: dataset.audio_source.clone(),
             att_frames,
             default_pose,
         }
@@ -114,6 +112,9 @@ impl RenderSpec {
         }
         if (0..3).any(|a| self.bounds.hi[a] < self.bounds.lo[a]) {
             return Err("has head bounds with hi below lo".into());
+        }
+        if let FeatureSource::Nldf(cfg) = &self.features {
+            cfg.validate().map_err(|e| e.to_string())?;
         }
         Ok(())
     }

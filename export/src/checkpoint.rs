@@ -99,7 +99,7 @@ impl StudentCheckpoint {
     /// Reads `dir` (`model.safetensors`, `config.json`, `render.json`, the background).
     pub fn open(dir: &Path) -> Result<StudentCheckpoint> {
         let config_path = dir.join(CONFIG_FILE);
-        let config: serde_json::Value = nldf_core::error::read_json(&config_path)?;
+        let config: serde_json::Value = nldf_core::files::read_json(&config_path)?;
         let model = config.get("model").ok_or_else(|| {
             Error::invalid(&config_path, "has no `model` field (not a student config?)")
         })?;
@@ -113,16 +113,21 @@ impl StudentCheckpoint {
 
         let spec_path = dir.join(RENDER_SPEC_FILE);
         let spec = RenderSpec::load(&spec_path)?;
-        if spec.att_frames != shape.audio.att_frames || spec.features.window != shape.audio.window {
+        if spec.att_frames != shape.audio.att_frames
+            || spec.features.window() != shape.audio.window
+            || spec.features.n_features() != shape.audio.n_features
+        {
             return Err(Error::invalid(
                 &spec_path,
                 format!(
-                    "att_frames {} and window {} disagree with {}'s {} and {}",
+                    "att_frames {}, window {} and features {} disagree with {}'s {}, {} and {}",
                     spec.att_frames,
-                    spec.features.window,
+                    spec.features.window(),
+                    spec.features.n_features(),
                     config_path.display(),
                     shape.audio.att_frames,
-                    shape.audio.window
+                    shape.audio.window,
+                    shape.audio.n_features
                 ),
             ));
         }
@@ -161,6 +166,18 @@ impl StudentCheckpoint {
         })
     }
 
+    /// The weight whose largest magnitude is largest, and that magnitude (`None` without
+    /// weights).
+    pub fn largest_weight(&self) -> Option<(&str, f32)> {
+        self.weights
+            .iter()
+            .map(|(name, w)| {
+                let m = w.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+                (name.as_str(), m)
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1).then_with(|| b.0.cmp(a.0)))
+    }
+
     /// The weight `name`, checked to have shape `shape`.
     pub fn weight(&self, name: &str, shape: &[usize]) -> Result<&[f32]> {
         let path = self.dir.join(MODEL_FILE);
@@ -184,7 +201,13 @@ impl StudentCheckpoint {
 /// The f32 tensors of a safetensors file and the `step` of its metadata (0 when absent).
 fn read_weights(path: &Path) -> Result<(HashMap<String, Weight>, u64)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+    parse_weights(path, &bytes)
+}
+
+/// The f32 tensors of safetensors `bytes` and the `step` of their metadata (0 when
+/// absent), refusing non-finite weights; `path` names the bytes in errors.
+pub fn parse_weights(path: &Path, bytes: &[u8]) -> Result<(HashMap<String, Weight>, u64)> {
+    let (_, meta) = safetensors::SafeTensors::read_metadata(bytes)
         .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
     let metadata = meta.metadata().clone().unwrap_or_default();
     if let Some(kind) = metadata.get("kind")
@@ -201,7 +224,7 @@ fn read_weights(path: &Path) -> Result<(HashMap<String, Weight>, u64)> {
             .map_err(|_| Error::invalid(path, format!("metadata step `{s}` is not a number")))?,
         None => 0,
     };
-    let tensors = safetensors::SafeTensors::deserialize(&bytes)
+    let tensors = safetensors::SafeTensors::deserialize(bytes)
         .map_err(|e| Error::invalid(path, format!("unreadable tensors: {e}")))?;
     let mut weights = HashMap::new();
     for (name, view) in tensors.iter() {
@@ -211,11 +234,20 @@ fn read_weights(path: &Path) -> Result<(HashMap<String, Weight>, u64)> {
                 format!("tensor `{name}` is {:?}, expected F32", view.dtype()),
             ));
         }
-        let data = view
+        let data: Vec<f32> = view
             .data()
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                path,
+                format!(
+                    "weight `{name}` holds {} at index {i}: a diverged run cannot be exported",
+                    data[i]
+                ),
+            ));
+        }
         weights.insert(
             name.to_string(),
             Weight {

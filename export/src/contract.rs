@@ -15,16 +15,25 @@
 //! - output [`OUTPUT_SEGMENTS`] `segments`: f32 `[n_rays, M, 3]`, the M segment colours whose
 //!   sum is `rgb`
 //!
+//! # Numerics
+//! The graph encodes each beam point as `nldf_core::encoding` does: the sine and cosine of
+//! the lowest octave in double precision, the higher octaves by the double-angle identities
+//! in double precision, each value rounded to f32 once. Every encoded value lies within
+//! `nldf_core::encoding::MAX_ENCODING_ERROR` (1e-7) of the exact `sin(2^l x)` / `cos(2^l x)`
+//! for every coordinate `|x| <= max_coord`, so the trainer's beams and any runtime's agree
+//! to f32 rounding.
+//!
 //! # Metadata
 //! Every value under [`keys`] is JSON (numbers, arrays, objects, `true`/`false`), except
-//! [`keys::FORMAT`], [`keys::BACKGROUND_FILE`], [`keys::WEIGHTS_CHECKSUM`] and
-//! [`keys::BACKGROUND_PNG`] (base64 of an 8-bit RGB PNG the size of the image), which are
-//! plain strings. Rays that miss the head's
-//! bounds (within `[near, far]`) take the background pixel instead of the network's colour.
+//! [`keys::FORMAT`], [`keys::AUDIO_FRONT_END`], [`keys::BACKGROUND_FILE`],
+//! [`keys::WEIGHTS_CHECKSUM`] and [`keys::BACKGROUND_PNG`] (base64 of an 8-bit RGB PNG the
+//! size of the image), which are plain strings. Rays that miss the head's bounds (within
+//! `[near, far]`) take the background pixel instead of the network's colour.
 
 use std::collections::HashMap;
 
 use base64::Engine;
+use nldf_core::audio::FeatureSource;
 use nldf_core::beam::BeamSpec;
 use nldf_core::encoding::MAX_COORD;
 use nldf_core::render_spec::RenderSpec;
@@ -56,8 +65,9 @@ pub const OUTPUT_SEGMENTS: &str = "segments";
 
 /// Value of [`keys::FORMAT`] that marks a model as an nldf student.
 pub const FORMAT: &str = "nldf-student";
-/// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change.
-pub const CONTRACT_VERSION: u32 = 1;
+/// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change
+/// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]).
+pub const CONTRACT_VERSION: u32 = 2;
 
 /// `metadata_props` keys.
 pub mod keys {
@@ -90,6 +100,11 @@ pub mod keys {
     pub const AUDIO_FEATURES: &str = "nldf.audio_features";
     /// Whether the neighbourhood is fused by attention (else only the centre window counts).
     pub const AUDIO_ATTENTION: &str = "nldf.audio_attention";
+    /// Which front end made the training features (plain string): `nldf` (the render spec's
+    /// `features` hold its settings, and any WAV can be turned into the same features) or
+    /// `foreign` (another front end's, e.g. AD-NeRF's DeepSpeech: a render must be given
+    /// features made the same way).
+    pub const AUDIO_FRONT_END: &str = "nldf.audio_front_end";
     /// The head's bounds, `[x, y, z]` each.
     pub const BOUNDS_LO: &str = "nldf.bounds_lo";
     pub const BOUNDS_HI: &str = "nldf.bounds_hi";
@@ -202,6 +217,7 @@ impl ModelInfo {
             (keys::AUDIO_WINDOW, json(&self.audio.window)),
             (keys::AUDIO_FEATURES, json(&self.audio.n_features)),
             (keys::AUDIO_ATTENTION, json(&self.audio.attention)),
+            (keys::AUDIO_FRONT_END, front_end(&s.features).to_string()),
             (keys::BOUNDS_LO, json(&s.bounds.lo.to_array())),
             (keys::BOUNDS_HI, json(&s.bounds.hi.to_array())),
             (keys::DEFAULT_POSE, json(&s.default_pose)),
@@ -322,6 +338,29 @@ impl ModelInfo {
                 ));
             }
         }
+        let said = get(keys::AUDIO_FRONT_END)?;
+        if said != front_end(&info.spec.features) {
+            return Err(MetadataError::Malformed(
+                keys::AUDIO_FRONT_END.to_string(),
+                format!(
+                    "says `{said}`, the render spec's features are {}",
+                    info.spec.features.describe()
+                ),
+            ));
+        }
+        let f = &info.spec.features;
+        if (f.window(), f.n_features()) != (info.audio.window, info.audio.n_features) {
+            return Err(MetadataError::Malformed(
+                keys::RENDER_SPEC.to_string(),
+                format!(
+                    "its features make {} x {} windows, the audio input takes {} x {}",
+                    f.window(),
+                    f.n_features(),
+                    info.audio.window,
+                    info.audio.n_features
+                ),
+            ));
+        }
         if info.beam.n_points < 2 || info.segments == 0 || info.audio.is_empty() {
             return Err(MetadataError::Malformed(
                 keys::BEAM_POINTS.to_string(),
@@ -329,6 +368,14 @@ impl ModelInfo {
             ));
         }
         Ok(info)
+    }
+}
+
+/// The [`keys::AUDIO_FRONT_END`] value of a feature source.
+pub fn front_end(features: &FeatureSource) -> &'static str {
+    match features {
+        FeatureSource::Nldf(_) => "nldf",
+        FeatureSource::Foreign { .. } => "foreign",
     }
 }
 

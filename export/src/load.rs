@@ -81,7 +81,10 @@ pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)>
         ));
     }
     for t in &graph.initializer {
-        let n: i64 = t.dims.iter().product();
+        let n = t.dims.iter().try_fold(
+            1i64,
+            |acc, &d| if d < 0 { None } else { acc.checked_mul(d) },
+        );
         let elem = match t.data_type.and_then(|d| DataType::try_from(d).ok()) {
             Some(DataType::Float | DataType::Int32) => 4,
             Some(DataType::Int64 | DataType::Double) => 8,
@@ -90,16 +93,15 @@ pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)>
             _ => continue,
         };
         if let Some(raw) = &t.raw_data
-            && raw.len() as i64 != n * elem
+            && n.and_then(|n| n.checked_mul(elem)) != Some(raw.len() as i64)
         {
             return Err(Error::corrupt(
                 path,
                 format!(
-                    "initializer `{}` holds {} bytes, its shape {:?} needs {}",
+                    "initializer `{}` holds {} bytes, which its shape {:?} does not fit",
                     t.name.as_deref().unwrap_or("?"),
                     raw.len(),
-                    t.dims,
-                    n * elem
+                    t.dims
                 ),
             ));
         }

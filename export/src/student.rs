@@ -36,12 +36,25 @@ pub struct ExportReport {
 /// in the graph.
 pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Result<ExportReport> {
     let ckpt = StudentCheckpoint::open(student_dir)?;
+    if weights == WeightType::F16
+        && let Some((name, largest)) = ckpt.largest_weight()
+        && largest > half::f16::MAX.to_f32()
+    {
+        return Err(Error::invalid(
+            student_dir.join(crate::checkpoint::MODEL_FILE),
+            format!(
+                "weight `{name}` reaches {largest:e}, beyond half precision's {}: export \
+                 without --fp16",
+                half::f16::MAX
+            ),
+        ));
+    }
     let (model, info, n_values) = student_model(&ckpt, weights)?;
     let bytes = prost::Message::encode_to_vec(&model);
     if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
-    nldf_core::error::write_atomic(out, &bytes)?;
+    nldf_core::files::write_atomic(out, &bytes)?;
     Ok(ExportReport {
         path: out.to_path_buf(),
         bytes: bytes.len(),
@@ -149,7 +162,8 @@ pub fn student_model(
 /// Beam encoding: points `x_k = o + t_k d` at the K evenly spaced `t_k` of
 /// `BeamSpec::t_value`, flattened to `[x_0, y_0, z_0, x_1, ...]`, clamped to
 /// `±MAX_COORD`, then `[x | sin(2^0 x) | cos(2^0 x) | ... | cos(2^(L-1) x)]`, the octaves
-/// above the first by the double-angle identities as `nldf_core::encoding` computes them.
+/// above the first by the double-angle identities in f64, as `nldf_core::encoding` computes
+/// them.
 ///
 /// # Shapes
 /// - `origins`, `directions`: `[n_rays, 3]`
@@ -188,12 +202,21 @@ fn encode_beams(
     if l == 0 {
         return g.node("Identity", "beam.encoded", &[&x], vec![]);
     }
-    // sin and cos at the lowest octave, then the double-angle identities of
-    // `nldf_core::encoding::double_angle`, op for op: 2 transcendental ops per value
-    // instead of 2 L (runtimes without vectorised Sin/Cos spend most of a frame there).
-    let mut blocks = vec![x.clone()];
-    let mut s = g.node("Sin", "beam.sin0", &[&x], vec![]);
-    let mut c = g.node("Cos", "beam.cos0", &[&x], vec![]);
+    // As `nldf_core::encoding` computes it, op for op: sin and cos at the lowest octave,
+    // then the double-angle identities of `nldf_core::encoding::double_angle`, all in
+    // double precision, rounded to f32 once. 2 transcendental ops per value instead of 2 L
+    // (runtimes without vectorised Sin/Cos spend most of a frame there), and the f64 climb
+    // keeps each value within an f32 rounding of the exact sine.
+    let double = DataType::Double as i64;
+    let xd = g.node(
+        "Cast",
+        "beam.points_f64",
+        &[&x],
+        vec![attr_int("to", double)],
+    );
+    let mut blocks = vec![xd.clone()];
+    let mut s = g.node("Sin", "beam.sin0", &[&xd], vec![]);
+    let mut c = g.node("Cos", "beam.cos0", &[&xd], vec![]);
     blocks.push(s.clone());
     blocks.push(c.clone());
     for octave in 1..l {
@@ -207,6 +230,12 @@ fn encode_beams(
     }
     let refs: Vec<&str> = blocks.iter().map(String::as_str).collect();
     let encoded = g.node("Concat", "beam.concat", &refs, vec![attr_int("axis", 1)]);
+    let encoded = g.node(
+        "Cast",
+        "beam.encoded_f32",
+        &[&encoded],
+        vec![attr_int("to", DataType::Float as i64)],
+    );
     // The same clamp once more, a no-op on these values, keeps the features one tensor:
     // tract splits a product whose input is a feature-axis Concat into one small product
     // per block (21 for L = 10), several times slower than the single product.

@@ -55,19 +55,25 @@ impl Default for BackendOptions {
 }
 
 impl BackendOptions {
+    /// The largest batch size and thread count accepted.
+    pub const LIMITS: BackendOptions = BackendOptions {
+        batch_size: 1 << 20,
+        threads: 1024,
+    };
+
     /// Checks the options.
     pub fn validate(&self) -> Result<()> {
-        if self.batch_size == 0 || self.batch_size > 1 << 20 {
+        let max = Self::LIMITS;
+        if self.batch_size == 0 || self.batch_size > max.batch_size {
             return Err(Error::Argument(format!(
                 "batch size must be 1 to {}, got {}",
-                1 << 20,
-                self.batch_size
+                max.batch_size, self.batch_size
             )));
         }
-        if self.threads == 0 || self.threads > 1024 {
+        if self.threads == 0 || self.threads > max.threads {
             return Err(Error::Argument(format!(
-                "threads must be 1 to 1024, got {}",
-                self.threads
+                "threads must be 1 to {}, got {}",
+                max.threads, self.threads
             )));
         }
         Ok(())

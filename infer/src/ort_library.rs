@@ -2,7 +2,7 @@
 //! the pip `onnxruntime` wheel ships inside the project's Python environment
 //! (`.venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so.*`, made by
 //! `scripts/python_env.sh`), looked for in the working folder, its ancestors and the
-//! ancestors of the running executable. DESIGN.md section 7.
+//! ancestors of the running executable.
 
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};

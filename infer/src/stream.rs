@@ -20,7 +20,7 @@ use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use glam::Mat4;
-use nldf_core::audio::Waveform;
+use nldf_core::audio::{FeatureConfig, Waveform};
 use nldf_core::audio_stream::{FeatureStream, WavStreamDecoder};
 use serde::Serialize;
 
@@ -60,6 +60,8 @@ pub struct StreamJob {
 #[derive(Debug)]
 pub struct StreamPlan {
     renderer: FrameRenderer,
+    /// nldf's front end as the model was trained with it.
+    features: FeatureConfig,
     poses: Option<Vec<Mat4>>,
     out: PathBuf,
     drop_late: bool,
@@ -153,6 +155,7 @@ impl StreamJob {
     /// runtime and makes the output folder; no audio is read yet.
     pub fn plan(&self) -> Result<StreamPlan> {
         let model = nldf_export::read_model(&self.model)?;
+        let features = crate::audio::wav_features(&model.info, &self.model)?.clone();
         let poses = match &self.poses {
             Some(path) => Some(poses_from_transforms(path)?),
             None => None,
@@ -165,6 +168,7 @@ impl StreamJob {
             .map_err(|e| Error::output(&self.out, format!("cannot create the folder: {e}")))?;
         Ok(StreamPlan {
             renderer,
+            features,
             poses,
             out: self.out.clone(),
             drop_late: self.drop_late,
@@ -305,7 +309,7 @@ impl StreamPlan {
             if mel.is_none()
                 && let Some(rate) = rate
             {
-                mel = Some(FeatureStream::new(rate, fps, &info.spec.features)?);
+                mel = Some(FeatureStream::new(rate, fps, &self.features)?);
             }
             let Some(m) = mel.as_mut() else {
                 if ended {
@@ -383,7 +387,7 @@ impl StreamPlan {
             wall_seconds: started.elapsed().as_secs_f64(),
             frames,
         };
-        nldf_core::error::write_json(&self.out.join(STREAM_REPORT_FILE), &report)?;
+        nldf_core::files::write_json(&self.out.join(STREAM_REPORT_FILE), &report)?;
         Ok(report)
     }
 }

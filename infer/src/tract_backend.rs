@@ -2,13 +2,16 @@
 //! counts (tract optimises a fixed shape much better than the symbolic `n_rays` axis): one
 //! plan for full batches and, made on demand, plans for partial batches rounded up to
 //! [`PLAN_GRANULE`] rays, so that a frame's last batch wastes little on padding. Matrix
-//! products run on a private thread pool of `threads` threads.
+//! products run on a private thread pool of `threads` threads. Inputs and outputs are bound
+//! by their contract names, as onnxruntime binds them, not by their position in the graph.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
 use nldf_export::ExportedModel;
-use nldf_export::contract::ModelInfo;
+use nldf_export::contract::{
+    INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
+};
 use tract_onnx::prelude::*;
 
 use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
@@ -43,9 +46,23 @@ impl TractBackend {
     /// Parses `model` and compiles the plan for full batches.
     pub fn new(model: &ExportedModel, options: BackendOptions) -> Result<TractBackend> {
         options.validate()?;
-        let parsed = tract_onnx::onnx()
+        let mut parsed = tract_onnx::onnx()
             .model_for_read(&mut &model.bytes[..])
             .map_err(|e| Error::backend(NAME, format!("{}: {e}", model.path.display())))?;
+        // tract numbers inputs and outputs by position; onnxruntime binds them by name. Bind
+        // by name here too, so that a graph listing them in another order renders the same.
+        parsed
+            .set_input_names([INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO])
+            .and_then(|()| parsed.select_outputs_by_name([OUTPUT_RGB, OUTPUT_SEGMENTS]))
+            .map_err(|e| {
+                Error::backend(
+                    NAME,
+                    format!(
+                        "{}: binding the contract's inputs and outputs by name: {e}",
+                        model.path.display()
+                    ),
+                )
+            })?;
         let executor = if options.threads > 1 {
             tract_linalg::multithread::Executor::multithread_with_name(
                 options.threads,

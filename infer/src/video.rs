@@ -1,7 +1,7 @@
-//! A talking-head video from a model and a WAV file: a plan that checks every input and the
-//! output folder before any frame is rendered, then one PNG per video frame (audio windows
-//! from the WAV, a pose per frame), and an MP4 with the audio muxed in when ffmpeg is on the
-//! PATH. Everything is written into a staging folder that replaces `out` only on success.
+//! A talking-head video from a model and a WAV file (or ready-made feature windows): a plan
+//! that checks every input and the output folder before any frame is rendered, then one PNG
+//! per video frame (audio windows from the WAV, a pose per frame), and an MP4 with the audio
+//! muxed in when ffmpeg is on the PATH. Everything is written into a staging folder that replaces `out` only on success.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -10,7 +10,7 @@ use std::time::Instant;
 use glam::Mat4;
 use nldf_core::audio::AudioWindows;
 
-use crate::audio::{neighbourhood, windows_from_wav};
+use crate::audio::{neighbourhood, windows_from_npy, windows_from_wav};
 use crate::backend::{BackendKind, BackendOptions, backend_for};
 use crate::error::{Error, Result};
 use crate::frame::FrameRenderer;
@@ -30,8 +30,13 @@ pub const VIDEO_FILE: &str = "video.mp4";
 pub struct VideoJob {
     /// The exported model (`.onnx` written by `nldf export`).
     pub model: PathBuf,
-    /// The speech to animate, a WAV file.
-    pub audio: PathBuf,
+    /// The speech to animate, a WAV file: the source of the audio features (unless
+    /// `features` are given) and the MP4's sound.
+    pub audio: Option<PathBuf>,
+    /// Ready-made feature windows (`aud.npy`, `[N, window, F]`), one per video frame, made
+    /// by the front end the model was trained on; a model trained on another front end's
+    /// features than nldf's renders only from these.
+    pub features: Option<PathBuf>,
     /// A transforms json whose camera poses to follow; `None`: the default track.
     pub poses: Option<PathBuf>,
     /// The output folder (absent or empty).
@@ -56,7 +61,7 @@ pub struct VideoPlan {
     windows: AudioWindows,
     poses: Vec<Mat4>,
     staging: Staging,
-    audio: PathBuf,
+    audio: Option<PathBuf>,
     ffmpeg: Option<PathBuf>,
     mp4_asked: bool,
 }
@@ -103,7 +108,21 @@ impl VideoJob {
     /// the audio features and poses; nothing is rendered yet.
     pub fn plan(&self) -> Result<VideoPlan> {
         let model = nldf_export::read_model(&self.model)?;
-        let windows = windows_from_wav(&model.info, &self.audio)?;
+        let windows = match (&self.features, &self.audio) {
+            (Some(npy), _) => windows_from_npy(&model.info, npy)?,
+            (None, Some(wav)) => windows_from_wav(&model.info, &self.model, wav)?,
+            (None, None) => {
+                return Err(Error::Argument(
+                    "nothing to animate: give a WAV file (--audio) or feature windows \
+                     (--features)"
+                        .into(),
+                ));
+            }
+        };
+        if let Some(wav) = self.audio.as_ref().filter(|_| self.features.is_some()) {
+            // The soundtrack of a render from features: it must at least be a WAV.
+            nldf_core::audio::read_wav(wav)?;
+        }
         let poses = match &self.poses {
             Some(path) => poses_from_transforms(path)?,
             None => default_track(&model.info, windows.n_frames),
@@ -179,7 +198,7 @@ impl VideoPlan {
         }
         let mut video = None;
         if let Some(ffmpeg) = &self.ffmpeg {
-            mux_mp4(ffmpeg, self.staging.path(), fps, &self.audio)?;
+            mux_mp4(ffmpeg, self.staging.path(), fps, self.audio.as_deref())?;
             files.push(PathBuf::from(VIDEO_FILE));
             video = Some(PathBuf::from(VIDEO_FILE));
         }
@@ -208,33 +227,31 @@ pub fn ffmpeg_on_path() -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
-/// Muxes `folder/frame_%05d.png` at `fps` with the audio of `wav` into `folder/video.mp4`
-/// (H.264, or MPEG-4 part 2 when the ffmpeg build lacks libx264; AAC audio).
-pub fn mux_mp4(ffmpeg: &Path, folder: &Path, fps: f32, wav: &Path) -> Result<()> {
+/// Muxes `folder/frame_%05d.png` at `fps`, with the audio of `wav` when given, into
+/// `folder/video.mp4` (H.264, or MPEG-4 part 2 when the ffmpeg build lacks libx264; AAC
+/// audio).
+pub fn mux_mp4(ffmpeg: &Path, folder: &Path, fps: f32, wav: Option<&Path>) -> Result<()> {
     let out = folder.join(VIDEO_FILE);
     let mut last_error = String::new();
     for codec in ["libx264", "mpeg4"] {
-        let result = Command::new(ffmpeg)
-            .args(["-nostdin", "-y", "-loglevel", "error", "-framerate"])
+        let mut cmd = Command::new(ffmpeg);
+        cmd.args(["-nostdin", "-y", "-loglevel", "error", "-framerate"])
             .arg(format!("{fps}"))
             .arg("-i")
-            .arg(folder.join("frame_%05d.png"))
-            .arg("-i")
-            .arg(wav)
+            .arg(folder.join("frame_%05d.png"));
+        if let Some(wav) = wav {
+            cmd.arg("-i")
+                .arg(wav)
+                .args(["-map", "0:v", "-map", "1:a", "-c:a", "aac", "-shortest"]);
+        }
+        let result = cmd
             .args([
-                "-map",
-                "0:v",
-                "-map",
-                "1:a",
                 "-vf",
                 "pad=ceil(iw/2)*2:ceil(ih/2)*2",
                 "-c:v",
                 codec,
                 "-pix_fmt",
                 "yuv420p",
-                "-c:a",
-                "aac",
-                "-shortest",
             ])
             .arg(&out)
             .output()

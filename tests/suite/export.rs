@@ -9,7 +9,7 @@ use std::process::Command;
 
 use candle_core::{DType, Device, Tensor};
 use glam::{Mat4, Vec3};
-use nldf_core::audio::{AudioWindows, FeatureConfig};
+use nldf_core::audio::{AudioWindows, FeatureConfig, FeatureSource};
 use nldf_core::bounds::Bounds;
 use nldf_core::camera::{Camera, Intrinsics, look_at};
 use nldf_core::dataset::save_audio_npy;
@@ -87,11 +87,11 @@ fn spec_for(cfg: &StudentConfig) -> RenderSpec {
             hi: Vec3::splat(0.5),
         },
         background: BACKGROUND_FILE.to_string(),
-        features: FeatureConfig {
+        features: FeatureSource::Nldf(FeatureConfig {
             n_mels: cfg.audio.n_features,
             window: cfg.audio.window,
             ..FeatureConfig::default()
-        },
+        }),
         att_frames: cfg.audio.att_frames,
         default_pose: c2w.transpose().to_cols_array_2d(),
     }
@@ -486,7 +486,7 @@ pub(crate) fn python() -> Option<PathBuf> {
         "{} with onnx, onnxruntime and numpy is missing: run scripts/python_env.sh",
         venv.display()
     );
-    if std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0") {
+    if nldf_tests::in_ci() {
         panic!("{msg}");
     }
     eprintln!("SKIPPED (CI is unset): {msg}");

@@ -8,17 +8,13 @@ use std::path::Path;
 use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::ort_library::find_ort_library;
+use nldf_tests::in_ci;
 use nldf_train::audio_net::neighbourhood;
 
 use crate::export::{
     PYTHON_PARITY, TOL, candle_render, configs, max_diff, python, random_audio, random_rays,
     read_npy, run_python, write_npy, write_run,
 };
-
-/// True under CI (`CI` set to anything but empty, `0` or `false`).
-pub(crate) fn in_ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
-}
 
 /// Whether the onnxruntime library can be found; outside CI a missing one skips (after
 /// saying so), under CI it fails.

@@ -121,7 +121,7 @@ fn infer_frames_agree_across_tract_ort_and_candle() {
 }
 
 /// A 16 kHz tone with a wobbling pitch, `seconds` long.
-fn write_test_wav(path: &Path, seconds: f32) {
+pub(crate) fn write_test_wav(path: &Path, seconds: f32) {
     let n = (16_000.0 * seconds) as usize;
     let samples = (0..n)
         .map(|i| {
@@ -157,7 +157,8 @@ const TEST_OPTIONS: BackendOptions = BackendOptions {
 fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
     VideoJob {
         model: model.to_path_buf(),
-        audio: audio.to_path_buf(),
+        audio: Some(audio.to_path_buf()),
+        features: None,
         poses: None,
         out: out.to_path_buf(),
         backend: BackendKind::Tract,
@@ -190,7 +191,7 @@ fn infer_render_video_writes_a_png_per_frame_through_staging() {
     assert_no_staging(&run.root);
     // Frame 3 is the candle student's frame for the WAV's audio and the default track.
     let info = read_model(&path).unwrap().info;
-    let windows = windows_from_wav(&info, &wav).unwrap();
+    let windows = windows_from_wav(&info, &path, &wav).unwrap();
     let audio = neighbourhood(&windows, 3, cfg.audio.att_frames);
     let k = info.spec.intrinsics;
     let background = background_at(&info, k.width, k.height).unwrap();
@@ -504,7 +505,7 @@ fn venv_ffmpeg() -> Option<PathBuf> {
         return Some(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()));
     }
     let msg = "the .venv lacks imageio-ffmpeg: run scripts/python_env.sh";
-    if std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0") {
+    if nldf_tests::in_ci() {
         panic!("{msg}");
     }
     eprintln!("SKIPPED (CI is unset): {msg}");

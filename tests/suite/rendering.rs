@@ -4,7 +4,7 @@ use glam::{Mat4, Vec3};
 use nldf_core::beam::{BeamSpec, encode_beams};
 use nldf_core::camera::{Camera, Intrinsics, look_at};
 use nldf_core::composite::{
-    composite, composite_f64, segment_colors, segment_colors_f64, segment_range,
+    composite, composite_f64, segment_colors, segment_colors_f64, segment_of,
 };
 use nldf_core::encoding::{MAX_COORD, encoded_len, positional_encoding};
 use nldf_core::rays::{Rays, Rect, rays_for_image, rays_for_pixels, sample_batch};
@@ -286,7 +286,8 @@ fn extreme_densities_and_spacings_stay_finite() {
             assert!(c.color.iter().all(|v| v.is_finite()));
             assert!(c.depth.is_finite() && c.opacity.is_finite());
             assert!(c.opacity <= 1.0);
-            let seg = segment_colors(&c.weights, &colors, 4);
+            let span = (t_vals[0], t_vals[15]);
+            let seg = segment_colors(&c.weights, &colors, &t_vals, span, 4);
             assert!(seg.iter().all(|v| v.is_finite()));
         }
     }
@@ -314,8 +315,9 @@ fn segment_colours_sum_to_the_pixel() {
     let mut rng = ChaCha8Rng::seed_from_u64(17);
     for n in [64usize, 66, 192] {
         let ray = random_ray(&mut rng, n, 1e10);
+        let span = (ray.t_vals[0], ray.t_vals[n - 1]);
         let c = composite(&ray.densities, &ray.deltas, &ray.t_vals, &ray.colors);
-        let seg = segment_colors(&c.weights, &ray.colors, 4);
+        let seg = segment_colors(&c.weights, &ray.colors, &ray.t_vals, span, 4);
         for ch in 0..3 {
             let sum: f32 = (0..4).map(|i| seg[3 * i + ch]).sum();
             assert!(
@@ -325,13 +327,15 @@ fn segment_colours_sum_to_the_pixel() {
             );
         }
         // f64: exact to rounding, and each segment uses the ray's own transmittance.
+        let t64 = to_f64(&ray.t_vals);
         let want = composite_f64(
             &to_f64(&ray.densities),
             &to_f64(&ray.deltas),
-            &to_f64(&ray.t_vals),
+            &t64,
             &rgb_f64(&ray.colors),
         );
-        let seg64 = segment_colors_f64(&want.weights, &rgb_f64(&ray.colors), 4);
+        let span64 = (span.0 as f64, span.1 as f64);
+        let seg64 = segment_colors_f64(&want.weights, &rgb_f64(&ray.colors), &t64, span64, 4);
         for ch in 0..3 {
             let sum: f64 = seg64.iter().map(|s| s[ch]).sum();
             assert!((sum - want.color[ch]).abs() < 1e-12);
@@ -341,7 +345,54 @@ fn segment_colours_sum_to_the_pixel() {
                 assert!((seg[3 * i + ch] as f64 - seg64[i][ch]).abs() < 1e-5);
             }
         }
-        let covered: usize = (0..4).map(|i| segment_range(i, 4, n).len()).sum();
-        assert_eq!(covered, n);
+    }
+}
+
+/// Eq. 5's segments are equal t-intervals of the sampled span: with one stratified sample
+/// per equal bin they are the paper's groups of N/M samples in order; with samples crowded
+/// towards one end (as importance samples crowd where the density is) they keep their
+/// depths instead of following the crowd.
+#[test]
+fn segments_are_equal_t_intervals_of_the_span() {
+    let (t0, t1) = (1.0f64, 3.0f64);
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    // Stratified: N = 32 bins, a jittered sample in each.
+    for _ in 0..20 {
+        for k in 0..32 {
+            let t = t0 + (k as f64 + rng.random::<f64>()) * (t1 - t0) / 32.0;
+            assert_eq!(segment_of(t, (t0, t1), 4), k / 8, "bin {k} at t {t}");
+        }
+    }
+    // The boundaries and the ends.
+    assert_eq!(segment_of(1.5, (t0, t1), 4), 1);
+    assert_eq!(segment_of(t0, (t0, t1), 4), 0);
+    assert_eq!(segment_of(t1, (t0, t1), 4), 3);
+    assert_eq!(segment_of(0.0, (t0, t1), 4), 0);
+    assert_eq!(segment_of(f64::NAN, (t0, t1), 4), 0);
+    assert_eq!(segment_of(2.0, (t0, t0), 4), 0);
+    // 48 samples crowded in the last quarter of the span, 16 spread over the rest: a split
+    // by count would give the last quarter's samples to three segments.
+    let mut t: Vec<f64> = (0..16)
+        .map(|k| t0 + 1.5 * (k as f64 + 0.5) / 16.0)
+        .collect();
+    t.extend((0..48).map(|k| t0 + 1.5 + 0.5 * (k as f64 + 0.5) / 48.0));
+    let weights = vec![1.0 / 64.0; 64];
+    let colors: Vec<[f64; 3]> = t.iter().map(|&x| [x, 1.0, 0.0]).collect();
+    let seg = segment_colors_f64(&weights, &colors, &t, (t0, t1), 4);
+    let counts: Vec<f64> = seg.iter().map(|s| s[1] * 64.0).collect();
+    for (got, want) in counts
+        .iter()
+        .zip([16.0 / 3.0, 16.0 / 3.0, 16.0 / 3.0, 48.0])
+    {
+        assert!((got - want).abs() < 0.7, "samples per segment {counts:?}");
+    }
+    let t32: Vec<f32> = t.iter().map(|&x| x as f32).collect();
+    let w32 = vec![1.0f32 / 64.0; 64];
+    let c32: Vec<f32> = colors.iter().flatten().map(|&x| x as f32).collect();
+    let seg32 = segment_colors(&w32, &c32, &t32, (t0 as f32, t1 as f32), 4);
+    for i in 0..4 {
+        for ch in 0..3 {
+            assert!((seg32[3 * i + ch] as f64 - seg[i][ch]).abs() < 1e-6);
+        }
     }
 }

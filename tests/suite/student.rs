@@ -18,7 +18,7 @@ fn the_student_presets_have_the_papers_depths_and_cost() {
         assert_eq!(1 + 2 * cfg.n_blocks() + 1, cfg.depth);
         assert_eq!(cfg.input_dim(), 1008 + 64);
     }
-    // DESIGN.md: about 11.8 MFLOP per ray at 88 x 256.
+    // About 11.8 MFLOP per ray at 88 x 256 (2 x 5.91 M multiply-adds).
     let flops = 2.0 * StudentConfig::paper_d88().macs_per_ray() as f64;
     assert!((flops / 1e6 - 11.8).abs() < 0.1, "{flops}");
     assert!(
@@ -26,7 +26,7 @@ fn the_student_presets_have_the_papers_depths_and_cost() {
             depth: 7,
             ..StudentConfig::tiny()
         }
-        .validate()
+        .check()
         .is_err()
     );
 

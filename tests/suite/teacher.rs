@@ -426,7 +426,7 @@ fn importance_samples_gather_where_the_weight_is() {
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     for jitter in [false, true] {
         let rng: Option<&mut dyn rand::RngCore> = if jitter { Some(&mut rng) } else { None };
-        let fine = sample_importance(&rays, &bounds, 0.5, 2.0, &coarse, &weights, 32, rng);
+        let fine = sample_importance(&rays, &coarse, &weights, 32, rng);
         assert_eq!(fine.n_samples, 48);
         assert_eq!(fine.hit, coarse.hit);
         for (h, &r) in fine.hit.iter().enumerate() {
@@ -511,4 +511,96 @@ fn segment_targets_sum_to_the_teachers_pixel() {
             assert!(spread, "M = {m}: every colour sits in the last segment");
         }
     }
+}
+
+/// With importance samples the merged samples crowd where the density is; Eq. 5's segments
+/// still cut each ray's span into equal t-intervals. The teacher's targets must equal an
+/// f64 reference built from its own samples and field outputs, segment by t-interval.
+#[test]
+fn importance_sampled_segment_targets_follow_t_intervals() {
+    use nldf_core::composite::{composite_f64, segment_colors_f64};
+    use nldf_train::teacher::encode_vectors;
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = tiny_run_config(120);
+    cfg.model.n_samples = 8;
+    cfg.model.n_importance = 24;
+    cfg.model.min_transmittance = 0.0;
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    for _ in 0..120 {
+        run.train_step(&data).unwrap();
+    }
+    let frame = &data.dataset.val[0];
+    let ds = &data.dataset;
+    let rays = nldf_core::rays::rays_for_image(&ds.camera(frame));
+    let code = run.audio_codes(&data, &[frame.aud_id]).unwrap();
+    let bg = &ds.background.data;
+    let t = &run.teacher;
+    let m = 4;
+    let seg = t
+        .segment_targets(&rays, bg, &code, &data.bounds, ds.near, ds.far, m)
+        .unwrap();
+    // The reference: the same samples and field outputs, composited and split in f64.
+    let codes_of = |hit: &[usize]| code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous();
+    let samples = t
+        .sample(&rays, &data.bounds, ds.near, ds.far, None, &codes_of)
+        .unwrap();
+    let s = samples.n_samples;
+    assert_eq!(s, 8 + 24);
+    let n_hit = samples.hit.len();
+    assert!(n_hit > 50, "{n_hit} rays hit the head");
+    let points = encode_vectors(&samples.points, t.cfg.pos_freqs)
+        .tensor()
+        .unwrap();
+    let dirs = encode_vectors(&samples.view_dirs, t.cfg.dir_freqs)
+        .tensor()
+        .unwrap();
+    let codes = codes_of(&samples.hit).unwrap();
+    let (densities, colors) = t.field.forward(&points, &codes, &dirs, s, false).unwrap();
+    let densities: Vec<f32> = densities.flatten_all().unwrap().to_vec1().unwrap();
+    let colors: Vec<f32> = colors.flatten_all().unwrap().to_vec1().unwrap();
+    let (mut worst, mut moved) = (0.0f64, 0usize);
+    for h in 0..n_hit {
+        let r = samples.hit[h];
+        let f = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<f64>>();
+        let t_vals = f(&samples.t_vals[h * s..(h + 1) * s]);
+        let rgb: Vec<[f64; 3]> = colors[3 * s * h..3 * s * (h + 1)]
+            .chunks_exact(3)
+            .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64])
+            .collect();
+        let c = composite_f64(
+            &f(&densities[h * s..(h + 1) * s]),
+            &f(&samples.deltas[h * s..(h + 1) * s]),
+            &t_vals,
+            &rgb,
+        );
+        let (t0, t1) = samples.spans[h];
+        let mut want = segment_colors_f64(&c.weights, &rgb, &t_vals, (t0 as f64, t1 as f64), m);
+        for ch in 0..3 {
+            want[m - 1][ch] += (1.0 - c.opacity) * bg[3 * r + ch] as f64;
+        }
+        for i in 0..m {
+            for ch in 0..3 {
+                worst = worst.max((seg[(r * m + i) * 3 + ch] as f64 - want[i][ch]).abs());
+            }
+        }
+        // Where the samples crowd, a split by count would put other samples in segment 0.
+        let by_count = (0..s / m).map(|k| c.weights[k]).sum::<f64>().to_bits();
+        let by_t = (0..s)
+            .filter(|&k| {
+                nldf_core::composite::segment_of(t_vals[k], (t0 as f64, t1 as f64), m) == 0
+            })
+            .map(|k| c.weights[k])
+            .sum::<f64>()
+            .to_bits();
+        moved += usize::from(by_count != by_t);
+    }
+    assert!(
+        worst < 2e-5,
+        "segment targets miss the t-interval reference by {worst}"
+    );
+    assert!(
+        moved > n_hit / 10,
+        "importance samples changed the first segment of only {moved} of {n_hit} rays"
+    );
 }

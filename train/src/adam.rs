@@ -5,8 +5,10 @@
 
 use std::collections::HashMap;
 
-use candle_core::{Result, Tensor, Var, backprop::GradStore};
+use candle_core::{Tensor, Var, backprop::GradStore};
 use rayon::prelude::*;
+
+use crate::error::{Error, Result};
 
 /// Adam's hyper-parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -56,14 +58,30 @@ impl Adam {
         Adam { params, slots }
     }
 
-    /// One update at learning rate `lr` from the gradients in `grads`.
+    /// One update at learning rate `lr` from the gradients in `grads`. A gradient holding a
+    /// NaN or infinite value is refused before any variable changes, with
+    /// [`Error::NonFinite`] naming the variable.
     pub fn step(&mut self, grads: &GradStore, lr: f64) -> Result<()> {
         let AdamParams { beta1, beta2, eps } = self.params;
-        for slot in &mut self.slots {
-            let Some(grad) = grads.get(slot.var.as_tensor()) else {
-                continue;
+        let mut flat: Vec<Option<Vec<f32>>> = Vec::with_capacity(self.slots.len());
+        for slot in &self.slots {
+            let g = match grads.get(slot.var.as_tensor()) {
+                Some(grad) => grad.flatten_all()?.to_vec1::<f32>()?,
+                None => {
+                    flat.push(None);
+                    continue;
+                }
             };
-            let g: Vec<f32> = grad.flatten_all()?.to_vec1()?;
+            if g.par_iter().any(|v| !v.is_finite()) {
+                return Err(Error::NonFinite(format!(
+                    "the gradient of `{}` holds a NaN or infinite value",
+                    slot.name
+                )));
+            }
+            flat.push(Some(g));
+        }
+        for (slot, g) in self.slots.iter_mut().zip(flat) {
+            let Some(g) = g else { continue };
             let mut theta: Vec<f32> = slot.var.as_tensor().flatten_all()?.to_vec1()?;
             slot.t += 1;
             let t = slot.t as i32;
@@ -92,7 +110,7 @@ impl Adam {
 
     /// The state as named tensors: `m.<name>`, `v.<name>` and `t.<name>` (a one-element
     /// f64 tensor holding the update count).
-    pub fn state(&self) -> Result<HashMap<String, Tensor>> {
+    pub fn state(&self) -> candle_core::Result<HashMap<String, Tensor>> {
         let mut out = HashMap::new();
         for s in &self.slots {
             let dev = s.var.device();
@@ -114,7 +132,7 @@ impl Adam {
 
     /// Restores a state written by [`Adam::state`]; every variable must be present with its
     /// shape.
-    pub fn load_state(&mut self, state: &HashMap<String, Tensor>) -> Result<()> {
+    pub fn load_state(&mut self, state: &HashMap<String, Tensor>) -> candle_core::Result<()> {
         for s in &mut self.slots {
             let get = |key: String| {
                 state.get(&key).ok_or_else(|| {

@@ -8,9 +8,8 @@ use std::path::Path;
 
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
-use nldf_core::error::write_atomic;
+use nldf_core::files::write_atomic;
 use serde::Serialize;
-use serde::de::DeserializeOwned;
 
 use crate::error::{Error, Result};
 use crate::nn::sorted_vars;
@@ -36,10 +35,18 @@ pub fn save_tensors(
 /// Reads a safetensors file: its tensors (f32 on the CPU) and its metadata.
 pub fn load_tensors(path: &Path) -> Result<(HashMap<String, Tensor>, HashMap<String, String>)> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
+    parse_tensors(path, &bytes)
+}
+
+/// [`load_tensors`] on bytes already read; `path` names them in errors.
+pub fn parse_tensors(
+    path: &Path,
+    bytes: &[u8],
+) -> Result<(HashMap<String, Tensor>, HashMap<String, String>)> {
+    let (_, meta) = safetensors::SafeTensors::read_metadata(bytes)
         .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
     let metadata = meta.metadata().clone().unwrap_or_default();
-    let tensors = candle_core::safetensors::load_buffer(&bytes, &Device::Cpu)
+    let tensors = candle_core::safetensors::load_buffer(bytes, &Device::Cpu)
         .map_err(|e| Error::invalid(path, format!("unreadable tensors: {e}")))?;
     Ok((tensors, metadata))
 }
@@ -79,12 +86,7 @@ pub fn restore_weights(
 
 /// Writes a JSON file atomically, pretty-printed.
 pub fn save_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    Ok(nldf_core::error::write_json(path, value)?)
-}
-
-/// Reads a JSON file.
-pub fn load_json<T: DeserializeOwned>(path: &Path) -> Result<T> {
-    Ok(nldf_core::error::read_json(path)?)
+    Ok(nldf_core::files::write_json(path, value)?)
 }
 
 /// The `step` entry of a checkpoint's metadata.

@@ -1,12 +1,100 @@
 //! Serde configurations of the teacher and its trainer, with documented defaults and presets
 //! that say which anchor they follow. The resolved configuration is saved beside every
 //! checkpoint as `config.json` and read back by later stages.
+//!
+//! Reading is strict ([`read_config`]): an unknown key or a value of the wrong type is an
+//! error naming the key, and each run configuration's `check` names the key whose value is
+//! out of range, before any work starts.
 
+use std::fmt::Display;
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+
+use nldf_core::audio::FeatureSource;
+use nldf_core::dataset::Dataset;
+
+use crate::error::{Error, Result};
+
+/// Reads a configuration file strictly: a key the configuration does not have, or a value
+/// of the wrong type, is an error that names the file and the key's path
+/// (`model.width: invalid value ...`).
+pub fn read_config<T: DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_config(path, &text)
+}
+
+/// [`read_config`] on text already read; `path` names it in errors.
+pub fn parse_config<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let key = e.path().to_string();
+        let inner = e.into_inner();
+        let problem = if key.is_empty() || key == "." {
+            format!("bad configuration: {inner}")
+        } else {
+            format!("bad configuration: `{key}`: {inner}")
+        };
+        Error::invalid(path, problem)
+    })
+}
+
+/// `Ok` when `lo <= value <= hi`, else an error naming `key` (NaN is out of every range).
+pub(crate) fn in_range<T: PartialOrd + Display>(key: &str, value: T, lo: T, hi: T) -> Result<()> {
+    if value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::Config(format!(
+            "`{key}` must be in [{lo}, {hi}], got {value}"
+        )))
+    }
+}
+
+/// `Ok` when `value >= lo`, else an error naming `key`.
+pub(crate) fn at_least(key: &str, value: usize, lo: usize) -> Result<()> {
+    if value >= lo {
+        Ok(())
+    } else {
+        Err(Error::Config(format!(
+            "`{key}` must be at least {lo}, got {value}"
+        )))
+    }
+}
+
+/// `Ok` when `lo <= value < hi`, else an error naming `key`.
+fn in_range_open(key: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
+    if value >= lo && value < hi {
+        Ok(())
+    } else {
+        Err(Error::Config(format!(
+            "`{key}` must be in [{lo}, {hi}), got {value}"
+        )))
+    }
+}
+
+/// `Ok` for a finite `value > 0` (at most `hi`), else an error naming `key`.
+fn positive(key: &str, value: f64, hi: f64) -> Result<()> {
+    if value > 0.0 && value <= hi {
+        Ok(())
+    } else {
+        Err(Error::Config(format!(
+            "`{key}` must be positive and at most {hi:e}, got {value}"
+        )))
+    }
+}
+
+/// Largest network width, sample count and batch the checks accept: far beyond any preset,
+/// small enough that a typo cannot ask for terabytes.
+const MAX_WIDTH: usize = 4096;
+const MAX_DEPTH: usize = 256;
+const MAX_SAMPLES: usize = 1024;
+const MAX_BATCH: usize = 1 << 20;
+const MAX_FREQS: usize = 16;
 
 /// The audio encoder (AD-NeRF's AudioNet and AudioAttNet).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct AudioConfig {
     /// Features per audio frame, the F of `aud.npy` `[N, 16, F]` (set from the data).
     pub n_features: usize,
@@ -16,6 +104,9 @@ pub struct AudioConfig {
     pub dim: usize,
     /// Neighbouring frames fused by AudioAttNet (AD-NeRF: 8).
     pub att_frames: usize,
+    /// Which front end made the features (set from the data): later stages read the
+    /// dataset's audio the same way, and an exported model records it.
+    pub features: FeatureSource,
 }
 
 impl Default for AudioConfig {
@@ -25,13 +116,14 @@ impl Default for AudioConfig {
             window: 16,
             dim: 64,
             att_frames: 8,
+            features: FeatureSource::default(),
         }
     }
 }
 
 /// The audio-conditioned NeRF teacher: network shape and sampling.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TeacherConfig {
     pub audio: AudioConfig,
     /// Hidden layers of the density trunk (AD-NeRF: 8).
@@ -51,8 +143,6 @@ pub struct TeacherConfig {
     /// Importance samples per ray drawn from the coarse weights and evaluated by the same
     /// network (AD-NeRF: 128 with a second, fine network; 0 = none).
     pub n_importance: usize,
-    /// Margin added around the head's bounds, as a fraction of their size.
-    pub bounds_margin: f32,
     /// Transmittance below which a ray stops being sampled when rendering.
     pub min_transmittance: f32,
 }
@@ -77,13 +167,13 @@ impl TeacherConfig {
             dir_freqs: 4,
             n_samples: 64,
             n_importance: 128,
-            bounds_margin: 0.05,
             min_transmittance: 1e-4,
         }
     }
 
-    /// A preset for 2-core machines: 6 x 128 with a skip at 3 (the JAX probe of DESIGN.md
-    /// section 8 used 6 x 128), 32 samples inside the head's bounds, no importance samples.
+    /// A preset for 2-core machines: 6 x 128 with a skip at 3 (a JAX probe on a comparable
+    /// synthetic head used 6 x 128), 32 samples inside the head's bounds, no importance
+    /// samples.
     pub fn small() -> TeacherConfig {
         TeacherConfig {
             depth: 6,
@@ -159,7 +249,7 @@ impl TeacherConfig {
 
 /// How the teacher is trained.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TrainConfig {
     /// Seed of the ray batches and the initial weights.
     pub seed: u64,
@@ -230,16 +320,95 @@ impl Default for TrainConfig {
 
 /// Everything a teacher run needs, as saved in `config.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TeacherRunConfig {
     pub model: TeacherConfig,
     pub train: TrainConfig,
 }
 
+impl AudioConfig {
+    /// Takes the features' width, window and source from a loaded dataset.
+    pub fn set_from(&mut self, dataset: &Dataset) {
+        self.n_features = dataset.audio.n_features;
+        self.window = dataset.audio.window;
+        self.features = dataset.audio_source.clone();
+    }
+
+    /// Checks the audio encoder's sizes; `at` prefixes the keys (`model.audio`).
+    pub fn check(&self, at: &str) -> Result<()> {
+        if self.window != 16 {
+            return Err(Error::Config(format!(
+                "`{at}.window` must be 16 feature frames (AudioNet halves it 4 times), got {}",
+                self.window
+            )));
+        }
+        in_range(&format!("{at}.n_features"), self.n_features, 1, 4096)?;
+        if (self.features.n_features(), self.features.window()) != (self.n_features, self.window) {
+            return Err(Error::Config(format!(
+                "`{at}.features` describe {} x {} windows, `{at}` says {} x {}",
+                self.features.window(),
+                self.features.n_features(),
+                self.window,
+                self.n_features
+            )));
+        }
+        in_range(&format!("{at}.dim"), self.dim, 1, MAX_WIDTH)?;
+        in_range(&format!("{at}.att_frames"), self.att_frames, 1, 64)
+    }
+}
+
+impl TeacherRunConfig {
+    /// Checks every value before any work starts; the error names the key.
+    pub fn check(&self) -> Result<()> {
+        let m = &self.model;
+        m.audio.check("model.audio")?;
+        in_range("model.depth", m.depth, 1, MAX_DEPTH)?;
+        in_range("model.width", m.width, 1, MAX_WIDTH)?;
+        in_range("model.color_width", m.color_width, 1, MAX_WIDTH)?;
+        in_range("model.pos_freqs", m.pos_freqs, 0, MAX_FREQS)?;
+        in_range("model.dir_freqs", m.dir_freqs, 0, MAX_FREQS)?;
+        in_range("model.n_samples", m.n_samples, 2, MAX_SAMPLES)?;
+        in_range("model.n_importance", m.n_importance, 0, MAX_SAMPLES)?;
+        if let Some(&s) = m.skips.iter().find(|&&s| s + 1 >= m.depth) {
+            return Err(Error::Config(format!(
+                "`model.skips` must name layers before the last of `model.depth` {}, got {s}",
+                m.depth
+            )));
+        }
+        in_range_open(
+            "model.min_transmittance",
+            m.min_transmittance as f64,
+            0.0,
+            1.0,
+        )?;
+        let t = &self.train;
+        at_least("train.iters", t.iters, 1)?;
+        in_range("train.batch_rays", t.batch_rays, 1, MAX_BATCH)?;
+        in_range("train.frames_per_batch", t.frames_per_batch, 1, 4096)?;
+        in_range("train.face_fraction", t.face_fraction, 0.0, 1.0)?;
+        in_range("train.mouth_fraction", t.mouth_fraction, 0.0, 1.0)?;
+        positive("train.lr", t.lr, 1.0)?;
+        at_least("train.lr_decay_steps", t.lr_decay_steps, 1)?;
+        at_least("train.att_start", t.att_start, 0)?;
+        positive("train.att_lr_scale", t.att_lr_scale, 1e3)?;
+        check_adam("train", t.beta1, t.beta2, t.eps)?;
+        at_least("train.log_every", t.log_every, 1)?;
+        in_range("train.val_frames", t.val_frames, 1, 4096)?;
+        in_range("train.time_budget_s", t.time_budget_s, 0.0, 1e9)
+    }
+}
+
+/// Checks Adam's hyper-parameters under `at`.
+fn check_adam(at: &str, beta1: f64, beta2: f64, eps: f64) -> Result<()> {
+    in_range_open(&format!("{at}.beta1"), beta1, 0.0, 1.0)?;
+    in_range_open(&format!("{at}.beta2"), beta2, 0.0, 1.0)?;
+    positive(&format!("{at}.eps"), eps, 1.0)
+}
+
 /// How the student is trained (paper sections 3.4-3.5; R2L's public settings where the
 /// paper is silent).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct StudentTrainConfig {
     /// Seed of the ray batches, the beam jitter and the initial weights.
     pub seed: u64,
@@ -349,10 +518,36 @@ impl Default for StudentTrainConfig {
 
 /// Everything a student run needs, as saved in its `config.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct StudentRunConfig {
     pub model: crate::student::StudentConfig,
     pub train: StudentTrainConfig,
+}
+
+impl StudentRunConfig {
+    /// Checks every value before any work starts; the error names the key.
+    pub fn check(&self) -> Result<()> {
+        self.model.check()?;
+        let t = &self.train;
+        at_least("train.iters", t.iters, 1)?;
+        in_range("train.batch_rays", t.batch_rays, 1, MAX_BATCH)?;
+        in_range("train.frames_per_batch", t.frames_per_batch, 1, 4096)?;
+        in_range("train.face_fraction", t.face_fraction, 0.0, 1.0)?;
+        in_range("train.mouth_fraction", t.mouth_fraction, 0.0, 1.0)?;
+        positive("train.lr", t.lr, 1.0)?;
+        at_least("train.lr_decay_steps", t.lr_decay_steps, 1)?;
+        check_adam("train", t.beta1, t.beta2, t.eps)?;
+        in_range("train.lambda", t.lambda, 0.0, 1e6)?;
+        in_range("train.hard_ratio", t.hard_ratio, 0.0, 1.0)?;
+        in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
+        in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;
+        in_range("train.pseudo_fraction", t.pseudo_fraction, 0.0, 1.0)?;
+        in_range("train.pseudo_yaw_deg", t.pseudo_yaw_deg, 0.0, 45.0)?;
+        in_range("train.pseudo_pitch_deg", t.pseudo_pitch_deg, 0.0, 45.0)?;
+        at_least("train.log_every", t.log_every, 1)?;
+        in_range("train.val_frames", t.val_frames, 1, 4096)?;
+        in_range("train.time_budget_s", t.time_budget_s, 0.0, 1e9)
+    }
 }
 
 #[cfg(test)]

@@ -15,6 +15,10 @@ pub enum Error {
     /// A setting is out of range.
     #[error("{0}")]
     Config(String),
+    /// A loss, gradient or weight became NaN or infinite: training stops rather than
+    /// checkpoint or export it.
+    #[error("{0}")]
+    NonFinite(String),
 }
 
 /// Result with [`Error`].

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
 use nldf_core::image::{ImageRgb, error_map, grid};
-use nldf_core::metrics::{psnr, ssim};
+use nldf_core::metrics::{cap_psnr, psnr, ssim};
 use serde::Serialize;
 
 use crate::checkpoint::save_json;
@@ -120,6 +120,9 @@ pub struct EvalReport {
     pub render_s_per_frame: f64,
     /// Network multiply-adds per frame, on average (rays that miss the head cost none).
     pub macs_per_frame: f64,
+    /// Frames whose render holds a NaN or infinite value. Their scores are NaN, so the
+    /// means are too: an evaluation with any is a failure, not a score.
+    pub non_finite_frames: usize,
 }
 
 /// Everything one evaluation wrote.
@@ -155,6 +158,7 @@ pub fn eval_models(
     let mut scores: Vec<Vec<FrameScore>> = vec![Vec::with_capacity(n); models.len()];
     let mut render_s = vec![0.0; models.len()];
     let mut macs = vec![0.0; models.len()];
+    let mut non_finite = vec![0usize; models.len()];
     let mut rows: Vec<Vec<ImageRgb>> = Vec::new();
     let mut files = Vec::new();
     for m in models {
@@ -176,9 +180,10 @@ pub fn eval_models(
                 Some(r) => region_psnrs(&render, &truth, r)?,
                 None => (None, None),
             };
+            non_finite[mi] += usize::from(render.non_finite_values() > 0);
             scores[mi].push(FrameScore {
                 img_id: frame.img_id,
-                psnr: psnr(&render, &truth)?,
+                psnr: cap_psnr(psnr(&render, &truth)?),
                 ssim: ssim(&render, &truth)?,
                 face_psnr: face,
                 mouth_psnr: mouth,
@@ -202,10 +207,8 @@ pub fn eval_models(
     let grid_path = out.join("grid.png");
     grid(&rows, 2, [1.0; 3]).save_png(&grid_path)?;
     files.push(grid_path);
-    let finite_mean = |v: Vec<f64>| {
-        let v: Vec<f64> = v.into_iter().filter(|x| x.is_finite()).collect();
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-    };
+    // Plain means: a NaN frame makes its model's mean NaN instead of dropping out.
+    let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
     let reports: Vec<EvalReport> = models
         .iter()
         .zip(scores)
@@ -214,12 +217,13 @@ pub fn eval_models(
             model: model.describe(),
             split: format!("{split:?}").to_lowercase(),
             step: model.step(),
-            psnr: finite_mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::INFINITY),
-            ssim: finite_mean(scores.iter().map(|s| s.ssim).collect()).unwrap_or(1.0),
-            face_psnr: finite_mean(scores.iter().filter_map(|s| s.face_psnr).collect()),
-            mouth_psnr: finite_mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
+            psnr: mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::NAN),
+            ssim: mean(scores.iter().map(|s| s.ssim).collect()).unwrap_or(f64::NAN),
+            face_psnr: mean(scores.iter().filter_map(|s| s.face_psnr).collect()),
+            mouth_psnr: mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
             render_s_per_frame: render_s[mi] / n as f64,
             macs_per_frame: macs[mi] / n as f64,
+            non_finite_frames: non_finite[mi],
             frames: scores,
         })
         .collect();

@@ -33,7 +33,7 @@ impl CsvLog {
         }
         let mut body = kept.join("\n");
         body.push('\n');
-        nldf_core::error::write_atomic(path, body.as_bytes())?;
+        nldf_core::files::write_atomic(path, body.as_bytes())?;
         let file = std::fs::OpenOptions::new()
             .append(true)
             .open(path)

@@ -22,6 +22,9 @@ pub struct RaySamples {
     pub points: Vec<f32>,
     /// `[n_hit, 3]`: unit view directions.
     pub view_dirs: Vec<f32>,
+    /// `[n_hit]`: the `(t0, t1)` each ray is sampled over, its entry into and exit from the
+    /// bounds within `[near, far]` (the span Eq. 5's segments divide).
+    pub spans: Vec<(f32, f32)>,
 }
 
 /// Stratified samples inside the bounds: `n_samples` equal bins between entry and exit, one
@@ -47,6 +50,7 @@ pub fn sample_stratified<R: Rng + ?Sized>(
             continue;
         };
         s.hit.push(r);
+        s.spans.push((t0, t1));
         let norm = d.length();
         let bin = (t1 - t0) / n_samples as f32;
         let start = s.t_vals.len();
@@ -83,12 +87,8 @@ pub fn sample_stratified<R: Rng + ?Sized>(
 /// # Shapes
 /// - `weights`: `[n_hit, coarse.n_samples]`
 /// - returns `n_samples = coarse.n_samples + n_importance` per ray, the same rays hit
-#[allow(clippy::too_many_arguments)]
 pub fn sample_importance<R: Rng + ?Sized>(
     rays: &Rays,
-    bounds: &Bounds,
-    near: f32,
-    far: f32,
     coarse: &RaySamples,
     weights: &[f32],
     n_importance: usize,
@@ -100,6 +100,7 @@ pub fn sample_importance<R: Rng + ?Sized>(
         hit: coarse.hit.clone(),
         n_samples: total,
         view_dirs: coarse.view_dirs.clone(),
+        spans: coarse.spans.clone(),
         ..RaySamples::default()
     };
     let mut edges = vec![0.0f32; s + 1];
@@ -108,9 +109,7 @@ pub fn sample_importance<R: Rng + ?Sized>(
     for (h, &r) in coarse.hit.iter().enumerate() {
         let (o, d) = (rays.origin(r), rays.direction(r));
         let t = &coarse.t_vals[h * s..(h + 1) * s];
-        let (t0, t1) = bounds
-            .intersect(o, d, near, far)
-            .unwrap_or((t[0], t[s - 1]));
+        let (t0, t1) = coarse.spans[h];
         edges[0] = t0;
         for k in 1..s {
             edges[k] = 0.5 * (t[k - 1] + t[k]);

@@ -15,7 +15,7 @@ use crate::student_op::{StudentOp, StudentPlan};
 
 /// The student's shape.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct StudentConfig {
     pub audio: AudioConfig,
     /// How each ray becomes the network's input (paper: K = 16 points, L = 10).
@@ -99,18 +99,21 @@ impl StudentConfig {
         self.input_dim() * w + self.n_blocks() * 2 * w * w + w * 3 * self.segments
     }
 
-    /// Checks the shape: at least one block, even depth, positive sizes.
-    pub fn validate(&self) -> std::result::Result<(), String> {
-        if self.depth < 4 || !self.depth.is_multiple_of(2) {
-            return Err(format!(
-                "student depth must be even and >= 4 (1 + 2 x blocks + 1), got {}",
+    /// Checks the shape (at least one block, even depth, sizes in range); the error names
+    /// the key under `model`.
+    pub fn check(&self) -> crate::Result<()> {
+        use crate::config::in_range;
+        if self.depth < 4 || !self.depth.is_multiple_of(2) || self.depth > 512 {
+            return Err(crate::Error::Config(format!(
+                "`model.depth` must be even and in [4, 512] (1 + 2 x blocks + 1), got {}",
                 self.depth
-            ));
+            )));
         }
-        if self.width == 0 || self.segments == 0 || self.beam.n_points < 2 {
-            return Err("student width, segments >= 1 and beam points >= 2 are required".into());
-        }
-        Ok(())
+        in_range("model.width", self.width, 1, 4096)?;
+        in_range("model.segments", self.segments, 1, 64)?;
+        in_range("model.beam.n_points", self.beam.n_points, 2, 256)?;
+        in_range("model.beam.n_freqs", self.beam.n_freqs, 0, 16)?;
+        self.audio.check("model.audio")
     }
 }
 

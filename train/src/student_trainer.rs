@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use candle_core::{D, DType, Device, Tensor};
+use candle_core::{D, Device, Tensor};
 use candle_nn::VarMap;
 use nldf_core::beam::{BeamSpec, encode_beams};
 use nldf_core::camera::{Camera, turn_about};
@@ -28,15 +28,15 @@ use rayon::prelude::*;
 
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
-use crate::checkpoint::{CONFIG_FILE, load_json, load_tensors, save_json, save_tensors, step_of};
-use crate::config::{StudentRunConfig, StudentTrainConfig};
+use crate::checkpoint::{CONFIG_FILE, load_tensors, save_json, save_tensors, step_of};
+use crate::config::{StudentRunConfig, StudentTrainConfig, read_config};
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
 use crate::student::{Student, student};
 use crate::trainer::{
-    CheckpointParts, Schedule, Scores, TeacherRun, TrainData, TrainingRun, open_checkpoint,
-    save_checkpoint, validate_frames,
+    CheckpointParts, Schedule, Scores, TeacherRun, TrainData, TrainingRun, finite_loss,
+    open_checkpoint, save_checkpoint, validate_frames,
 };
 
 /// The teacher's cached segment colours beside a student checkpoint.
@@ -297,9 +297,16 @@ impl StudentRun {
         data: &TrainData,
         teacher: Option<&TeacherRun>,
     ) -> Result<StudentRun> {
-        cfg.model.audio.n_features = data.dataset.audio.n_features;
-        cfg.model.audio.window = data.dataset.audio.window;
+        cfg.model.audio.set_from(&data.dataset);
         if let Some(t) = teacher {
+            if t.cfg.model.audio.features != data.dataset.audio_source {
+                return Err(Error::Config(format!(
+                    "the teacher was trained on {} but the dataset's audio is {} from {}",
+                    t.cfg.model.audio.features.describe(),
+                    data.dataset.audio_source.describe(),
+                    data.dataset.audio_file.display()
+                )));
+            }
             cfg.model.audio = t.cfg.model.audio.clone();
             cfg.model.attention = t.step >= t.cfg.train.att_start;
         }
@@ -324,7 +331,7 @@ impl StudentRun {
     /// Loads the run in `dir` (config, weights, pool and, with `optimizer`, the optimizer
     /// state).
     pub fn open(dir: &Path, optimizer: bool) -> Result<StudentRun> {
-        let mut run = Self::build(dir, load_json(&dir.join(CONFIG_FILE))?)?;
+        let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
         let (step, elapsed) =
             open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
         run.step = step;
@@ -337,7 +344,7 @@ impl StudentRun {
     }
 
     fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentRun> {
-        validate(&cfg)?;
+        cfg.check()?;
         let (varmap, vb) = new_varmap();
         let student = student(&cfg.model, vb)?;
         let t = &cfg.train;
@@ -684,6 +691,7 @@ impl StudentRun {
             per_ray = (per_ray + (seg_sq * (t.lambda / 3.0))?)?;
         }
         let loss = per_ray.mean_all()?;
+        let loss_value = finite_loss(&loss)?;
         if update {
             let lr = self.learning_rate();
             let grads = loss.backward()?;
@@ -694,7 +702,7 @@ impl StudentRun {
         let main_mse =
             pixel_sq[..n_main].iter().map(|&v| v as f64).sum::<f64>() / (3 * n_main.max(1)) as f64;
         Ok(StepOutput {
-            loss: loss.to_dtype(DType::F64)?.to_scalar::<f64>()?,
+            loss: loss_value,
             per_ray: per_ray.to_vec1()?,
             main_mse,
         })
@@ -841,39 +849,6 @@ impl TrainingRun for StudentRun {
     fn save(&self) -> Result<()> {
         StudentRun::save(self)
     }
-}
-
-/// Checks a student configuration before any work starts.
-pub fn validate(cfg: &StudentRunConfig) -> Result<()> {
-    cfg.model.validate().map_err(Error::Config)?;
-    let t = &cfg.train;
-    if t.batch_rays == 0 || t.frames_per_batch == 0 {
-        return Err(Error::Config(
-            "batch_rays and frames_per_batch must be >= 1".into(),
-        ));
-    }
-    let betas_ok = (0.0..1.0).contains(&t.beta1) && (0.0..1.0).contains(&t.beta2);
-    if !(t.lr.is_finite() && t.lr > 0.0 && betas_ok) {
-        return Err(Error::Config(
-            "lr must be positive and beta1, beta2 in [0, 1)".into(),
-        ));
-    }
-    if !(t.lambda.is_finite() && t.lambda >= 0.0 && (0.0..=1.0).contains(&t.hard_ratio)) {
-        return Err(Error::Config(
-            "lambda must be >= 0 and hard_ratio in [0, 1]".into(),
-        ));
-    }
-    let turn_ok = |deg: f32| deg.is_finite() && (0.0..=45.0).contains(&deg);
-    if !((0.0..=1.0).contains(&t.pseudo_fraction)
-        && turn_ok(t.pseudo_yaw_deg)
-        && turn_ok(t.pseudo_pitch_deg))
-    {
-        return Err(Error::Config(
-            "pseudo_fraction must be in [0, 1] and pseudo_yaw_deg, pseudo_pitch_deg in [0, 45]"
-                .into(),
-        ));
-    }
-    Ok(())
 }
 
 /// A fingerprint of the views (poses, audio and mixing weights), stored with the cached

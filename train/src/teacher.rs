@@ -167,9 +167,6 @@ impl Teacher {
         let weights = self.coarse_weights(&coarse, &codes_of(&coarse.hit)?.detach())?;
         Ok(sample_importance(
             rays,
-            bounds,
-            near,
-            far,
             &coarse,
             &weights,
             self.cfg.n_importance,
@@ -327,8 +324,10 @@ impl Teacher {
 
 impl Teacher {
     /// The teacher's segment colours of Eq. 5, the student's distillation targets: each
-    /// ray's samples are split in order into `m` groups, segment `i` is the sum of
-    /// `w_k c_k` over its group with the transmittance accumulated from the ray's start, and
+    /// ray's sampled span inside the bounds is cut into `m` equal t-intervals
+    /// (`nldf_core::composite::segment_of`, whatever the samples' density, importance
+    /// samples included), segment `i` is the sum of `w_k c_k` over the samples in its
+    /// interval with the transmittance accumulated from the ray's start, and
     /// the background behind the last sample (AD-NeRF's last sample) belongs to the last
     /// segment, so that the segments sum to the pixel. Rays that miss the bounds are their
     /// background, all in the last segment. No early termination, no jitter.
@@ -370,7 +369,13 @@ impl Teacher {
                     &samples.deltas[h * s..(h + 1) * s],
                     &mut weights,
                 );
-                let segments = segment_colors(&weights, &colors[3 * s * k..3 * s * (k + 1)], m);
+                let segments = segment_colors(
+                    &weights,
+                    &colors[3 * s * k..3 * s * (k + 1)],
+                    &samples.t_vals[h * s..(h + 1) * s],
+                    samples.spans[h],
+                    m,
+                );
                 let optical_depth: f32 = (0..s)
                     .map(|j| {
                         (densities[k * s + j].max(0.0) * samples.deltas[h * s + j])

@@ -5,6 +5,7 @@
 //! Every step draws its batch from a generator seeded by `(seed, step)`, so a resumed run
 //! sees exactly the batches an uninterrupted one would have seen.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -12,9 +13,9 @@ use std::time::Instant;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
 use nldf_core::bounds::{Bounds, dataset_bounds};
-use nldf_core::dataset::{Dataset, Frame, Split};
+use nldf_core::dataset::{AudioChoice, Dataset, Frame, Split};
 use nldf_core::image::ImageRgb;
-use nldf_core::metrics::{psnr, psnr_from_mse, psnr_masked, ssim};
+use nldf_core::metrics::{cap_psnr, psnr, psnr_from_mse, psnr_masked, ssim};
 use nldf_core::rays::{Rays, rays_for_image, sample_batch};
 use nldf_core::region::Region;
 use rand::seq::index::sample as sample_indices;
@@ -24,10 +25,10 @@ use rand_chacha::ChaCha8Rng;
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
 use crate::checkpoint::{
-    CONFIG_FILE, MODEL_FILE, STATE_FILE, load_json, load_tensors, restore_weights, save_json,
-    save_tensors, step_of, weights,
+    CONFIG_FILE, MODEL_FILE, STATE_FILE, load_tensors, restore_weights, save_json, save_tensors,
+    step_of, weights,
 };
-use crate::config::TeacherRunConfig;
+use crate::config::{TeacherRunConfig, read_config};
 
 /// The training curve written beside the log at every checkpoint.
 pub const CURVE_FILE: &str = "training_curve.png";
@@ -56,7 +57,12 @@ impl TrainData {
     /// Loads and validates a dataset; decodes the training frames only with `decode`
     /// (rendering and evaluation need none).
     pub fn open(root: &Path, decode: bool) -> Result<TrainData> {
-        let dataset = Dataset::load(root)?;
+        Self::open_with(root, decode, &AudioChoice::Auto)
+    }
+
+    /// [`TrainData::open`] with the audio features `audio` says (a trained run's, say).
+    pub fn open_with(root: &Path, decode: bool, audio: &AudioChoice) -> Result<TrainData> {
+        let dataset = Dataset::load_with(root, audio)?;
         let (mut images, mut mouth_pixels) = (Vec::new(), Vec::new());
         if decode {
             let width = dataset.intrinsics.width as usize;
@@ -110,10 +116,14 @@ pub struct Scores {
     /// PSNR inside the mouth region (when the dataset has parsing masks).
     pub mouth_psnr: Option<f64>,
     pub frames: usize,
+    /// Frames whose render holds a NaN or infinite value: their scores are NaN, and so are
+    /// the means above.
+    #[serde(default)]
+    pub non_finite: usize,
 }
 
 /// PSNR inside the head and inside the mouth (each `None` where the region is empty),
-/// capped at 100 dB.
+/// capped at [`nldf_core::metrics::PSNR_CAP`] dB (a NaN stays NaN).
 pub fn region_psnrs(
     render: &ImageRgb,
     truth: &ImageRgb,
@@ -122,8 +132,8 @@ pub fn region_psnrs(
     let head: Vec<bool> = regions.iter().map(|r| r.is_head()).collect();
     let mouth: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
     Ok((
-        psnr_masked(render, truth, &head)?.map(|v| v.min(100.0)),
-        psnr_masked(render, truth, &mouth)?.map(|v| v.min(100.0)),
+        psnr_masked(render, truth, &head)?.map(cap_psnr),
+        psnr_masked(render, truth, &mouth)?.map(cap_psnr),
     ))
 }
 
@@ -151,12 +161,16 @@ pub fn validate_frames(
     score_frames(&pairs)
 }
 
-/// Scores of rendered frames against their ground truth and optional region masks.
+/// Scores of rendered frames against their ground truth and optional region masks. A
+/// render holding a NaN or infinite value makes every mean NaN and is counted in
+/// [`Scores::non_finite`]: it never scores as a good frame.
 pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Result<Scores> {
     let (mut p, mut s) = (0.0, 0.0);
     let (mut face, mut mouth) = (Vec::new(), Vec::new());
+    let mut non_finite = 0;
     for (render, truth, regions) in pairs {
-        p += psnr(render, truth)?.min(100.0);
+        non_finite += usize::from(render.non_finite_values() > 0);
+        p += cap_psnr(psnr(render, truth)?);
         s += ssim(render, truth)?;
         if let Some(regions) = regions {
             let (f, m) = region_psnrs(render, truth, regions)?;
@@ -172,6 +186,7 @@ pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Resu
         face_psnr: mean(face),
         mouth_psnr: mean(mouth),
         frames: pairs.len(),
+        non_finite,
     })
 }
 
@@ -192,11 +207,10 @@ pub struct TeacherRun {
 }
 
 impl TeacherRun {
-    /// A new run in `dir` with seeded weights. The audio feature width is taken from the
-    /// data.
+    /// A new run in `dir` with seeded weights. The audio features' width and source are
+    /// taken from the data.
     pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
-        cfg.model.audio.n_features = data.dataset.audio.n_features;
-        cfg.model.audio.window = data.dataset.audio.window;
+        cfg.model.audio.set_from(&data.dataset);
         let run = Self::build(dir, cfg)?;
         init_seeded(&run.varmap, run.cfg.train.seed)?;
         crate::audio_net::centre_attention(&run.varmap, "audio", run.cfg.model.audio.att_frames)?;
@@ -206,7 +220,7 @@ impl TeacherRun {
     /// Loads the run in `dir` (its `config.json`, weights and, with `optimizer`, the
     /// optimizer state) to continue training or to render.
     pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
-        let mut run = Self::build(dir, load_json(&dir.join(CONFIG_FILE))?)?;
+        let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
         let (step, elapsed) =
             open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
         run.step = step;
@@ -217,7 +231,7 @@ impl TeacherRun {
     /// A run at step 0 with the network of `cfg` (weights as the variable builder made
     /// them) and a fresh optimizer.
     fn build(dir: &Path, cfg: TeacherRunConfig) -> Result<TeacherRun> {
-        validate(&cfg)?;
+        cfg.check()?;
         let (varmap, vb) = new_varmap();
         let teacher = teacher(&cfg.model, vb)?;
         let adam = new_adam(&varmap, &cfg)?;
@@ -338,12 +352,12 @@ impl TeacherRun {
         let scale = 1.0 / (3 * n) as f64;
         let hit_sq = (&out.color - &gt_hit)?.sqr()?.sum_all()?;
         let loss = (hit_sq.affine(scale, miss_sq * scale))?;
+        let value = finite_loss(&loss)?;
         let lr = self.learning_rate();
         let grads = loss.backward()?;
         self.adam.step(&grads, lr)?;
         self.step += 1;
-        let loss = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
-        Ok((loss, psnr_from_mse(loss)))
+        Ok((value, psnr_from_mse(value)))
     }
 
     /// Renders a whole frame of the dataset (any split).
@@ -470,9 +484,24 @@ pub trait TrainingRun {
     fn save(&self) -> Result<()>;
 }
 
+/// The value of a scalar loss, or [`Error::NonFinite`] when it is NaN or infinite (checked
+/// before the backward pass, so that a diverged step changes no weight).
+pub fn finite_loss(loss: &Tensor) -> Result<f64> {
+    let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(Error::NonFinite(format!("the loss is {value}")))
+    }
+}
+
 /// Trains until the schedule's steps are done, its time budget is spent or `stop` is set,
 /// validating, logging to `log.csv` and checkpointing as scheduled; always leaves a
 /// checkpoint of the last step. Returns the final validation scores when it ran to the end.
+///
+/// A loss or gradient that becomes NaN or infinite, or a validation render that does,
+/// stops the run with [`Error::NonFinite`] naming the step: nothing is checkpointed after
+/// it, so the last checkpoint on disk is the last good one.
 pub fn train_loop(
     run: &mut dyn TrainingRun,
     data: &TrainData,
@@ -484,6 +513,17 @@ pub fn train_loop(
     let mut log = crate::log::CsvLog::open(&dir.join("log.csv"), run.step())?;
     let t = run.schedule();
     let mut last_val = None;
+    let mut saved = (run.step() > 0).then_some(run.step());
+    let diverged = |step: usize, what: String, saved: Option<usize>| {
+        let kept = match saved {
+            Some(s) => format!("the checkpoint of step {s} in {} is kept", dir.display()),
+            None => "no checkpoint was written".to_string(),
+        };
+        Error::NonFinite(format!(
+            "training diverged at step {step}: {what}; {kept}; lower the learning rate (`lr`) \
+             and train again"
+        ))
+    };
     while run.step() < t.iters {
         if stop.load(Ordering::Relaxed) {
             run.save()?;
@@ -494,7 +534,11 @@ pub fn train_loop(
             return Ok(None);
         }
         let started = Instant::now();
-        let (loss, psnr) = run.train_step(data)?;
+        let (loss, psnr) = match run.train_step(data) {
+            Ok(v) => v,
+            Err(Error::NonFinite(what)) => return Err(diverged(run.step() + 1, what, saved)),
+            Err(e) => return Err(e),
+        };
         let rays_per_s = t.batch_rays as f64 / started.elapsed().as_secs_f64().max(1e-9);
         let step = run.step();
         on_event(&Event::Step {
@@ -508,6 +552,13 @@ pub fn train_loop(
         let validate_now = (t.val_every > 0 && step.is_multiple_of(t.val_every)) || last;
         let scores = if validate_now {
             let s = run.validate(data, t.val_frames)?;
+            if s.non_finite > 0 {
+                let what = format!(
+                    "{} of {} validation renders hold NaN or infinite values",
+                    s.non_finite, s.frames
+                );
+                return Err(diverged(step, what, saved));
+            }
             on_event(&Event::Validation { step, scores: s });
             last_val = Some(s);
             Some(s)
@@ -527,6 +578,7 @@ pub fn train_loop(
         }
         if (t.checkpoint_every > 0 && step.is_multiple_of(t.checkpoint_every)) || last {
             run.save()?;
+            saved = Some(step);
             on_event(&Event::Checkpoint {
                 step,
                 dir: dir.clone(),
@@ -556,6 +608,13 @@ pub struct CheckpointParts<'a> {
 /// metadata), and redraws the training curve from `log.csv`. The caller writes its config.
 pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
     let dir = parts.dir;
+    let weights = weights(parts.varmap)?;
+    if let Some(name) = first_non_finite(&weights)? {
+        return Err(Error::NonFinite(format!(
+            "refusing to checkpoint {}: weight `{name}` holds a NaN or infinite value",
+            dir.display()
+        )));
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let meta = |kind: &str| {
         [
@@ -571,17 +630,29 @@ pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
         &parts.adam.state()?,
         meta("optimizer"),
     )?;
-    save_tensors(
-        &dir.join(MODEL_FILE),
-        &weights(parts.varmap)?,
-        meta(parts.kind),
-    )?;
+    save_tensors(&dir.join(MODEL_FILE), &weights, meta(parts.kind))?;
     let log = dir.join("log.csv");
     if log.is_file() {
         let rows = crate::log::read_log(&log)?;
         crate::plot::plot_training_curve(&dir.join(CURVE_FILE), parts.title, &rows)?;
     }
     Ok(())
+}
+
+/// The name of the first tensor (in name order) holding a NaN or infinite value.
+pub fn first_non_finite(tensors: &HashMap<String, Tensor>) -> Result<Option<String>> {
+    let mut names: Vec<&String> = tensors.keys().collect();
+    names.sort();
+    for name in names {
+        let values: Vec<f32> = tensors[name]
+            .flatten_all()?
+            .to_dtype(DType::F32)?
+            .to_vec1()?;
+        if values.iter().any(|v| !v.is_finite()) {
+            return Ok(Some(name.clone()));
+        }
+    }
+    Ok(None)
 }
 
 /// Restores the weights in `dir` into `varmap` and, given `adam`, the optimizer state
@@ -638,39 +709,4 @@ fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
             eps: t.eps,
         },
     ))
-}
-
-/// Checks a run configuration before any work starts.
-pub fn validate(cfg: &TeacherRunConfig) -> Result<()> {
-    let m = &cfg.model;
-    let t = &cfg.train;
-    let bad = |s: String| Err(Error::Config(s));
-    if m.depth == 0 || m.width == 0 || m.color_width == 0 || m.n_samples < 2 {
-        return bad(
-            "the teacher needs depth, width and color_width >= 1 and n_samples >= 2".into(),
-        );
-    }
-    if m.skips.iter().any(|&s| s + 1 >= m.depth) {
-        return bad(format!(
-            "skips {:?} must name layers before the last of {}",
-            m.skips, m.depth
-        ));
-    }
-    if m.audio.window != 16 {
-        return bad(format!(
-            "the audio window must be 16 frames (AudioNet halves it 4 times), got {}",
-            m.audio.window
-        ));
-    }
-    if m.audio.att_frames == 0 || m.audio.dim == 0 || m.audio.n_features == 0 {
-        return bad("audio dim, att_frames and n_features must be >= 1".into());
-    }
-    if t.batch_rays == 0 || t.frames_per_batch == 0 {
-        return bad("batch_rays and frames_per_batch must be >= 1".into());
-    }
-    let betas_ok = (0.0..1.0).contains(&t.beta1) && (0.0..1.0).contains(&t.beta2);
-    if !(t.lr.is_finite() && t.lr > 0.0 && betas_ok) {
-        return bad("lr must be positive and beta1, beta2 in [0, 1)".into());
-    }
-    Ok(())
 }

@@ -19,10 +19,11 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::audio::{FeatureConfig, Waveform, audio_windows, resample, write_wav};
+use crate::audio::{FeatureConfig, FeatureSource, Waveform, audio_windows, resample, write_wav};
 use crate::camera::{Camera, Intrinsics, look_at};
-use crate::dataset::{FrameEntry, Split, TransformsFile, save_audio_npy, save_regions_png};
-use crate::error::{Error, Result, read_json, write_json};
+use crate::dataset::{FrameEntry, Split, TransformsFile, save_audio_features, save_regions_png};
+use crate::error::{Error, Result};
+use crate::files::{read_json, write_json};
 use crate::image::save_png_bytes;
 use crate::rays::Rect;
 use crate::region::Region;
@@ -424,7 +425,7 @@ fn write_scene(
     }
     background.save_png(&dir.join("bc.png"))?;
     write_wav(&dir.join("aud.wav"), &wave)?;
-    save_audio_npy(&dir.join("aud.npy"), &windows)?;
+    save_audio_features(dir, &windows, &FeatureSource::Nldf(cfg.features.clone()))?;
 
     let face_rects: Vec<Rect> = (0..n_frames)
         .into_par_iter()
@@ -520,6 +521,7 @@ fn write_scene(
         ("bc.png", 1),
         ("aud.wav", 1),
         ("aud.npy", 1),
+        ("aud.json", 1),
         ("head_imgs", n_frames),
         ("parsing", n_frames),
         ("depth", n_frames),

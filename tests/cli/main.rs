@@ -1,0 +1,963 @@
+//! The bad-input suite: the `nldf` binary given wrong files and wrong flags. Every case must
+//! end with exactly one line `error: ...` that names the file or the flag at fault, a
+//! non-zero exit that is not a panic's, and no output left behind.
+
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use nldf_core::audio::{FeatureConfig, FeatureSource, Waveform, write_wav};
+use nldf_core::dataset::AUDIO_SOURCE_FILE;
+
+/// Runs `nldf` with `args`.
+fn nldf<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: Into<OsString>,
+{
+    Command::new(env!("CARGO_BIN_EXE_nldf"))
+        .args(args.into_iter().map(Into::into))
+        .env_remove("ORT_DYLIB_PATH")
+        .output()
+        .expect("running nldf")
+}
+
+/// Runs `nldf` and asserts it succeeded.
+fn nldf_ok<I, S>(args: I) -> Output
+where
+    I: IntoIterator<Item = S>,
+    S: Into<OsString>,
+{
+    let out = nldf(args);
+    assert!(
+        out.status.success(),
+        "nldf failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A small dataset whose audio is nldf's own 5-mel features, with a trained tiny teacher
+/// and student and the exported model, made once through the command line.
+struct Fixture {
+    _dir: tempfile::TempDir,
+    data: PathBuf,
+    run: PathBuf,
+    model: PathBuf,
+    wav: PathBuf,
+}
+
+fn fixture() -> &'static Fixture {
+    static F: OnceLock<Fixture> = OnceLock::new();
+    F.get_or_init(|| {
+        let dir = tempfile::Builder::new()
+            .prefix("cli-fixture")
+            .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
+            .unwrap();
+        let data = dir.path().join("data");
+        nldf_tests::write_tiny_dataset(&data);
+        let source = FeatureSource::Nldf(FeatureConfig {
+            n_mels: 5,
+            ..FeatureConfig::default()
+        });
+        nldf_core::files::write_json(&data.join(AUDIO_SOURCE_FILE), &source).unwrap();
+        let run = dir.path().join("run");
+        let s = |p: &Path| p.to_str().unwrap().to_string();
+        nldf_ok([
+            "train",
+            "teacher",
+            "--data",
+            &s(&data),
+            "--run",
+            &s(&run),
+            "--preset",
+            "tiny",
+            "--iters",
+            "3",
+        ]);
+        nldf_ok([
+            "train",
+            "student",
+            "--data",
+            &s(&data),
+            "--run",
+            &s(&run),
+            "--depth",
+            "tiny",
+            "--iters",
+            "2",
+        ]);
+        nldf_ok(["export", "--run", &s(&run)]);
+        let wav = dir.path().join("speech.wav");
+        write_wav(
+            &wav,
+            &Waveform {
+                sample_rate: 16_000,
+                samples: (0..8000).map(|i| (i as f32 * 0.05).sin() * 0.3).collect(),
+            },
+        )
+        .unwrap();
+        Fixture {
+            model: run.join("model.onnx"),
+            _dir: dir,
+            data,
+            run,
+            wav,
+        }
+    })
+}
+
+/// A fresh folder for one case.
+fn scratch() -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix("cli-case")
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
+        .unwrap()
+}
+
+/// A copy of the folder `from` at `to`.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dst = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dst);
+        } else {
+            std::fs::copy(e.path(), dst).unwrap();
+        }
+    }
+}
+
+/// The fixture's dataset copied to `dir/data`, damaged by `damage`.
+fn damaged_data(dir: &Path, damage: impl FnOnce(&Path)) -> PathBuf {
+    let data = dir.join("data");
+    copy_dir(&fixture().data, &data);
+    damage(&data);
+    data
+}
+
+/// The fixture's run copied to `dir/run`, damaged by `damage`.
+fn damaged_run(dir: &Path, damage: impl FnOnce(&Path)) -> PathBuf {
+    let run = dir.join("run");
+    copy_dir(&fixture().run, &run);
+    damage(&run);
+    run
+}
+
+fn edit_json(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    edit(&mut v);
+    std::fs::write(path, v.to_string()).unwrap();
+}
+
+/// Cases run and refused, counted for the report.
+static CASES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// Runs `nldf args` and asserts the refusal: one `error:` line, the last on stderr, naming
+/// every needle; a non-zero exit that is not a panic's (101); and none of `absent` left.
+#[track_caller]
+fn refused(case: &str, args: &[String], needles: &[&str], absent: &[&Path]) {
+    let out = nldf(args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let code = out.status.code();
+    assert!(
+        !out.status.success() && code != Some(101),
+        "{case}: exit {code:?}\n{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{case}: panic\n{stderr}");
+    let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+    let errors: Vec<&&str> = lines.iter().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(errors.len(), 1, "{case}: want one error line\n{stderr}");
+    let last = lines.last().copied().unwrap_or_default();
+    assert!(
+        last.starts_with("error: "),
+        "{case}: last line {last:?}\n{stderr}"
+    );
+    for needle in needles {
+        assert!(
+            last.contains(needle),
+            "{case}: {last:?} does not name {needle:?}"
+        );
+    }
+    for path in absent {
+        assert!(!path.exists(), "{case}: left {} behind", path.display());
+    }
+    CASES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    println!("{case}: {last}");
+}
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+fn args(list: &[&str]) -> Vec<String> {
+    list.iter().map(|a| a.to_string()).collect()
+}
+
+/// `nldf train teacher` on the dataset `data` into `dir/run`.
+fn train_teacher(data: &Path, dir: &Path) -> (Vec<String>, PathBuf) {
+    let run = dir.join("run");
+    let a = args(&[
+        "train",
+        "teacher",
+        "--data",
+        &s(data),
+        "--run",
+        &s(&run),
+        "--preset",
+        "tiny",
+        "--iters",
+        "2",
+    ]);
+    (a, run)
+}
+
+#[test]
+fn bad_transforms_files_are_refused() {
+    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+        (
+            "transforms_train.json missing",
+            Box::new(|d: &Path| std::fs::remove_file(d.join("transforms_train.json")).unwrap()),
+            "transforms_train.json",
+        ),
+        (
+            "transforms_train.json not JSON",
+            Box::new(|d: &Path| std::fs::write(d.join("transforms_train.json"), "{ nope").unwrap()),
+            "transforms_train.json",
+        ),
+        (
+            "transforms_val.json cut short",
+            Box::new(|d: &Path| {
+                let p = d.join("transforms_val.json");
+                let t = std::fs::read_to_string(&p).unwrap();
+                std::fs::write(&p, &t[..t.len() / 2]).unwrap();
+            }),
+            "transforms_val.json",
+        ),
+        (
+            "a matrix that is not rigid",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["frames"][1]["transform_matrix"][0][0] = 3.0.into()
+                })
+            }),
+            "transforms_train.json",
+        ),
+        (
+            "aud_id beyond aud.npy",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["frames"][0]["aud_id"] = 99.into()
+                })
+            }),
+            "aud_id 99",
+        ),
+        (
+            "negative focal length",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["focal_len"] = (-5.0).into()
+                })
+            }),
+            "focal_len",
+        ),
+        (
+            "face_rect outside the image",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["frames"][0]["face_rect"] = serde_json::json!([500, 500, 10, 10])
+                })
+            }),
+            "face_rect",
+        ),
+        (
+            "near without far",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v.as_object_mut().unwrap().remove("far");
+                })
+            }),
+            "near",
+        ),
+        (
+            "no training frames",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["frames"] = serde_json::json!([])
+                })
+            }),
+            "has no frames",
+        ),
+        (
+            "frames as a string",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["frames"] = "many".into()
+                })
+            }),
+            "transforms_train.json",
+        ),
+        (
+            "a huge face_rect",
+            Box::new(|d: &Path| {
+                edit_json(&d.join("transforms_train.json"), |v| {
+                    v["frames"][0]["face_rect"] =
+                        serde_json::json!([i64::MAX, i64::MAX, i64::MAX, i64::MAX])
+                })
+            }),
+            "face_rect",
+        ),
+    ];
+    for (case, damage, needle) in cases {
+        let dir = scratch();
+        let data = damaged_data(dir.path(), damage);
+        let (a, run) = train_teacher(&data, dir.path());
+        refused(case, &a, &[needle], &[&run]);
+    }
+}
+
+#[test]
+fn bad_images_and_audio_files_are_refused() {
+    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+        (
+            "a frame that is not a PNG",
+            Box::new(|d: &Path| std::fs::write(d.join("head_imgs/2.png"), b"not a png").unwrap()),
+            "2.png",
+        ),
+        (
+            "a frame of the wrong size",
+            Box::new(|d: &Path| {
+                nldf_tests::pattern_image(8, 8, 1)
+                    .save_png(&d.join("head_imgs/1.png"))
+                    .unwrap()
+            }),
+            "1.png",
+        ),
+        (
+            "a missing frame",
+            Box::new(|d: &Path| std::fs::remove_file(d.join("head_imgs/3.png")).unwrap()),
+            "3.png",
+        ),
+        (
+            "no background",
+            Box::new(|d: &Path| std::fs::remove_file(d.join("bc.png")).unwrap()),
+            "bc.png",
+        ),
+        (
+            "a background cut short",
+            Box::new(|d: &Path| {
+                let p = d.join("bc.png");
+                let b = std::fs::read(&p).unwrap();
+                std::fs::write(&p, &b[..b.len() / 2]).unwrap();
+            }),
+            "bc.png",
+        ),
+        (
+            "aud.npy of garbage",
+            Box::new(|d: &Path| std::fs::write(d.join("aud.npy"), b"\x93NUMPY garbage").unwrap()),
+            "aud.npy",
+        ),
+        (
+            "aud.npy cut short",
+            Box::new(|d: &Path| {
+                let p = d.join("aud.npy");
+                let b = std::fs::read(&p).unwrap();
+                std::fs::write(&p, &b[..b.len() - 40]).unwrap();
+            }),
+            "aud.npy",
+        ),
+        (
+            "aud.npy of the wrong shape",
+            Box::new(|d: &Path| {
+                let w = nldf_core::audio::AudioWindows {
+                    n_frames: 6,
+                    window: 8,
+                    n_features: 5,
+                    data: vec![0.0; 6 * 8 * 5],
+                };
+                nldf_core::dataset::save_audio_npy(&d.join("aud.npy"), &w).unwrap();
+            }),
+            "aud.npy",
+        ),
+        (
+            "aud.npy holding a NaN",
+            Box::new(|d: &Path| {
+                let mut w = nldf_core::dataset::load_audio_npy(&d.join("aud.npy")).unwrap();
+                w.data[17] = f32::NAN;
+                nldf_core::dataset::save_audio_npy(&d.join("aud.npy"), &w).unwrap();
+            }),
+            "aud.npy",
+        ),
+        (
+            "aud.json not JSON",
+            Box::new(|d: &Path| std::fs::write(d.join("aud.json"), "[").unwrap()),
+            "aud.json",
+        ),
+        (
+            "aud.json describing other windows",
+            Box::new(|d: &Path| {
+                let src = FeatureSource::Nldf(FeatureConfig::default());
+                nldf_core::files::write_json(&d.join("aud.json"), &src).unwrap();
+            }),
+            "aud.json",
+        ),
+        (
+            "aud.wav that is not a WAV (aud.npy another front end's)",
+            Box::new(|d: &Path| {
+                std::fs::remove_file(d.join("aud.json")).unwrap();
+                std::fs::write(d.join("aud.wav"), b"RIFF....WAVEjunk").unwrap();
+            }),
+            "aud.wav",
+        ),
+        (
+            "a parsing mask missing",
+            Box::new(|d: &Path| {
+                std::fs::create_dir_all(d.join("parsing")).unwrap();
+            }),
+            "parsing",
+        ),
+    ];
+    for (case, damage, needle) in cases {
+        let dir = scratch();
+        let data = damaged_data(dir.path(), damage);
+        let (a, run) = train_teacher(&data, dir.path());
+        refused(case, &a, &[needle], &[&run]);
+    }
+}
+
+#[test]
+fn bad_checkpoints_and_configs_are_refused() {
+    let f = fixture();
+    // Checkpoints.
+    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+        (
+            "student weights of garbage",
+            Box::new(|r: &Path| {
+                std::fs::write(r.join("student/model.safetensors"), b"xx").unwrap()
+            }),
+            "model.safetensors",
+        ),
+        (
+            "student weights cut short",
+            Box::new(|r: &Path| {
+                let p = r.join("student/model.safetensors");
+                let b = std::fs::read(&p).unwrap();
+                std::fs::write(&p, &b[..b.len() / 2]).unwrap();
+            }),
+            "model.safetensors",
+        ),
+        (
+            "a header that claims 2^60 bytes",
+            Box::new(|r: &Path| {
+                let p = r.join("student/model.safetensors");
+                let mut b = std::fs::read(&p).unwrap();
+                b[..8].copy_from_slice(&(1u64 << 60).to_le_bytes());
+                std::fs::write(&p, b).unwrap();
+            }),
+            "model.safetensors",
+        ),
+        (
+            "a student config that is not one",
+            Box::new(|r: &Path| std::fs::write(r.join("student/config.json"), "{}").unwrap()),
+            "config.json",
+        ),
+        (
+            "render.json with far below near",
+            Box::new(|r: &Path| {
+                edit_json(&r.join("student/render.json"), |v| v["far"] = 0.1.into())
+            }),
+            "render.json",
+        ),
+    ];
+    for (case, damage, needle) in cases {
+        let dir = scratch();
+        let run = damaged_run(dir.path(), damage);
+        let out = dir.path().join("out.onnx");
+        refused(
+            case,
+            &args(&["export", "--run", &s(&run), "--out", &s(&out)]),
+            &[needle],
+            &[&out],
+        );
+    }
+    // A teacher whose weights lack a tensor: eval names the file.
+    let dir = scratch();
+    let run = damaged_run(dir.path(), |r| {
+        let p = r.join("teacher/model.safetensors");
+        let (mut t, _) = nldf_train::checkpoint::load_tensors(&p).unwrap();
+        let first = t.keys().min().unwrap().clone();
+        t.remove(&first);
+        let meta = [("step".to_string(), "3".to_string())]
+            .into_iter()
+            .collect();
+        nldf_train::checkpoint::save_tensors(&p, &t, meta).unwrap();
+    });
+    let out = dir.path().join("eval");
+    refused(
+        "teacher weights lacking a tensor",
+        &args(&[
+            "eval",
+            "--run",
+            &s(&run),
+            "--data",
+            &s(&f.data),
+            "--out",
+            &s(&out),
+        ]),
+        &["model.safetensors", "lacks weight"],
+        &[&out],
+    );
+    // Config files.
+    let configs = [
+        (
+            "a config with unknown keys",
+            r#"{"width": -1, "depth": "many"}"#,
+            "unknown field `width`",
+        ),
+        (
+            "a config with a value out of range",
+            r#"{"model": {"width": 0}}"#,
+            "`model.width`",
+        ),
+        (
+            "a config with a value of the wrong type",
+            r#"{"model": {"depth": "many"}}"#,
+            "`model.depth`",
+        ),
+        ("a config that is not JSON", "model: 3", "cfg.json"),
+        ("a config naming a missing file", "", "missing.json"),
+    ];
+    for (case, text, needle) in configs {
+        let dir = scratch();
+        let cfg = if text.is_empty() {
+            dir.path().join("missing.json")
+        } else {
+            let p = dir.path().join("cfg.json");
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        let run = dir.path().join("run");
+        refused(
+            case,
+            &args(&[
+                "train",
+                "teacher",
+                "--data",
+                &s(&f.data),
+                "--run",
+                &s(&run),
+                "--config",
+                &s(&cfg),
+            ]),
+            &[needle],
+            &[&run],
+        );
+    }
+    let dir = scratch();
+    let cfg = dir.path().join("student.json");
+    std::fs::write(&cfg, r#"{"train": {"lamda": 0.2}}"#).unwrap();
+    let run = damaged_run(dir.path(), |r| {
+        std::fs::remove_dir_all(r.join("student")).unwrap()
+    });
+    refused(
+        "a student config with a misspelt key",
+        &args(&[
+            "train",
+            "student",
+            "--data",
+            &s(&f.data),
+            "--run",
+            &s(&run),
+            "--config",
+            &s(&cfg),
+        ]),
+        &["student.json", "unknown field `lamda`"],
+        &[&run.join("student")],
+    );
+}
+
+#[test]
+fn bad_models_and_audio_for_render_are_refused() {
+    let f = fixture();
+    let model_bytes = std::fs::read(&f.model).unwrap();
+    let write = |dir: &Path, name: &str, bytes: &[u8]| -> PathBuf {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let render = |model: &Path, wav: &Path, out: &Path| {
+        args(&[
+            "render",
+            "--model",
+            &s(model),
+            "--audio",
+            &s(wav),
+            "--out",
+            &s(out),
+        ])
+    };
+    let dir = scratch();
+    let d = dir.path();
+    let out = d.join("video");
+    let mut flipped = model_bytes.clone();
+    let at = flipped.len() / 2;
+    flipped[at] ^= 0x40;
+    let models = [
+        (
+            "a model of garbage",
+            write(d, "garbage.onnx", b"\x08\x09garbage"),
+            "garbage.onnx",
+        ),
+        ("an empty model", write(d, "empty.onnx", b""), "empty.onnx"),
+        (
+            "a model cut short",
+            write(d, "cut.onnx", &model_bytes[..model_bytes.len() / 2]),
+            "cut.onnx",
+        ),
+        (
+            "a model with a flipped weight byte",
+            write(d, "flipped.onnx", &flipped),
+            "flipped.onnx",
+        ),
+        ("a missing model", d.join("absent.onnx"), "absent.onnx"),
+        (
+            "an ONNX model nldf did not write",
+            {
+                use prost::Message;
+                let proto = nldf_export::onnx::ModelProto {
+                    ir_version: Some(8),
+                    graph: Some(Default::default()),
+                    ..Default::default()
+                };
+                write(d, "foreign.onnx", &proto.encode_to_vec())
+            },
+            "foreign.onnx",
+        ),
+    ];
+    for (case, model, needle) in models {
+        refused(case, &render(&model, &f.wav, &out), &[needle], &[&out]);
+    }
+    let wavs = [
+        (
+            "a WAV of garbage",
+            write(d, "garbage.wav", b"RIFF\x10\0\0\0WAVEfmt "),
+            "garbage.wav",
+        ),
+        ("an empty WAV", write(d, "empty.wav", b""), "empty.wav"),
+        ("a missing WAV", d.join("absent.wav"), "absent.wav"),
+        (
+            "a WAV shorter than a frame",
+            {
+                let p = d.join("short.wav");
+                write_wav(
+                    &p,
+                    &Waveform {
+                        sample_rate: 16_000,
+                        samples: vec![0.1; 100],
+                    },
+                )
+                .unwrap();
+                p
+            },
+            "short.wav",
+        ),
+        (
+            "a WAV cut inside its samples",
+            {
+                let b = std::fs::read(&f.wav).unwrap();
+                write(d, "cut.wav", &b[..b.len() - 1])
+            },
+            "cut.wav",
+        ),
+    ];
+    for (case, wav, needle) in wavs {
+        refused(case, &render(&f.model, &wav, &out), &[needle], &[&out]);
+    }
+    let wide = d.join("wide.npy");
+    let w = nldf_core::audio::AudioWindows {
+        n_frames: 3,
+        window: 16,
+        n_features: 29,
+        data: vec![0.0; 3 * 16 * 29],
+    };
+    nldf_core::dataset::save_audio_npy(&wide, &w).unwrap();
+    refused(
+        "features of another width",
+        &args(&[
+            "render",
+            "--model",
+            &s(&f.model),
+            "--features",
+            &s(&wide),
+            "--out",
+            &s(&out),
+        ]),
+        &["wide.npy"],
+        &[&out],
+    );
+}
+
+#[test]
+fn command_line_misuse_is_refused() {
+    let f = fixture();
+    let dir = scratch();
+    let d = dir.path();
+    let out = d.join("out");
+    let model = s(&f.model);
+    let wav = s(&f.wav);
+    let o = s(&out);
+    let file = d.join("a_file");
+    std::fs::write(&file, b"x").unwrap();
+    let under_file = s(&file.join("sub"));
+    let busy = d.join("busy");
+    std::fs::create_dir_all(&busy).unwrap();
+    std::fs::write(busy.join("keep.txt"), b"x").unwrap();
+    let cases: Vec<(&str, Vec<String>, Vec<&str>, Vec<PathBuf>)> = vec![
+        (
+            "an unknown backend",
+            args(&[
+                "render",
+                "--model",
+                &model,
+                "--audio",
+                &wav,
+                "--backend",
+                "cuda",
+                "--out",
+                &o,
+            ]),
+            vec!["--backend", "cuda"],
+            vec![out.clone()],
+        ),
+        (
+            "an unknown subcommand",
+            args(&["trian"]),
+            vec!["trian"],
+            vec![],
+        ),
+        (
+            "an unknown flag",
+            args(&["export", "--run", &s(&f.run), "--int4"]),
+            vec!["--int4"],
+            vec![],
+        ),
+        (
+            "image size zero",
+            args(&[
+                "render", "--model", &model, "--audio", &wav, "--size", "0", "--out", &o,
+            ]),
+            vec!["--size"],
+            vec![out.clone()],
+        ),
+        (
+            "a negative size",
+            args(&[
+                "render",
+                "--model",
+                &model,
+                "--audio",
+                &wav,
+                "--size=-4",
+                "--out",
+                &o,
+            ]),
+            vec!["--size"],
+            vec![out.clone()],
+        ),
+        (
+            "batch zero",
+            args(&[
+                "render", "--model", &model, "--audio", &wav, "--batch", "0", "--out", &o,
+            ]),
+            vec!["--batch"],
+            vec![out.clone()],
+        ),
+        (
+            "zero threads",
+            args(&[
+                "render",
+                "--model",
+                &model,
+                "--audio",
+                &wav,
+                "--threads",
+                "0",
+                "--out",
+                &o,
+            ]),
+            vec!["--threads"],
+            vec![out.clone()],
+        ),
+        (
+            "render output under a file",
+            args(&[
+                "render",
+                "--model",
+                &model,
+                "--audio",
+                &wav,
+                "--out",
+                &under_file,
+            ]),
+            vec!["a_file"],
+            vec![],
+        ),
+        (
+            "render into a folder that holds files",
+            args(&[
+                "render",
+                "--model",
+                &model,
+                "--audio",
+                &wav,
+                "--out",
+                &s(&busy),
+            ]),
+            vec!["busy"],
+            vec![],
+        ),
+        (
+            "synth output under a file",
+            args(&[
+                "synth",
+                "--out",
+                &under_file,
+                "--size",
+                "16",
+                "--seconds",
+                "1",
+            ]),
+            vec!["a_file"],
+            vec![],
+        ),
+        (
+            "synth of size zero",
+            args(&["synth", "--out", &o, "--size", "0"]),
+            vec!["size"],
+            vec![out.clone()],
+        ),
+        (
+            "synth of negative length",
+            args(&["synth", "--out", &o, "--seconds=-1"]),
+            vec!["seconds"],
+            vec![out.clone()],
+        ),
+        (
+            "a student without a teacher",
+            args(&["train", "student", "--data", &s(&f.data), "--run", &o]),
+            vec!["teacher"],
+            vec![out.join("student")],
+        ),
+        (
+            "--resume with no run",
+            args(&[
+                "train",
+                "teacher",
+                "--data",
+                &s(&f.data),
+                "--run",
+                &o,
+                "--resume",
+            ]),
+            vec!["resume", "out"],
+            vec![out.join("teacher")],
+        ),
+        (
+            "a teacher over a trained one without --resume",
+            args(&[
+                "train",
+                "teacher",
+                "--data",
+                &s(&f.data),
+                "--run",
+                &s(&f.run),
+            ]),
+            vec!["--resume"],
+            vec![],
+        ),
+        (
+            "eval of a run that does not exist",
+            args(&["eval", "--run", &o, "--data", &s(&f.data)]),
+            vec!["out"],
+            vec![out.clone()],
+        ),
+        (
+            "export of a run without a student",
+            args(&["export", "--run", &s(d)]),
+            vec!["student"],
+            vec![d.join("model.onnx")],
+        ),
+        (
+            "a demo with negative minutes",
+            args(&["demo", "--out", &o, "--minutes=-1"]),
+            vec!["--minutes"],
+            vec![out.clone()],
+        ),
+        (
+            "features to a file that is not .npy",
+            args(&["features", "--audio", &wav, "--out", &s(&d.join("aud.txt"))]),
+            vec!["--out"],
+            vec![d.join("aud.txt")],
+        ),
+        (
+            "features of a missing WAV",
+            args(&[
+                "features",
+                "--audio",
+                &s(&d.join("none.wav")),
+                "--out",
+                &s(&d.join("a.npy")),
+            ]),
+            vec!["none.wav"],
+            vec![d.join("a.npy")],
+        ),
+        (
+            "render with neither audio nor features",
+            args(&["render", "--model", &model, "--out", &o]),
+            vec!["--audio"],
+            vec![out.clone()],
+        ),
+        (
+            "a render stream with features",
+            args(&[
+                "render",
+                "--model",
+                &model,
+                "--audio",
+                "-",
+                "--stream",
+                "--features",
+                &wav,
+            ]),
+            vec!["--features"],
+            vec![],
+        ),
+    ];
+    for (case, a, needles, absent) in cases {
+        let absent: Vec<&Path> = absent.iter().map(PathBuf::as_path).collect();
+        refused(case, &a, &needles, &absent);
+    }
+}
+
+/// The fixture's exported model renders from the WAV (so the refusals above are about the
+/// damage alone), and the suite's size is reported.
+#[test]
+fn the_fixture_renders_and_the_suite_counts_its_cases() {
+    let f = fixture();
+    let dir = scratch();
+    let out = dir.path().join("video");
+    nldf_ok([
+        "render",
+        "--model",
+        &s(&f.model),
+        "--audio",
+        &s(&f.wav),
+        "--out",
+        &s(&out),
+        "--no-video",
+    ]);
+    assert!(out.join("frame_00000.png").is_file());
+}

@@ -1,0 +1,544 @@
+//! Every number nldf prints can be trusted: a NaN never scores as a perfect frame, a run
+//! that diverges stops before it checkpoints or exports a NaN, a config's unknown or
+//! out-of-range key is named, tract binds the graph's inputs by name, and a model trained
+//! on another front end's audio features refuses a WAV.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use candle_core::{Device, Tensor};
+use nldf_core::dataset::Split;
+use nldf_core::image::ImageRgb;
+use nldf_core::region::Region;
+use nldf_export::onnx::ModelProto;
+use nldf_export::{WeightType, read_model};
+use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
+use nldf_train::checkpoint::save_tensors;
+use nldf_train::config::{StudentRunConfig, TeacherRunConfig, parse_config};
+use nldf_train::eval::{FrameModel, eval_models};
+use nldf_train::student::StudentConfig;
+use nldf_train::trainer::{
+    Event, Schedule, Scores, TeacherRun, TrainData, TrainingRun, score_frames, train_loop,
+};
+use prost::Message;
+
+use crate::export::{max_diff, random_audio, random_rays, write_run};
+use crate::teacher::{tiny_run_config, tiny_scene};
+
+/// An image whose every value is NaN.
+fn nan_image(width: u32, height: u32) -> ImageRgb {
+    ImageRgb::filled(width, height, [f32::NAN; 3])
+}
+
+#[test]
+fn a_nan_render_scores_nan_not_a_perfect_frame() {
+    let truth = nldf_tests::pattern_image(16, 12, 3);
+    let regions = vec![Region::Mouth; 16 * 12];
+    let pairs = vec![
+        (nan_image(16, 12), truth.clone(), Some(regions.clone())),
+        (truth.clone(), truth.clone(), Some(regions)),
+    ];
+    let s: Scores = score_frames(&pairs).unwrap();
+    assert!(s.psnr.is_nan(), "a NaN frame scored {} dB", s.psnr);
+    assert!(s.ssim.is_nan());
+    assert!(s.mouth_psnr.unwrap().is_nan() && s.face_psnr.unwrap().is_nan());
+    assert_eq!((s.non_finite, s.frames), (1, 2));
+    // Identical frames are capped at 100 dB, not infinity.
+    let s = score_frames(&[(truth.clone(), truth, None)]).unwrap();
+    assert_eq!((s.psnr, s.non_finite), (100.0, 0));
+}
+
+/// A model whose renders hold NaN.
+struct NanModel;
+
+impl FrameModel for NanModel {
+    fn label(&self) -> String {
+        "nan".into()
+    }
+    fn describe(&self) -> String {
+        "a model that renders NaN".into()
+    }
+    fn step(&self) -> usize {
+        1
+    }
+    fn macs_per_ray(&self) -> f64 {
+        1.0
+    }
+    fn render_frame(
+        &self,
+        data: &TrainData,
+        _frame: &nldf_core::dataset::Frame,
+    ) -> nldf_train::Result<ImageRgb> {
+        let k = data.dataset.intrinsics;
+        Ok(nan_image(k.width, k.height))
+    }
+}
+
+#[test]
+fn eval_counts_non_finite_frames_and_never_reports_inf() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let models: Vec<&dyn FrameModel> = vec![&NanModel];
+    let e = eval_models(&models, &data, Split::Val, Some(3), out.path(), &mut || {}).unwrap();
+    let r = &e.models[0];
+    assert_eq!(r.non_finite_frames, 3);
+    assert!(r.psnr.is_nan(), "an all-NaN model scored {} dB", r.psnr);
+    assert!(r.ssim.is_nan(), "an all-NaN model scored SSIM {}", r.ssim);
+    assert!(r.frames.iter().all(|f| f.psnr.is_nan()));
+}
+
+/// A run whose loss turns NaN at `nan_at`, checkpointing every step into `dir`.
+struct Diverging {
+    dir: std::path::PathBuf,
+    step: usize,
+    nan_at: usize,
+}
+
+impl TrainingRun for Diverging {
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+    fn step(&self) -> usize {
+        self.step
+    }
+    fn schedule(&self) -> Schedule {
+        Schedule {
+            iters: 10,
+            batch_rays: 1,
+            log_every: 1,
+            val_every: 0,
+            val_frames: 1,
+            checkpoint_every: 1,
+            time_budget_s: 0.0,
+        }
+    }
+    fn elapsed(&self) -> f64 {
+        0.0
+    }
+    fn learning_rate(&self) -> f64 {
+        1e-3
+    }
+    fn train_step(&mut self, _data: &TrainData) -> nldf_train::Result<(f64, f64)> {
+        self.step += 1;
+        let loss = if self.step >= self.nan_at {
+            f64::NAN
+        } else {
+            0.1
+        };
+        // As the trainers do: a non-finite loss is refused before any update.
+        if !loss.is_finite() {
+            self.step -= 1;
+            return Err(nldf_train::Error::NonFinite(format!("the loss is {loss}")));
+        }
+        Ok((loss, 10.0))
+    }
+    fn validate(&self, _data: &TrainData, n: usize) -> nldf_train::Result<Scores> {
+        Ok(Scores {
+            psnr: 30.0,
+            ssim: 0.9,
+            face_psnr: None,
+            mouth_psnr: None,
+            frames: n,
+            non_finite: 0,
+        })
+    }
+    fn save(&self) -> nldf_train::Result<()> {
+        Ok(())
+    }
+}
+
+#[test]
+fn a_nan_loss_stops_training_and_keeps_the_last_good_checkpoint() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = Diverging {
+        dir: dir.path().to_path_buf(),
+        step: 0,
+        nan_at: 4,
+    };
+    let mut checkpoints = Vec::new();
+    let err = train_loop(&mut run, &data, &AtomicBool::new(false), &mut |e| {
+        if let Event::Checkpoint { step, .. } = e {
+            checkpoints.push(*step);
+        }
+    })
+    .unwrap_err()
+    .to_string();
+    assert_eq!(
+        checkpoints,
+        [1, 2, 3],
+        "checkpoints after the loss turned NaN"
+    );
+    assert!(!err.contains('\n'), "{err}");
+    assert!(
+        err.contains("diverged at step 4") && err.contains("NaN"),
+        "{err}"
+    );
+    assert!(err.contains("checkpoint of step 3"), "{err}");
+}
+
+#[test]
+fn adam_refuses_a_non_finite_gradient_and_checkpoints_refuse_non_finite_weights() {
+    use nldf_train::adam::{Adam, AdamParams};
+    let var = candle_core::Var::from_tensor(
+        &Tensor::ones(4, candle_core::DType::F32, &Device::Cpu).unwrap(),
+    )
+    .unwrap();
+    let mut adam = Adam::new(
+        vec![("w".into(), var.clone(), 1.0)],
+        AdamParams {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+    );
+    let loss = (var.as_tensor() * f64::NAN).unwrap().sum_all().unwrap();
+    let grads = loss.backward().unwrap();
+    let err = adam.step(&grads, 1e-3).unwrap_err().to_string();
+    assert!(err.contains("gradient of `w`"), "{err}");
+    let after: Vec<f32> = var.as_tensor().to_vec1().unwrap();
+    assert_eq!(after, [1.0; 4], "a refused step changed the weights");
+
+    // A teacher whose weight holds a NaN is not checkpointed.
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let run = TeacherRun::create(dir.path(), tiny_run_config(5), &data).unwrap();
+    let (name, var) = nldf_train::nn::sorted_vars(&run.varmap).unwrap().remove(0);
+    let mut values: Vec<f32> = var.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
+    values[0] = f32::NAN;
+    var.set(&Tensor::from_vec(values, var.shape(), &Device::Cpu).unwrap())
+        .unwrap();
+    let err = run.save().unwrap_err().to_string();
+    assert!(err.contains(&name) && err.contains("NaN"), "{err}");
+    assert!(!dir.path().join("model.safetensors").exists());
+}
+
+#[test]
+fn export_refuses_non_finite_weights_and_fp16_refuses_weights_beyond_its_range() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 5);
+    let path = run.student_dir().join("model.safetensors");
+    let (tensors, _) = nldf_train::checkpoint::load_tensors(&path).unwrap();
+    let meta = HashMap::from([
+        ("step".to_string(), "7".to_string()),
+        ("kind".to_string(), "student".to_string()),
+    ]);
+    let with = |name: &str, value: f32| {
+        let mut t = tensors.clone();
+        let w = &t[name];
+        let mut v: Vec<f32> = w.flatten_all().unwrap().to_vec1().unwrap();
+        v[3] = value;
+        t.insert(
+            name.to_string(),
+            Tensor::from_vec(v, w.shape(), &Device::Cpu).unwrap(),
+        );
+        save_tensors(&path, &t, meta.clone()).unwrap();
+    };
+    let out = run.root.join("out.onnx");
+    with("mlp.body.0.fc1.weight", f32::NAN);
+    let err = nldf_export::export_student(&run.student_dir(), &out, WeightType::F32)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("mlp.body.0.fc1.weight") && err.contains("NaN"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    with("mlp.body.0.fc1.weight", 1e5);
+    let err = nldf_export::export_student(&run.student_dir(), &out, WeightType::F16)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("mlp.body.0.fc1.weight") && err.contains("--fp16"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // In f32 the same weight is fine.
+    nldf_export::export_student(&run.student_dir(), &out, WeightType::F32).unwrap();
+}
+
+#[test]
+fn config_files_reject_unknown_keys_and_name_bad_values() {
+    let path = Path::new("cfg.json");
+    let err = |text: &str| -> String {
+        match parse_config::<TeacherRunConfig>(path, text) {
+            Err(e) => e.to_string(),
+            Ok(cfg) => cfg
+                .check()
+                .map(|_| String::new())
+                .unwrap_or_else(|e| e.to_string()),
+        }
+    };
+    let e = err(r#"{"width": -1, "depth": "many"}"#);
+    assert!(
+        e.contains("cfg.json") && e.contains("unknown field `width`"),
+        "{e}"
+    );
+    let e = err(r#"{"model": {"depth": "many"}}"#);
+    assert!(e.contains("`model.depth`"), "{e}");
+    let e = err(r#"{"model": {"width": -1}}"#);
+    assert!(e.contains("`model.width`") && e.contains("-1"), "{e}");
+    let e = err(r#"{"model": {"widht": 64}}"#);
+    assert!(
+        e.contains("unknown field `widht`") && e.contains("model"),
+        "{e}"
+    );
+    let e = err(r#"{"model": {"width": 0}}"#);
+    assert!(e.contains("`model.width`") && e.contains("got 0"), "{e}");
+    let e = err(r#"{"train": {"lr": -0.1}}"#);
+    assert!(e.contains("`train.lr`"), "{e}");
+    let e = err(r#"{"train": {"face_fraction": 1.5}}"#);
+    assert!(e.contains("`train.face_fraction`"), "{e}");
+    let e = err(r#"{"model": {"n_samples": 1}}"#);
+    assert!(e.contains("`model.n_samples`"), "{e}");
+    assert_eq!(err(r#"{"model": {"width": 64}}"#), "");
+    let student = |text: &str| -> String {
+        match parse_config::<StudentRunConfig>(path, text) {
+            Err(e) => e.to_string(),
+            Ok(cfg) => cfg
+                .check()
+                .map(|_| String::new())
+                .unwrap_or_else(|e| e.to_string()),
+        }
+    };
+    let e = student(r#"{"model": {"depth": 7}}"#);
+    assert!(e.contains("`model.depth`"), "{e}");
+    let e = student(r#"{"train": {"lamda": 0.2}}"#);
+    assert!(e.contains("unknown field `lamda`"), "{e}");
+    let e = student(r#"{"model": {"beam": {"points": 16}}}"#);
+    assert!(e.contains("unknown field `points`"), "{e}");
+    let e = student(r#"{"train": {"hard_ratio": 2}}"#);
+    assert!(e.contains("`train.hard_ratio`"), "{e}");
+    assert_eq!(student(r#"{"model": {"depth": 28}}"#), "");
+}
+
+/// The graph's inputs (or outputs) listed in another order: tract binds them by name, as
+/// onnxruntime does, so the frame does not change.
+#[test]
+fn tract_binds_inputs_and_outputs_by_name() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 9);
+    let path = run.export(WeightType::F32);
+    let rays = random_rays(700, 2);
+    let audio =
+        nldf_train::audio_net::neighbourhood(&random_audio(&cfg, 10, 3), 4, cfg.audio.att_frames);
+    let options = BackendOptions {
+        batch_size: 1024,
+        threads: 1,
+    };
+    let render = |p: &Path| {
+        let model = read_model(p).unwrap();
+        let mut b = backend_for(&model, BackendKind::Tract, options).unwrap();
+        b.run(&rays.origins, &rays.directions, &audio).unwrap()
+    };
+    let want = render(&path);
+    let mut proto = ModelProto::decode(&std::fs::read(&path).unwrap()[..]).unwrap();
+    let graph = proto.graph.as_mut().unwrap();
+    graph.input.swap(0, 1);
+    graph.output.swap(0, 1);
+    let swapped = run.root.join("swapped.onnx");
+    std::fs::write(&swapped, proto.encode_to_vec()).unwrap();
+    let got = render(&swapped);
+    assert_eq!(max_diff(&got.rgb, &want.rgb), 0.0);
+    assert_eq!(max_diff(&got.segments, &want.segments), 0.0);
+}
+
+/// A copy of the folder `from` at `to` (files and sub-folders).
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let dst = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &dst);
+        } else {
+            std::fs::copy(e.path(), dst).unwrap();
+        }
+    }
+}
+
+/// The tiny synthetic scene with its `aud.npy` replaced by 29-wide windows of another
+/// front end (no `aud.json`; `aud.wav` kept only with `keep_wav`): an AD-NeRF dataset with
+/// DeepSpeech features looks like this.
+fn foreign_features_scene(dir: &Path, keep_wav: bool) -> nldf_core::audio::AudioWindows {
+    use nldf_core::dataset::{AUDIO_SOURCE_FILE, AUDIO_WAV, save_audio_npy};
+    copy_dir(tiny_scene(), dir);
+    std::fs::remove_file(dir.join(AUDIO_SOURCE_FILE)).unwrap();
+    if !keep_wav {
+        std::fs::remove_file(dir.join(AUDIO_WAV)).unwrap();
+    }
+    let n = nldf_core::dataset::load_audio_npy(&dir.join("aud.npy"))
+        .unwrap()
+        .n_frames;
+    let cfg = StudentConfig {
+        audio: nldf_train::config::AudioConfig {
+            n_features: 29,
+            ..Default::default()
+        },
+        ..StudentConfig::tiny()
+    };
+    let windows = random_audio(&cfg, n, 77);
+    save_audio_npy(&dir.join("aud.npy"), &windows).unwrap();
+    windows
+}
+
+#[test]
+fn datasets_say_which_front_end_made_their_features() {
+    use nldf_core::audio::FeatureSource;
+    use nldf_core::dataset::{AudioChoice, Dataset};
+    let dir = tempfile::tempdir().unwrap();
+    // nldf's own (synth writes aud.json): read from aud.npy.
+    let ours = Dataset::load(tiny_scene()).unwrap();
+    assert!(matches!(ours.audio_source, FeatureSource::Nldf(_)));
+    assert!(ours.audio_file.ends_with("aud.npy"));
+    // Another front end's aud.npy beside aud.wav: by default nldf computes its own features
+    // from aud.wav, and they equal the synth's (made from the same samples).
+    let root = dir.path().join("with_wav");
+    let foreign = foreign_features_scene(&root, true);
+    let auto = Dataset::load(&root).unwrap();
+    assert!(matches!(auto.audio_source, FeatureSource::Nldf(_)));
+    assert!(auto.audio_file.ends_with("aud.wav"));
+    assert_eq!(auto.audio, ours.audio);
+    let npy = Dataset::load_with(&root, &AudioChoice::Npy).unwrap();
+    assert!(matches!(npy.audio_source, FeatureSource::Foreign { .. }));
+    assert_eq!(npy.audio, foreign);
+    // Without aud.wav, aud.npy is all there is: foreign.
+    let root = dir.path().join("no_wav");
+    foreign_features_scene(&root, false);
+    let only = Dataset::load(&root).unwrap();
+    assert!(matches!(
+        only.audio_source,
+        FeatureSource::Foreign { n_features: 29, .. }
+    ));
+    // A run trained on nldf's features cannot read this dataset's audio.
+    let err = Dataset::load_with(&root, &AudioChoice::Matching(ours.audio_source.clone()))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("aud.wav") && err.contains("missing"), "{err}");
+}
+
+/// The must-show of the audio provenance: a model trained on a dataset's foreign 29-wide
+/// features refuses a WAV with one clear line, and renders from `--features` exactly what
+/// the candle student renders from those windows.
+#[test]
+fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
+    use nldf_infer::poses::default_track;
+    use nldf_infer::video::VideoJob;
+    use nldf_train::student_trainer::StudentRun;
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scene");
+    foreign_features_scene(&root, false);
+    let data = TrainData::load(&root).unwrap();
+    let mut cfg = StudentRunConfig {
+        model: StudentConfig::tiny(),
+        ..StudentRunConfig::default()
+    };
+    cfg.train.distill = false;
+    cfg.train.batch_rays = 256;
+    cfg.train.iters = 3;
+    let run_dir = dir.path().join("run/student");
+    let mut run = StudentRun::create(&run_dir, cfg, &data, None).unwrap();
+    run.prepare(&data, None, &mut |_, _| {}).unwrap();
+    for _ in 0..3 {
+        run.train_step(&data).unwrap();
+    }
+    run.save().unwrap();
+    let model = dir.path().join("run/model.onnx");
+    nldf_export::export_student(&run_dir, &model, WeightType::F32).unwrap();
+    let wav = dir.path().join("speech.wav");
+    crate::infer::write_test_wav(&wav, 0.5);
+    let job = |audio: Option<&Path>, features: Option<&Path>, out: &str| VideoJob {
+        model: model.clone(),
+        audio: audio.map(Path::to_path_buf),
+        features: features.map(Path::to_path_buf),
+        poses: None,
+        out: dir.path().join(out),
+        backend: BackendKind::Tract,
+        options: BackendOptions {
+            batch_size: 512,
+            threads: 1,
+        },
+        size: None,
+        mp4: false,
+        ffmpeg: None,
+    };
+    let err = job(Some(&wav), None, "from_wav")
+        .plan()
+        .unwrap_err()
+        .to_string();
+    println!("{err}");
+    assert!(!err.contains('\n'));
+    assert!(
+        err.contains("model.onnx") && err.contains("--features"),
+        "{err}"
+    );
+    assert!(err.contains("another front end"), "{err}");
+    assert!(!dir.path().join("from_wav").exists());
+    let features = root.join("aud.npy");
+    let report = job(None, Some(&features), "from_features")
+        .plan()
+        .unwrap()
+        .render(|_| {})
+        .unwrap();
+    assert_eq!(report.n_frames, data.dataset.audio.n_frames);
+    // Frame f is the candle student's frame of audio row f at the default track's pose.
+    let info = read_model(&model).unwrap().info;
+    let poses = default_track(&info, report.n_frames);
+    for f in [0, 7, report.n_frames - 1] {
+        let camera = nldf_core::camera::Camera {
+            intrinsics: info.spec.intrinsics,
+            c2w: poses[f],
+        };
+        let rays = nldf_core::rays::rays_for_image(&camera);
+        let code = run.audio_codes(&data, &[f]).unwrap();
+        let want = run
+            .render_rays(&rays, &data.dataset.background.data, &code, &data)
+            .unwrap();
+        let want = ImageRgb {
+            width: camera.intrinsics.width,
+            height: camera.intrinsics.height,
+            data: want,
+        }
+        .to_rgb8();
+        let got = ImageRgb::load(&report.files[f]).unwrap().to_rgb8();
+        let worst = want
+            .iter()
+            .zip(&got)
+            .map(|(a, b)| (*a as i32 - *b as i32).abs())
+            .max()
+            .unwrap();
+        assert!(worst <= 1, "frame {f}: 8-bit values differ by {worst}");
+    }
+}
+
+/// AD-NeRF's near and far follow the head's mean depth along the cameras' viewing axes
+/// (`mean_z`), not the cameras' distance from it: a camera beside the axis at depth 1.0 is
+/// 1.118 away.
+#[test]
+fn ad_nerf_bounds_use_the_depth_along_the_view_axis() {
+    use glam::{Mat4, Vec3};
+    use nldf_core::dataset::{Frame, ad_nerf_bounds};
+    let frame = |c2w: Mat4| Frame {
+        img_id: 0,
+        aud_id: 0,
+        c2w,
+        face_rect: nldf_core::rays::Rect {
+            x: 0,
+            y: 0,
+            w: 1,
+            h: 1,
+        },
+        eye: None,
+        image_path: "0.png".into(),
+        parsing_path: None,
+    };
+    // Looking along -z from (0.5, 0, 1.0) and from (0, 0, 1.2).
+    let a = frame(Mat4::from_translation(Vec3::new(0.5, 0.0, 1.0)));
+    let b = frame(Mat4::from_translation(Vec3::new(0.0, 0.0, 1.2)));
+    let (near, far) = ad_nerf_bounds(&[a, b]);
+    assert!(
+        (near - 0.9).abs() < 1e-6 && (far - 1.5).abs() < 1e-6,
+        "{near} {far}"
+    );
+}
