@@ -30,8 +30,7 @@ fn main() -> Result<()> {
         other => bail!("unknown preset {other:?} (tiny, d28, d50, d88)"),
     };
     let ds = Dataset::load(&PathBuf::from(data)).context("loading the dataset")?;
-    cfg.audio.n_features = ds.audio.n_features;
-    cfg.audio.window = ds.audio.window;
+    cfg.audio.set_from(&ds);
     let spec = RenderSpec::of_dataset(&ds, dataset_bounds(&ds)?, cfg.audio.att_frames);
     let out = PathBuf::from(out);
     let student_dir = out.join("student");

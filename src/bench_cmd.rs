@@ -27,6 +27,25 @@ pub enum BenchCommand {
     /// `nldf render --stream` fed a WAV at real-time speed: the latency from each frame's
     /// audio to its PNG.
     Stream(StreamBenchArgs),
+    /// The positional encoding's sines and cosines three ways (direct f32, f32
+    /// double-angle climb, nldf's f64 climb): time per value and error against f64.
+    Encoding(EncodingBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct EncodingBenchArgs {
+    /// Frequencies L.
+    #[arg(long, default_value_t = 10)]
+    pub freqs: usize,
+    /// The scene's coordinate range |x| for the first error column.
+    #[arg(long, default_value_t = 2.0)]
+    pub range: f32,
+    /// Timed repetitions (the median is reported).
+    #[arg(long, default_value_t = 15)]
+    pub reps: usize,
+    /// Folder for encoding.json and encoding.md.
+    #[arg(long, default_value = "runs/bench")]
+    pub out: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -119,7 +138,43 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::StudentStep(args) => student_step(args),
         BenchCommand::Render(args) => render(args),
         BenchCommand::Stream(args) => stream(args),
+        BenchCommand::Encoding(args) => encoding(args),
     }
+}
+
+fn encoding(args: EncodingBenchArgs) -> Result<()> {
+    if !(1..=16).contains(&args.freqs) {
+        anyhow::bail!("--freqs must be 1 to 16, got {}", args.freqs);
+    }
+    if !(args.range.is_finite() && args.range > 0.0) {
+        anyhow::bail!("--range must be positive, got {}", args.range);
+    }
+    let machine = Machine::here();
+    let result = nldf_train::bench::bench_encoding(args.freqs, args.range, args.reps);
+    let mut md = format!(
+        "Positional encoding, L = {}, {} values per call (a beam), one thread; error is the \
+         largest difference from the exact sin(2^l x), cos(2^l x) in f64.\n\n\
+         Machine: {}\n\n\
+         | variant | ns per value | max error, abs(x) <= {} | max error, abs(x) <= 1e4 |\n\
+         |---|---|---|---|\n",
+        result.n_freqs,
+        result.values_per_call,
+        machine_cell(&machine),
+        result.scene_range
+    );
+    for v in &result.variants {
+        md.push_str(&format!(
+            "| {} | {:.1} | {:.2e} | {:.2e} |\n",
+            v.name, v.ns_per_value, v.max_error_scene, v.max_error_clamp
+        ));
+    }
+    let report = serde_json::json!({
+        "bench": "encoding",
+        "machine": machine,
+        "settings": {"freqs": args.freqs, "range": args.range, "reps": args.reps},
+        "result": result,
+    });
+    write_bench_files(&args.out, "encoding", &report, &md)
 }
 
 /// The dataset at `data`, or the synthetic scene generated into `tmp`.

@@ -6,6 +6,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Subcommand;
 
+use nldf_train::config::RunConfig;
+
 use crate::progress::progress_bar;
 
 #[derive(Subcommand, Debug)]

@@ -80,29 +80,23 @@ pub fn safetensors(bytes: &[u8]) -> Verdict {
     }
 }
 
-/// A run configuration (teacher and student): parsed strictly, then checked; an accepted one
-/// builds its network's shapes without overflow.
+/// A run configuration (teacher and student): parsed strictly, then checked; an error names
+/// the file, and an accepted one sizes its network without overflow.
 pub fn config(bytes: &[u8]) -> Verdict {
-    use nldf_train::config::{StudentRunConfig, TeacherRunConfig, parse_config};
+    use nldf_train::config::{StudentRunConfig, TeacherRunConfig, parse_checked};
     let path = Path::new("config.json");
     let text = String::from_utf8_lossy(bytes);
-    match parse_config::<TeacherRunConfig>(path, &text) {
-        Ok(cfg) => match cfg.check() {
-            Ok(()) => {
-                let _ = cfg.model.macs_per_ray();
-            }
-            Err(e) => one_line_naming(&e.to_string(), "`")?,
-        },
+    match parse_checked::<TeacherRunConfig>(path, &text) {
+        Ok(cfg) => {
+            let _ = cfg.model.macs_per_ray();
+        }
         Err(e) => one_line_naming(&e.to_string(), "config.json")?,
     }
-    match parse_config::<StudentRunConfig>(path, &text) {
-        Ok(cfg) => match cfg.check() {
-            Ok(()) => {
-                let _ = cfg.model.macs_per_ray();
-                Ok(())
-            }
-            Err(e) => one_line_naming(&e.to_string(), "`"),
-        },
+    match parse_checked::<StudentRunConfig>(path, &text) {
+        Ok(cfg) => {
+            let _ = cfg.model.macs_per_ray();
+            Ok(())
+        }
         Err(e) => one_line_naming(&e.to_string(), "config.json"),
     }
 }

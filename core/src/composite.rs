@@ -29,7 +29,7 @@ pub struct Composite<F> {
 pub fn segment_of(t: f64, span: (f64, f64), m: usize) -> usize {
     let (t0, t1) = span;
     let length = t1 - t0;
-    if m <= 1 || !(length > 0.0) {
+    if m <= 1 || length.is_nan() || length <= 0.0 {
         return 0;
     }
     let s = (m as f64 * (t - t0) / length).floor();

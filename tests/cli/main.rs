@@ -116,24 +116,10 @@ fn scratch() -> tempfile::TempDir {
         .unwrap()
 }
 
-/// A copy of the folder `from` at `to`.
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let dst = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &dst);
-        } else {
-            std::fs::copy(e.path(), dst).unwrap();
-        }
-    }
-}
-
 /// The fixture's dataset copied to `dir/data`, damaged by `damage`.
 fn damaged_data(dir: &Path, damage: impl FnOnce(&Path)) -> PathBuf {
     let data = dir.join("data");
-    copy_dir(&fixture().data, &data);
+    nldf_tests::copy_dir(&fixture().data, &data);
     damage(&data);
     data
 }
@@ -141,9 +127,15 @@ fn damaged_data(dir: &Path, damage: impl FnOnce(&Path)) -> PathBuf {
 /// The fixture's run copied to `dir/run`, damaged by `damage`.
 fn damaged_run(dir: &Path, damage: impl FnOnce(&Path)) -> PathBuf {
     let run = dir.join("run");
-    copy_dir(&fixture().run, &run);
+    nldf_tests::copy_dir(&fixture().run, &run);
     damage(&run);
     run
+}
+
+/// Cuts the file at `path` to its first half.
+fn cut_in_half(path: &Path) {
+    let b = std::fs::read(path).unwrap();
+    std::fs::write(path, &b[..b.len() / 2]).unwrap();
 }
 
 fn edit_json(path: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
@@ -197,6 +189,25 @@ fn args(list: &[&str]) -> Vec<String> {
     list.iter().map(|a| a.to_string()).collect()
 }
 
+/// A damage done to a copy of a folder: what it is, the damage, and the name its error must
+/// give.
+type Damage = (&'static str, Box<dyn Fn(&Path)>, &'static str);
+
+/// A misuse of the command line: what it is, the arguments, the names its error must give
+/// and the paths that must not exist after it.
+type Misuse<'a> = (&'a str, Vec<String>, Vec<&'a str>, Vec<PathBuf>);
+
+/// Each case's damage done to a copy of the fixture's dataset, which `nldf train teacher`
+/// must then refuse, naming the needle and writing no run.
+fn refuse_damaged_datasets(cases: Vec<Damage>) {
+    for (case, damage, needle) in cases {
+        let dir = scratch();
+        let data = damaged_data(dir.path(), damage);
+        let (a, run) = train_teacher(&data, dir.path());
+        refused(case, &a, &[needle], &[&run]);
+    }
+}
+
 /// `nldf train teacher` on the dataset `data` into `dir/run`.
 fn train_teacher(data: &Path, dir: &Path) -> (Vec<String>, PathBuf) {
     let run = dir.join("run");
@@ -217,7 +228,7 @@ fn train_teacher(data: &Path, dir: &Path) -> (Vec<String>, PathBuf) {
 
 #[test]
 fn bad_transforms_files_are_refused() {
-    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+    let cases: Vec<Damage> = vec![
         (
             "transforms_train.json missing",
             Box::new(|d: &Path| std::fs::remove_file(d.join("transforms_train.json")).unwrap()),
@@ -230,11 +241,7 @@ fn bad_transforms_files_are_refused() {
         ),
         (
             "transforms_val.json cut short",
-            Box::new(|d: &Path| {
-                let p = d.join("transforms_val.json");
-                let t = std::fs::read_to_string(&p).unwrap();
-                std::fs::write(&p, &t[..t.len() / 2]).unwrap();
-            }),
+            Box::new(|d: &Path| cut_in_half(&d.join("transforms_val.json"))),
             "transforms_val.json",
         ),
         (
@@ -311,17 +318,12 @@ fn bad_transforms_files_are_refused() {
             "face_rect",
         ),
     ];
-    for (case, damage, needle) in cases {
-        let dir = scratch();
-        let data = damaged_data(dir.path(), damage);
-        let (a, run) = train_teacher(&data, dir.path());
-        refused(case, &a, &[needle], &[&run]);
-    }
+    refuse_damaged_datasets(cases);
 }
 
 #[test]
 fn bad_images_and_audio_files_are_refused() {
-    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+    let cases: Vec<Damage> = vec![
         (
             "a frame that is not a PNG",
             Box::new(|d: &Path| std::fs::write(d.join("head_imgs/2.png"), b"not a png").unwrap()),
@@ -348,11 +350,7 @@ fn bad_images_and_audio_files_are_refused() {
         ),
         (
             "a background cut short",
-            Box::new(|d: &Path| {
-                let p = d.join("bc.png");
-                let b = std::fs::read(&p).unwrap();
-                std::fs::write(&p, &b[..b.len() / 2]).unwrap();
-            }),
+            Box::new(|d: &Path| cut_in_half(&d.join("bc.png"))),
             "bc.png",
         ),
         (
@@ -420,19 +418,14 @@ fn bad_images_and_audio_files_are_refused() {
             "parsing",
         ),
     ];
-    for (case, damage, needle) in cases {
-        let dir = scratch();
-        let data = damaged_data(dir.path(), damage);
-        let (a, run) = train_teacher(&data, dir.path());
-        refused(case, &a, &[needle], &[&run]);
-    }
+    refuse_damaged_datasets(cases);
 }
 
 #[test]
 fn bad_checkpoints_and_configs_are_refused() {
     let f = fixture();
     // Checkpoints.
-    let cases: Vec<(&str, Box<dyn Fn(&Path)>, &str)> = vec![
+    let cases: Vec<Damage> = vec![
         (
             "student weights of garbage",
             Box::new(|r: &Path| {
@@ -442,11 +435,7 @@ fn bad_checkpoints_and_configs_are_refused() {
         ),
         (
             "student weights cut short",
-            Box::new(|r: &Path| {
-                let p = r.join("student/model.safetensors");
-                let b = std::fs::read(&p).unwrap();
-                std::fs::write(&p, &b[..b.len() / 2]).unwrap();
-            }),
+            Box::new(|r: &Path| cut_in_half(&r.join("student/model.safetensors"))),
             "model.safetensors",
         ),
         (
@@ -715,20 +704,16 @@ fn command_line_misuse_is_refused() {
     let busy = d.join("busy");
     std::fs::create_dir_all(&busy).unwrap();
     std::fs::write(busy.join("keep.txt"), b"x").unwrap();
-    let cases: Vec<(&str, Vec<String>, Vec<&str>, Vec<PathBuf>)> = vec![
+    // `nldf render` of the fixture into `out`, with `extra` flags.
+    let render = |extra: &[&str]| {
+        let mut a = args(&["render", "--model", &model, "--audio", &wav, "--out", &o]);
+        a.extend(args(extra));
+        a
+    };
+    let cases: Vec<Misuse> = vec![
         (
             "an unknown backend",
-            args(&[
-                "render",
-                "--model",
-                &model,
-                "--audio",
-                &wav,
-                "--backend",
-                "cuda",
-                "--out",
-                &o,
-            ]),
+            render(&["--backend", "cuda"]),
             vec!["--backend", "cuda"],
             vec![out.clone()],
         ),
@@ -746,48 +731,25 @@ fn command_line_misuse_is_refused() {
         ),
         (
             "image size zero",
-            args(&[
-                "render", "--model", &model, "--audio", &wav, "--size", "0", "--out", &o,
-            ]),
+            render(&["--size", "0"]),
             vec!["--size"],
             vec![out.clone()],
         ),
         (
             "a negative size",
-            args(&[
-                "render",
-                "--model",
-                &model,
-                "--audio",
-                &wav,
-                "--size=-4",
-                "--out",
-                &o,
-            ]),
+            render(&["--size=-4"]),
             vec!["--size"],
             vec![out.clone()],
         ),
         (
             "batch zero",
-            args(&[
-                "render", "--model", &model, "--audio", &wav, "--batch", "0", "--out", &o,
-            ]),
+            render(&["--batch", "0"]),
             vec!["--batch"],
             vec![out.clone()],
         ),
         (
             "zero threads",
-            args(&[
-                "render",
-                "--model",
-                &model,
-                "--audio",
-                &wav,
-                "--threads",
-                "0",
-                "--out",
-                &o,
-            ]),
+            render(&["--threads", "0"]),
             vec!["--threads"],
             vec![out.clone()],
         ),

@@ -33,8 +33,11 @@ fn log_uniform(rng: &mut impl Rng, lo: f64, hi: f64) -> f64 {
     (lo.ln() + rng.random::<f64>() * (hi.ln() - lo.ln())).exp()
 }
 
+/// One ray's densities, spacings, `t` values (each `[64]`) and colours (`[64, 3]`).
+type Ray = (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>);
+
 /// `n` cases of a ray of 64 samples with densities in 0..1e8 and spacings in 1e-9..1e10.
-fn extreme_rays(n: usize, seed: u64) -> Vec<(Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>)> {
+fn extreme_rays(n: usize, seed: u64) -> Vec<Ray> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..n)
         .map(|_| {
@@ -139,13 +142,13 @@ fn stress_candle_compositing_extreme_densities_and_spacings_matches_f64() {
             .collect();
         let want = composite_f64(&f64s(densities), &f64s(deltas), &f64s(t_vals), &rgb64);
         assert!(weights[r].iter().sum::<f32>() <= 1.0 + 1e-6);
-        for k in 0..s {
-            worst = worst.max((weights[r][k] as f64 - want.weights[k]).abs());
+        for (w, want_w) in weights[r].iter().zip(&want.weights) {
+            worst = worst.max((*w as f64 - want_w).abs());
         }
-        for c in 0..3 {
-            let with_bg = want.color[c] + (1.0 - want.opacity) * 0.25;
-            assert!(color[r][c].is_finite());
-            worst = worst.max((color[r][c] as f64 - with_bg).abs());
+        for (c, want_c) in color[r].iter().zip(want.color) {
+            let with_bg = want_c + (1.0 - want.opacity) * 0.25;
+            assert!(c.is_finite());
+            worst = worst.max((*c as f64 - with_bg).abs());
         }
     }
     println!("candle compositing, {n} extreme rays: worst error {worst:.2e}");

@@ -471,21 +471,47 @@ fn a_teacher_with_importance_samples_trains_and_renders() {
     );
 }
 
-#[test]
-fn segment_targets_sum_to_the_teachers_pixel() {
+/// A tiny teacher trained `steps` steps on the tiny scene (rendering without early
+/// termination, so that every path sees every sample), with the rays and audio code of the
+/// first validation frame.
+struct TrainedTeacher {
+    _dir: tempfile::TempDir,
+    data: TrainData,
+    run: TeacherRun,
+    rays: Rays,
+    code: Tensor,
+}
+
+fn trained_teacher(mut cfg: TeacherRunConfig, steps: usize) -> TrainedTeacher {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = tiny_run_config(30);
-    // Rendering without early termination, so that both paths see every sample.
     cfg.model.min_transmittance = 0.0;
     let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
-    for _ in 0..30 {
+    for _ in 0..steps {
         run.train_step(&data).unwrap();
     }
     let frame = &data.dataset.val[0];
-    let ds = &data.dataset;
-    let rays = nldf_core::rays::rays_for_image(&ds.camera(frame));
+    let rays = nldf_core::rays::rays_for_image(&data.dataset.camera(frame));
     let code = run.audio_codes(&data, &[frame.aud_id]).unwrap();
+    TrainedTeacher {
+        _dir: dir,
+        data,
+        run,
+        rays,
+        code,
+    }
+}
+
+#[test]
+fn segment_targets_sum_to_the_teachers_pixel() {
+    let TrainedTeacher {
+        data,
+        run,
+        rays,
+        code,
+        ..
+    } = trained_teacher(tiny_run_config(30), 30);
+    let ds = &data.dataset;
     let bg = &ds.background.data;
     let t = &run.teacher;
     let pixels = t
@@ -520,20 +546,17 @@ fn segment_targets_sum_to_the_teachers_pixel() {
 fn importance_sampled_segment_targets_follow_t_intervals() {
     use nldf_core::composite::{composite_f64, segment_colors_f64};
     use nldf_train::teacher::encode_vectors;
-    let data = TrainData::load(tiny_scene()).unwrap();
-    let dir = tempfile::tempdir().unwrap();
     let mut cfg = tiny_run_config(120);
     cfg.model.n_samples = 8;
     cfg.model.n_importance = 24;
-    cfg.model.min_transmittance = 0.0;
-    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
-    for _ in 0..120 {
-        run.train_step(&data).unwrap();
-    }
-    let frame = &data.dataset.val[0];
+    let TrainedTeacher {
+        data,
+        run,
+        rays,
+        code,
+        ..
+    } = trained_teacher(cfg, 120);
     let ds = &data.dataset;
-    let rays = nldf_core::rays::rays_for_image(&ds.camera(frame));
-    let code = run.audio_codes(&data, &[frame.aud_id]).unwrap();
     let bg = &ds.background.data;
     let t = &run.teacher;
     let m = 4;

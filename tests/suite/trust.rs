@@ -15,7 +15,7 @@ use nldf_export::onnx::ModelProto;
 use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_train::checkpoint::save_tensors;
-use nldf_train::config::{StudentRunConfig, TeacherRunConfig, parse_config};
+use nldf_train::config::{RunConfig, StudentRunConfig, TeacherRunConfig, parse_checked};
 use nldf_train::eval::{FrameModel, eval_models};
 use nldf_train::student::StudentConfig;
 use nldf_train::trainer::{
@@ -236,40 +236,36 @@ fn export_refuses_non_finite_weights_and_fp16_refuses_weights_beyond_its_range()
         save_tensors(&path, &t, meta.clone()).unwrap();
     };
     let out = run.root.join("out.onnx");
+    let refused = |weights: WeightType, needle: &str| {
+        let err = nldf_export::export_student(&run.student_dir(), &out, weights)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("mlp.body.0.fc1.weight") && err.contains(needle),
+            "{err}"
+        );
+        assert!(!out.exists());
+    };
     with("mlp.body.0.fc1.weight", f32::NAN);
-    let err = nldf_export::export_student(&run.student_dir(), &out, WeightType::F32)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("mlp.body.0.fc1.weight") && err.contains("NaN"),
-        "{err}"
-    );
-    assert!(!out.exists());
+    refused(WeightType::F32, "NaN");
     with("mlp.body.0.fc1.weight", 1e5);
-    let err = nldf_export::export_student(&run.student_dir(), &out, WeightType::F16)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("mlp.body.0.fc1.weight") && err.contains("--fp16"),
-        "{err}"
-    );
-    assert!(!out.exists());
+    refused(WeightType::F16, "--fp16");
     // In f32 the same weight is fine.
     nldf_export::export_student(&run.student_dir(), &out, WeightType::F32).unwrap();
 }
 
+/// What reading and checking `text` as a run configuration says: the error, or "" when the
+/// configuration is fine.
+fn config_error<T: RunConfig>(text: &str) -> String {
+    parse_checked::<T>(Path::new("cfg.json"), text)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default()
+}
+
 #[test]
 fn config_files_reject_unknown_keys_and_name_bad_values() {
-    let path = Path::new("cfg.json");
-    let err = |text: &str| -> String {
-        match parse_config::<TeacherRunConfig>(path, text) {
-            Err(e) => e.to_string(),
-            Ok(cfg) => cfg
-                .check()
-                .map(|_| String::new())
-                .unwrap_or_else(|e| e.to_string()),
-        }
-    };
+    let err = config_error::<TeacherRunConfig>;
     let e = err(r#"{"width": -1, "depth": "many"}"#);
     assert!(
         e.contains("cfg.json") && e.contains("unknown field `width`"),
@@ -293,15 +289,7 @@ fn config_files_reject_unknown_keys_and_name_bad_values() {
     let e = err(r#"{"model": {"n_samples": 1}}"#);
     assert!(e.contains("`model.n_samples`"), "{e}");
     assert_eq!(err(r#"{"model": {"width": 64}}"#), "");
-    let student = |text: &str| -> String {
-        match parse_config::<StudentRunConfig>(path, text) {
-            Err(e) => e.to_string(),
-            Ok(cfg) => cfg
-                .check()
-                .map(|_| String::new())
-                .unwrap_or_else(|e| e.to_string()),
-        }
-    };
+    let student = config_error::<StudentRunConfig>;
     let e = student(r#"{"model": {"depth": 7}}"#);
     assert!(e.contains("`model.depth`"), "{e}");
     let e = student(r#"{"train": {"lamda": 0.2}}"#);
@@ -344,26 +332,12 @@ fn tract_binds_inputs_and_outputs_by_name() {
     assert_eq!(max_diff(&got.segments, &want.segments), 0.0);
 }
 
-/// A copy of the folder `from` at `to` (files and sub-folders).
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        let dst = to.join(e.file_name());
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &dst);
-        } else {
-            std::fs::copy(e.path(), dst).unwrap();
-        }
-    }
-}
-
 /// The tiny synthetic scene with its `aud.npy` replaced by 29-wide windows of another
 /// front end (no `aud.json`; `aud.wav` kept only with `keep_wav`): an AD-NeRF dataset with
 /// DeepSpeech features looks like this.
 fn foreign_features_scene(dir: &Path, keep_wav: bool) -> nldf_core::audio::AudioWindows {
     use nldf_core::dataset::{AUDIO_SOURCE_FILE, AUDIO_WAV, save_audio_npy};
-    copy_dir(tiny_scene(), dir);
+    nldf_tests::copy_dir(tiny_scene(), dir);
     std::fs::remove_file(dir.join(AUDIO_SOURCE_FILE)).unwrap();
     if !keep_wav {
         std::fs::remove_file(dir.join(AUDIO_WAV)).unwrap();

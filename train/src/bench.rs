@@ -447,3 +447,124 @@ pub fn student_layers(cfg: &crate::student::StudentConfig) -> Vec<(usize, usize)
     layers.push((w, 3 * cfg.segments));
     layers
 }
+
+/// One way to compute the positional encoding's sines and cosines, timed and checked.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EncodingVariant {
+    /// What it computes.
+    pub name: String,
+    /// Median nanoseconds per encoded input value (all `L` octaves, both functions), one
+    /// thread.
+    pub ns_per_value: f64,
+    /// Largest difference from the exact `sin(2^l x)` / `cos(2^l x)` (f64) over coordinates
+    /// in the scene's range, `|x| <= scene_range`.
+    pub max_error_scene: f64,
+    /// The same over `|x| <= MAX_COORD`.
+    pub max_error_clamp: f64,
+}
+
+/// The positional encoding's variants side by side (`nldf bench encoding`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EncodingBench {
+    /// Frequencies L.
+    pub n_freqs: usize,
+    /// Values per call (a beam: 3 K).
+    pub values_per_call: usize,
+    /// The coordinate range of the scene the first error column covers.
+    pub scene_range: f32,
+    pub variants: Vec<EncodingVariant>,
+}
+
+/// Sines and cosines `[L][n]` of `2^l x` by one of the variants: 0 direct f32 `sin_cos` per
+/// octave, 1 the f32 double-angle climb, 2 nldf's encoding (f64 climb).
+fn encode_variant(variant: usize, values: &[f32], n_freqs: usize, out: &mut [f32]) {
+    use nldf_core::encoding::{MAX_COORD, encode_positions};
+    let n = values.len();
+    match variant {
+        0 => {
+            for l in 0..n_freqs {
+                let scale = (1u32 << l) as f32;
+                for (i, &v) in values.iter().enumerate() {
+                    let (s, c) = (scale * v.clamp(-MAX_COORD, MAX_COORD)).sin_cos();
+                    out[n + 2 * n * l + i] = s;
+                    out[2 * n + 2 * n * l + i] = c;
+                }
+            }
+        }
+        1 => {
+            for (i, &v) in values.iter().enumerate() {
+                let (mut s, mut c) = v.clamp(-MAX_COORD, MAX_COORD).sin_cos();
+                for l in 0..n_freqs {
+                    out[n + 2 * n * l + i] = s;
+                    out[2 * n + 2 * n * l + i] = c;
+                    let p = s * c;
+                    (s, c) = (p + p, (c - s) * (c + s));
+                }
+            }
+        }
+        _ => encode_positions(values, n_freqs, out),
+    }
+}
+
+/// Times and checks the encoding's variants on beam-sized inputs (48 values, `n_freqs`
+/// octaves): the direct `sin(2^l x)` in f32, the double-angle climb in f32 (nldf's
+/// encoding before this one) and nldf's f64 climb.
+pub fn bench_encoding(n_freqs: usize, scene_range: f32, reps: usize) -> EncodingBench {
+    use nldf_core::encoding::{MAX_COORD, encoded_len};
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let n = 48;
+    let width = encoded_len(n, n_freqs);
+    let sample = |rng: &mut rand_chacha::ChaCha8Rng, range: f32| -> Vec<f32> {
+        (0..n).map(|_| rng.random_range(-range..range)).collect()
+    };
+    let names = [
+        "direct sin(2^l x) in f32, per octave",
+        "double-angle climb in f32",
+        "double-angle climb in f64, rounded once (nldf)",
+    ];
+    let variants = (0..3)
+        .map(|variant| {
+            let mut out = vec![0.0f32; width];
+            let mut worst = [0.0f64; 2];
+            for (slot, range) in [scene_range, MAX_COORD].into_iter().enumerate() {
+                for _ in 0..2000 {
+                    let values = sample(&mut rng, range);
+                    encode_variant(variant, &values, n_freqs, &mut out);
+                    for l in 0..n_freqs {
+                        for (i, &x) in values.iter().enumerate() {
+                            let arg = (1u64 << l) as f64 * x as f64;
+                            let ds = (out[n + 2 * n * l + i] as f64 - arg.sin()).abs();
+                            let dc = (out[2 * n + 2 * n * l + i] as f64 - arg.cos()).abs();
+                            worst[slot] = worst[slot].max(ds).max(dc);
+                        }
+                    }
+                }
+            }
+            let inputs: Vec<Vec<f32>> = (0..1024).map(|_| sample(&mut rng, scene_range)).collect();
+            let mut times: Vec<f64> = (0..reps.max(1))
+                .map(|_| {
+                    let started = Instant::now();
+                    for values in &inputs {
+                        encode_variant(variant, std::hint::black_box(values), n_freqs, &mut out);
+                        std::hint::black_box(&out);
+                    }
+                    started.elapsed().as_secs_f64() * 1e9 / (inputs.len() * n) as f64
+                })
+                .collect();
+            times.sort_by(f64::total_cmp);
+            EncodingVariant {
+                name: names[variant].to_string(),
+                ns_per_value: times[times.len() / 2],
+                max_error_scene: worst[0],
+                max_error_clamp: worst[1],
+            }
+        })
+        .collect();
+    EncodingBench {
+        n_freqs,
+        values_per_call: n,
+        scene_range,
+        variants,
+    }
+}

@@ -40,6 +40,26 @@ pub fn parse_config<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
     })
 }
 
+/// A run configuration: read strictly, then checked value by value.
+pub trait RunConfig: DeserializeOwned {
+    /// Checks every value before any work starts; the error names the key.
+    fn check(&self) -> Result<()>;
+}
+
+/// [`parse_config`], then [`RunConfig::check`]: either error names `path`.
+pub fn parse_checked<T: RunConfig>(path: &Path, text: &str) -> Result<T> {
+    let cfg: T = parse_config(path, text)?;
+    cfg.check()
+        .map_err(|e| Error::invalid(path, format!("invalid configuration: {e}")))?;
+    Ok(cfg)
+}
+
+/// [`parse_checked`] on the file at `path`.
+pub fn read_checked<T: RunConfig>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    parse_checked(path, &text)
+}
+
 /// `Ok` when `lo <= value <= hi`, else an error naming `key` (NaN is out of every range).
 pub(crate) fn in_range<T: PartialOrd + Display>(key: &str, value: T, lo: T, hi: T) -> Result<()> {
     if value >= lo && value <= hi {
@@ -82,6 +102,27 @@ fn positive(key: &str, value: f64, hi: f64) -> Result<()> {
             "`{key}` must be positive and at most {hi:e}, got {value}"
         )))
     }
+}
+
+/// The checks of the fields the teacher's and the student's `train` sections share (same
+/// names, same meaning): batches, fractions, learning rate, Adam, logging and time budget.
+macro_rules! check_shared_train {
+    ($t:expr) => {
+        let t = $t;
+        at_least("train.iters", t.iters, 1)?;
+        in_range("train.batch_rays", t.batch_rays, 1, MAX_BATCH)?;
+        in_range("train.frames_per_batch", t.frames_per_batch, 1, 4096)?;
+        in_range("train.face_fraction", t.face_fraction, 0.0, 1.0)?;
+        in_range("train.mouth_fraction", t.mouth_fraction, 0.0, 1.0)?;
+        positive("train.lr", t.lr, 1.0)?;
+        at_least("train.lr_decay_steps", t.lr_decay_steps, 1)?;
+        in_range_open("train.beta1", t.beta1, 0.0, 1.0)?;
+        in_range_open("train.beta2", t.beta2, 0.0, 1.0)?;
+        positive("train.eps", t.eps, 1.0)?;
+        at_least("train.log_every", t.log_every, 1)?;
+        in_range("train.val_frames", t.val_frames, 1, 4096)?;
+        in_range("train.time_budget_s", t.time_budget_s, 0.0, 1e9)?;
+    };
 }
 
 /// Largest network width, sample count and batch the checks accept: far beyond any preset,
@@ -357,9 +398,8 @@ impl AudioConfig {
     }
 }
 
-impl TeacherRunConfig {
-    /// Checks every value before any work starts; the error names the key.
-    pub fn check(&self) -> Result<()> {
+impl RunConfig for TeacherRunConfig {
+    fn check(&self) -> Result<()> {
         let m = &self.model;
         m.audio.check("model.audio")?;
         in_range("model.depth", m.depth, 1, MAX_DEPTH)?;
@@ -382,27 +422,9 @@ impl TeacherRunConfig {
             1.0,
         )?;
         let t = &self.train;
-        at_least("train.iters", t.iters, 1)?;
-        in_range("train.batch_rays", t.batch_rays, 1, MAX_BATCH)?;
-        in_range("train.frames_per_batch", t.frames_per_batch, 1, 4096)?;
-        in_range("train.face_fraction", t.face_fraction, 0.0, 1.0)?;
-        in_range("train.mouth_fraction", t.mouth_fraction, 0.0, 1.0)?;
-        positive("train.lr", t.lr, 1.0)?;
-        at_least("train.lr_decay_steps", t.lr_decay_steps, 1)?;
-        at_least("train.att_start", t.att_start, 0)?;
-        positive("train.att_lr_scale", t.att_lr_scale, 1e3)?;
-        check_adam("train", t.beta1, t.beta2, t.eps)?;
-        at_least("train.log_every", t.log_every, 1)?;
-        in_range("train.val_frames", t.val_frames, 1, 4096)?;
-        in_range("train.time_budget_s", t.time_budget_s, 0.0, 1e9)
+        check_shared_train!(t);
+        positive("train.att_lr_scale", t.att_lr_scale, 1e3)
     }
-}
-
-/// Checks Adam's hyper-parameters under `at`.
-fn check_adam(at: &str, beta1: f64, beta2: f64, eps: f64) -> Result<()> {
-    in_range_open(&format!("{at}.beta1"), beta1, 0.0, 1.0)?;
-    in_range_open(&format!("{at}.beta2"), beta2, 0.0, 1.0)?;
-    positive(&format!("{at}.eps"), eps, 1.0)
 }
 
 /// How the student is trained (paper sections 3.4-3.5; R2L's public settings where the
@@ -524,29 +546,18 @@ pub struct StudentRunConfig {
     pub train: StudentTrainConfig,
 }
 
-impl StudentRunConfig {
-    /// Checks every value before any work starts; the error names the key.
-    pub fn check(&self) -> Result<()> {
+impl RunConfig for StudentRunConfig {
+    fn check(&self) -> Result<()> {
         self.model.check()?;
         let t = &self.train;
-        at_least("train.iters", t.iters, 1)?;
-        in_range("train.batch_rays", t.batch_rays, 1, MAX_BATCH)?;
-        in_range("train.frames_per_batch", t.frames_per_batch, 1, 4096)?;
-        in_range("train.face_fraction", t.face_fraction, 0.0, 1.0)?;
-        in_range("train.mouth_fraction", t.mouth_fraction, 0.0, 1.0)?;
-        positive("train.lr", t.lr, 1.0)?;
-        at_least("train.lr_decay_steps", t.lr_decay_steps, 1)?;
-        check_adam("train", t.beta1, t.beta2, t.eps)?;
+        check_shared_train!(t);
         in_range("train.lambda", t.lambda, 0.0, 1e6)?;
         in_range("train.hard_ratio", t.hard_ratio, 0.0, 1.0)?;
         in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;
         in_range("train.pseudo_fraction", t.pseudo_fraction, 0.0, 1.0)?;
         in_range("train.pseudo_yaw_deg", t.pseudo_yaw_deg, 0.0, 45.0)?;
-        in_range("train.pseudo_pitch_deg", t.pseudo_pitch_deg, 0.0, 45.0)?;
-        at_least("train.log_every", t.log_every, 1)?;
-        in_range("train.val_frames", t.val_frames, 1, 4096)?;
-        in_range("train.time_budget_s", t.time_budget_s, 0.0, 1e9)
+        in_range("train.pseudo_pitch_deg", t.pseudo_pitch_deg, 0.0, 45.0)
     }
 }
 

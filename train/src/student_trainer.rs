@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
 use crate::checkpoint::{CONFIG_FILE, load_tensors, save_json, save_tensors, step_of};
-use crate::config::{StudentRunConfig, StudentTrainConfig, read_config};
+use crate::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};

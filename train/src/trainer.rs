@@ -28,7 +28,7 @@ use crate::checkpoint::{
     CONFIG_FILE, MODEL_FILE, STATE_FILE, load_tensors, restore_weights, save_json, save_tensors,
     step_of, weights,
 };
-use crate::config::{TeacherRunConfig, read_config};
+use crate::config::{RunConfig, TeacherRunConfig, read_config};
 
 /// The training curve written beside the log at every checkpoint.
 pub const CURVE_FILE: &str = "training_curve.png";
