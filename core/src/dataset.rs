@@ -591,8 +591,49 @@ pub fn load_audio_npy(path: &Path) -> Result<AudioWindows> {
     parse_audio_npy(path, &bytes)
 }
 
+/// The dimensions of a `.npy` file's `shape` entry as written in its header, without
+/// multiplying them; `None` when the bytes hold no readable header or no `shape` tuple
+/// (the npy reader then says what is wrong). A dimension beyond `u64` reads as `u64::MAX`.
+fn npy_header_shape(bytes: &[u8]) -> Option<Vec<u64>> {
+    let rest = bytes.strip_prefix(b"\x93NUMPY")?;
+    let (&major, rest) = rest.split_first()?;
+    let rest = rest.get(1..)?;
+    let (len, rest) = if major == 1 {
+        (u16::from_le_bytes([*rest.first()?, *rest.get(1)?]) as usize, rest.get(2..)?)
+    } else {
+        let b = rest.get(..4)?;
+        (u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize, rest.get(4..)?)
+    };
+    let header = String::from_utf8_lossy(rest.get(..len.min(rest.len()))?);
+    let after = &header[header.find("shape")? + "shape".len()..];
+    let tuple = &after[after.find('(')? + 1..];
+    let tuple = &tuple[..tuple.find(')')?];
+    tuple
+        .split(',')
+        .map(str::trim)
+        .filter(|d| !d.is_empty())
+        .map(|d| {
+            let digits = d.trim_end_matches(['L', 'l']);
+            digits
+                .chars()
+                .all(|c| c.is_ascii_digit())
+                .then(|| digits.parse::<u64>().unwrap_or(u64::MAX))
+        })
+        .collect()
+}
+
 /// [`load_audio_npy`] on bytes already read; `path` names them in errors.
 pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
+    // npyz multiplies the header's dimensions unchecked: a shape whose size overflows must
+    // be refused before it reads the header.
+    if let Some(shape) = npy_header_shape(bytes)
+        && shape.iter().try_fold(1u64, |acc, &d| acc.checked_mul(d)).is_none()
+    {
+        return Err(Error::invalid(
+            path,
+            format!("shape {shape:?} holds more values than any file can"),
+        ));
+    }
     let npy = npyz::NpyFile::new(Cursor::new(bytes))
         .map_err(|e| Error::invalid(path, format!("not a .npy file: {e}")))?;
     let shape: Vec<u64> = npy.shape().to_vec();

@@ -298,3 +298,22 @@ fn float64_audio_loads_as_f32() {
     assert_eq!((a.n_frames, a.window, a.n_features), (2, 16, 3));
     assert_eq!(a.data[95], 47.5);
 }
+
+#[test]
+fn an_npy_header_whose_shape_overflows_is_refused_in_one_line() {
+    // A valid v1.0 header whose dimensions multiply past u64: the npy reader must answer
+    // with an error, not an arithmetic overflow.
+    let dict = "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 16, 4294967296), }";
+    let mut header = dict.to_string();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes.extend_from_slice(&[0u8; 64]);
+    let err = nldf_core::dataset::parse_audio_npy(Path::new("aud.npy"), &bytes).unwrap_err();
+    assert_one_line_naming(&err.to_string(), "aud.npy");
+    assert!(err.to_string().contains("holds more values"), "{err}");
+}
