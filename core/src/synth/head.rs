@@ -1,26 +1,21 @@
-//! Signed-distance head model and its sphere-tracing renderer.
+//! The synthetic head model: the shape and colours of one head ([`HeadParams`]), its animated
+//! state ([`FaceState`]), and the signed-distance field that places every part in head space,
+//! with the colour and face region of each surface point.
 //!
 //! The head is a smooth union of ellipsoids, spheres and capsules in head space (AD-NeRF's
 //! world: head near the origin, facing +z, +y up, about 0.25 units tall). Eyes with blinking
 //! lids and a mouth whose opening and width follow a [`FaceState`] are carved into and added
-//! onto it. Shading is Lambert plus ambient with a faint specular term, lit from a fixed
-//! direction in head space, so that a surface point looks the same from every camera except
-//! for the specular highlight.
+//! onto it. [`render_head`] and [`render_background`] render it into images.
 
 use glam::{Vec2, Vec3};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::camera::Camera;
-use crate::image::ImageRgb;
+use super::sdf::{Ellipsoid, RoundBox, RoundCone, smax, smin, smoothstep};
 use crate::region::Region;
 
-/// Largest number of sphere-tracing steps per ray.
-const MAX_STEPS: usize = 64;
-/// A ray hits the surface where the signed distance falls below this.
-const HIT_EPS: f32 = 1e-4;
-/// A ray that runs out of steps this close to the surface counts as a hit (grazing rays).
-const GRAZE_EPS: f32 = 1e-3;
+pub use super::trace::{HeadFrame, render_background, render_head};
+
 /// Margin added to every part's bounds: covers the bulge of the smooth unions.
 const BOUNDS_MARGIN: f32 = 0.01;
 /// Largest jaw drop (and mouth gap) at `mouth_open = 1`, in head units.
@@ -264,18 +259,6 @@ impl FaceState {
     }
 }
 
-/// One rendered frame with its per-pixel ground truth.
-#[derive(Debug, Clone, PartialEq)]
-pub struct HeadFrame {
-    /// The image: the head over the background.
-    pub rgb: ImageRgb,
-    /// Per pixel, row-major: ray parameter `t` (z-depth) of the surface hit by the pixel's
-    /// centre sample, 0.0 where that ray misses.
-    pub depth: Vec<f32>,
-    /// Per pixel, row-major: which part of the head the centre sample hit.
-    pub regions: Vec<Region>,
-}
-
 /// Axis-aligned bounds (min, max) in head space that contain the head in every FaceState.
 pub fn head_bounds(head: &HeadParams) -> (Vec3, Vec3) {
     let mut lo = Vec3::splat(f32::INFINITY);
@@ -297,307 +280,9 @@ pub fn head_bounds(head: &HeadParams) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
-/// Renders one frame: for each pixel, `supersample` x `supersample` sub-pixel rays (pixel
-/// (i, j) covers [i-0.5, i+0.5] x [j-0.5, j+0.5] around the [`Camera::ray`] grid point); a
-/// sub-ray that hits the head takes its shaded colour, one that misses takes the background
-/// pixel (i, j); the pixel is the average. Depth and region come from the centre ray
-/// (`supersample` odd) or the sub-ray nearest the centre. `supersample` 0 counts as 1; a
-/// background of another size is sampled at the clamped pixel.
-pub fn render_head(
-    head: &HeadParams,
-    state: &FaceState,
-    camera: &Camera,
-    background: &ImageRgb,
-    supersample: u32,
-) -> HeadFrame {
-    let model = Model::new(head, state);
-    let k = &camera.intrinsics;
-    let (width, height) = (k.width, k.height);
-    let s = supersample.max(1);
-    let offsets: Vec<f32> = (0..s).map(|a| (a as f32 + 0.5) / s as f32 - 0.5).collect();
-    let centre = (s / 2) as usize;
-    let n = k.n_pixels();
-    let mut rgb = ImageRgb {
-        width,
-        height,
-        data: Vec::with_capacity(3 * n),
-    };
-    let mut depth = Vec::with_capacity(n);
-    let mut regions = Vec::with_capacity(n);
-    for j in 0..height {
-        for i in 0..width {
-            let bg = background_pixel(background, i, j);
-            let mut sum = Vec3::ZERO;
-            let mut n_hit = 0u32;
-            let mut centre_depth = 0.0;
-            let mut centre_region = Region::Background;
-            for (b, &oy) in offsets.iter().enumerate() {
-                for (a, &ox) in offsets.iter().enumerate() {
-                    let (o, d) = camera.ray(i as f32 + ox, j as f32 + oy);
-                    let is_centre = a == centre && b == centre;
-                    if let Some(hit) = model.trace(o, d) {
-                        let (colour, region) = model.shade(hit.p, d);
-                        sum += colour;
-                        n_hit += 1;
-                        if is_centre {
-                            centre_depth = hit.t;
-                            centre_region = region;
-                        }
-                    }
-                }
-            }
-            let pixel = if n_hit == 0 {
-                bg
-            } else {
-                let n_miss = (s * s - n_hit) as f32;
-                ((sum + n_miss * Vec3::from(bg)) / (s * s) as f32).to_array()
-            };
-            rgb.data.extend_from_slice(&pixel);
-            depth.push(centre_depth);
-            regions.push(centre_region);
-        }
-    }
-    HeadFrame {
-        rgb,
-        depth,
-        regions,
-    }
-}
-
-fn background_pixel(background: &ImageRgb, i: u32, j: u32) -> [f32; 3] {
-    if background.width == 0
-        || background.height == 0
-        || background.data.len() < 3 * background.n_pixels()
-    {
-        return [0.0; 3];
-    }
-    background.get(i.min(background.width - 1), j.min(background.height - 1))
-}
-
-/// A static, smooth background image (soft gradient plus a few large blurred shapes, colours
-/// from rng), deterministic for the rng state.
-pub fn render_background(rng: &mut impl Rng, width: u32, height: u32) -> ImageRgb {
-    let hue = rng.random::<f32>();
-    let c0 = muted(
-        hue,
-        rng.random_range(0.25..0.45),
-        rng.random_range(0.55..0.85),
-    );
-    let c1 = muted(
-        hue + rng.random_range(-0.15..0.15),
-        rng.random_range(0.2..0.4),
-        rng.random_range(0.3..0.6),
-    );
-    let angle = rng.random_range(0.0..std::f32::consts::TAU);
-    let dir = Vec2::new(angle.cos(), angle.sin());
-    let n_blobs = rng.random_range(3..=5);
-    let blobs: Vec<(Vec2, f32, Vec3, f32)> = (0..n_blobs)
-        .map(|_| {
-            let c = Vec2::new(rng.random_range(-0.1..1.1), rng.random_range(-0.1..1.1));
-            let r = rng.random_range(0.2..0.45);
-            let colour = muted(
-                rng.random::<f32>(),
-                rng.random_range(0.2..0.5),
-                rng.random_range(0.35..0.9),
-            );
-            let alpha = rng.random_range(0.25..0.55);
-            (c, r, colour, alpha)
-        })
-        .collect();
-    let mut img = ImageRgb {
-        width,
-        height,
-        data: Vec::with_capacity(3 * width as usize * height as usize),
-    };
-    let scale = width.max(height).max(1) as f32;
-    for j in 0..height {
-        for i in 0..width {
-            let uv = Vec2::new((i as f32 + 0.5) / scale, (j as f32 + 0.5) / scale);
-            let g = (uv - Vec2::splat(0.5)).dot(dir) * 0.9 + 0.5;
-            let mut c = c0.lerp(c1, smoothstep(0.0, 1.0, g));
-            for &(centre, r, colour, alpha) in &blobs {
-                let w = alpha * (-(uv - centre).length_squared() / (r * r)).exp();
-                c = c.lerp(colour, w);
-            }
-            img.data
-                .extend_from_slice(&c.clamp(Vec3::ZERO, Vec3::ONE).to_array());
-        }
-    }
-    img
-}
-
-/// A colour from hue (turns), saturation and value.
-fn muted(hue: f32, sat: f32, val: f32) -> Vec3 {
-    let h = hue.rem_euclid(1.0) * 6.0;
-    let f = |n: f32| {
-        let k = (n + h).rem_euclid(6.0);
-        val - val * sat * (k.min(4.0 - k).clamp(0.0, 1.0))
-    };
-    Vec3::new(f(5.0), f(3.0), f(1.0))
-}
-
-fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
-    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
-}
-
-/// Polynomial smooth minimum of `a` and `b` with blend width `k`, and the weight of `b`.
-#[inline]
-fn smin(a: f32, b: f32, k: f32) -> (f32, f32) {
-    let h = (0.5 + 0.5 * (a - b) / k).clamp(0.0, 1.0);
-    (a + (b - a) * h - k * h * (1.0 - h), h)
-}
-
-/// Polynomial smooth maximum of `a` and `b`, and the weight of `b`.
-#[inline]
-fn smax(a: f32, b: f32, k: f32) -> (f32, f32) {
-    let (d, h) = smin(-a, -b, k);
-    (-d, h)
-}
-
-/// An axis-aligned ellipsoid with the approximate distance of Quilez (`k0 (k0 - 1) / k1`).
-#[derive(Debug, Clone, Copy)]
-struct Ellipsoid {
-    c: Vec3,
-    r: Vec3,
-    inv_r: Vec3,
-    inv_r2: Vec3,
-    r_max: f32,
-}
-
-impl Ellipsoid {
-    fn new(c: Vec3, r: Vec3) -> Ellipsoid {
-        let r = r.max(Vec3::splat(1e-4));
-        Ellipsoid {
-            c,
-            r,
-            inv_r: r.recip(),
-            inv_r2: (r * r).recip(),
-            r_max: r.max_element(),
-        }
-    }
-
-    #[inline]
-    fn dist(&self, p: Vec3) -> f32 {
-        let q = p - self.c;
-        let k0 = (q * self.inv_r).length();
-        let k1 = (q * self.inv_r2).length();
-        if k1 < 1e-20 {
-            return -self.r.min_element();
-        }
-        k0 * (k0 - 1.0) / k1
-    }
-
-    /// A lower bound of the distance: to the bounding sphere.
-    #[inline]
-    fn bound(&self, p: Vec3) -> f32 {
-        (p - self.c).length() - self.r_max
-    }
-
-    fn extend(&self, lo: &mut Vec3, hi: &mut Vec3) {
-        *lo = lo.min(self.c - self.r);
-        *hi = hi.max(self.c + self.r);
-    }
-}
-
-/// A capsule whose radius varies linearly from `ra` at `a` to `rb` at `b` (Quilez' round
-/// cone).
-#[derive(Debug, Clone, Copy)]
-struct RoundCone {
-    a: Vec3,
-    b: Vec3,
-    ra: f32,
-    rb: f32,
-    centre: Vec3,
-    bound_r: f32,
-}
-
-impl RoundCone {
-    fn new(a: Vec3, b: Vec3, ra: f32, rb: f32) -> RoundCone {
-        let centre = 0.5 * (a + b);
-        let bound_r = 0.5 * (b - a).length() + ra.max(rb);
-        RoundCone {
-            a,
-            b,
-            ra,
-            rb,
-            centre,
-            bound_r,
-        }
-    }
-
-    #[inline]
-    fn dist(&self, p: Vec3) -> f32 {
-        let ba = self.b - self.a;
-        let l2 = ba.length_squared();
-        if l2 < 1e-12 {
-            return (p - self.a).length() - self.ra.max(self.rb);
-        }
-        let rr = self.ra - self.rb;
-        let a2 = l2 - rr * rr;
-        let il2 = 1.0 / l2;
-        let pa = p - self.a;
-        let y = pa.dot(ba);
-        let z = y - l2;
-        let xv = pa * l2 - ba * y;
-        let x2 = xv.length_squared();
-        let y2 = y * y * l2;
-        let z2 = z * z * l2;
-        let k = rr.signum() * rr * rr * x2;
-        if z.signum() * a2 * z2 > k {
-            return (x2 + z2).sqrt() * il2 - self.rb;
-        }
-        if y.signum() * a2 * y2 < k {
-            return (x2 + y2).sqrt() * il2 - self.ra;
-        }
-        ((x2 * a2 * il2).sqrt() + y * rr) * il2 - self.ra
-    }
-
-    #[inline]
-    fn bound(&self, p: Vec3) -> f32 {
-        (p - self.centre).length() - self.bound_r
-    }
-
-    fn extend(&self, lo: &mut Vec3, hi: &mut Vec3) {
-        *lo = lo.min(self.centre - Vec3::splat(self.bound_r));
-        *hi = hi.max(self.centre + Vec3::splat(self.bound_r));
-    }
-}
-
-/// A box with rounded edges: half extents `b` (before rounding), corner radius `r`.
-#[derive(Debug, Clone, Copy)]
-struct RoundBox {
-    c: Vec3,
-    b: Vec3,
-    r: f32,
-    bound_r: f32,
-}
-
-impl RoundBox {
-    fn new(c: Vec3, b: Vec3, r: f32) -> RoundBox {
-        RoundBox {
-            c,
-            b,
-            r,
-            bound_r: b.length() + r,
-        }
-    }
-
-    #[inline]
-    fn dist(&self, p: Vec3) -> f32 {
-        let q = (p - self.c).abs() - self.b;
-        q.max(Vec3::ZERO).length() + q.max_element().min(0.0) - self.r
-    }
-
-    #[inline]
-    fn bound(&self, p: Vec3) -> f32 {
-        (p - self.c).length() - self.bound_r
-    }
-}
-
 /// Material of a surface point: which part owns it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Part {
+pub(super) enum Part {
     Skin,
     Hair,
     Brow,
@@ -611,10 +296,10 @@ enum Part {
 
 /// A surface sample as the material-tracking evaluation builds it.
 #[derive(Debug, Clone, Copy)]
-struct Surf {
+pub(super) struct Surf {
     d: f32,
-    colour: Vec3,
-    part: Part,
+    pub(super) colour: Vec3,
+    pub(super) part: Part,
 }
 
 /// Accumulates the field: the distance alone (`MAT = false`, the fast path used by the
@@ -661,16 +346,8 @@ impl<const MAT: bool> Acc<MAT> {
     }
 }
 
-/// A ray's first surface hit.
-struct Hit {
-    /// Ray parameter (z-depth for camera rays).
-    t: f32,
-    /// Hit point in head space.
-    p: Vec3,
-}
-
 /// The head of one [`HeadParams`] in one [`FaceState`], with every part placed.
-struct Model {
+pub(super) struct Model {
     skin: Vec3,
     blush_colour: Vec3,
     blush: f32,
@@ -678,7 +355,7 @@ struct Model {
     brow_colour: Vec3,
     lips: Vec3,
     iris: Vec3,
-    skull: Ellipsoid,
+    pub(super) skull: Ellipsoid,
     jaw: Ellipsoid,
     chin: Ellipsoid,
     /// Right cheek; the left one is its mirror image (x -> -x).
@@ -715,13 +392,13 @@ struct Model {
     mouth_group_c: Vec3,
     mouth_group_r: f32,
     eye_group_r: f32,
-    light: Vec3,
-    lo: Vec3,
-    hi: Vec3,
+    pub(super) light: Vec3,
+    pub(super) lo: Vec3,
+    pub(super) hi: Vec3,
 }
 
 impl Model {
-    fn new(head: &HeadParams, state: &FaceState) -> Model {
+    pub(super) fn new(head: &HeadParams, state: &FaceState) -> Model {
         let st = state.clamped();
         let h = sanitized(head);
         let gap = MAX_GAP * st.mouth_open;
@@ -934,13 +611,13 @@ impl Model {
 
     /// The signed distance (a lower bound of it, Lipschitz about 1) at `p`.
     #[inline]
-    fn sdf(&self, p: Vec3) -> f32 {
+    pub(super) fn sdf(&self, p: Vec3) -> f32 {
         self.field::<false>(p).d
     }
 
     /// The field at `p`; with `MAT` also the colour and owning part of the nearest surface.
     #[inline]
-    fn field<const MAT: bool>(&self, p: Vec3) -> Surf {
+    pub(super) fn field<const MAT: bool>(&self, p: Vec3) -> Surf {
         // Mirror: every paired part is stored for the right side (x > 0).
         let q = Vec3::new(p.x.abs(), p.y, p.z);
         let skull = self.skull.dist(p);
@@ -1062,69 +739,7 @@ impl Model {
         acc.s
     }
 
-    /// Marches the ray `o + t d` and returns its first hit inside the head's bounds.
-    fn trace(&self, o: Vec3, d: Vec3) -> Option<Hit> {
-        let len = d.length();
-        if !(len > 1e-20 && len.is_finite() && o.is_finite()) {
-            return None;
-        }
-        let u = d / len;
-        let (s0, s1) = ray_box(o, u, self.lo, self.hi)?;
-        let s0 = s0.max(0.0);
-        if s1 <= s0 {
-            return None;
-        }
-        let p0 = o + u * s0;
-        let span = s1 - s0;
-        let mut s = 0.0;
-        let mut dist = f32::INFINITY;
-        for _ in 0..MAX_STEPS {
-            let p = p0 + u * s;
-            dist = self.sdf(p);
-            if dist < HIT_EPS {
-                return Some(Hit {
-                    t: (s0 + s) / len,
-                    p,
-                });
-            }
-            s += dist;
-            if s > span {
-                return None;
-            }
-        }
-        (dist < GRAZE_EPS).then(|| Hit {
-            t: (s0 + s) / len,
-            p: p0 + u * s,
-        })
-    }
-
-    /// Shaded colour and region of the surface point `p` seen along direction `d`.
-    fn shade(&self, p: Vec3, d: Vec3) -> (Vec3, Region) {
-        let n = self.normal(p);
-        let surf = self.field::<true>(p);
-        let diffuse = n.dot(self.light).max(0.0);
-        let ao = (0.55 + 0.45 * self.sdf(p + 0.008 * n) / 0.008).clamp(0.4, 1.0);
-        let view = -d.normalize_or(Vec3::NEG_Z);
-        let half = (self.light + view).normalize_or(Vec3::Z);
-        let gloss = match surf.part {
-            Part::Eyeball => 0.25,
-            Part::Lips => 0.08,
-            Part::Hair | Part::Brow => 0.03,
-            Part::Cavity => 0.0,
-            _ => 0.04,
-        };
-        let spec = gloss * n.dot(half).max(0.0).powi(32) * (diffuse > 0.0) as u8 as f32;
-        let colour = surf.colour * (0.32 + 0.05 * n.y + 0.68 * diffuse) * ao + Vec3::splat(spec);
-        let colour = colour.clamp(Vec3::ZERO, Vec3::ONE);
-        let colour = if colour.is_finite() {
-            colour
-        } else {
-            surf.colour
-        };
-        (colour, self.region(p, surf.part))
-    }
-
-    fn region(&self, p: Vec3, part: Part) -> Region {
+    pub(super) fn region(&self, p: Vec3, part: Part) -> Region {
         let q = Vec3::new(p.x.abs(), p.y, p.z);
         if matches!(part, Part::Eyeball | Part::Lid)
             || (q - self.eye_c).length() < self.eye_region_r
@@ -1137,21 +752,6 @@ impl Model {
             return Region::Mouth;
         }
         Region::Face
-    }
-
-    /// Unit surface normal by the tetrahedron technique.
-    fn normal(&self, p: Vec3) -> Vec3 {
-        const H: f32 = 2e-4;
-        let k0 = Vec3::new(1.0, -1.0, -1.0);
-        let k1 = Vec3::new(-1.0, -1.0, 1.0);
-        let k2 = Vec3::new(-1.0, 1.0, -1.0);
-        let k3 = Vec3::new(1.0, 1.0, 1.0);
-        let g = k0 * self.sdf(p + k0 * H)
-            + k1 * self.sdf(p + k1 * H)
-            + k2 * self.sdf(p + k2 * H)
-            + k3 * self.sdf(p + k3 * H);
-        g.try_normalize()
-            .unwrap_or_else(|| (p - self.skull.c).normalize_or(Vec3::Z))
     }
 }
 
@@ -1196,24 +796,4 @@ fn sanitized(head: &HeadParams) -> HeadParams {
         hair_thickness: len(head.hair_thickness, d.hair_thickness),
         ear_size: len(head.ear_size, d.ear_size),
     }
-}
-
-/// Entry and exit distances of the unit-direction ray `o + s u` through the box, if it
-/// crosses it in front of the origin.
-fn ray_box(o: Vec3, u: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
-    let mut s0 = f32::NEG_INFINITY;
-    let mut s1 = f32::INFINITY;
-    for a in 0..3 {
-        if u[a].abs() < 1e-12 {
-            if o[a] < lo[a] || o[a] > hi[a] {
-                return None;
-            }
-            continue;
-        }
-        let inv = 1.0 / u[a];
-        let (ta, tb) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
-        s0 = s0.max(ta.min(tb));
-        s1 = s1.min(ta.max(tb));
-    }
-    (s1 >= s0.max(0.0) && s1.is_finite()).then_some((s0, s1))
 }

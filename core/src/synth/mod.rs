@@ -8,7 +8,9 @@
 //! replaces the output only once it is complete.
 
 pub mod head;
+mod sdf;
 pub mod speech;
+mod trace;
 
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
