@@ -21,15 +21,17 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::audio::{FeatureConfig, FeatureSource, Waveform, audio_windows, resample, write_wav};
+use crate::audio::{
+    AudioWindows, FeatureConfig, FeatureSource, Waveform, audio_windows, resample, write_wav,
+};
 use crate::camera::{Camera, Intrinsics, look_at};
 use crate::dataset::{FrameEntry, Split, TransformsFile, save_audio_features, save_regions_png};
 use crate::error::{Error, Result};
 use crate::files::{read_json, write_json};
-use crate::image::save_png_bytes;
+use crate::image::{ImageRgb, save_png_bytes};
 use crate::rays::Rect;
 use crate::region::Region;
-use head::{FaceState, HeadParams, head_bounds, render_background, render_head};
+use head::{FaceState, HeadFrame, HeadParams, head_bounds, render_background, render_head};
 use speech::{MouthFrame, Voice, blink_track, mouth_track, synthesize_speech};
 
 /// Depth PNGs store `t * DEPTH_SCALE` as 16-bit integers (0 where the ray misses).
@@ -356,18 +358,44 @@ fn stream(seed: u64, id: u64) -> ChaCha8Rng {
     rng
 }
 
+/// Writes the scene into `dir`: draws the head, the background, the audio and the per-frame
+/// tracks, then writes the inputs, the rendered frames, the transforms and `scene.json`.
 fn write_scene(
     cfg: &SynthConfig,
     audio: Option<Waveform>,
     dir: &Path,
     tick: &(dyn Fn() + Sync),
 ) -> Result<Summary> {
-    let rate = cfg.features.sample_rate;
     let n_frames = (cfg.seconds * cfg.fps).floor() as usize;
-    let n_samples = (n_frames as f64 * rate as f64 / cfg.fps as f64).round() as usize;
-
     let head = HeadParams::random(&mut stream(cfg.seed, 1));
     let background = render_background(&mut stream(cfg.seed, 2), cfg.size, cfg.size);
+    let (voice, audio_source, wave) = scene_audio(cfg, audio, n_frames)?;
+    let tracks = Tracks::new(cfg, &wave, n_frames);
+    let windows = feature_windows(cfg, &wave, n_frames)?;
+    let (intrinsics, cameras) = frame_cameras(cfg, &tracks.poses);
+    write_inputs(cfg, dir, &background, &wave, &windows)?;
+    let face_rects = render_frames(cfg, dir, &head, &background, &tracks, &cameras, tick)?;
+    let n_train = write_transforms(cfg, dir, intrinsics, &cameras, &face_rects, &tracks.blink)?;
+    scene_file(cfg, head, voice, audio_source, intrinsics, &tracks)
+        .save(&dir.join("scene.json"))?;
+    Ok(Summary {
+        out: dir.to_path_buf(),
+        n_frames,
+        n_train,
+        files: scene_files(n_frames),
+    })
+}
+
+/// The audio of a scene of `n_frames` frames as `aud.wav` stores it (16-bit), with the voice
+/// that spoke it and its `audio_source`: speech generated from the seed, or `audio`
+/// resampled and cut to length (no voice).
+fn scene_audio(
+    cfg: &SynthConfig,
+    audio: Option<Waveform>,
+    n_frames: usize,
+) -> Result<(Option<Voice>, String, Waveform)> {
+    let rate = cfg.features.sample_rate;
+    let n_samples = (n_frames as f64 * rate as f64 / cfg.fps as f64).round() as usize;
     let (voice, audio_source, wave) = match audio {
         None => {
             let mut rng = stream(cfg.seed, 3);
@@ -388,18 +416,56 @@ fn write_scene(
         }
     };
     // Features and the mouth are computed from the audio exactly as aud.wav stores it.
-    let wave = wave.quantized_16bit();
-    let mouth: Vec<MouthFrame> = mouth_track(&wave, cfg.fps, n_frames);
-    let blink = blink_track(&mut stream(cfg.seed, 4), cfg.fps, n_frames);
-    let poses = pose_track(&mut stream(cfg.seed, 5), cfg, n_frames);
-    let windows = audio_windows(&wave, cfg.fps, &cfg.features)?;
+    Ok((voice, audio_source, wave.quantized_16bit()))
+}
+
+/// The per-frame tracks that drive the head: the mouth, the eyelids and the head pose.
+struct Tracks {
+    mouth: Vec<MouthFrame>,
+    blink: Vec<f32>,
+    poses: Vec<HeadPose>,
+}
+
+impl Tracks {
+    /// The mouth follows `wave`; blinks and head motion are drawn from their own streams.
+    fn new(cfg: &SynthConfig, wave: &Waveform, n_frames: usize) -> Tracks {
+        Tracks {
+            mouth: mouth_track(wave, cfg.fps, n_frames),
+            blink: blink_track(&mut stream(cfg.seed, 4), cfg.fps, n_frames),
+            poses: pose_track(&mut stream(cfg.seed, 5), cfg, n_frames),
+        }
+    }
+
+    /// The number of frames.
+    fn len(&self) -> usize {
+        self.poses.len()
+    }
+
+    /// The face state of frame `i`.
+    fn face(&self, i: usize) -> FaceState {
+        FaceState {
+            mouth_open: self.mouth[i].mouth_open,
+            mouth_width: self.mouth[i].mouth_width,
+            blink: self.blink[i],
+        }
+    }
+}
+
+/// The audio features of every video frame, checked to be one per frame.
+fn feature_windows(cfg: &SynthConfig, wave: &Waveform, n_frames: usize) -> Result<AudioWindows> {
+    let windows = audio_windows(wave, cfg.fps, &cfg.features)?;
     if windows.n_frames != n_frames {
         return Err(Error::Argument(format!(
             "audio features give {} frames for {n_frames} video frames",
             windows.n_frames
         )));
     }
+    Ok(windows)
+}
 
+/// The intrinsics, and each frame's camera in head space: the fixed world camera on +z looking
+/// at the origin, seen from the head in that frame's pose.
+fn frame_cameras(cfg: &SynthConfig, poses: &[HeadPose]) -> (Intrinsics, Vec<Camera>) {
     let s = cfg.size as f32;
     let intrinsics = Intrinsics {
         focal: cfg.focal_at_128 * s / 128.0,
@@ -413,57 +479,98 @@ fn write_scene(
         Vec3::ZERO,
         Vec3::Y,
     );
-    let cameras: Vec<Camera> = poses
+    let cameras = poses
         .iter()
         .map(|p| Camera {
             intrinsics,
             c2w: p.matrix().inverse() * world_camera,
         })
         .collect();
+    (intrinsics, cameras)
+}
 
+/// Creates the per-frame folders and writes the background, the audio and its features.
+fn write_inputs(
+    cfg: &SynthConfig,
+    dir: &Path,
+    background: &ImageRgb,
+    wave: &Waveform,
+    windows: &AudioWindows,
+) -> Result<()> {
     for sub in ["head_imgs", "parsing", "depth"] {
         let d = dir.join(sub);
         std::fs::create_dir(&d).map_err(|e| Error::io(&d, e))?;
     }
     background.save_png(&dir.join("bc.png"))?;
-    write_wav(&dir.join("aud.wav"), &wave)?;
-    save_audio_features(dir, &windows, &FeatureSource::Nldf(cfg.features.clone()))?;
+    write_wav(&dir.join("aud.wav"), wave)?;
+    save_audio_features(dir, windows, &FeatureSource::Nldf(cfg.features.clone()))
+}
 
-    let face_rects: Vec<Rect> = (0..n_frames)
+/// Renders the frames in parallel, writes each one's files, calls `tick` once per frame and
+/// returns each frame's face rectangle.
+fn render_frames(
+    cfg: &SynthConfig,
+    dir: &Path,
+    head: &HeadParams,
+    background: &ImageRgb,
+    tracks: &Tracks,
+    cameras: &[Camera],
+    tick: &(dyn Fn() + Sync),
+) -> Result<Vec<Rect>> {
+    (0..tracks.len())
         .into_par_iter()
         .map(|i| {
-            let state = FaceState {
-                mouth_open: mouth[i].mouth_open,
-                mouth_width: mouth[i].mouth_width,
-                blink: blink[i],
-            };
-            let frame = render_head(&head, &state, &cameras[i], &background, cfg.supersample);
-            frame
-                .rgb
-                .save_png(&dir.join(format!("head_imgs/{i}.png")))?;
-            save_regions_png(
-                &dir.join(format!("parsing/{i}.png")),
-                cfg.size,
-                cfg.size,
-                &frame.regions,
-            )?;
-            let depth: Vec<u8> = frame
-                .depth
-                .iter()
-                .flat_map(|&t| ((t * DEPTH_SCALE).round().clamp(0.0, 65535.0) as u16).to_ne_bytes())
-                .collect();
-            save_png_bytes(
-                &dir.join(format!("depth/{i}.png")),
-                cfg.size,
-                cfg.size,
-                image::ExtendedColorType::L16,
-                &depth,
-            )?;
+            let frame = render_head(
+                head,
+                &tracks.face(i),
+                &cameras[i],
+                background,
+                cfg.supersample,
+            );
+            write_frame(dir, i, &frame, cfg.size)?;
             tick();
             Ok(face_rect(&frame.regions, cfg.size))
         })
-        .collect::<Result<_>>()?;
+        .collect()
+}
 
+/// Writes frame `i`'s image, face parsing and depth (`t * DEPTH_SCALE` as 16 bits).
+fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, size: u32) -> Result<()> {
+    frame
+        .rgb
+        .save_png(&dir.join(format!("head_imgs/{i}.png")))?;
+    save_regions_png(
+        &dir.join(format!("parsing/{i}.png")),
+        size,
+        size,
+        &frame.regions,
+    )?;
+    let depth: Vec<u8> = frame
+        .depth
+        .iter()
+        .flat_map(|&t| ((t * DEPTH_SCALE).round().clamp(0.0, 65535.0) as u16).to_ne_bytes())
+        .collect();
+    save_png_bytes(
+        &dir.join(format!("depth/{i}.png")),
+        size,
+        size,
+        image::ExtendedColorType::L16,
+        &depth,
+    )
+}
+
+/// Writes the train and val transforms (the first ten elevenths of the frames, at least one,
+/// train; the rest val), with near and far around the cameras' mean distance from the head,
+/// and returns the number of train frames.
+fn write_transforms(
+    cfg: &SynthConfig,
+    dir: &Path,
+    intrinsics: Intrinsics,
+    cameras: &[Camera],
+    face_rects: &[Rect],
+    blink: &[f32],
+) -> Result<usize> {
+    let n_frames = cameras.len();
     let (near, far) = {
         let mean = cameras.iter().map(|c| c.origin().length()).sum::<f32>() / n_frames as f32;
         (mean - 0.2, mean + 0.4)
@@ -492,9 +599,20 @@ fn write_scene(
     };
     transforms(&entries[..n_train]).save(&dir.join(Split::Train.file_name()))?;
     transforms(&entries[n_train..]).save(&dir.join(Split::Val.file_name()))?;
+    Ok(n_train)
+}
 
+/// `scene.json`: how the scene was made and every frame's ground truth.
+fn scene_file(
+    cfg: &SynthConfig,
+    head: HeadParams,
+    voice: Option<Voice>,
+    audio_source: String,
+    intrinsics: Intrinsics,
+    tracks: &Tracks,
+) -> SceneFile {
     let (lo, hi) = head_bounds(&head);
-    let scene = SceneFile {
+    SceneFile {
         generator: GENERATOR.to_string(),
         config: cfg.clone(),
         head,
@@ -503,21 +621,23 @@ fn write_scene(
         intrinsics,
         depth_scale: DEPTH_SCALE,
         head_bounds: [lo.to_array(), hi.to_array()],
-        frames: (0..n_frames)
+        frames: (0..tracks.len())
             .map(|i| SceneFrame {
                 img_id: i as i64,
                 time: i as f32 / cfg.fps,
-                loudness: mouth[i].loudness,
-                mouth_open: mouth[i].mouth_open,
-                mouth_width: mouth[i].mouth_width,
-                blink: blink[i],
-                pose: poses[i],
+                loudness: tracks.mouth[i].loudness,
+                mouth_open: tracks.mouth[i].mouth_open,
+                mouth_width: tracks.mouth[i].mouth_width,
+                blink: tracks.blink[i],
+                pose: tracks.poses[i],
             })
             .collect(),
-    };
-    scene.save(&dir.join("scene.json"))?;
+    }
+}
 
-    let files = [
+/// The files and folders of a scene of `n_frames` frames, as [`Summary::files`] lists them.
+fn scene_files(n_frames: usize) -> Vec<(PathBuf, usize)> {
+    [
         ("transforms_train.json", 1),
         ("transforms_val.json", 1),
         ("bc.png", 1),
@@ -531,13 +651,7 @@ fn write_scene(
     ]
     .into_iter()
     .map(|(p, n)| (PathBuf::from(p), n))
-    .collect();
-    Ok(Summary {
-        out: dir.to_path_buf(),
-        n_frames,
-        n_train,
-        files,
-    })
+    .collect()
 }
 
 /// The bounding box of the head's pixels, padded by 4 % of the image, or the whole image
