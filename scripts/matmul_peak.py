@@ -1,5 +1,5 @@
 """The machine's practical f32 matrix peak: onnxruntime's sgemm on a 4096^3 product with
-one thread per core (DESIGN section 8 quotes this figure for planning), best of 5 runs.
+one thread per core (the README quotes this figure as the practical fp32 peak), best of 5 runs.
 
 Usage: "$(scripts/python_env.sh)" scripts/matmul_peak.py [--n 4096]
 """
