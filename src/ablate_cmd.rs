@@ -128,7 +128,7 @@ pub fn run(args: AblateArgs) -> Result<()> {
     let mut rows = Vec::new();
     let train = |table: &str, label: &str, name: &str, args: StudentArgs| -> Result<Row> {
         let dir = args.run.join(name);
-        let done = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
+        let done = dir.join(nldf_core::run_files::MODEL_FILE).is_file();
         // A finished variant resumes with nothing left to do.
         let args = StudentArgs {
             name: name.to_string(),
@@ -219,7 +219,7 @@ fn write_reports(
     let mut series = Vec::new();
     let mut seen = std::collections::HashSet::new();
     for r in rows.iter().filter(|r| seen.insert(r.folder.clone())) {
-        let log = nldf_train::log::read_log(&r.folder.join("log.csv"))?;
+        let log = nldf_train::log::read_log(&r.folder.join(nldf_core::run_files::LOG_FILE))?;
         series.push(nldf_train::plot::Series {
             label: r.variant.clone(),
             color: nldf_train::plot::palette(series.len()),
@@ -251,7 +251,7 @@ fn write_reports(
 /// again (the trainer checks that the cache fits its views and teacher, and renders anew
 /// when it does not).
 fn share_targets(run: &std::path::Path, dir: &std::path::Path) -> Result<()> {
-    use nldf_train::student_trainer::TARGETS_FILE;
+    use nldf_core::run_files::TARGETS_FILE;
     if dir.join(TARGETS_FILE).is_file() {
         return Ok(());
     }

@@ -64,7 +64,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         })?;
     }
     let teacher = args.out.join("teacher");
-    let resume = teacher.join(nldf_train::checkpoint::MODEL_FILE).is_file();
+    let resume = teacher.join(nldf_core::run_files::MODEL_FILE).is_file();
     println!(
         "== teacher ({} min budget{}) -> {}",
         args.minutes,
@@ -85,7 +85,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     )?;
     if args.student_minutes > 0.0 {
         let student = args.out.join("student");
-        let resume = student.join(nldf_train::checkpoint::MODEL_FILE).is_file();
+        let resume = student.join(nldf_core::run_files::MODEL_FILE).is_file();
         println!(
             "== student ({} min budget{}) -> {}",
             args.student_minutes,

@@ -57,7 +57,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         .with_context(|| format!("reading {}", args.run.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
-            p.join("render.json").is_file() && p.join(nldf_train::checkpoint::MODEL_FILE).is_file()
+            p.join("render.json").is_file() && p.join(nldf_core::run_files::MODEL_FILE).is_file()
         })
         .collect();
     dirs.sort();

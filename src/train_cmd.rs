@@ -184,7 +184,7 @@ pub fn run(cmd: TrainCommand) -> Result<()> {
 
 /// Refuses to overwrite a trained stage without `--resume`, or to resume a missing one.
 fn check_resume(dir: &std::path::Path, what: &str, resume: bool) -> Result<()> {
-    let exists = dir.join(nldf_train::checkpoint::MODEL_FILE).is_file();
+    let exists = dir.join(nldf_core::run_files::MODEL_FILE).is_file();
     if exists && !resume {
         anyhow::bail!(
             "{} already holds a {what}; pass --resume to continue it or choose another --run",
@@ -319,10 +319,7 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
         })?;
         Some(cfg)
     };
-    let teacher = if teacher_dir
-        .join(nldf_train::checkpoint::MODEL_FILE)
-        .is_file()
-    {
+    let teacher = if teacher_dir.join(nldf_core::run_files::MODEL_FILE).is_file() {
         Some(TeacherRun::open(&teacher_dir, false)?)
     } else {
         None

@@ -81,6 +81,43 @@ impl AudioWindows {
     }
 }
 
+/// The audio neighbourhood of video frame `f`, the model's audio input for that frame: the
+/// windows of frames `f - att_frames/2 .. f + att_frames/2`, clamped to the track at its
+/// ends (AD-NeRF's `smo_size` windows; AD-NeRF pads with zeros instead). Training and
+/// rendering both take a frame's audio from here.
+///
+/// # Shapes
+/// - returns `[att_frames, window, n_features]` flat (empty for an empty track)
+pub fn neighbourhood(audio: &AudioWindows, f: usize, att_frames: usize) -> Vec<f32> {
+    neighbourhood_of(audio.n_frames, f, att_frames, |g| audio.frame(g))
+}
+
+/// [`neighbourhood`] over any store of windows (a stream's, say): `window(g)` is frame
+/// `g`'s window, for `g < n_frames`.
+pub fn neighbourhood_of<'a>(
+    n_frames: usize,
+    f: usize,
+    att_frames: usize,
+    window: impl Fn(usize) -> &'a [f32],
+) -> Vec<f32> {
+    let mut out = Vec::new();
+    if n_frames == 0 {
+        return out;
+    }
+    for s in 0..att_frames {
+        let g =
+            (f as isize + s as isize - (att_frames / 2) as isize).clamp(0, n_frames as isize - 1);
+        out.extend_from_slice(window(g as usize));
+    }
+    out
+}
+
+/// Frames after `f` whose windows `f`'s neighbourhood reads: a stream renders frame `f`
+/// once frame `f + lookahead_frames(att_frames)` has its window.
+pub fn lookahead_frames(att_frames: usize) -> usize {
+    att_frames.saturating_sub(1) - att_frames / 2
+}
+
 /// Settings of the log-mel features. The defaults follow common speech front ends (25 ms
 /// windows every 20 ms at 16 kHz, as DeepSpeech's 50 Hz features that AD-NeRF uses) with
 /// AD-NeRF's 16-frame window and its feature count F = 29.

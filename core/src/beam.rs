@@ -1,7 +1,9 @@
 //! The student's input: a whole camera ray ("light beam", paper section 3.2, after R2L)
 //! sampled at K points between near and far, concatenated and positionally encoded.
 
-use rand::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::encoding::{encode_positions, encoded_len};
@@ -79,4 +81,43 @@ pub fn encode_beams(
         }
         encode_positions(&points, spec.n_freqs, row);
     }
+}
+
+/// Rays per task of [`encode_beams_parallel`].
+const ENCODE_CHUNK: usize = 256;
+
+/// Encodes beams in parallel; with `jitter_seed`, chunk `c` of rays jitters its points
+/// with a generator seeded by `(jitter_seed, c)`, so the result does not depend on the
+/// thread count.
+///
+/// # Shapes
+/// - returns `[rays.len(), spec.encoded_len()]` flat
+pub fn encode_beams_parallel(
+    rays: &Rays,
+    near: f32,
+    far: f32,
+    spec: &BeamSpec,
+    jitter_seed: Option<u64>,
+) -> Vec<f32> {
+    let width = spec.encoded_len();
+    let mut out = vec![0.0f32; rays.len() * width];
+    out.par_chunks_mut(ENCODE_CHUNK * width)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            let lo = c * ENCODE_CHUNK;
+            let n = chunk.len() / width.max(1);
+            let part = Rays {
+                origins: rays.origins[3 * lo..3 * (lo + n)].to_vec(),
+                directions: rays.directions[3 * lo..3 * (lo + n)].to_vec(),
+            };
+            match jitter_seed {
+                Some(seed) => {
+                    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                    rng.set_stream(c as u64 + 1);
+                    encode_beams(&part, near, far, spec, Some(&mut rng), chunk);
+                }
+                None => encode_beams(&part, near, far, spec, None, chunk),
+            }
+        });
+    out
 }

@@ -599,10 +599,16 @@ fn npy_header_shape(bytes: &[u8]) -> Option<Vec<u64>> {
     let (&major, rest) = rest.split_first()?;
     let rest = rest.get(1..)?;
     let (len, rest) = if major == 1 {
-        (u16::from_le_bytes([*rest.first()?, *rest.get(1)?]) as usize, rest.get(2..)?)
+        (
+            u16::from_le_bytes([*rest.first()?, *rest.get(1)?]) as usize,
+            rest.get(2..)?,
+        )
     } else {
         let b = rest.get(..4)?;
-        (u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize, rest.get(4..)?)
+        (
+            u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize,
+            rest.get(4..)?,
+        )
     };
     let header = String::from_utf8_lossy(rest.get(..len.min(rest.len()))?);
     let after = &header[header.find("shape")? + "shape".len()..];
@@ -627,7 +633,10 @@ pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
     // npyz multiplies the header's dimensions unchecked: a shape whose size overflows must
     // be refused before it reads the header.
     if let Some(shape) = npy_header_shape(bytes)
-        && shape.iter().try_fold(1u64, |acc, &d| acc.checked_mul(d)).is_none()
+        && shape
+            .iter()
+            .try_fold(1u64, |acc, &d| acc.checked_mul(d))
+            .is_none()
     {
         return Err(Error::invalid(
             path,

@@ -25,6 +25,26 @@ pub fn encoded_len(n_values: usize, n_freqs: usize) -> usize {
     n_values * (1 + 2 * n_freqs)
 }
 
+/// Positional encoding of `n` 3-vectors (the teacher's sample points and view directions),
+/// in parallel over blocks of 256 vectors.
+///
+/// # Shapes
+/// - `values`: `[n, 3]` flat; returns `[n, 3 (1 + 2 n_freqs)]` flat
+pub fn encode_vectors(values: &[f32], n_freqs: usize) -> Vec<f32> {
+    use rayon::prelude::*;
+    let width = encoded_len(3, n_freqs);
+    let n = values.len() / 3;
+    let mut out = vec![0.0f32; n * width];
+    out.par_chunks_mut(width * 256)
+        .zip(values.par_chunks(3 * 256))
+        .for_each(|(o, v)| {
+            for (o, v) in o.chunks_mut(width).zip(v.chunks(3)) {
+                encode_positions(v, n_freqs, o);
+            }
+        });
+    out
+}
+
 /// Values encoded per pass of [`encode_positions`] (a beam holds 48).
 const CHUNK: usize = 64;
 

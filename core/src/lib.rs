@@ -3,7 +3,10 @@
 //! Cameras and rays in AD-NeRF's convention ([`camera`], [`rays`]), the student's beam
 //! encoding ([`encoding`], [`beam`]), the f64 compositing reference of the paper's Eq. 3-5
 //! ([`composite`]), datasets in AD-NeRF's layout ([`dataset`]), audio features
-//! ([`audio`]), image metrics ([`metrics`]) and a procedural talking head whose ground truth is
+//! ([`audio`]), image metrics ([`metrics`]), the
+//! rules training and rendering share (the student's shape in [`student_shape`], the rays that
+//! meet the head in [`rays::head_rays`], a frame's audio neighbourhood in
+//! [`audio::neighbourhood`], the run folder's files in [`run_files`]) and a procedural talking head whose ground truth is
 //! known exactly ([`synth`]). `nldf-train` (candle), `nldf-export` (prost) and `nldf-infer`
 //! (tract / onnxruntime) build on it; it never depends on them.
 
@@ -12,6 +15,7 @@ pub mod audio_stream;
 pub mod beam;
 pub mod bounds;
 pub mod camera;
+pub mod checks;
 pub mod composite;
 pub mod dataset;
 pub mod encoding;
@@ -22,6 +26,8 @@ pub mod metrics;
 pub mod rays;
 pub mod region;
 pub mod render_spec;
+pub mod run_files;
+pub mod student_shape;
 pub mod synth;
 
 pub use error::{Error, Result};

@@ -6,6 +6,7 @@ use glam::Vec3;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::bounds::Bounds;
 use crate::camera::Camera;
 
 /// A pixel rectangle `[x, y, w, h]` (AD-NeRF's `face_rect`).
@@ -115,6 +116,50 @@ pub fn rays_for_image(camera: &Camera) -> Rays {
         }
     }
     rays
+}
+
+/// Rays of an image with the pixel each goes through.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PixelRays {
+    pub rays: Rays,
+    /// The row-major pixel index (`j * width + i`) of each ray.
+    pub pixels: Vec<usize>,
+}
+
+impl PixelRays {
+    /// Pixel (`i`, `j`) of ray `r`, for an image `width` pixels wide.
+    pub fn pixel_ij(&self, r: usize, width: u32) -> (u32, u32) {
+        let p = self.pixels[r];
+        ((p % width as usize) as u32, (p / width as usize) as u32)
+    }
+}
+
+/// The rays of `camera`'s image that meet the head's `bounds` within `[near, far]`, row by
+/// row, with their pixels: the only rays the student is trained on and the only ones a
+/// renderer sends through a network; every other pixel is the background. Training,
+/// evaluation and inference all take a frame's rays from here.
+pub fn head_rays(camera: &Camera, bounds: &Bounds, near: f32, far: f32) -> PixelRays {
+    pixel_rays(camera, |o, d| bounds.intersect(o, d, near, far).is_some())
+}
+
+/// Every ray of `camera`'s image with its pixel, row by row (as [`rays_for_image`]).
+pub fn all_pixel_rays(camera: &Camera) -> PixelRays {
+    pixel_rays(camera, |_, _| true)
+}
+
+fn pixel_rays(camera: &Camera, keep: impl Fn(Vec3, Vec3) -> bool) -> PixelRays {
+    let k = &camera.intrinsics;
+    let mut out = PixelRays::default();
+    for j in 0..k.height {
+        for i in 0..k.width {
+            let (o, d) = camera.ray(i as f32, j as f32);
+            if keep(o, d) {
+                out.rays.push(o, d);
+                out.pixels.push(j as usize * k.width as usize + i as usize);
+            }
+        }
+    }
+    out
 }
 
 /// Rays through the listed pixels (`i`, `j`), in order.

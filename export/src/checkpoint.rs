@@ -6,71 +6,12 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use nldf_core::beam::BeamSpec;
 use nldf_core::image::ImageRgb;
-use nldf_core::render_spec::{RENDER_SPEC_FILE, RenderSpec};
-use serde::{Deserialize, Serialize};
+use nldf_core::render_spec::RenderSpec;
+use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE, RENDER_SPEC_FILE};
+use nldf_core::student_shape::StudentConfig;
 
 use crate::error::{Error, Result};
-
-/// Weights file of a student folder.
-pub const MODEL_FILE: &str = "model.safetensors";
-/// Resolved training config of a student folder.
-pub const CONFIG_FILE: &str = "config.json";
-
-/// The audio encoder's sizes (nldf-train's `AudioConfig`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct AudioShape {
-    /// Features per audio frame, F.
-    pub n_features: usize,
-    /// Feature frames per window (AD-NeRF: 16).
-    pub window: usize,
-    /// Width of the audio code.
-    pub dim: usize,
-    /// Neighbouring frames fused by the attention.
-    pub att_frames: usize,
-}
-
-/// The student's shape as `config.json` stores it (nldf-train's `StudentConfig`; every field
-/// is required, since the trainer writes the resolved config).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StudentShape {
-    pub audio: AudioShape,
-    /// Beam points K and frequencies L.
-    pub beam: BeamSpec,
-    /// Linear layers: input, `(depth - 2) / 2` residual blocks of two, output.
-    pub depth: usize,
-    /// Hidden width.
-    pub width: usize,
-    /// Segments per ray, M.
-    pub segments: usize,
-    /// Whether AudioAttNet fuses the neighbourhood.
-    pub attention: bool,
-}
-
-impl StudentShape {
-    /// Residual blocks between the input and the output layer.
-    pub fn n_blocks(&self) -> usize {
-        self.depth.saturating_sub(2) / 2
-    }
-
-    fn check(&self) -> std::result::Result<(), String> {
-        let a = &self.audio;
-        if self.depth < 4 || !self.depth.is_multiple_of(2) {
-            return Err(format!(
-                "student depth must be even and >= 4, got {}",
-                self.depth
-            ));
-        }
-        if self.width == 0 || self.segments == 0 || self.beam.n_points < 2 {
-            return Err("student width, segments >= 1 and beam points >= 2 are required".into());
-        }
-        if a.n_features == 0 || a.window == 0 || a.dim == 0 || a.att_frames == 0 {
-            return Err("audio n_features, window, dim and att_frames must be positive".into());
-        }
-        Ok(())
-    }
-}
 
 /// One f32 tensor of the checkpoint.
 #[derive(Debug, Clone, PartialEq)]
@@ -85,7 +26,7 @@ pub struct StudentCheckpoint {
     /// The folder.
     pub dir: PathBuf,
     /// The network's shape.
-    pub shape: StudentShape,
+    pub shape: StudentConfig,
     /// How to render frames of the scene.
     pub spec: RenderSpec,
     /// Training step of the weights.
@@ -103,13 +44,15 @@ impl StudentCheckpoint {
         let model = config.get("model").ok_or_else(|| {
             Error::invalid(&config_path, "has no `model` field (not a student config?)")
         })?;
-        let shape: StudentShape = serde_json::from_value(model.clone()).map_err(|e| {
+        let shape: StudentConfig = serde_json::from_value(model.clone()).map_err(|e| {
             Error::invalid(
                 &config_path,
                 format!("`model` is not a student config: {e}"),
             )
         })?;
-        shape.check().map_err(|e| Error::invalid(&config_path, e))?;
+        shape
+            .check()
+            .map_err(|e| Error::invalid(&config_path, e.to_string()))?;
 
         let spec_path = dir.join(RENDER_SPEC_FILE);
         let spec = RenderSpec::load(&spec_path)?;

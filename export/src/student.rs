@@ -41,7 +41,7 @@ pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Re
         && largest > half::f16::MAX.to_f32()
     {
         return Err(Error::invalid(
-            student_dir.join(crate::checkpoint::MODEL_FILE),
+            student_dir.join(nldf_core::run_files::MODEL_FILE),
             format!(
                 "weight `{name}` reaches {largest:e}, beyond half precision's {}: export \
                  without --fp16",
@@ -297,7 +297,7 @@ fn leaky(g: &mut GraphBuilder, name: &str, x: &str) -> String {
 /// - `audio`: `[att_frames, window, n_features]`
 /// - returns `audio.code` `[1, dim]`
 fn audio_code(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, audio: &str) -> Result<String> {
-    let a = ckpt.shape.audio;
+    let a = &ckpt.shape.audio;
     let seq = a.att_frames;
     let windows = if ckpt.shape.attention {
         audio.to_string()

@@ -90,38 +90,3 @@ pub fn windows_from_npy(info: &ModelInfo, path: &Path) -> Result<AudioWindows> {
     }
     Ok(windows)
 }
-
-/// The neighbourhood of video frame `f`: the windows of frames `f - att_frames/2 ..`,
-/// clamped to the track (AD-NeRF's `smo_size` windows), as the model's audio input.
-///
-/// # Shapes
-/// - returns `[att_frames, window, n_features]` flat
-pub fn neighbourhood(audio: &AudioWindows, f: usize, att_frames: usize) -> Vec<f32> {
-    neighbourhood_of(audio.n_frames, f, att_frames, |g| audio.frame(g))
-}
-
-/// [`neighbourhood`] over any store of windows: `window(g)` is frame `g`'s window, for
-/// `g < n_frames`.
-pub fn neighbourhood_of<'a>(
-    n_frames: usize,
-    f: usize,
-    att_frames: usize,
-    window: impl Fn(usize) -> &'a [f32],
-) -> Vec<f32> {
-    let mut out = Vec::new();
-    if n_frames == 0 {
-        return out;
-    }
-    for s in 0..att_frames {
-        let g =
-            (f as isize + s as isize - (att_frames / 2) as isize).clamp(0, n_frames as isize - 1);
-        out.extend_from_slice(window(g as usize));
-    }
-    out
-}
-
-/// Frames after `f` whose windows `f`'s neighbourhood reads: a stream renders frame `f`
-/// once frame `f + lookahead_frames(att_frames)` has its window.
-pub fn lookahead_frames(att_frames: usize) -> usize {
-    att_frames.saturating_sub(1) - att_frames / 2
-}

@@ -175,7 +175,7 @@ pub fn bench_render(
     let (mut bare_times, mut frame_times) = (Vec::new(), Vec::new());
     for rep in 0..cfg.warmup + cfg.reps {
         let t = Instant::now();
-        bare.run_bare(&rays.origins, &rays.directions, &audio)?;
+        bare.run_bare(&rays.rays.origins, &rays.rays.directions, &audio)?;
         let b = t.elapsed().as_secs_f64();
         let t = Instant::now();
         ort.render(c2w, &audio)?;

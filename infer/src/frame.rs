@@ -6,6 +6,7 @@
 use glam::Mat4;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
+use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
 use nldf_export::contract::ModelInfo;
 
 use crate::backend::Backend;
@@ -60,17 +61,6 @@ pub struct FrameRenderer {
     background: ImageRgb,
     /// Send only the rays that meet the head's bounds through the network.
     skip_rays: bool,
-}
-
-/// The rays of a frame that go through the network.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct FrameRays {
-    /// `[n, 3]` flat.
-    pub origins: Vec<f32>,
-    /// `[n, 3]` flat.
-    pub directions: Vec<f32>,
-    /// The pixel (row-major index) of each ray.
-    pub pixels: Vec<usize>,
 }
 
 impl std::fmt::Debug for FrameRenderer {
@@ -130,27 +120,19 @@ impl FrameRenderer {
     }
 
     /// The rays of the frame seen from camera-to-world `c2w` that go through the network:
-    /// those meeting the head's bounds within `[near, far]`, or all with skipping off.
-    pub fn rays(&self, c2w: Mat4) -> FrameRays {
+    /// those meeting the head's bounds within `[near, far]` ([`head_rays`], the rays the
+    /// student was trained on), or all with skipping off.
+    pub fn rays(&self, c2w: Mat4) -> PixelRays {
         let camera = Camera {
             intrinsics: self.intrinsics,
             c2w,
         };
         let spec = &self.backend.info().spec;
-        let (bounds, near, far) = (spec.bounds, spec.near, spec.far);
-        let k = self.intrinsics;
-        let mut rays = FrameRays::default();
-        for j in 0..k.height {
-            for i in 0..k.width {
-                let (o, d) = camera.ray(i as f32, j as f32);
-                if !self.skip_rays || bounds.intersect(o, d, near, far).is_some() {
-                    rays.origins.extend_from_slice(&o.to_array());
-                    rays.directions.extend_from_slice(&d.to_array());
-                    rays.pixels.push(j as usize * k.width as usize + i as usize);
-                }
-            }
+        if self.skip_rays {
+            head_rays(&camera, &spec.bounds, spec.near, spec.far)
+        } else {
+            all_pixel_rays(&camera)
         }
-        rays
     }
 
     /// The frame seen from camera-to-world `c2w` with the audio neighbourhood `audio`.
@@ -162,7 +144,9 @@ impl FrameRenderer {
         let rays = self.rays(c2w);
         let mut image = self.background.clone();
         if !rays.pixels.is_empty() {
-            let out = self.backend.run(&rays.origins, &rays.directions, audio)?;
+            let out = self
+                .backend
+                .run(&rays.rays.origins, &rays.rays.directions, audio)?;
             for (r, &p) in rays.pixels.iter().enumerate() {
                 image.data[3 * p..3 * p + 3].copy_from_slice(&out.rgb[3 * r..3 * r + 3]);
             }

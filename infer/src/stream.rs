@@ -24,12 +24,12 @@ use nldf_core::audio::{FeatureConfig, Waveform};
 use nldf_core::audio_stream::{FeatureStream, WavStreamDecoder};
 use serde::Serialize;
 
-use crate::audio::{lookahead_frames, neighbourhood_of};
 use crate::backend::{BackendKind, BackendOptions, backend_for};
 use crate::error::{Error, Result};
 use crate::frame::FrameRenderer;
 use crate::poses::{default_pose, pose_at, poses_from_transforms};
 use crate::video::frame_file_name;
+use nldf_core::audio::{lookahead_frames, neighbourhood_of};
 
 /// The report's file name in the output folder.
 pub const STREAM_REPORT_FILE: &str = "stream.json";

@@ -10,7 +10,9 @@ use std::time::Instant;
 use glam::Mat4;
 use nldf_core::audio::AudioWindows;
 
-use crate::audio::{neighbourhood, windows_from_npy, windows_from_wav};
+use nldf_core::audio::neighbourhood;
+
+use crate::audio::{windows_from_npy, windows_from_wav};
 use crate::backend::{BackendKind, BackendOptions, backend_for};
 use crate::error::{Error, Result};
 use crate::frame::FrameRenderer;

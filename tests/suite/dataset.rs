@@ -305,7 +305,7 @@ fn an_npy_header_whose_shape_overflows_is_refused_in_one_line() {
     // with an error, not an arithmetic overflow.
     let dict = "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 16, 4294967296), }";
     let mut header = dict.to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');

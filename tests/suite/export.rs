@@ -9,17 +9,17 @@ use std::process::Command;
 
 use candle_core::{DType, Device, Tensor};
 use glam::{Mat4, Vec3};
+use nldf_core::audio::neighbourhood;
 use nldf_core::audio::{AudioWindows, FeatureConfig, FeatureSource};
 use nldf_core::bounds::Bounds;
 use nldf_core::camera::{Camera, Intrinsics, look_at};
 use nldf_core::dataset::save_audio_npy;
 use nldf_core::image::ImageRgb;
-use nldf_core::rays::{Rays, rays_for_image};
+use nldf_core::rays::{Rays, head_rays};
 use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
 use nldf_export::contract::{self, ModelInfo};
 use nldf_export::onnx::{ModelProto, StringStringEntryProto};
 use nldf_export::{Error, WeightType, export_student, read_model};
-use nldf_train::audio_net::neighbourhood;
 use nldf_train::checkpoint::{save_tensors, weights};
 use nldf_train::nn::{init_seeded, new_varmap, sorted_vars};
 use nldf_train::student::{Student, StudentConfig, student};
@@ -243,6 +243,10 @@ pub(crate) fn configs() -> Vec<StudentConfig> {
     paper_beam.width = 16;
     paper_beam.attention = false;
     paper_beam.audio.n_features = 5;
+    paper_beam.audio.features = FeatureSource::Nldf(FeatureConfig {
+        n_mels: 5,
+        ..FeatureConfig::default()
+    });
     paper_beam.audio.att_frames = 4;
     paper_beam.segments = 3;
     vec![StudentConfig::tiny(), paper_beam]
@@ -590,35 +594,49 @@ fn export_passes_onnx_checker_and_python_onnxruntime_matches_candle() {
     }
 }
 
-/// The Rust reference frame: rays through every pixel from the default pose; those that
-/// meet the head's bounds get the candle student's colour, the others the background.
-fn reference_frame(run: &Run, audio: &[f32]) -> Vec<f32> {
+/// The candle reference frame: the rays of the frame seen from `c2w` with `intrinsics` that
+/// meet the head's bounds ([`head_rays`]) get the candle student's colour, the other pixels
+/// the background.
+pub fn candle_frame(
+    run: &Run,
+    intrinsics: Intrinsics,
+    c2w: Mat4,
+    audio: &[f32],
+    background: &ImageRgb,
+) -> ImageRgb {
     let spec = &run.spec;
-    let camera = Camera {
-        intrinsics: spec.intrinsics,
-        c2w: Mat4::from_cols_array_2d(&spec.default_pose).transpose(),
-    };
-    let rays = rays_for_image(&camera);
-    let background = ImageRgb::load(&run.student_dir().join(&spec.background)).unwrap();
-    let mut hit = Rays::default();
-    let mut hit_index = Vec::new();
-    for r in 0..rays.len() {
-        let (o, d) = (rays.origin(r), rays.direction(r));
-        if spec.bounds.intersect(o, d, spec.near, spec.far).is_some() {
-            hit.push(o, d);
-            hit_index.push(r);
+    let camera = Camera { intrinsics, c2w };
+    let head = head_rays(&camera, &spec.bounds, spec.near, spec.far);
+    let mut frame = background.clone();
+    if !head.pixels.is_empty() {
+        let (rgb, _) = candle_render(run, &head.rays, audio);
+        for (k, &p) in head.pixels.iter().enumerate() {
+            frame.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
         }
     }
+    frame
+}
+
+/// The Rust reference frame from the model's default pose; the camera sees both the head
+/// and the background.
+fn reference_frame(run: &Run, audio: &[f32]) -> Vec<f32> {
+    let spec = &run.spec;
+    let c2w = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let background = ImageRgb::load(&run.student_dir().join(&spec.background)).unwrap();
+    let head = head_rays(
+        &Camera {
+            intrinsics: spec.intrinsics,
+            c2w,
+        },
+        &spec.bounds,
+        spec.near,
+        spec.far,
+    );
     assert!(
-        !hit_index.is_empty() && hit_index.len() < rays.len(),
+        !head.pixels.is_empty() && head.pixels.len() < spec.intrinsics.n_pixels(),
         "the test camera should see both head and background"
     );
-    let (rgb, _) = candle_render(run, &hit, audio);
-    let mut frame = background.data.clone();
-    for (k, &r) in hit_index.iter().enumerate() {
-        frame[3 * r..3 * r + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
-    }
-    frame
+    candle_frame(run, spec.intrinsics, c2w, audio, &background).data
 }
 
 #[test]

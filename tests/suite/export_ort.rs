@@ -5,11 +5,11 @@
 
 use std::path::Path;
 
+use nldf_core::audio::neighbourhood;
 use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::ort_library::find_ort_library;
 use nldf_tests::in_ci;
-use nldf_train::audio_net::neighbourhood;
 
 use crate::export::{
     PYTHON_PARITY, TOL, candle_render, configs, max_diff, python, random_audio, random_rays,

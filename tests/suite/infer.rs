@@ -7,14 +7,13 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use glam::Mat4;
+use nldf_core::audio::neighbourhood;
 use nldf_core::audio::{Waveform, n_video_frames, write_wav};
-use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr;
-use nldf_core::rays::Rays;
 use nldf_export::WeightType;
 use nldf_export::read_model;
-use nldf_infer::audio::{neighbourhood, windows_from_wav};
+use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::{FrameRenderer, background_at};
 use nldf_infer::ort_library::find_ort_library_in;
@@ -23,42 +22,11 @@ use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob, next_frame, paced_wav_st
 use nldf_infer::video::{VideoJob, frame_file_name};
 use nldf_train::student::StudentConfig;
 
-use crate::export::{Run, candle_render, configs, foreign_model, random_audio, write_run};
+use crate::export::{Run, candle_frame, configs, foreign_model, random_audio, write_run};
 use crate::export_ort::ort_available;
 
 /// The parity bound between any two renderers' frames.
 const MIN_PSNR: f64 = 60.0;
-
-/// The candle reference frame: every pixel's ray from `c2w` with `intrinsics`; rays that
-/// meet the head's bounds get the candle student's colour, the others the background.
-fn candle_frame(
-    run: &Run,
-    intrinsics: Intrinsics,
-    c2w: Mat4,
-    audio: &[f32],
-    background: &ImageRgb,
-) -> ImageRgb {
-    let spec = &run.spec;
-    let camera = Camera { intrinsics, c2w };
-    let rays = nldf_core::rays::rays_for_image(&camera);
-    let mut hit = Rays::default();
-    let mut hit_index = Vec::new();
-    for r in 0..rays.len() {
-        let (o, d) = (rays.origin(r), rays.direction(r));
-        if spec.bounds.intersect(o, d, spec.near, spec.far).is_some() {
-            hit.push(o, d);
-            hit_index.push(r);
-        }
-    }
-    let mut frame = background.clone();
-    if !hit.is_empty() {
-        let (rgb, _) = candle_render(run, &hit, audio);
-        for (k, &r) in hit_index.iter().enumerate() {
-            frame.data[3 * r..3 * r + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
-        }
-    }
-    frame
-}
 
 #[test]
 fn infer_frames_agree_across_tract_ort_and_candle() {

@@ -5,6 +5,7 @@ mod dataset;
 mod export;
 mod export_ort;
 mod fuzz;
+mod identity;
 mod infer;
 mod metrics;
 mod rendering;

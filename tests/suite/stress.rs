@@ -251,7 +251,7 @@ fn stress_exported_model_gives_finite_output_for_far_rays_and_extreme_audio() {
         let windows = nldf_infer::audio::windows_from_wav(info, &path, &dir.join(wav)).unwrap();
         assert!(windows.data.iter().all(|v| v.is_finite()), "{wav} features");
         for f in [0, windows.n_frames - 1] {
-            let audio = nldf_infer::audio::neighbourhood(&windows, f, info.audio.att_frames);
+            let audio = nldf_core::audio::neighbourhood(&windows, f, info.audio.att_frames);
             for &kind in &kinds {
                 let options = BackendOptions {
                     batch_size: 512,

@@ -288,7 +288,7 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
         .unwrap()
         .unwrap();
     assert!(scores.psnr.is_finite() && events >= 12);
-    let log = nldf_train::log::read_log(&dir.path().join("log.csv")).unwrap();
+    let log = nldf_train::log::read_log(&dir.path().join(nldf_core::run_files::LOG_FILE)).unwrap();
     assert_eq!(
         log.iter().map(|r| r.step).collect::<Vec<_>>(),
         vec![4, 6, 8, 12]

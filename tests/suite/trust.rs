@@ -310,7 +310,7 @@ fn tract_binds_inputs_and_outputs_by_name() {
     let path = run.export(WeightType::F32);
     let rays = random_rays(700, 2);
     let audio =
-        nldf_train::audio_net::neighbourhood(&random_audio(&cfg, 10, 3), 4, cfg.audio.att_frames);
+        nldf_core::audio::neighbourhood(&random_audio(&cfg, 10, 3), 4, cfg.audio.att_frames);
     let options = BackendOptions {
         batch_size: 1024,
         threads: 1,
@@ -464,17 +464,11 @@ fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
             intrinsics: info.spec.intrinsics,
             c2w: poses[f],
         };
-        let rays = nldf_core::rays::rays_for_image(&camera);
         let code = run.audio_codes(&data, &[f]).unwrap();
         let want = run
-            .render_rays(&rays, &data.dataset.background.data, &code, &data)
-            .unwrap();
-        let want = ImageRgb {
-            width: camera.intrinsics.width,
-            height: camera.intrinsics.height,
-            data: want,
-        }
-        .to_rgb8();
+            .render_view(&camera, &data.dataset.background, &code, &data)
+            .unwrap()
+            .to_rgb8();
         let got = ImageRgb::load(&report.files[f]).unwrap().to_rgb8();
         let worst = want
             .iter()

@@ -146,18 +146,6 @@ impl AudioEncoder {
     }
 }
 
-/// The neighbourhood of frame `f`: the windows of frames `f - seq/2 .. f + seq/2`, clamped to
-/// `[0, n_frames)` (AD-NeRF's `smo_size` windows), as flat `[seq, window, n_features]`.
-pub fn neighbourhood(audio: &nldf_core::audio::AudioWindows, f: usize, seq: usize) -> Vec<f32> {
-    let mut out = Vec::with_capacity(seq * audio.window * audio.n_features);
-    for s in 0..seq {
-        let g =
-            (f as isize + s as isize - (seq / 2) as isize).clamp(0, audio.n_frames as isize - 1);
-        out.extend_from_slice(audio.frame(g as usize));
-    }
-    out
-}
-
 /// Logit of the centre frame in AudioAttNet's initial attention (softmax weight
 /// `e^3 / (e^3 + 7)`, about 0.74, over 8 frames).
 const CENTRE_LOGIT: f32 = 3.0;
@@ -185,7 +173,7 @@ pub fn centre_attention(varmap: &candle_nn::VarMap, prefix: &str, att_frames: us
     b.set(&Tensor::from_vec(bias, att_frames, b.device())?)
 }
 
-/// The neighbourhoods of several frames as one tensor (see [`neighbourhood`]).
+/// The neighbourhoods of several frames as one tensor (see [`nldf_core::audio::neighbourhood`]).
 ///
 /// # Shapes
 /// - returns `[aud_ids.len(), seq, window, n_features]`
@@ -196,7 +184,7 @@ pub fn neighbourhoods(
 ) -> Result<Tensor> {
     let flat: Vec<f32> = aud_ids
         .iter()
-        .flat_map(|&f| neighbourhood(audio, f, seq))
+        .flat_map(|&f| nldf_core::audio::neighbourhood(audio, f, seq))
         .collect();
     Tensor::from_vec(
         flat,

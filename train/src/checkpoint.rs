@@ -14,11 +14,6 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::nn::sorted_vars;
 
-/// File names inside a stage folder (`runs/<name>/teacher/`).
-pub const MODEL_FILE: &str = "model.safetensors";
-pub const STATE_FILE: &str = "train_state.safetensors";
-pub const CONFIG_FILE: &str = "config.json";
-
 /// Writes named tensors with string metadata to `path` atomically.
 pub fn save_tensors(
     path: &Path,

@@ -6,14 +6,13 @@
 //! error naming the key, and each run configuration's `check` names the key whose value is
 //! out of range, before any work starts.
 
-use std::fmt::Display;
 use std::path::Path;
 
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use nldf_core::audio::FeatureSource;
-use nldf_core::dataset::Dataset;
+use nldf_core::checks::{MAX_WIDTH, at_least, in_range, in_range_open, positive};
+pub use nldf_core::student_shape::AudioConfig;
 
 use crate::error::{Error, Result};
 
@@ -60,50 +59,6 @@ pub fn read_checked<T: RunConfig>(path: &Path) -> Result<T> {
     parse_checked(path, &text)
 }
 
-/// `Ok` when `lo <= value <= hi`, else an error naming `key` (NaN is out of every range).
-pub(crate) fn in_range<T: PartialOrd + Display>(key: &str, value: T, lo: T, hi: T) -> Result<()> {
-    if value >= lo && value <= hi {
-        Ok(())
-    } else {
-        Err(Error::Config(format!(
-            "`{key}` must be in [{lo}, {hi}], got {value}"
-        )))
-    }
-}
-
-/// `Ok` when `value >= lo`, else an error naming `key`.
-pub(crate) fn at_least(key: &str, value: usize, lo: usize) -> Result<()> {
-    if value >= lo {
-        Ok(())
-    } else {
-        Err(Error::Config(format!(
-            "`{key}` must be at least {lo}, got {value}"
-        )))
-    }
-}
-
-/// `Ok` when `lo <= value < hi`, else an error naming `key`.
-fn in_range_open(key: &str, value: f64, lo: f64, hi: f64) -> Result<()> {
-    if value >= lo && value < hi {
-        Ok(())
-    } else {
-        Err(Error::Config(format!(
-            "`{key}` must be in [{lo}, {hi}), got {value}"
-        )))
-    }
-}
-
-/// `Ok` for a finite `value > 0` (at most `hi`), else an error naming `key`.
-fn positive(key: &str, value: f64, hi: f64) -> Result<()> {
-    if value > 0.0 && value <= hi {
-        Ok(())
-    } else {
-        Err(Error::Config(format!(
-            "`{key}` must be positive and at most {hi:e}, got {value}"
-        )))
-    }
-}
-
 /// The checks of the fields the teacher's and the student's `train` sections share (same
 /// names, same meaning): batches, fractions, learning rate, Adam, logging and time budget.
 macro_rules! check_shared_train {
@@ -127,40 +82,10 @@ macro_rules! check_shared_train {
 
 /// Largest network width, sample count and batch the checks accept: far beyond any preset,
 /// small enough that a typo cannot ask for terabytes.
-const MAX_WIDTH: usize = 4096;
 const MAX_DEPTH: usize = 256;
 const MAX_SAMPLES: usize = 1024;
 const MAX_BATCH: usize = 1 << 20;
 const MAX_FREQS: usize = 16;
-
-/// The audio encoder (AD-NeRF's AudioNet and AudioAttNet).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct AudioConfig {
-    /// Features per audio frame, the F of `aud.npy` `[N, 16, F]` (set from the data).
-    pub n_features: usize,
-    /// Feature frames per window (AD-NeRF: 16).
-    pub window: usize,
-    /// Width of the audio code (AD-NeRF: 64).
-    pub dim: usize,
-    /// Neighbouring frames fused by AudioAttNet (AD-NeRF: 8).
-    pub att_frames: usize,
-    /// Which front end made the features (set from the data): later stages read the
-    /// dataset's audio the same way, and an exported model records it.
-    pub features: FeatureSource,
-}
-
-impl Default for AudioConfig {
-    fn default() -> Self {
-        AudioConfig {
-            n_features: 29,
-            window: 16,
-            dim: 64,
-            att_frames: 8,
-            features: FeatureSource::default(),
-        }
-    }
-}
 
 /// The audio-conditioned NeRF teacher: network shape and sampling.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -367,37 +292,6 @@ pub struct TeacherRunConfig {
     pub train: TrainConfig,
 }
 
-impl AudioConfig {
-    /// Takes the features' width, window and source from a loaded dataset.
-    pub fn set_from(&mut self, dataset: &Dataset) {
-        self.n_features = dataset.audio.n_features;
-        self.window = dataset.audio.window;
-        self.features = dataset.audio_source.clone();
-    }
-
-    /// Checks the audio encoder's sizes; `at` prefixes the keys (`model.audio`).
-    pub fn check(&self, at: &str) -> Result<()> {
-        if self.window != 16 {
-            return Err(Error::Config(format!(
-                "`{at}.window` must be 16 feature frames (AudioNet halves it 4 times), got {}",
-                self.window
-            )));
-        }
-        in_range(&format!("{at}.n_features"), self.n_features, 1, 4096)?;
-        if (self.features.n_features(), self.features.window()) != (self.n_features, self.window) {
-            return Err(Error::Config(format!(
-                "`{at}.features` describe {} x {} windows, `{at}` says {} x {}",
-                self.features.window(),
-                self.features.n_features(),
-                self.window,
-                self.n_features
-            )));
-        }
-        in_range(&format!("{at}.dim"), self.dim, 1, MAX_WIDTH)?;
-        in_range(&format!("{at}.att_frames"), self.att_frames, 1, 64)
-    }
-}
-
 impl RunConfig for TeacherRunConfig {
     fn check(&self) -> Result<()> {
         let m = &self.model;
@@ -423,7 +317,8 @@ impl RunConfig for TeacherRunConfig {
         )?;
         let t = &self.train;
         check_shared_train!(t);
-        positive("train.att_lr_scale", t.att_lr_scale, 1e3)
+        positive("train.att_lr_scale", t.att_lr_scale, 1e3)?;
+        Ok(())
     }
 }
 
@@ -557,7 +452,8 @@ impl RunConfig for StudentRunConfig {
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;
         in_range("train.pseudo_fraction", t.pseudo_fraction, 0.0, 1.0)?;
         in_range("train.pseudo_yaw_deg", t.pseudo_yaw_deg, 0.0, 45.0)?;
-        in_range("train.pseudo_pitch_deg", t.pseudo_pitch_deg, 0.0, 45.0)
+        in_range("train.pseudo_pitch_deg", t.pseudo_pitch_deg, 0.0, 45.0)?;
+        Ok(())
     }
 }
 

@@ -32,14 +32,9 @@ pub trait FrameModel {
 /// Rays of a frame that hit the head's bounds.
 fn hit_rays(data: &TrainData, frame: &Frame) -> usize {
     let ds = &data.dataset;
-    let rays = nldf_core::rays::rays_for_image(&ds.camera(frame));
-    (0..rays.len())
-        .filter(|&r| {
-            data.bounds
-                .intersect(rays.origin(r), rays.direction(r), ds.near, ds.far)
-                .is_some()
-        })
-        .count()
+    nldf_core::rays::head_rays(&ds.camera(frame), &data.bounds, ds.near, ds.far)
+        .pixels
+        .len()
 }
 
 impl FrameModel for TeacherRun {

@@ -5,117 +5,12 @@
 
 use candle_core::{D, Device, Result, Tensor};
 use candle_nn::{Linear, Module, VarBuilder, linear};
-use nldf_core::beam::{BeamSpec, encode_beams};
+use nldf_core::beam::encode_beams;
 use nldf_core::rays::Rays;
-use serde::{Deserialize, Serialize};
 
 use crate::audio_net::{AudioEncoder, audio_encoder};
-use crate::config::AudioConfig;
 use crate::student_op::{StudentOp, StudentPlan};
-
-/// The student's shape.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct StudentConfig {
-    pub audio: AudioConfig,
-    /// How each ray becomes the network's input (paper: K = 16 points, L = 10).
-    pub beam: BeamSpec,
-    /// Linear layers in all: 1 input layer, `(depth - 2) / 2` residual blocks of two, 1 output
-    /// layer (paper Table 3: 28, 50, 88).
-    pub depth: usize,
-    /// Hidden width (paper: 256).
-    pub width: usize,
-    /// Segments per ray, M (paper: 4).
-    pub segments: usize,
-    /// Fuse the codes of `audio.att_frames` neighbouring frames with AudioAttNet (AD-NeRF's
-    /// smoothing); without, only the frame's own window is encoded.
-    pub attention: bool,
-}
-
-impl Default for StudentConfig {
-    fn default() -> Self {
-        StudentConfig::paper_d88()
-    }
-}
-
-impl StudentConfig {
-    fn paper(depth: usize) -> StudentConfig {
-        StudentConfig {
-            audio: AudioConfig::default(),
-            beam: BeamSpec::default(),
-            depth,
-            width: 256,
-            segments: 4,
-            attention: true,
-        }
-    }
-
-    /// 28 layers at width 256 (paper Table 3).
-    pub fn paper_d28() -> StudentConfig {
-        Self::paper(28)
-    }
-
-    /// 50 layers at width 256 (paper Table 3).
-    pub fn paper_d50() -> StudentConfig {
-        Self::paper(50)
-    }
-
-    /// 88 layers at width 256, the paper's and R2L's main setting (1 + 43 x 2 + 1).
-    pub fn paper_d88() -> StudentConfig {
-        Self::paper(88)
-    }
-
-    /// 6 layers at width 32 with 4 beam points and 4 frequencies, for tests.
-    pub fn tiny() -> StudentConfig {
-        StudentConfig {
-            audio: AudioConfig {
-                dim: 8,
-                ..AudioConfig::default()
-            },
-            beam: BeamSpec {
-                n_points: 4,
-                n_freqs: 4,
-            },
-            depth: 6,
-            width: 32,
-            segments: 4,
-            attention: true,
-        }
-    }
-
-    /// Residual blocks between the input and output layers.
-    pub fn n_blocks(&self) -> usize {
-        self.depth.saturating_sub(2) / 2
-    }
-
-    /// Width of the network's input: the encoded beam and the audio code.
-    pub fn input_dim(&self) -> usize {
-        self.beam.encoded_len() + self.audio.dim
-    }
-
-    /// Multiply-adds per ray of the network.
-    pub fn macs_per_ray(&self) -> usize {
-        let w = self.width;
-        self.input_dim() * w + self.n_blocks() * 2 * w * w + w * 3 * self.segments
-    }
-
-    /// Checks the shape (at least one block, even depth, sizes in range); the error names
-    /// the key under `model`.
-    pub fn check(&self) -> crate::Result<()> {
-        use crate::config::in_range;
-        if self.depth < 4 || !self.depth.is_multiple_of(2) || self.depth > 512 {
-            return Err(crate::Error::Config(format!(
-                "`model.depth` must be even and in [4, 512] (1 + 2 x blocks + 1), got {}",
-                self.depth
-            )));
-        }
-        in_range("model.width", self.width, 1, 4096)?;
-        in_range("model.segments", self.segments, 1, 64)?;
-        in_range("model.beam.n_points", self.beam.n_points, 2, 256)?;
-        in_range("model.beam.n_freqs", self.beam.n_freqs, 0, 16)?;
-        self.audio.check("model.audio")
-    }
-}
+pub use nldf_core::student_shape::StudentConfig;
 
 /// One residual block: `relu(x + fc2(relu(fc1(x))))`.
 #[derive(Debug, Clone)]

@@ -14,13 +14,16 @@ use std::time::Instant;
 
 use candle_core::{D, Device, Tensor};
 use candle_nn::VarMap;
-use nldf_core::beam::{BeamSpec, encode_beams};
+use nldf_core::beam::encode_beams_parallel;
 use nldf_core::camera::{Camera, turn_about};
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr_from_mse;
-use nldf_core::rays::{Rays, rays_for_image};
-use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
+use nldf_core::rays::{Rays, head_rays};
+use nldf_core::render_spec::RenderSpec;
+use nldf_core::run_files::{
+    BACKGROUND_FILE, CONFIG_FILE, POOL_FILE, RENDER_SPEC_FILE, TARGETS_FILE,
+};
 use rand::seq::index::sample as sample_indices;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -28,7 +31,7 @@ use rayon::prelude::*;
 
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
-use crate::checkpoint::{CONFIG_FILE, load_tensors, save_json, save_tensors, step_of};
+use crate::checkpoint::{load_tensors, save_json, save_tensors, step_of};
 use crate::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
@@ -39,14 +42,8 @@ use crate::trainer::{
     open_checkpoint, save_checkpoint, validate_frames,
 };
 
-/// The teacher's cached segment colours beside a student checkpoint.
-pub const TARGETS_FILE: &str = "targets.safetensors";
-/// The beam pool beside a student checkpoint (for bit-exact resume).
-pub const POOL_FILE: &str = "pool.safetensors";
 /// Rays per forward pass when rendering.
 const RENDER_CHUNK: usize = 8192;
-/// Rays per task when encoding beams in parallel.
-const ENCODE_CHUNK: usize = 256;
 
 /// The pixels of one training frame whose rays hit the head's bounds (the only ones the
 /// student sees), split by where they lie.
@@ -122,7 +119,7 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
 pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
     let ds = &data.dataset;
     let frames = ds.frames(Split::Train);
-    let width = ds.intrinsics.width as usize;
+    let width = ds.intrinsics.width;
     views
         .par_iter()
         .map(|view| {
@@ -132,13 +129,10 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
                 .get(view.source)
                 .map(|m| m.iter().copied().collect())
                 .unwrap_or_default();
+            let head = head_rays(&view.camera, &data.bounds, ds.near, ds.far);
             let mut fb = FrameBeams::default();
-            for p in 0..ds.intrinsics.n_pixels() {
-                let (i, j) = ((p % width) as u32, (p / width) as u32);
-                let (o, d) = view.camera.ray(i as f32, j as f32);
-                if data.bounds.intersect(o, d, ds.near, ds.far).is_none() {
-                    continue;
-                }
+            for r in 0..head.pixels.len() {
+                let (i, j) = head.pixel_ij(r, width);
                 let k = fb.pixels.len() as u32;
                 fb.pixels.push((i, j));
                 if frame.face_rect.contains(i, j) {
@@ -209,42 +203,6 @@ pub fn teacher_targets(
         progress(vi + 1, views.len());
     }
     Ok(out)
-}
-
-/// Encodes beams in parallel; with `jitter_seed`, chunk `c` of rays jitters its points
-/// with a generator seeded by `(jitter_seed, c)`, so the result does not depend on the
-/// thread count.
-///
-/// # Shapes
-/// - returns `[rays.len(), spec.encoded_len()]` flat
-pub fn encode_beams_parallel(
-    rays: &Rays,
-    near: f32,
-    far: f32,
-    spec: &BeamSpec,
-    jitter_seed: Option<u64>,
-) -> Vec<f32> {
-    let width = spec.encoded_len();
-    let mut out = vec![0.0f32; rays.len() * width];
-    out.par_chunks_mut(ENCODE_CHUNK * width)
-        .enumerate()
-        .for_each(|(c, chunk)| {
-            let lo = c * ENCODE_CHUNK;
-            let n = chunk.len() / width.max(1);
-            let part = Rays {
-                origins: rays.origins[3 * lo..3 * (lo + n)].to_vec(),
-                directions: rays.directions[3 * lo..3 * (lo + n)].to_vec(),
-            };
-            match jitter_seed {
-                Some(seed) => {
-                    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-                    rng.set_stream(c as u64 + 1);
-                    encode_beams(&part, near, far, spec, Some(&mut rng), chunk);
-                }
-                None => encode_beams(&part, near, far, spec, None, chunk),
-            }
-        });
-    out
 }
 
 /// One beam of a batch: training frame and hit-pixel index.
@@ -708,47 +666,36 @@ impl StudentRun {
         })
     }
 
-    /// Renders a whole frame (any split): rays that hit the head's bounds go through the
-    /// student, the others are the background.
+    /// Renders a whole frame (any split): the rays that meet the head's bounds
+    /// ([`head_rays`]) go through the student, the other pixels are the background.
     pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
         let ds = &data.dataset;
-        let rays = rays_for_image(&ds.camera(frame));
         let code = self.audio_codes(data, &[frame.aud_id])?;
-        let colors = self.render_rays(&rays, &ds.background.data, &code, data)?;
-        Ok(ImageRgb {
-            width: ds.intrinsics.width,
-            height: ds.intrinsics.height,
-            data: colors,
-        })
+        self.render_view(&ds.camera(frame), &ds.background, &code, data)
     }
 
-    /// Colours of rays seen with one audio code: the student's pixel for rays that hit the
-    /// bounds, the background for the others.
+    /// The image seen by `camera` with one audio code: the student's pixel where the ray
+    /// meets the head's bounds, `background` elsewhere.
     ///
     /// # Shapes
-    /// - `background`: `[n_rays, 3]` flat; `code`: `[1, audio_dim]`; returns `[n_rays, 3]`
-    pub fn render_rays(
+    /// - `code`: `[1, audio_dim]`; `background` is the camera's image size
+    pub fn render_view(
         &self,
-        rays: &Rays,
-        background: &[f32],
+        camera: &Camera,
+        background: &ImageRgb,
         code: &Tensor,
         data: &TrainData,
-    ) -> Result<Vec<f32>> {
+    ) -> Result<ImageRgb> {
         let ds = &data.dataset;
-        let mut out = background.to_vec();
-        let hit: Vec<usize> = (0..rays.len())
-            .filter(|&r| {
-                data.bounds
-                    .intersect(rays.origin(r), rays.direction(r), ds.near, ds.far)
-                    .is_some()
-            })
-            .collect();
+        let head = head_rays(camera, &data.bounds, ds.near, ds.far);
+        let mut image = background.clone();
         let spec = &self.cfg.model.beam;
-        for chunk in hit.chunks(RENDER_CHUNK) {
-            let mut sub = Rays::with_capacity(chunk.len());
-            for &r in chunk {
-                sub.push(rays.origin(r), rays.direction(r));
-            }
+        for (c, chunk) in head.pixels.chunks(RENDER_CHUNK).enumerate() {
+            let lo = c * RENDER_CHUNK;
+            let sub = Rays {
+                origins: head.rays.origins[3 * lo..3 * (lo + chunk.len())].to_vec(),
+                directions: head.rays.directions[3 * lo..3 * (lo + chunk.len())].to_vec(),
+            };
             let beams = encode_beams_parallel(&sub, ds.near, ds.far, spec, None);
             let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
             let codes = code
@@ -756,11 +703,11 @@ impl StudentRun {
                 .contiguous()?;
             let (_, pixels) = self.student.mlp.forward_fused(&beams, &codes, false)?;
             let pixels: Vec<f32> = pixels.flatten_all()?.to_vec1()?;
-            for (k, &r) in chunk.iter().enumerate() {
-                out[3 * r..3 * r + 3].copy_from_slice(&pixels[3 * k..3 * k + 3]);
+            for (k, &p) in chunk.iter().enumerate() {
+                image.data[3 * p..3 * p + 3].copy_from_slice(&pixels[3 * k..3 * k + 3]);
             }
         }
-        Ok(out)
+        Ok(image)
     }
 
     /// Renders `n` validation frames spread evenly over the split and scores them.

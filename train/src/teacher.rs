@@ -4,9 +4,8 @@
 use candle_core::{Device, Result, Tensor};
 use candle_nn::VarBuilder;
 use nldf_core::composite::{composite_weights, segment_colors};
-use nldf_core::encoding::{encode_positions, encoded_len};
+use nldf_core::encoding::encoded_len;
 use nldf_core::rays::Rays;
-use rayon::prelude::*;
 
 use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::config::TeacherConfig;
@@ -32,25 +31,15 @@ pub fn teacher(cfg: &TeacherConfig, vb: VarBuilder) -> Result<Teacher> {
     })
 }
 
-/// Positional encoding of `n` 3-vectors, in parallel.
+/// Positional encoding of `n` 3-vectors, in parallel ([`nldf_core::encoding::encode_vectors`]).
 ///
 /// # Shapes
 /// - `values`: `[n, 3]` flat; returns `[n, 3 (1 + 2 n_freqs)]`
 pub fn encode_vectors(values: &[f32], n_freqs: usize) -> Matrix {
-    let width = encoded_len(3, n_freqs);
-    let n = values.len() / 3;
-    let mut out = vec![0.0f32; n * width];
-    out.par_chunks_mut(width * 256)
-        .zip(values.par_chunks(3 * 256))
-        .for_each(|(o, v)| {
-            for (o, v) in o.chunks_mut(width).zip(v.chunks(3)) {
-                encode_positions(v, n_freqs, o);
-            }
-        });
     Matrix {
-        data: out,
-        n,
-        width,
+        data: nldf_core::encoding::encode_vectors(values, n_freqs),
+        n: values.len() / 3,
+        width: encoded_len(3, n_freqs),
     }
 }
 

@@ -24,17 +24,12 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
-use crate::checkpoint::{
-    CONFIG_FILE, MODEL_FILE, STATE_FILE, load_tensors, restore_weights, save_json, save_tensors,
-    step_of, weights,
-};
+use crate::checkpoint::{load_tensors, restore_weights, save_json, save_tensors, step_of, weights};
 use crate::config::{RunConfig, TeacherRunConfig, read_config};
-
-/// The training curve written beside the log at every checkpoint.
-pub const CURVE_FILE: &str = "training_curve.png";
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::teacher::{Teacher, teacher};
+use nldf_core::run_files::{CONFIG_FILE, CURVE_FILE, LOG_FILE, MODEL_FILE, STATE_FILE};
 
 /// A dataset prepared for training: decoded training frames and the head's bounds.
 #[derive(Debug, Clone)]
@@ -510,7 +505,7 @@ pub fn train_loop(
 ) -> Result<Option<Scores>> {
     let dir = run.dir().to_path_buf();
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-    let mut log = crate::log::CsvLog::open(&dir.join("log.csv"), run.step())?;
+    let mut log = crate::log::CsvLog::open(&dir.join(LOG_FILE), run.step())?;
     let t = run.schedule();
     let mut last_val = None;
     let mut saved = (run.step() > 0).then_some(run.step());
@@ -631,7 +626,7 @@ pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
         meta("optimizer"),
     )?;
     save_tensors(&dir.join(MODEL_FILE), &weights, meta(parts.kind))?;
-    let log = dir.join("log.csv");
+    let log = dir.join(LOG_FILE);
     if log.is_file() {
         let rows = crate::log::read_log(&log)?;
         crate::plot::plot_training_curve(&dir.join(CURVE_FILE), parts.title, &rows)?;

@@ -1,0 +1,176 @@
+//! The student's shape, read by every stage that builds, exports or renders it: the audio
+//! encoder's sizes ([`AudioConfig`], shared with the teacher) and the light-field network's
+//! ([`StudentConfig`]: beam points K and frequencies L, depth, width, segments M). The
+//! trainer saves it under `model` in the student's `config.json`; the exporter reads it back
+//! from there.
+
+use serde::{Deserialize, Serialize};
+
+use crate::audio::FeatureSource;
+use crate::beam::BeamSpec;
+use crate::checks::{MAX_WIDTH, in_range};
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+
+/// The audio encoder (AD-NeRF's AudioNet and AudioAttNet).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AudioConfig {
+    /// Features per audio frame, the F of `aud.npy` `[N, 16, F]` (set from the data).
+    pub n_features: usize,
+    /// Feature frames per window (AD-NeRF: 16).
+    pub window: usize,
+    /// Width of the audio code (AD-NeRF: 64).
+    pub dim: usize,
+    /// Neighbouring frames fused by AudioAttNet (AD-NeRF: 8).
+    pub att_frames: usize,
+    /// Which front end made the features (set from the data): later stages read the
+    /// dataset's audio the same way, and an exported model records it.
+    pub features: FeatureSource,
+}
+
+impl Default for AudioConfig {
+    fn default() -> Self {
+        AudioConfig {
+            n_features: 29,
+            window: 16,
+            dim: 64,
+            att_frames: 8,
+            features: FeatureSource::default(),
+        }
+    }
+}
+
+impl AudioConfig {
+    /// Takes the features' width, window and source from a loaded dataset.
+    pub fn set_from(&mut self, dataset: &Dataset) {
+        self.n_features = dataset.audio.n_features;
+        self.window = dataset.audio.window;
+        self.features = dataset.audio_source.clone();
+    }
+
+    /// Checks the audio encoder's sizes; `at` prefixes the keys (`model.audio`).
+    pub fn check(&self, at: &str) -> Result<()> {
+        if self.window != 16 {
+            return Err(Error::Argument(format!(
+                "`{at}.window` must be 16 feature frames (AudioNet halves it 4 times), got {}",
+                self.window
+            )));
+        }
+        in_range(&format!("{at}.n_features"), self.n_features, 1, 4096)?;
+        if (self.features.n_features(), self.features.window()) != (self.n_features, self.window) {
+            return Err(Error::Argument(format!(
+                "`{at}.features` describe {} x {} windows, `{at}` says {} x {}",
+                self.features.window(),
+                self.features.n_features(),
+                self.window,
+                self.n_features
+            )));
+        }
+        in_range(&format!("{at}.dim"), self.dim, 1, MAX_WIDTH)?;
+        in_range(&format!("{at}.att_frames"), self.att_frames, 1, 64)
+    }
+}
+
+/// The student's shape.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StudentConfig {
+    pub audio: AudioConfig,
+    /// How each ray becomes the network's input (paper: K = 16 points, L = 10).
+    pub beam: BeamSpec,
+    /// Linear layers in all: 1 input layer, `(depth - 2) / 2` residual blocks of two, 1 output
+    /// layer (paper Table 3: 28, 50, 88).
+    pub depth: usize,
+    /// Hidden width (paper: 256).
+    pub width: usize,
+    /// Segments per ray, M (paper: 4).
+    pub segments: usize,
+    /// Fuse the codes of `audio.att_frames` neighbouring frames with AudioAttNet (AD-NeRF's
+    /// smoothing); without, only the frame's own window is encoded.
+    pub attention: bool,
+}
+
+impl Default for StudentConfig {
+    fn default() -> Self {
+        StudentConfig::paper_d88()
+    }
+}
+
+impl StudentConfig {
+    fn paper(depth: usize) -> StudentConfig {
+        StudentConfig {
+            audio: AudioConfig::default(),
+            beam: BeamSpec::default(),
+            depth,
+            width: 256,
+            segments: 4,
+            attention: true,
+        }
+    }
+
+    /// 28 layers at width 256 (paper Table 3).
+    pub fn paper_d28() -> StudentConfig {
+        Self::paper(28)
+    }
+
+    /// 50 layers at width 256 (paper Table 3).
+    pub fn paper_d50() -> StudentConfig {
+        Self::paper(50)
+    }
+
+    /// 88 layers at width 256, the paper's and R2L's main setting (1 + 43 x 2 + 1).
+    pub fn paper_d88() -> StudentConfig {
+        Self::paper(88)
+    }
+
+    /// 6 layers at width 32 with 4 beam points and 4 frequencies, for tests.
+    pub fn tiny() -> StudentConfig {
+        StudentConfig {
+            audio: AudioConfig {
+                dim: 8,
+                ..AudioConfig::default()
+            },
+            beam: BeamSpec {
+                n_points: 4,
+                n_freqs: 4,
+            },
+            depth: 6,
+            width: 32,
+            segments: 4,
+            attention: true,
+        }
+    }
+
+    /// Residual blocks between the input and output layers.
+    pub fn n_blocks(&self) -> usize {
+        self.depth.saturating_sub(2) / 2
+    }
+
+    /// Width of the network's input: the encoded beam and the audio code.
+    pub fn input_dim(&self) -> usize {
+        self.beam.encoded_len() + self.audio.dim
+    }
+
+    /// Multiply-adds per ray of the network.
+    pub fn macs_per_ray(&self) -> usize {
+        let w = self.width;
+        self.input_dim() * w + self.n_blocks() * 2 * w * w + w * 3 * self.segments
+    }
+
+    /// Checks the shape (at least one block, even depth, sizes in range); the error names
+    /// the key under `model`.
+    pub fn check(&self) -> Result<()> {
+        if self.depth < 4 || !self.depth.is_multiple_of(2) || self.depth > 512 {
+            return Err(Error::Argument(format!(
+                "`model.depth` must be even and in [4, 512] (1 + 2 x blocks + 1), got {}",
+                self.depth
+            )));
+        }
+        in_range("model.width", self.width, 1, MAX_WIDTH)?;
+        in_range("model.segments", self.segments, 1, 64)?;
+        in_range("model.beam.n_points", self.beam.n_points, 2, 256)?;
+        in_range("model.beam.n_freqs", self.beam.n_freqs, 0, 16)?;
+        self.audio.check("model.audio")
+    }
+}
