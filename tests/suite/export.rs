@@ -53,6 +53,37 @@ impl Run {
         out
     }
 
+    /// Scales the weights (not the biases) to a trained deep ReLU network's magnitude and
+    /// writes them back into the run folder: He's standard deviation `sqrt(2 / fan_in)` for
+    /// the input and output layers and each block's first layer, and He's divided by the
+    /// square root of the number of blocks for each block's second layer (the residual
+    /// branch), so that the residual stream stays finite through every block.
+    pub(crate) fn scale_weights_like_trained(&self, n_blocks: usize) {
+        // The seeded initialisation is uniform in +-1/sqrt(fan_in): std 1/sqrt(3 fan_in).
+        let he = 6f64.sqrt();
+        for (name, var) in sorted_vars(&self.varmap).unwrap() {
+            if !name.ends_with("weight") || name.starts_with("audio.") {
+                continue;
+            }
+            let factor = if name.contains(".fc2.") {
+                he / (n_blocks as f64).sqrt()
+            } else {
+                he
+            };
+            var.set(&(var.as_tensor() * factor).unwrap()).unwrap();
+        }
+        let metadata = HashMap::from([
+            ("step".to_string(), "7".to_string()),
+            ("kind".to_string(), "student".to_string()),
+        ]);
+        save_tensors(
+            &self.student_dir().join("model.safetensors"),
+            &weights(&self.varmap).unwrap(),
+            metadata,
+        )
+        .unwrap();
+    }
+
     /// Rounds every weight of the candle student to f16 and back (the fp16 model's
     /// values).
     fn round_weights_to_f16(&self) {
