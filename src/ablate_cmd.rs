@@ -9,8 +9,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use nldf_core::dataset::Split;
+use nldf_train::data::TrainData;
 use nldf_train::student_trainer::StudentRun;
-use nldf_train::trainer::{TeacherRun, TrainData};
+use nldf_train::teacher_trainer::TeacherRun;
 use serde::Serialize;
 
 use crate::train_cmd::{StudentArgs, StudentDepth, run_student};
@@ -142,7 +143,7 @@ pub fn run(args: AblateArgs) -> Result<()> {
         run_student(args)?;
         let run = StudentRun::open(&dir, false)?;
         let minutes = run.elapsed() / 60.0;
-        let s = run.validate(&data, n_val)?;
+        let s = run.validation_scores(&data, n_val)?;
         Ok(Row {
             table: table.into(),
             variant: label.into(),

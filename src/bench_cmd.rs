@@ -7,7 +7,8 @@ use anyhow::{Context, Result};
 use clap::Subcommand;
 use nldf_train::bench::{Machine, StepBench, bench_teacher_step};
 use nldf_train::config::TeacherRunConfig;
-use nldf_train::trainer::{TeacherRun, TrainData};
+use nldf_train::data::TrainData;
+use nldf_train::teacher_trainer::TeacherRun;
 
 use nldf_infer::backend::BackendOptions;
 

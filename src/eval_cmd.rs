@@ -5,8 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use nldf_core::dataset::Split;
+use nldf_train::data::TrainData;
 use nldf_train::eval::eval_models;
-use nldf_train::trainer::{TeacherRun, TrainData};
+use nldf_train::teacher_trainer::TeacherRun;
 
 use crate::progress::progress_bar;
 

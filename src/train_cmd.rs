@@ -154,7 +154,7 @@ impl AudioFeaturesArg {
 }
 
 /// Prints which audio features a stage reads, and from which file.
-pub fn say_audio(data: &nldf_train::trainer::TrainData) {
+pub fn say_audio(data: &nldf_train::data::TrainData) {
     eprintln!(
         "audio features: {} from {}",
         data.dataset.audio_source.describe(),
@@ -224,10 +224,10 @@ fn stop_on_ctrl_c() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
 /// come and the final scores as JSON.
 fn train_with_progress(
     what: &str,
-    run: &mut dyn nldf_train::trainer::TrainingRun,
-    data: &nldf_train::trainer::TrainData,
-) -> Result<Option<nldf_train::trainer::Scores>> {
-    use nldf_train::trainer::{Event, train_loop};
+    run: &mut dyn nldf_train::run_loop::TrainingRun,
+    data: &nldf_train::data::TrainData,
+) -> Result<Option<nldf_train::scores::Scores>> {
+    use nldf_train::run_loop::{Event, train_loop};
     use std::sync::atomic::Ordering;
     let stop = stop_on_ctrl_c()?;
     let bar = progress_bar(run.schedule().iters as u64, what);
@@ -279,11 +279,12 @@ fn train_with_progress(
 
 /// Trains (or resumes) a student; returns its final validation scores when it ran to the
 /// end.
-pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scores>> {
+pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::scores::Scores>> {
     use nldf_core::dataset::AudioChoice;
     use nldf_train::config::StudentRunConfig;
+    use nldf_train::data::TrainData;
     use nldf_train::student_trainer::StudentRun;
-    use nldf_train::trainer::{TeacherRun, TrainData};
+    use nldf_train::teacher_trainer::TeacherRun;
 
     let dir = args.run.join(&args.name);
     let teacher_dir = args.run.join("teacher");
@@ -385,7 +386,8 @@ pub fn run_student(args: StudentArgs) -> Result<Option<nldf_train::trainer::Scor
 /// Trains (or resumes) a teacher; `budget_s` caps its training time.
 pub fn run_teacher_with(args: TeacherArgs, budget_s: Option<f64>) -> Result<()> {
     use nldf_train::config::TeacherRunConfig;
-    use nldf_train::trainer::{TeacherRun, TrainData};
+    use nldf_train::data::TrainData;
+    use nldf_train::teacher_trainer::TeacherRun;
 
     let dir = args.run.join("teacher");
     check_resume(&dir, "teacher", args.resume)?;

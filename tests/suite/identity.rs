@@ -11,9 +11,10 @@ use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::FrameRenderer;
 use nldf_train::audio_net::neighbourhoods;
 use nldf_train::config::StudentRunConfig;
+use nldf_train::data::TrainData;
 use nldf_train::student::StudentConfig;
-use nldf_train::student_trainer::{StudentRun, frame_beams, training_views};
-use nldf_train::trainer::TrainData;
+use nldf_train::student_trainer::StudentRun;
+use nldf_train::views::{frame_beams, training_views};
 
 use crate::teacher::tiny_scene;
 

@@ -17,8 +17,10 @@ use nldf_core::encoding::{MAX_COORD, MAX_ENCODING_ERROR, positional_encoding};
 use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::ort_library::find_ort_library;
+use nldf_train::data::TrainData;
+use nldf_train::run_loop::train_loop;
 use nldf_train::student::StudentConfig;
-use nldf_train::trainer::{TeacherRun, TrainData, train_loop};
+use nldf_train::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -292,7 +294,7 @@ fn stress_training_at_ten_times_the_learning_rate_never_checkpoints_a_nan() {
     let (tensors, _) =
         nldf_train::checkpoint::load_tensors(&dir.path().join("model.safetensors")).unwrap();
     assert_eq!(
-        nldf_train::trainer::first_non_finite(&tensors).unwrap(),
+        nldf_train::checkpoint::first_non_finite(&tensors).unwrap(),
         None
     );
 }

@@ -152,9 +152,10 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
 
 use nldf_core::dataset::Split;
 use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
+use nldf_train::data::TrainData;
 use nldf_train::pool::{BeamPool, PoolEntry};
 use nldf_train::student_trainer::StudentRun;
-use nldf_train::trainer::{TeacherRun, TrainData};
+use nldf_train::teacher_trainer::TeacherRun;
 
 fn entry(frame: u32, loss: f32) -> PoolEntry {
     PoolEntry {
@@ -276,14 +277,14 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     };
     let audio_of = |varmap: &candle_nn::VarMap| vars_of(varmap, "audio.");
     assert_eq!(audio_of(&run.varmap), audio_of(&teacher.varmap));
-    let before = run.validate(&data, 2).unwrap();
+    let before = run.validation_scores(&data, 2).unwrap();
     let mut losses = Vec::new();
     for _ in 0..150 {
         let s = run.train_step(&data).unwrap();
         assert!(s.loss.is_finite());
         losses.push(s.loss);
     }
-    let after = run.validate(&data, 2).unwrap();
+    let after = run.validation_scores(&data, 2).unwrap();
     let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
     let last: f64 = losses[140..].iter().sum::<f64>() / 10.0;
     eprintln!(

@@ -11,11 +11,12 @@ use nldf_core::bounds::Bounds;
 use nldf_core::composite::composite_f64;
 use nldf_core::rays::Rays;
 use nldf_core::synth::{SynthConfig, generate};
-use nldf_train::config::{TeacherConfig, TeacherRunConfig, TrainConfig};
+use nldf_train::config::{TeacherConfig, TeacherRunConfig, TeacherTrainConfig};
+use nldf_train::data::TrainData;
 use nldf_train::nn::{conv1d, new_varmap};
 use nldf_train::render::composite;
 use nldf_train::sampler::{sample_importance, sample_stratified};
-use nldf_train::trainer::{TeacherRun, TrainData};
+use nldf_train::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -208,7 +209,7 @@ pub(crate) fn tiny_scene() -> &'static Path {
 pub(crate) fn tiny_run_config(iters: usize) -> TeacherRunConfig {
     TeacherRunConfig {
         model: TeacherConfig::tiny(),
-        train: TrainConfig {
+        train: TeacherTrainConfig {
             iters,
             batch_rays: 256,
             frames_per_batch: 2,
@@ -217,7 +218,7 @@ pub(crate) fn tiny_run_config(iters: usize) -> TeacherRunConfig {
             val_every: 0,
             val_frames: 2,
             checkpoint_every: 0,
-            ..TrainConfig::default()
+            ..TeacherTrainConfig::default()
         },
     }
 }
@@ -227,12 +228,12 @@ fn a_tiny_teacher_learns_the_tiny_scene() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut run = TeacherRun::create(dir.path(), tiny_run_config(200), &data).unwrap();
-    let before = run.validate(&data, 2).unwrap();
+    let before = run.validation_scores(&data, 2).unwrap();
     let mut losses = Vec::new();
     for _ in 0..200 {
         losses.push(run.train_step(&data).unwrap().0);
     }
-    let after = run.validate(&data, 2).unwrap();
+    let after = run.validation_scores(&data, 2).unwrap();
     let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
     let last: f64 = losses[190..].iter().sum::<f64>() / 10.0;
     eprintln!(

@@ -16,11 +16,12 @@ use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_train::checkpoint::save_tensors;
 use nldf_train::config::{RunConfig, StudentRunConfig, TeacherRunConfig, parse_checked};
+use nldf_train::data::TrainData;
 use nldf_train::eval::{FrameModel, eval_models};
+use nldf_train::run_loop::{Event, Schedule, TrainingRun, train_loop};
+use nldf_train::scores::{Scores, score_frames};
 use nldf_train::student::StudentConfig;
-use nldf_train::trainer::{
-    Event, Schedule, Scores, TeacherRun, TrainData, TrainingRun, score_frames, train_loop,
-};
+use nldf_train::teacher_trainer::TeacherRun;
 use prost::Message;
 
 use crate::export::{max_diff, random_audio, random_rays, write_run};
@@ -133,7 +134,7 @@ impl TrainingRun for Diverging {
         }
         Ok((loss, 10.0))
     }
-    fn validate(&self, _data: &TrainData, n: usize) -> nldf_train::Result<Scores> {
+    fn validation_scores(&self, _data: &TrainData, n: usize) -> nldf_train::Result<Scores> {
         Ok(Scores {
             psnr: 30.0,
             ssim: 0.9,

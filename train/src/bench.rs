@@ -9,8 +9,9 @@ use candle_core::{Device, Tensor};
 use serde::Serialize;
 
 use crate::config::TeacherConfig;
+use crate::data::TrainData;
 use crate::error::Result;
-use crate::trainer::{TeacherRun, TrainData};
+use crate::teacher_trainer::TeacherRun;
 
 /// The machine a benchmark ran on.
 #[derive(Debug, Clone, Serialize)]

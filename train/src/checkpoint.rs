@@ -6,13 +6,15 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
 use nldf_core::files::write_atomic;
 use serde::Serialize;
 
+use crate::adam::Adam;
 use crate::error::{Error, Result};
 use crate::nn::sorted_vars;
+use nldf_core::run_files::{CURVE_FILE, LOG_FILE, MODEL_FILE, STATE_FILE};
 
 /// Writes named tensors with string metadata to `path` atomically.
 pub fn save_tensors(
@@ -90,4 +92,101 @@ pub fn step_of(path: &Path, metadata: &HashMap<String, String>) -> Result<usize>
         .get("step")
         .and_then(|s| s.parse().ok())
         .ok_or_else(|| Error::invalid(path, "metadata lacks the training step"))
+}
+
+/// What [`save_checkpoint`] writes.
+pub struct CheckpointParts<'a> {
+    pub dir: &'a Path,
+    /// `teacher` or `student`, in the safetensors metadata.
+    pub kind: &'a str,
+    pub step: usize,
+    pub elapsed: f64,
+    pub varmap: &'a VarMap,
+    pub adam: &'a Adam,
+    /// Title of the training-curve plot.
+    pub title: &'a str,
+}
+
+/// Writes the optimizer state, then the weights (each atomically, with the step in their
+/// metadata), and redraws the training curve from `log.csv`. The caller writes its config.
+pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
+    let dir = parts.dir;
+    let weights = weights(parts.varmap)?;
+    if let Some(name) = first_non_finite(&weights)? {
+        return Err(Error::NonFinite(format!(
+            "refusing to checkpoint {}: weight `{name}` holds a NaN or infinite value",
+            dir.display()
+        )));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let meta = |kind: &str| {
+        [
+            ("step".to_string(), parts.step.to_string()),
+            ("elapsed_s".to_string(), format!("{:.3}", parts.elapsed)),
+            ("kind".to_string(), kind.to_string()),
+        ]
+        .into_iter()
+        .collect()
+    };
+    save_tensors(
+        &dir.join(STATE_FILE),
+        &parts.adam.state()?,
+        meta("optimizer"),
+    )?;
+    save_tensors(&dir.join(MODEL_FILE), &weights, meta(parts.kind))?;
+    let log = dir.join(LOG_FILE);
+    if log.is_file() {
+        let rows = crate::log::read_log(&log)?;
+        crate::plot::plot_training_curve(&dir.join(CURVE_FILE), parts.title, &rows)?;
+    }
+    Ok(())
+}
+
+/// The name of the first tensor (in name order) holding a NaN or infinite value.
+pub fn first_non_finite(tensors: &HashMap<String, Tensor>) -> Result<Option<String>> {
+    let mut names: Vec<&String> = tensors.keys().collect();
+    names.sort();
+    for name in names {
+        let values: Vec<f32> = tensors[name]
+            .flatten_all()?
+            .to_dtype(DType::F32)?
+            .to_vec1()?;
+        if values.iter().any(|v| !v.is_finite()) {
+            return Ok(Some(name.clone()));
+        }
+    }
+    Ok(None)
+}
+
+/// Restores the weights in `dir` into `varmap` and, given `adam`, the optimizer state
+/// (checking that both come from the same step). Returns the step and the training seconds.
+pub fn open_checkpoint(
+    dir: &Path,
+    varmap: &VarMap,
+    adam: Option<&mut Adam>,
+) -> Result<(usize, f64)> {
+    let model_path = dir.join(MODEL_FILE);
+    let (tensors, meta) = load_tensors(&model_path)?;
+    restore_weights(&model_path, varmap, &tensors)?;
+    let step = step_of(&model_path, &meta)?;
+    let elapsed = meta
+        .get("elapsed_s")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.0);
+    if let Some(adam) = adam {
+        let state_path = dir.join(STATE_FILE);
+        let (state, state_meta) = load_tensors(&state_path)?;
+        let state_step = step_of(&state_path, &state_meta)?;
+        if state_step != step {
+            return Err(Error::invalid(
+                &state_path,
+                format!(
+                    "is from step {state_step} but {MODEL_FILE} from step {step}; the last checkpoint was cut short"
+                ),
+            ));
+        }
+        adam.load_state(&state)
+            .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
+    }
+    Ok((step, elapsed))
 }

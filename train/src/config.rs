@@ -216,7 +216,7 @@ impl TeacherConfig {
 /// How the teacher is trained.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct TrainConfig {
+pub struct TeacherTrainConfig {
     /// Seed of the ray batches and the initial weights.
     pub seed: u64,
     /// Training steps.
@@ -259,9 +259,9 @@ pub struct TrainConfig {
     pub time_budget_s: f64,
 }
 
-impl Default for TrainConfig {
+impl Default for TeacherTrainConfig {
     fn default() -> Self {
-        TrainConfig {
+        TeacherTrainConfig {
             seed: 0,
             iters: 6000,
             batch_rays: 1024,
@@ -289,7 +289,7 @@ impl Default for TrainConfig {
 #[serde(default, deny_unknown_fields)]
 pub struct TeacherRunConfig {
     pub model: TeacherConfig,
-    pub train: TrainConfig,
+    pub train: TeacherTrainConfig,
 }
 
 impl RunConfig for TeacherRunConfig {
@@ -437,7 +437,7 @@ impl Default for StudentTrainConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
 pub struct StudentRunConfig {
-    pub model: crate::student::StudentConfig,
+    pub model: nldf_core::student_shape::StudentConfig,
     pub train: StudentTrainConfig,
 }
 

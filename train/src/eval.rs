@@ -11,9 +11,11 @@ use nldf_core::metrics::{cap_psnr, psnr, ssim};
 use serde::Serialize;
 
 use crate::checkpoint::save_json;
+use crate::data::TrainData;
 use crate::error::{Error, Result};
+use crate::scores::region_psnrs;
 use crate::student_trainer::StudentRun;
-use crate::trainer::{TeacherRun, TrainData, region_psnrs};
+use crate::teacher_trainer::TeacherRun;
 use nldf_core::dataset::Frame;
 
 /// A trained model that renders whole frames.

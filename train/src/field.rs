@@ -11,8 +11,9 @@ use candle_core::{Result, Tensor};
 use candle_nn::VarBuilder;
 
 use crate::config::TeacherConfig;
-use crate::fused_field::{FieldOp, FieldPlan, Packer, TrunkStep};
+use crate::field_op::{FieldOp, FieldPlan, TrunkStep};
 use crate::nn::{Dense, dense};
+use crate::op_base::Packer;
 
 /// One trunk layer: the hidden input, plus the point encoding and the audio code where the
 /// network feeds its input in (the first layer and after each skip).

@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::trainer::Scores;
+use crate::scores::Scores;
 
 /// The header of `log.csv`.
 pub const HEADER: &str =

@@ -7,7 +7,13 @@
 //! batch's new losses overwrite its entries' records, so beams that have become easy make
 //! room for harder ones.
 
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
 use rand::Rng;
+
+use crate::checkpoint::{load_tensors, save_tensors, step_of};
+use crate::error::{Error, Result};
 
 /// A beam in the pool: which training frame, which of its hit pixels, and its last loss.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,4 +99,52 @@ impl BeamPool {
             }
         }
     }
+}
+
+/// Writes the pool's entries with the step of the checkpoint they belong to.
+pub fn save_pool(path: &Path, pool: &BeamPool, step: usize) -> Result<()> {
+    let dev = Device::Cpu;
+    let n = pool.entries.len();
+    let frames: Vec<u32> = pool.entries.iter().map(|e| e.frame).collect();
+    let pixels: Vec<u32> = pool.entries.iter().map(|e| e.pixel).collect();
+    let losses: Vec<f32> = pool.entries.iter().map(|e| e.loss).collect();
+    let tensors = [
+        ("frame".to_string(), Tensor::from_vec(frames, n, &dev)?),
+        ("pixel".to_string(), Tensor::from_vec(pixels, n, &dev)?),
+        ("loss".to_string(), Tensor::from_vec(losses, n, &dev)?),
+    ]
+    .into_iter()
+    .collect();
+    let meta = [("step".to_string(), step.to_string())]
+        .into_iter()
+        .collect();
+    save_tensors(path, &tensors, meta)
+}
+
+/// Reads a pool written by [`save_pool`], checking that it is from `step`.
+pub fn load_pool(path: &Path, capacity: usize, step: usize) -> Result<BeamPool> {
+    let (tensors, meta) = load_tensors(path)?;
+    let pool_step = step_of(path, &meta)?;
+    if pool_step != step {
+        return Err(Error::invalid(
+            path,
+            format!("is from step {pool_step}, the weights from step {step}"),
+        ));
+    }
+    let get = |k: &str| {
+        tensors
+            .get(k)
+            .ok_or_else(|| Error::invalid(path, format!("lacks `{k}`")))
+    };
+    let frames: Vec<u32> = get("frame")?.to_vec1()?;
+    let pixels: Vec<u32> = get("pixel")?.to_vec1()?;
+    let losses: Vec<f32> = get("loss")?.to_vec1()?;
+    let mut pool = BeamPool::new(capacity);
+    pool.entries = frames
+        .into_iter()
+        .zip(pixels)
+        .zip(losses)
+        .map(|((frame, pixel), loss)| PoolEntry { frame, pixel, loss })
+        .collect();
+    Ok(pool)
 }

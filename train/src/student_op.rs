@@ -13,12 +13,12 @@ use std::sync::Mutex;
 
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
-use crate::fused_field::{
-    Affine, Packer, accumulate_affine, bias_or_zero, contiguous, weight, with_data,
-};
 use crate::kernels::{
     Addend, give_buffer, linear_forward, linear_forward_residual, matmul, matmul_add,
     relu_backward, take_buffer,
+};
+use crate::op_base::{
+    Affine, Packer, accumulate_affine, bias_or_zero, contiguous, weight, with_data,
 };
 
 /// One residual block's two layers.

@@ -12,11 +12,11 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use candle_core::{D, Device, Tensor};
+use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
 use nldf_core::beam::encode_beams_parallel;
-use nldf_core::camera::{Camera, turn_about};
-use nldf_core::dataset::{Frame, Split};
+use nldf_core::camera::Camera;
+use nldf_core::dataset::Frame;
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr_from_mse;
 use nldf_core::rays::{Rays, head_rays};
@@ -27,183 +27,29 @@ use nldf_core::run_files::{
 use rand::seq::index::sample as sample_indices;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
-use crate::checkpoint::{load_tensors, save_json, save_tensors, step_of};
-use crate::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
+use crate::checkpoint::save_json;
+use crate::checkpoint::{CheckpointParts, open_checkpoint, save_checkpoint};
+use crate::config::{RunConfig, StudentRunConfig, read_config};
+use crate::data::TrainData;
 use crate::error::{Error, Result};
+use crate::loss::{RayLosses, distillation_loss};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
+use crate::pool::{load_pool, save_pool};
+use crate::run_loop::{Schedule, TrainingRun, finite_loss};
+use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
-use crate::trainer::{
-    CheckpointParts, Schedule, Scores, TeacherRun, TrainData, TrainingRun, finite_loss,
-    open_checkpoint, save_checkpoint, validate_frames,
+use crate::targets::{load_targets, save_targets, teacher_targets};
+use crate::teacher_trainer::TeacherRun;
+use crate::views::{
+    FrameBeams, View, codes_of_views, frame_beams, training_views, views_fingerprint,
 };
 
 /// Rays per forward pass when rendering.
 const RENDER_CHUNK: usize = 8192;
-
-/// The pixels of one training frame whose rays hit the head's bounds (the only ones the
-/// student sees), split by where they lie.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct FrameBeams {
-    /// `(i, j)` of every hit pixel, in row-major order.
-    pub pixels: Vec<(u32, u32)>,
-    /// Indices into `pixels`: inside `face_rect`, outside it, inside the mouth region.
-    pub face: Vec<u32>,
-    pub other: Vec<u32>,
-    pub mouth: Vec<u32>,
-}
-
-/// A view the student learns from: a training frame, or a pseudo view (R2L's pseudo data)
-/// whose pose and audio lie between the training frames'.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct View {
-    pub camera: Camera,
-    /// Audio ids whose codes are mixed: `weight code(a) + (1 - weight) code(b)`.
-    pub audio: (usize, usize),
-    pub weight: f32,
-    /// The training frame the view comes from (its face and mouth regions are used).
-    pub source: usize,
-    /// Whether the view is a training frame, with a ground-truth image.
-    pub recorded: bool,
-}
-
-/// The training frames as views, then `cfg.pseudo_frames` pseudo views (with distillation
-/// on): each a seeded training frame's camera turned about the head's centre by up to
-/// `pseudo_yaw_deg` and `pseudo_pitch_deg`, with the audio codes of two seeded training
-/// frames mixed by a uniform weight.
-pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
-    let ds = &data.dataset;
-    let frames = ds.frames(Split::Train);
-    let mut views: Vec<View> = frames
-        .iter()
-        .enumerate()
-        .map(|(fi, f)| View {
-            camera: ds.camera(f),
-            audio: (f.aud_id, f.aud_id),
-            weight: 1.0,
-            source: fi,
-            recorded: true,
-        })
-        .collect();
-    if !cfg.distill || frames.is_empty() {
-        return views;
-    }
-    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5eed_5eed);
-    let centre = 0.5 * (data.bounds.lo + data.bounds.hi);
-    for _ in 0..cfg.pseudo_frames {
-        let source = rng.random_range(0..frames.len());
-        let other = rng.random_range(0..frames.len());
-        let weight: f32 = rng.random_range(0.0..=1.0);
-        let yaw = cfg.pseudo_yaw_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
-        let pitch = cfg.pseudo_pitch_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
-        let base = ds.camera(&frames[source]);
-        views.push(View {
-            camera: Camera {
-                intrinsics: base.intrinsics,
-                c2w: turn_about(centre, yaw, pitch) * base.c2w,
-            },
-            audio: (frames[source].aud_id, frames[other].aud_id),
-            weight,
-            source,
-            recorded: false,
-        });
-    }
-    views
-}
-
-/// The hit pixels of every view; a view's face and mouth regions are its source frame's.
-pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
-    let ds = &data.dataset;
-    let frames = ds.frames(Split::Train);
-    let width = ds.intrinsics.width;
-    views
-        .par_iter()
-        .map(|view| {
-            let frame = &frames[view.source];
-            let mouth: std::collections::HashSet<(u32, u32)> = data
-                .mouth_pixels
-                .get(view.source)
-                .map(|m| m.iter().copied().collect())
-                .unwrap_or_default();
-            let head = head_rays(&view.camera, &data.bounds, ds.near, ds.far);
-            let mut fb = FrameBeams::default();
-            for r in 0..head.pixels.len() {
-                let (i, j) = head.pixel_ij(r, width);
-                let k = fb.pixels.len() as u32;
-                fb.pixels.push((i, j));
-                if frame.face_rect.contains(i, j) {
-                    fb.face.push(k);
-                } else {
-                    fb.other.push(k);
-                }
-                if mouth.contains(&(i, j)) {
-                    fb.mouth.push(k);
-                }
-            }
-            fb
-        })
-        .collect()
-}
-
-/// The audio codes of `views`: `weight code(a) + (1 - weight) code(b)` row by row, with
-/// `codes(ids)` the encoder's codes of audio ids (`[ids.len(), dim]`). Recorded frames
-/// (weight 1) need only their own code, so the second encoder call is made only for
-/// batches holding a pseudo view.
-///
-/// # Shapes
-/// - returns `[views.len(), dim]`
-fn codes_of_views(views: &[&View], codes: impl Fn(&[usize]) -> Result<Tensor>) -> Result<Tensor> {
-    let a: Vec<usize> = views.iter().map(|v| v.audio.0).collect();
-    let codes_a = codes(&a)?;
-    if views.iter().all(|v| v.weight == 1.0) {
-        return Ok(codes_a);
-    }
-    let b: Vec<usize> = views.iter().map(|v| v.audio.1).collect();
-    let n = views.len();
-    let dev = codes_a.device().clone();
-    let w = Tensor::from_vec(views.iter().map(|v| v.weight).collect(), (n, 1), &dev)?;
-    let rest = Tensor::from_vec(views.iter().map(|v| 1.0 - v.weight).collect(), (n, 1), &dev)?;
-    Ok((codes_a.broadcast_mul(&w)? + codes(&b)?.broadcast_mul(&rest)?)?)
-}
-
-/// The teacher's Eq. 5 segment colours of every hit pixel of every view (`[n_pixels, m,
-/// 3]` flat per view). `progress(done, total)` is called per view.
-pub fn teacher_targets(
-    teacher: &TeacherRun,
-    data: &TrainData,
-    views: &[View],
-    beams: &[FrameBeams],
-    m: usize,
-    progress: &mut dyn FnMut(usize, usize),
-) -> Result<Vec<Vec<f32>>> {
-    let ds = &data.dataset;
-    let mut out = Vec::with_capacity(views.len());
-    for (vi, (view, fb)) in views.iter().zip(beams).enumerate() {
-        let mut rays = Rays::with_capacity(fb.pixels.len());
-        let mut bg = Vec::with_capacity(3 * fb.pixels.len());
-        for &(i, j) in &fb.pixels {
-            let (o, d) = view.camera.ray(i as f32, j as f32);
-            rays.push(o, d);
-            bg.extend_from_slice(&ds.background.get(i, j));
-        }
-        let code = codes_of_views(&[view], |ids| teacher.audio_codes(data, ids))?;
-        out.push(teacher.teacher.segment_targets(
-            &rays,
-            &bg,
-            &code,
-            &data.bounds,
-            ds.near,
-            ds.far,
-            m,
-        )?);
-        progress(vi + 1, views.len());
-    }
-    Ok(out)
-}
 
 /// One beam of a batch: training frame and hit-pixel index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -641,13 +487,13 @@ impl StudentRun {
         let beams = Tensor::from_vec(beams, (n, spec.encoded_len()), &dev)?;
         let (segments, pixels) = self.student.mlp.forward_fused(&beams, &codes, update)?;
         let gt = Tensor::from_vec(gt, (n, 3), &dev)?;
-        let pixel_sq = (&pixels - &gt)?.sqr()?.sum(D::Minus1)?; // [n]
-        let mut per_ray = (pixel_sq.clone() / 3.0)?;
-        if distill {
-            let tgt = Tensor::from_vec(tgt, (n, m, 3), &dev)?;
-            let seg_sq = (&segments - &tgt)?.sqr()?.sum((1, 2))?;
-            per_ray = (per_ray + (seg_sq * (t.lambda / 3.0))?)?;
-        }
+        let tgt = if distill {
+            Some(Tensor::from_vec(tgt, (n, m, 3), &dev)?)
+        } else {
+            None
+        };
+        let RayLosses { per_ray, pixel_sq } =
+            distillation_loss(&pixels, &gt, &segments, tgt.as_ref(), t.lambda)?;
         let loss = per_ray.mean_all()?;
         let loss_value = finite_loss(&loss)?;
         if update {
@@ -711,8 +557,8 @@ impl StudentRun {
     }
 
     /// Renders `n` validation frames spread evenly over the split and scores them.
-    pub fn validate(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        validate_frames(data, n, &|f| self.render_frame(data, f))
+    pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        score_validation_frames(data, n, &|f| self.render_frame(data, f))
     }
 
     /// Writes the checkpoint: config, pool, optimizer state and weights.
@@ -789,135 +635,11 @@ impl TrainingRun for StudentRun {
         Ok((s.loss, s.psnr))
     }
 
-    fn validate(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        StudentRun::validate(self, data, n)
+    fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        StudentRun::validation_scores(self, data, n)
     }
 
     fn save(&self) -> Result<()> {
         StudentRun::save(self)
     }
-}
-
-/// A fingerprint of the views (poses, audio and mixing weights), stored with the cached
-/// targets so that a cache made for other views is never used (FNV-1a over their bits).
-fn views_fingerprint(views: &[View]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |v: u64| {
-        for b in v.to_le_bytes() {
-            h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
-        }
-    };
-    for v in views {
-        v.camera
-            .c2w
-            .to_cols_array()
-            .iter()
-            .for_each(|x| eat(x.to_bits() as u64));
-        eat(v.audio.0 as u64);
-        eat(v.audio.1 as u64);
-        eat(v.weight.to_bits() as u64);
-    }
-    format!("{h:016x}")
-}
-
-fn save_targets(
-    path: &Path,
-    targets: &[Vec<f32>],
-    m: usize,
-    teacher_step: usize,
-    views: &str,
-) -> Result<()> {
-    let mut tensors = HashMap::new();
-    for (f, t) in targets.iter().enumerate() {
-        let rows = t.len() / (3 * m);
-        tensors.insert(
-            format!("frame.{f}"),
-            Tensor::from_slice(t, (rows, m, 3), &Device::Cpu)?,
-        );
-    }
-    let meta = [
-        ("teacher_step".to_string(), teacher_step.to_string()),
-        ("segments".to_string(), m.to_string()),
-        ("frames".to_string(), targets.len().to_string()),
-        ("views".to_string(), views.to_string()),
-    ]
-    .into_iter()
-    .collect();
-    save_tensors(path, &tensors, meta)
-}
-
-/// The cached targets when they fit the views, `m` and (when known) the teacher's step.
-fn load_targets(
-    path: &Path,
-    beams: &[FrameBeams],
-    m: usize,
-    teacher_step: Option<usize>,
-    views: &str,
-) -> Result<Option<Vec<Vec<f32>>>> {
-    let (tensors, meta) = load_tensors(path)?;
-    let get = |k: &str| meta.get(k).and_then(|v| v.parse::<usize>().ok());
-    let fits = get("segments") == Some(m)
-        && get("frames") == Some(beams.len())
-        && meta.get("views").map(String::as_str) == Some(views)
-        && teacher_step.is_none_or(|s| get("teacher_step") == Some(s));
-    if !fits {
-        return Ok(None);
-    }
-    let mut out = Vec::with_capacity(beams.len());
-    for (f, fb) in beams.iter().enumerate() {
-        let Some(t) = tensors.get(&format!("frame.{f}")) else {
-            return Ok(None);
-        };
-        if t.dims() != [fb.pixels.len(), m, 3] {
-            return Ok(None);
-        }
-        out.push(t.flatten_all()?.to_vec1()?);
-    }
-    Ok(Some(out))
-}
-
-fn save_pool(path: &Path, pool: &BeamPool, step: usize) -> Result<()> {
-    let dev = Device::Cpu;
-    let n = pool.entries.len();
-    let frames: Vec<u32> = pool.entries.iter().map(|e| e.frame).collect();
-    let pixels: Vec<u32> = pool.entries.iter().map(|e| e.pixel).collect();
-    let losses: Vec<f32> = pool.entries.iter().map(|e| e.loss).collect();
-    let tensors = [
-        ("frame".to_string(), Tensor::from_vec(frames, n, &dev)?),
-        ("pixel".to_string(), Tensor::from_vec(pixels, n, &dev)?),
-        ("loss".to_string(), Tensor::from_vec(losses, n, &dev)?),
-    ]
-    .into_iter()
-    .collect();
-    let meta = [("step".to_string(), step.to_string())]
-        .into_iter()
-        .collect();
-    save_tensors(path, &tensors, meta)
-}
-
-fn load_pool(path: &Path, capacity: usize, step: usize) -> Result<BeamPool> {
-    let (tensors, meta) = load_tensors(path)?;
-    let pool_step = step_of(path, &meta)?;
-    if pool_step != step {
-        return Err(Error::invalid(
-            path,
-            format!("is from step {pool_step}, the weights from step {step}"),
-        ));
-    }
-    let get = |k: &str| {
-        tensors
-            .get(k)
-            .ok_or_else(|| Error::invalid(path, format!("lacks `{k}`")))
-    };
-    let frames: Vec<u32> = get("frame")?.to_vec1()?;
-    let pixels: Vec<u32> = get("pixel")?.to_vec1()?;
-    let losses: Vec<f32> = get("loss")?.to_vec1()?;
-    let mut pool = BeamPool::new(capacity);
-    pool.entries = frames
-        .into_iter()
-        .zip(pixels)
-        .zip(losses)
-        .map(|((frame, pixel), loss)| PoolEntry { frame, pixel, loss })
-        .collect();
-    Ok(pool)
 }

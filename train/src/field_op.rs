@@ -16,22 +16,14 @@
 
 use std::sync::Mutex;
 
-use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
+use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
 use rayon::prelude::*;
 
 use crate::kernels::{
-    Addend, Epilogue, Packed, block_product, block_weight_grad, give_buffer, matmul_tn, take_buffer,
+    Addend, Epilogue, Packed, block_product, block_weight_grad, give_buffer, take_buffer,
 };
-
-/// A weight `[out, inp]` (and bias `[out]`) inside the flat parameter tensor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Affine {
-    pub weight: usize,
-    pub bias: Option<usize>,
-    pub out: usize,
-    pub inp: usize,
-}
+use crate::op_base::{Affine, bias_of, contiguous, weight, weight_range, with_data};
 
 /// One trunk layer: `relu(prev W_h^T [+ b_h] + points W_p^T + ray term)` with the parts
 /// that layer has.
@@ -88,89 +80,6 @@ impl FieldOp {
             stash: Mutex::new(None),
         }
     }
-}
-
-/// Collects the flat parameter tensor of a fused op: the variables, flattened and
-/// concatenated, so that candle routes each slice of the op's parameter gradient back to
-/// its variable.
-#[derive(Debug, Default)]
-pub(crate) struct Packer {
-    parts: Vec<Tensor>,
-    len: usize,
-}
-
-impl Packer {
-    fn push(&mut self, t: &Tensor) -> Result<usize> {
-        let at = self.len;
-        self.len += t.elem_count();
-        self.parts.push(t.flatten_all()?);
-        Ok(at)
-    }
-
-    /// Adds a layer's weight `[out, inp]` and optional bias `[out]`.
-    pub(crate) fn affine(&mut self, weight: &Tensor, bias: Option<&Tensor>) -> Result<Affine> {
-        let (out, inp) = weight.dims2()?;
-        let w = self.push(weight)?;
-        let bias = match bias {
-            Some(b) => Some(self.push(b)?),
-            None => None,
-        };
-        Ok(Affine {
-            weight: w,
-            bias,
-            out,
-            inp,
-        })
-    }
-
-    /// Values packed so far.
-    pub(crate) fn len(&self) -> usize {
-        self.len
-    }
-
-    /// The flat parameter tensor `[len]`.
-    pub(crate) fn tensor(&self) -> Result<Tensor> {
-        Tensor::cat(&self.parts, 0)
-    }
-}
-
-pub(crate) fn contiguous<'a>(s: &'a CpuStorage, l: &Layout, what: &str) -> Result<&'a [f32]> {
-    let data = s.as_slice::<f32>()?;
-    match l.contiguous_offsets() {
-        Some((a, b)) => Ok(&data[a..b]),
-        None => candle_core::bail!("fused field: `{what}` must be contiguous"),
-    }
-}
-
-pub(crate) fn with_data<R>(
-    t: &Tensor,
-    what: &str,
-    f: impl FnOnce(&[f32]) -> Result<R>,
-) -> Result<R> {
-    let t = t.contiguous()?;
-    let (storage, layout) = t.storage_and_layout();
-    match &*storage {
-        Storage::Cpu(cpu) => f(contiguous(cpu, layout, what)?),
-        _ => candle_core::bail!("the fused field runs on the CPU only"),
-    }
-}
-
-/// Where an affine layer's weight lies in the flat parameters.
-fn weight_range(a: &Affine) -> std::ops::Range<usize> {
-    a.weight..a.weight + a.out * a.inp
-}
-
-pub(crate) fn weight<'a>(p: &'a [f32], a: &Affine) -> &'a [f32] {
-    &p[weight_range(a)]
-}
-
-/// The bias of `a` as a slice of the parameters (none: no bias).
-fn bias_of<'a>(p: &'a [f32], a: &Affine) -> Option<&'a [f32]> {
-    a.bias.map(|b| &p[b..b + a.out])
-}
-
-pub(crate) fn bias_or_zero(p: &[f32], a: &Affine) -> Vec<f32> {
-    bias_of(p, a).map_or_else(|| vec![0.0; a.out], <[f32]>::to_vec)
 }
 
 /// Rows per block of the blocked passes, rounded to whole rays: a block's activations
@@ -796,26 +705,5 @@ impl CustomOp3 for FieldOp {
         let d_params = Tensor::from_vec(dp, params.shape(), dev)?;
         let d_rays = Tensor::from_vec(dr, rays.shape(), dev)?;
         Ok((None, Some(d_params), Some(d_rays)))
-    }
-}
-
-/// Adds `g^T x` to the weight's gradient and `db` to the bias's.
-pub(crate) fn accumulate_affine(
-    dp: &mut [f32],
-    a: &Affine,
-    g: &[f32],
-    x: &[f32],
-    n: usize,
-    db: Option<&Vec<f32>>,
-) {
-    let mut dw = vec![0.0f32; a.out * a.inp];
-    matmul_tn(g, n, a.out, x, a.inp, &mut dw);
-    for (d, v) in dp[weight_range(a)].iter_mut().zip(&dw) {
-        *d += v;
-    }
-    if let (Some(b), Some(db)) = (a.bias, db) {
-        for (d, v) in dp[b..b + a.out].iter_mut().zip(db) {
-            *d += v;
-        }
     }
 }

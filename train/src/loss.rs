@@ -1,0 +1,35 @@
+//! The student's loss (paper Eq. 6, 8 and 9): the pixel's squared error against the ground
+//! truth plus lambda times the segments' squared error against the teacher's Eq. 5 segment
+//! colours, per ray, both as means over the colour channels.
+
+use candle_core::{D, Result, Tensor};
+
+/// Per-ray losses of a batch.
+#[derive(Debug, Clone)]
+pub struct RayLosses {
+    /// Eq. 9 per ray: `|c - c_gt|^2 / 3 + lambda sum_i |c_i - c~_i|^2 / 3`, `[n]`.
+    pub per_ray: Tensor,
+    /// Eq. 8's squared pixel error per ray, summed over the channels, `[n]`.
+    pub pixel_sq: Tensor,
+}
+
+/// Eq. 9 per ray: the pixel loss (Eq. 8) of `pixels` against `truth`, plus, with `targets`
+/// (distillation), `lambda` times the segment loss (Eq. 6) of `segments` against them.
+///
+/// # Shapes
+/// - `pixels`, `truth`: `[n, 3]`; `segments`, `targets`: `[n, m, 3]`
+pub fn distillation_loss(
+    pixels: &Tensor,
+    truth: &Tensor,
+    segments: &Tensor,
+    targets: Option<&Tensor>,
+    lambda: f64,
+) -> Result<RayLosses> {
+    let pixel_sq = (pixels - truth)?.sqr()?.sum(D::Minus1)?;
+    let mut per_ray = (pixel_sq.clone() / 3.0)?;
+    if let Some(targets) = targets {
+        let seg_sq = (segments - targets)?.sqr()?.sum((1, 2))?;
+        per_ray = (per_ray + (seg_sq * (lambda / 3.0))?)?;
+    }
+    Ok(RayLosses { per_ray, pixel_sq })
+}

@@ -1,0 +1,167 @@
+//! The training loop every stage shares: steps until the schedule, the time budget or a stop
+//! request ends it, with validation, `log.csv`, checkpoints and progress events, stopping
+//! at the first non-finite loss or gradient.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use candle_core::{DType, Tensor};
+
+use crate::data::TrainData;
+use crate::error::{Error, Result};
+use crate::scores::Scores;
+use nldf_core::run_files::LOG_FILE;
+
+/// What the trainer reports as it goes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A training step finished.
+    Step {
+        step: usize,
+        loss: f64,
+        psnr: f64,
+        rays_per_s: f64,
+    },
+    /// Validation frames were rendered and scored.
+    Validation { step: usize, scores: Scores },
+    /// A checkpoint was written.
+    Checkpoint { step: usize, dir: PathBuf },
+}
+
+/// When a training loop validates, logs, checkpoints and stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Schedule {
+    pub iters: usize,
+    pub batch_rays: usize,
+    pub log_every: usize,
+    pub val_every: usize,
+    pub val_frames: usize,
+    pub checkpoint_every: usize,
+    pub time_budget_s: f64,
+}
+
+/// A model being trained, as [`train_loop`] sees it (the teacher and the student).
+pub trait TrainingRun {
+    /// The run's folder.
+    fn dir(&self) -> &Path;
+    /// Steps done.
+    fn step(&self) -> usize;
+    fn schedule(&self) -> Schedule;
+    /// Training seconds so far, across resumes.
+    fn elapsed(&self) -> f64;
+    fn learning_rate(&self) -> f64;
+    /// One step; returns the batch's loss and PSNR.
+    fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)>;
+    /// Scores `n` validation frames.
+    fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores>;
+    /// Writes the checkpoint.
+    fn save(&self) -> Result<()>;
+}
+
+/// The value of a scalar loss, or [`Error::NonFinite`] when it is NaN or infinite (checked
+/// before the backward pass, so that a diverged step changes no weight).
+pub fn finite_loss(loss: &Tensor) -> Result<f64> {
+    let value = loss.to_dtype(DType::F64)?.to_scalar::<f64>()?;
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(Error::NonFinite(format!("the loss is {value}")))
+    }
+}
+
+/// Trains until the schedule's steps are done, its time budget is spent or `stop` is set,
+/// validating, logging to `log.csv` and checkpointing as scheduled; always leaves a
+/// checkpoint of the last step. Returns the final validation scores when it ran to the end.
+///
+/// A loss or gradient that becomes NaN or infinite, or a validation render that does,
+/// stops the run with [`Error::NonFinite`] naming the step: nothing is checkpointed after
+/// it, so the last checkpoint on disk is the last good one.
+pub fn train_loop(
+    run: &mut dyn TrainingRun,
+    data: &TrainData,
+    stop: &AtomicBool,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<Option<Scores>> {
+    let dir = run.dir().to_path_buf();
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    let mut log = crate::log::CsvLog::open(&dir.join(LOG_FILE), run.step())?;
+    let t = run.schedule();
+    let mut last_val = None;
+    let mut saved = (run.step() > 0).then_some(run.step());
+    let diverged = |step: usize, what: String, saved: Option<usize>| {
+        let kept = match saved {
+            Some(s) => format!("the checkpoint of step {s} in {} is kept", dir.display()),
+            None => "no checkpoint was written".to_string(),
+        };
+        Error::NonFinite(format!(
+            "training diverged at step {step}: {what}; {kept}; lower the learning rate (`lr`) \
+             and train again"
+        ))
+    };
+    while run.step() < t.iters {
+        if stop.load(Ordering::Relaxed) {
+            run.save()?;
+            on_event(&Event::Checkpoint {
+                step: run.step(),
+                dir: dir.clone(),
+            });
+            return Ok(None);
+        }
+        let started = Instant::now();
+        let (loss, psnr) = match run.train_step(data) {
+            Ok(v) => v,
+            Err(Error::NonFinite(what)) => return Err(diverged(run.step() + 1, what, saved)),
+            Err(e) => return Err(e),
+        };
+        let rays_per_s = t.batch_rays as f64 / started.elapsed().as_secs_f64().max(1e-9);
+        let step = run.step();
+        on_event(&Event::Step {
+            step,
+            loss,
+            psnr,
+            rays_per_s,
+        });
+        let out_of_time = t.time_budget_s > 0.0 && run.elapsed() >= t.time_budget_s;
+        let last = step == t.iters || out_of_time;
+        let validate_now = (t.val_every > 0 && step.is_multiple_of(t.val_every)) || last;
+        let scores = if validate_now {
+            let s = run.validation_scores(data, t.val_frames)?;
+            if s.non_finite > 0 {
+                let what = format!(
+                    "{} of {} validation renders hold NaN or infinite values",
+                    s.non_finite, s.frames
+                );
+                return Err(diverged(step, what, saved));
+            }
+            on_event(&Event::Validation { step, scores: s });
+            last_val = Some(s);
+            Some(s)
+        } else {
+            None
+        };
+        if step.is_multiple_of(t.log_every.max(1)) || scores.is_some() {
+            log.row(
+                step,
+                run.elapsed(),
+                loss,
+                psnr,
+                run.learning_rate(),
+                rays_per_s,
+                scores,
+            )?;
+        }
+        if (t.checkpoint_every > 0 && step.is_multiple_of(t.checkpoint_every)) || last {
+            run.save()?;
+            saved = Some(step);
+            on_event(&Event::Checkpoint {
+                step,
+                dir: dir.clone(),
+            });
+        }
+        if out_of_time {
+            break;
+        }
+    }
+    Ok(last_val)
+}

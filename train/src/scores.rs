@@ -1,0 +1,95 @@
+//! Image scores of rendered frames against their ground truth: PSNR, SSIM and PSNR inside
+//! the head and the mouth, with NaN renders counted instead of hidden. Training scores its
+//! validation frames with them, evaluation its whole splits.
+
+use nldf_core::dataset::{Frame, Split};
+use nldf_core::image::ImageRgb;
+use nldf_core::metrics::{cap_psnr, psnr, psnr_masked, ssim};
+use nldf_core::region::Region;
+
+use crate::data::TrainData;
+use crate::error::Result;
+
+/// Image scores averaged over frames.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Scores {
+    pub psnr: f64,
+    pub ssim: f64,
+    /// PSNR inside the head (face, eyes, mouth; when the dataset has parsing masks).
+    pub face_psnr: Option<f64>,
+    /// PSNR inside the mouth region (when the dataset has parsing masks).
+    pub mouth_psnr: Option<f64>,
+    pub frames: usize,
+    /// Frames whose render holds a NaN or infinite value: their scores are NaN, and so are
+    /// the means above.
+    #[serde(default)]
+    pub non_finite: usize,
+}
+
+/// PSNR inside the head and inside the mouth (each `None` where the region is empty),
+/// capped at [`nldf_core::metrics::PSNR_CAP`] dB (a NaN stays NaN).
+pub fn region_psnrs(
+    render: &ImageRgb,
+    truth: &ImageRgb,
+    regions: &[Region],
+) -> Result<(Option<f64>, Option<f64>)> {
+    let head: Vec<bool> = regions.iter().map(|r| r.is_head()).collect();
+    let mouth: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
+    Ok((
+        psnr_masked(render, truth, &head)?.map(cap_psnr),
+        psnr_masked(render, truth, &mouth)?.map(cap_psnr),
+    ))
+}
+
+/// Renders `n` validation frames spread evenly over the validation split (the training
+/// split when it is empty) with `render` and scores them.
+pub fn score_validation_frames(
+    data: &TrainData,
+    n: usize,
+    render: &dyn Fn(&Frame) -> Result<ImageRgb>,
+) -> Result<Scores> {
+    let frames = data.dataset.frames(Split::Val);
+    let frames = if frames.is_empty() {
+        data.dataset.frames(Split::Train)
+    } else {
+        frames
+    };
+    let n = n.clamp(1, frames.len().max(1));
+    let mut pairs = Vec::with_capacity(n);
+    for k in 0..n.min(frames.len()) {
+        let frame = &frames[k * frames.len() / n];
+        let truth = data.dataset.load_image(frame)?;
+        let regions = data.dataset.load_regions(frame)?;
+        pairs.push((render(frame)?, truth, regions));
+    }
+    score_frames(&pairs)
+}
+
+/// Scores of rendered frames against their ground truth and optional region masks. A
+/// render holding a NaN or infinite value makes every mean NaN and is counted in
+/// [`Scores::non_finite`]: it never scores as a good frame.
+pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Result<Scores> {
+    let (mut p, mut s) = (0.0, 0.0);
+    let (mut face, mut mouth) = (Vec::new(), Vec::new());
+    let mut non_finite = 0;
+    for (render, truth, regions) in pairs {
+        non_finite += usize::from(render.non_finite_values() > 0);
+        p += cap_psnr(psnr(render, truth)?);
+        s += ssim(render, truth)?;
+        if let Some(regions) = regions {
+            let (f, m) = region_psnrs(render, truth, regions)?;
+            face.extend(f);
+            mouth.extend(m);
+        }
+    }
+    let n = pairs.len().max(1) as f64;
+    let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    Ok(Scores {
+        psnr: p / n,
+        ssim: s / n,
+        face_psnr: mean(face),
+        mouth_psnr: mean(mouth),
+        frames: pairs.len(),
+        non_finite,
+    })
+}

@@ -1,0 +1,108 @@
+//! The teacher's per-segment colours (Eq. 5) that the student distils: rendered once per hit
+//! pixel of every view and cached in `targets.safetensors` beside the student's checkpoint,
+//! with the teacher's step and a fingerprint of the views, so that a cache made for other
+//! views or another teacher is never used.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use candle_core::{Device, Tensor};
+use nldf_core::rays::Rays;
+
+use crate::checkpoint::{load_tensors, save_tensors};
+use crate::data::TrainData;
+use crate::error::Result;
+use crate::teacher_trainer::TeacherRun;
+use crate::views::{FrameBeams, View, codes_of_views};
+
+/// The teacher's Eq. 5 segment colours of every hit pixel of every view (`[n_pixels, m,
+/// 3]` flat per view). `progress(done, total)` is called per view.
+pub fn teacher_targets(
+    teacher: &TeacherRun,
+    data: &TrainData,
+    views: &[View],
+    beams: &[FrameBeams],
+    m: usize,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Vec<Vec<f32>>> {
+    let ds = &data.dataset;
+    let mut out = Vec::with_capacity(views.len());
+    for (vi, (view, fb)) in views.iter().zip(beams).enumerate() {
+        let mut rays = Rays::with_capacity(fb.pixels.len());
+        let mut bg = Vec::with_capacity(3 * fb.pixels.len());
+        for &(i, j) in &fb.pixels {
+            let (o, d) = view.camera.ray(i as f32, j as f32);
+            rays.push(o, d);
+            bg.extend_from_slice(&ds.background.get(i, j));
+        }
+        let code = codes_of_views(&[view], |ids| teacher.audio_codes(data, ids))?;
+        out.push(teacher.teacher.segment_targets(
+            &rays,
+            &bg,
+            &code,
+            &data.bounds,
+            ds.near,
+            ds.far,
+            m,
+        )?);
+        progress(vi + 1, views.len());
+    }
+    Ok(out)
+}
+
+/// Writes the targets with the teacher's step and the views' fingerprint.
+pub fn save_targets(
+    path: &Path,
+    targets: &[Vec<f32>],
+    m: usize,
+    teacher_step: usize,
+    views: &str,
+) -> Result<()> {
+    let mut tensors = HashMap::new();
+    for (f, t) in targets.iter().enumerate() {
+        let rows = t.len() / (3 * m);
+        tensors.insert(
+            format!("frame.{f}"),
+            Tensor::from_slice(t, (rows, m, 3), &Device::Cpu)?,
+        );
+    }
+    let meta = [
+        ("teacher_step".to_string(), teacher_step.to_string()),
+        ("segments".to_string(), m.to_string()),
+        ("frames".to_string(), targets.len().to_string()),
+        ("views".to_string(), views.to_string()),
+    ]
+    .into_iter()
+    .collect();
+    save_tensors(path, &tensors, meta)
+}
+
+/// The cached targets when they fit the views, `m` and (when known) the teacher's step.
+pub fn load_targets(
+    path: &Path,
+    beams: &[FrameBeams],
+    m: usize,
+    teacher_step: Option<usize>,
+    views: &str,
+) -> Result<Option<Vec<Vec<f32>>>> {
+    let (tensors, meta) = load_tensors(path)?;
+    let get = |k: &str| meta.get(k).and_then(|v| v.parse::<usize>().ok());
+    let fits = get("segments") == Some(m)
+        && get("frames") == Some(beams.len())
+        && meta.get("views").map(String::as_str) == Some(views)
+        && teacher_step.is_none_or(|s| get("teacher_step") == Some(s));
+    if !fits {
+        return Ok(None);
+    }
+    let mut out = Vec::with_capacity(beams.len());
+    for (f, fb) in beams.iter().enumerate() {
+        let Some(t) = tensors.get(&format!("frame.{f}")) else {
+            return Ok(None);
+        };
+        if t.dims() != [fb.pixels.len(), m, 3] {
+            return Ok(None);
+        }
+        out.push(t.flatten_all()?.to_vec1()?);
+    }
+    Ok(Some(out))
+}

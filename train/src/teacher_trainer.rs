@@ -1,0 +1,320 @@
+//! The teacher's trainer: AD-NeRF's recipe (face-biased ray batches, Adam with exponential
+//! learning-rate decay, AudioAttNet switched on late at a higher rate) with periodic
+//! validation, `log.csv`, atomic checkpoints and bit-exact resume.
+//!
+//! Every step draws its batch from a generator seeded by `(seed, step)`, so a resumed run
+//! sees exactly the batches an uninterrupted one would have seen.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use candle_nn::VarMap;
+use nldf_core::dataset::{Frame, Split};
+use nldf_core::image::ImageRgb;
+use nldf_core::metrics::psnr_from_mse;
+use nldf_core::rays::{Rays, rays_for_image, sample_batch};
+use rand::seq::index::sample as sample_indices;
+use rand::{Rng, RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::adam::{Adam, AdamParams};
+use crate::audio_net::neighbourhoods;
+use crate::checkpoint::save_json;
+use crate::checkpoint::{CheckpointParts, open_checkpoint, save_checkpoint};
+use crate::config::{RunConfig, TeacherRunConfig, read_config};
+use crate::data::TrainData;
+use crate::error::{Error, Result};
+use crate::nn::{init_seeded, new_varmap, sorted_vars};
+use crate::run_loop::{Event, Schedule, TrainingRun, finite_loss, train_loop};
+use crate::scores::{Scores, score_validation_frames};
+use crate::teacher::{Teacher, teacher};
+use nldf_core::run_files::CONFIG_FILE;
+
+/// A teacher being trained: its folder, configuration, weights and optimizer.
+pub struct TeacherRun {
+    pub dir: PathBuf,
+    pub cfg: TeacherRunConfig,
+    pub varmap: VarMap,
+    pub teacher: Teacher,
+    adam: Adam,
+    /// Steps done.
+    pub step: usize,
+    /// Training seconds before this process (from the checkpoint).
+    elapsed_before: f64,
+    /// Rays of the last training step that hit the head's bounds.
+    pub last_hit_rays: usize,
+    started: Instant,
+}
+
+impl TeacherRun {
+    /// A new run in `dir` with seeded weights. The audio features' width and source are
+    /// taken from the data.
+    pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
+        cfg.model.audio.set_from(&data.dataset);
+        let run = Self::build(dir, cfg)?;
+        init_seeded(&run.varmap, run.cfg.train.seed)?;
+        crate::audio_net::centre_attention(&run.varmap, "audio", run.cfg.model.audio.att_frames)?;
+        Ok(run)
+    }
+
+    /// Loads the run in `dir` (its `config.json`, weights and, with `optimizer`, the
+    /// optimizer state) to continue training or to render.
+    pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
+        let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
+        let (step, elapsed) =
+            open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
+        run.step = step;
+        run.elapsed_before = elapsed;
+        Ok(run)
+    }
+
+    /// A run at step 0 with the network of `cfg` (weights as the variable builder made
+    /// them) and a fresh optimizer.
+    fn build(dir: &Path, cfg: TeacherRunConfig) -> Result<TeacherRun> {
+        cfg.check()?;
+        let (varmap, vb) = new_varmap();
+        let teacher = teacher(&cfg.model, vb)?;
+        let adam = new_adam(&varmap, &cfg)?;
+        Ok(TeacherRun {
+            dir: dir.to_path_buf(),
+            cfg,
+            varmap,
+            teacher,
+            adam,
+            step: 0,
+            elapsed_before: 0.0,
+            last_hit_rays: 0,
+            started: Instant::now(),
+        })
+    }
+
+    /// Training seconds so far, across resumes.
+    pub fn elapsed(&self) -> f64 {
+        self.elapsed_before + self.started.elapsed().as_secs_f64()
+    }
+
+    /// The learning rate at the current step: `lr 0.1^(step / lr_decay_steps)`.
+    pub fn learning_rate(&self) -> f64 {
+        let t = &self.cfg.train;
+        t.lr * 0.1f64.powf(self.step as f64 / t.lr_decay_steps.max(1) as f64)
+    }
+
+    fn attention_on(&self) -> bool {
+        self.step >= self.cfg.train.att_start
+    }
+
+    /// Audio codes of `frames` (indices into the dataset's audio windows).
+    ///
+    /// # Shapes
+    /// - returns `[frames.len(), audio_dim]`
+    pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
+        let windows = neighbourhoods(
+            &data.dataset.audio,
+            aud_ids,
+            self.cfg.model.audio.att_frames,
+        )?;
+        Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
+    }
+
+    /// One training step; returns the batch's loss (MSE over all its rays) and PSNR.
+    pub fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
+        let t = self.cfg.train.clone();
+        let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
+        rng.set_stream(self.step as u64 + 1);
+        let frames = data.dataset.frames(Split::Train);
+        let n_frames = t.frames_per_batch.min(frames.len()).max(1);
+        let picked = sample_indices(&mut rng, frames.len(), n_frames).into_vec();
+        let per_frame = t.batch_rays.div_ceil(n_frames);
+        let mut rays = Rays::with_capacity(per_frame * n_frames);
+        let (mut gt, mut bg, mut frame_of_ray) = (Vec::new(), Vec::new(), Vec::new());
+        for (slot, &fi) in picked.iter().enumerate() {
+            let frame = &frames[fi];
+            let mouth = data.mouth_pixels.get(fi).map(Vec::as_slice).unwrap_or(&[]);
+            let n_mouth = if mouth.is_empty() {
+                0
+            } else {
+                ((t.mouth_fraction.clamp(0.0, 1.0) * per_frame as f32).round() as usize)
+                    .min(per_frame)
+            };
+            let camera = data.dataset.camera(frame);
+            let mut batch = sample_batch(
+                &camera,
+                frame.face_rect,
+                per_frame - n_mouth,
+                t.face_fraction,
+                &mut rng,
+            );
+            for _ in 0..n_mouth {
+                let (i, j) = mouth[rng.random_range(0..mouth.len())];
+                let (o, d) = camera.ray(i as f32, j as f32);
+                batch.pixels.push((i, j));
+                batch.rays.push(o, d);
+            }
+            for (r, &(i, j)) in batch.pixels.iter().enumerate() {
+                rays.push(batch.rays.origin(r), batch.rays.direction(r));
+                gt.extend_from_slice(&data.images[fi].get(i, j));
+                bg.extend_from_slice(&data.dataset.background.get(i, j));
+                frame_of_ray.push(slot as u32);
+            }
+        }
+        let aud_ids: Vec<usize> = picked.iter().map(|&fi| frames[fi].aud_id).collect();
+        let codes = self.audio_codes(data, &aud_ids)?;
+        let out = self.teacher.render(
+            &rays,
+            &bg,
+            &codes,
+            &frame_of_ray,
+            &data.bounds,
+            data.dataset.near,
+            data.dataset.far,
+            Some(&mut rng as &mut dyn RngCore),
+        )?;
+        let n = rays.len();
+        self.last_hit_rays = out.hit.len();
+        // Rays that miss the bounds are their background: a constant part of the loss.
+        let mut hit_mask = vec![false; n];
+        out.hit.iter().for_each(|&r| hit_mask[r] = true);
+        let miss_sq: f64 = (0..n)
+            .filter(|&r| !hit_mask[r])
+            .map(|r| {
+                (0..3)
+                    .map(|c| (bg[3 * r + c] - gt[3 * r + c]) as f64)
+                    .map(|d| d * d)
+                    .sum::<f64>()
+            })
+            .sum();
+        let gt_hit: Vec<f32> = out
+            .hit
+            .iter()
+            .flat_map(|&r| gt[3 * r..3 * r + 3].iter().copied())
+            .collect();
+        let gt_hit = Tensor::from_vec(gt_hit, (out.hit.len(), 3), &Device::Cpu)?;
+        let scale = 1.0 / (3 * n) as f64;
+        let hit_sq = (&out.color - &gt_hit)?.sqr()?.sum_all()?;
+        let loss = (hit_sq.affine(scale, miss_sq * scale))?;
+        let value = finite_loss(&loss)?;
+        let lr = self.learning_rate();
+        let grads = loss.backward()?;
+        self.adam.step(&grads, lr)?;
+        self.step += 1;
+        Ok((value, psnr_from_mse(value)))
+    }
+
+    /// Renders a whole frame of the dataset (any split).
+    pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        let ds = &data.dataset;
+        let rays = rays_for_image(&ds.camera(frame));
+        let codes = self.audio_codes(data, &[frame.aud_id])?;
+        let bg = &ds.background.data;
+        let colors = self
+            .teacher
+            .render_eval(&rays, bg, &codes, &data.bounds, ds.near, ds.far)?;
+        Ok(ImageRgb {
+            width: ds.intrinsics.width,
+            height: ds.intrinsics.height,
+            data: colors,
+        })
+    }
+
+    /// Renders `n` validation frames spread evenly over the split and scores them.
+    pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        score_validation_frames(data, n, &|f| self.render_frame(data, f))
+    }
+
+    /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.
+    pub fn save(&self) -> Result<()> {
+        let title = format!(
+            "teacher {}x{}, {} rays/step",
+            self.cfg.model.depth, self.cfg.model.width, self.cfg.train.batch_rays
+        );
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        save_json(&self.dir.join(CONFIG_FILE), &self.cfg)?;
+        save_checkpoint(&CheckpointParts {
+            dir: &self.dir,
+            kind: "teacher",
+            step: self.step,
+            elapsed: self.elapsed(),
+            varmap: &self.varmap,
+            adam: &self.adam,
+            title: &title,
+        })
+    }
+
+    /// Trains until `cfg.train.iters` steps are done or `stop` is set (see [`train_loop`]).
+    pub fn train(
+        &mut self,
+        data: &TrainData,
+        stop: &AtomicBool,
+        on_event: &mut dyn FnMut(&Event),
+    ) -> Result<Option<Scores>> {
+        train_loop(self, data, stop, on_event)
+    }
+}
+
+impl TrainingRun for TeacherRun {
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn step(&self) -> usize {
+        self.step
+    }
+
+    fn schedule(&self) -> Schedule {
+        let t = &self.cfg.train;
+        Schedule {
+            iters: t.iters,
+            batch_rays: t.batch_rays,
+            log_every: t.log_every,
+            val_every: t.val_every,
+            val_frames: t.val_frames,
+            checkpoint_every: t.checkpoint_every,
+            time_budget_s: t.time_budget_s,
+        }
+    }
+
+    fn elapsed(&self) -> f64 {
+        TeacherRun::elapsed(self)
+    }
+
+    fn learning_rate(&self) -> f64 {
+        TeacherRun::learning_rate(self)
+    }
+
+    fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
+        TeacherRun::train_step(self, data)
+    }
+
+    fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        TeacherRun::validation_scores(self, data, n)
+    }
+
+    fn save(&self) -> Result<()> {
+        TeacherRun::save(self)
+    }
+}
+
+fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
+    let t = &cfg.train;
+    let vars = sorted_vars(varmap)?
+        .into_iter()
+        .map(|(name, var)| {
+            let scale = if name.starts_with("audio.att.") {
+                t.att_lr_scale
+            } else {
+                1.0
+            };
+            (name, var, scale)
+        })
+        .collect();
+    Ok(Adam::new(
+        vars,
+        AdamParams {
+            beta1: t.beta1,
+            beta2: t.beta2,
+            eps: t.eps,
+        },
+    ))
+}
