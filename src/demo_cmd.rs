@@ -6,10 +6,12 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use nldf_core::synth::SynthConfig;
+use nldf_train::job::JobEvent;
+use nldf_train::job::demo::DemoJob;
 
-use crate::eval_cmd::{EvalArgs, SplitArg};
-use crate::synth_cmd::SynthArgs;
-use crate::train_cmd::{TeacherArgs, TeacherPreset};
+use crate::progress::{EventPrinter, stop_on_ctrl_c};
+use crate::train_cmd::TeacherPreset;
 
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
@@ -39,86 +41,32 @@ pub struct DemoArgs {
 
 /// Runs `nldf demo`.
 pub fn run(args: DemoArgs) -> Result<()> {
-    if !(args.minutes.is_finite() && args.minutes > 0.0) {
-        anyhow::bail!("--minutes must be positive, got {}", args.minutes);
-    }
-    if !(args.student_minutes.is_finite() && args.student_minutes >= 0.0) {
-        anyhow::bail!(
-            "--student-minutes must be zero or positive, got {}",
-            args.student_minutes
-        );
-    }
-    let data = args.out.join("data");
-    if data.join("scene.json").is_file() {
-        println!("== synthetic scene: reusing {}", data.display());
-    } else {
-        println!("== synthetic scene -> {}", data.display());
-        crate::synth_cmd::run(SynthArgs {
-            out: data.clone(),
+    let job = DemoJob {
+        out: args.out.clone(),
+        scene: SynthConfig {
             seed: args.seed,
-            seconds: None,
             size: 128,
-            audio: None,
             supersample: 3,
-            force: false,
-        })?;
-    }
-    let teacher = args.out.join("teacher");
-    let resume = teacher.join(nldf_core::run_files::MODEL_FILE).is_file();
-    println!(
-        "== teacher ({} min budget{}) -> {}",
-        args.minutes,
-        if resume { ", resuming" } else { "" },
-        teacher.display()
-    );
-    crate::train_cmd::run_teacher_with(
-        TeacherArgs {
-            data: data.clone(),
-            run: args.out.clone(),
-            preset: TeacherPreset::Small,
-            config: None,
-            iters: None,
-            resume,
-            audio_features: crate::train_cmd::AudioFeaturesArg::Auto,
+            ..SynthConfig::default()
         },
-        Some(args.minutes * 60.0),
-    )?;
-    if args.student_minutes > 0.0 {
-        let student = args.out.join("student");
-        let resume = student.join(nldf_core::run_files::MODEL_FILE).is_file();
-        println!(
-            "== student ({} min budget{}) -> {}",
-            args.student_minutes,
-            if resume { ", resuming" } else { "" },
-            student.display()
-        );
-        crate::train_cmd::run_student(crate::train_cmd::StudentArgs {
-            data: data.clone(),
-            run: args.out.clone(),
-            depth: args.student_depth,
-            width: None,
-            no_distill: false,
-            no_pool: false,
-            pseudo_frames: None,
-            config: None,
-            iters: Some(args.student_iters),
-            minutes: Some(args.student_minutes),
-            name: "student".into(),
-            resume,
-        })?;
-        println!("== ONNX export");
-        crate::export_cmd::run(crate::export_cmd::ExportArgs {
-            run: args.out.clone(),
-            out: None,
-            fp16: false,
-        })?;
-    }
-    println!("== evaluation on the held-out frames");
-    crate::eval_cmd::run(EvalArgs {
-        run: args.out.clone(),
-        data,
-        split: SplitArg::Val,
-        frames: None,
-        out: None,
-    })
+        teacher: TeacherPreset::Small.config(),
+        teacher_minutes: args.minutes,
+        student: args.student_depth.config(),
+        student_minutes: args.student_minutes,
+        student_iters: args.student_iters,
+    };
+    job.check()?;
+    let stop = stop_on_ctrl_c()?;
+    let mut printer = EventPrinter::default();
+    let mut show = |e: &JobEvent| printer.show(e);
+    let Some(report) = job.run(&stop, &mut show)? else {
+        println!("interrupted; run the same command again to resume");
+        return Ok(());
+    };
+    let n = report
+        .evaluation
+        .models
+        .first()
+        .map_or(0, |m| m.frames.len());
+    crate::eval_cmd::print_evaluation(&report.evaluation, &report.eval_dir, n)
 }

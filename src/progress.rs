@@ -14,3 +14,116 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     bar.set_message(what.to_string());
     bar
 }
+
+/// Shows a training job's events: a progress bar per training stage and per counted piece
+/// of work, stage headings, notes on stderr and the files each stage wrote.
+#[derive(Default)]
+pub struct EventPrinter {
+    bar: Option<ProgressBar>,
+    last_val: String,
+}
+
+impl EventPrinter {
+    /// Shows one event.
+    pub fn show(&mut self, event: &nldf_train::job::JobEvent) {
+        use nldf_train::job::JobEvent;
+        use nldf_train::run_loop::Event;
+        match event {
+            JobEvent::Stage(line) => println!("== {line}"),
+            JobEvent::Note(line) => eprintln!("{line}"),
+            JobEvent::TrainingStarts { stage, step, iters } => {
+                let bar = progress_bar(*iters as u64, stage);
+                bar.set_position(*step as u64);
+                self.last_val.clear();
+                self.bar = Some(bar);
+            }
+            JobEvent::Training { stage, event } => {
+                let Some(bar) = &self.bar else { return };
+                match event {
+                    Event::Step {
+                        step,
+                        loss,
+                        psnr,
+                        rays_per_s,
+                    } => {
+                        bar.set_position(*step as u64);
+                        bar.set_message(format!(
+                            "{stage} loss {loss:.2e} psnr {psnr:.2} dB {rays_per_s:.0} rays/s{}",
+                            self.last_val
+                        ));
+                    }
+                    Event::Validation { step, scores } => {
+                        self.last_val = format!(" | val {:.2} dB", scores.psnr);
+                        bar.println(format!(
+                            "step {step}: validation PSNR {:.2} dB, SSIM {:.4}{}",
+                            scores.psnr,
+                            scores.ssim,
+                            match (scores.face_psnr, scores.mouth_psnr) {
+                                (Some(f), Some(m)) => format!(", face {f:.2} dB, mouth {m:.2} dB"),
+                                _ => String::new(),
+                            }
+                        ));
+                    }
+                    Event::Checkpoint { .. } => {}
+                }
+            }
+            JobEvent::TrainingEnds {
+                stage,
+                step,
+                interrupted,
+                scores,
+            } => {
+                if let Some(bar) = self.bar.take() {
+                    bar.finish_and_clear();
+                }
+                if *interrupted {
+                    println!(
+                        "interrupted at step {step}; checkpoint written, continue with --resume"
+                    );
+                }
+                if let Some(s) = scores {
+                    println!(
+                        "{}",
+                        serde_json::json!({"stage": stage, "step": step, "val": s})
+                    );
+                }
+            }
+            JobEvent::Progress { what, done, total } => {
+                let bar = self
+                    .bar
+                    .get_or_insert_with(|| progress_bar(*total as u64, what));
+                bar.set_length(*total as u64);
+                bar.set_position(*done as u64);
+                if done >= total {
+                    bar.finish_and_clear();
+                    self.bar = None;
+                }
+            }
+            JobEvent::Wrote { dir, files } => {
+                if let Some(bar) = self.bar.take() {
+                    bar.finish_and_clear();
+                }
+                println!("wrote to {}:", dir.display());
+                for f in files {
+                    println!("  {}", f.display());
+                }
+            }
+        }
+    }
+}
+
+/// A flag set by Ctrl-C: training stops at the next step with a checkpoint.
+pub fn stop_on_ctrl_c() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    use anyhow::Context;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Arc, OnceLock};
+    static STOP: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    if let Some(s) = STOP.get() {
+        return Ok(s.clone());
+    }
+    let flag = Arc::new(AtomicBool::new(false));
+    let handler = flag.clone();
+    ctrlc::set_handler(move || handler.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    Ok(STOP.get_or_init(|| flag).clone())
+}

@@ -7,6 +7,7 @@ mod export_ort;
 mod fuzz;
 mod identity;
 mod infer;
+mod jobs;
 mod metrics;
 mod rendering;
 mod stress;

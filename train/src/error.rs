@@ -19,12 +19,26 @@ pub enum Error {
     /// checkpoint or export it.
     #[error("{0}")]
     NonFinite(String),
+    /// Another error, with what was being done when it happened.
+    #[error("{what}: {source}")]
+    Context { what: String, source: Box<Error> },
+    /// Exporting the student failed.
+    #[error(transparent)]
+    Export(#[from] nldf_export::Error),
 }
 
 /// Result with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
+    /// `self`, saying what was being done: `what: self`.
+    pub fn context(self, what: impl Into<String>) -> Self {
+        Error::Context {
+            what: what.into(),
+            source: Box::new(self),
+        }
+    }
+
     /// An I/O error on `path`.
     pub fn io(path: impl AsRef<Path>, err: std::io::Error) -> Self {
         Error::Core(nldf_core::Error::io(path, err))

@@ -105,7 +105,10 @@ pub struct FrameScore {
 /// The result of evaluating one model on one split.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EvalReport {
+    /// What the model is, for tables.
     pub model: String,
+    /// The folder of its renders in the evaluation's output.
+    pub label: String,
     pub split: String,
     pub step: usize,
     pub frames: Vec<FrameScore>,
@@ -212,6 +215,7 @@ pub fn eval_models(
         .enumerate()
         .map(|(mi, (model, scores))| EvalReport {
             model: model.describe(),
+            label: model.label(),
             split: format!("{split:?}").to_lowercase(),
             step: model.step(),
             psnr: mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::NAN),

@@ -17,6 +17,7 @@ pub mod error;
 pub mod eval;
 pub mod field;
 pub mod field_op;
+pub mod job;
 pub mod kernels;
 pub mod log;
 pub mod loss;

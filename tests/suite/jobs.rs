@@ -1,0 +1,139 @@
+//! The training jobs run end to end through the library, as the command line runs them: a
+//! tiny demo (scene, teacher, student, export, evaluation), run twice to show that the
+//! second run reuses every finished stage, then a tiny ablation on its teacher.
+
+use std::sync::atomic::AtomicBool;
+
+use nldf_core::run_files::{ONNX_FILE, STUDENT_FILES, TARGETS_FILE, TEACHER_FILES};
+use nldf_core::synth::SynthConfig;
+use nldf_train::config::TeacherConfig;
+use nldf_train::job::JobEvent;
+use nldf_train::job::ablation::AblationJob;
+use nldf_train::job::demo::DemoJob;
+use nldf_train::student::StudentConfig;
+
+fn tiny_demo(out: &std::path::Path) -> DemoJob {
+    DemoJob {
+        out: out.to_path_buf(),
+        scene: SynthConfig {
+            seconds: 2.0,
+            size: 32,
+            supersample: 1,
+            ..SynthConfig::default()
+        },
+        teacher: TeacherConfig::tiny(),
+        teacher_minutes: 0.04,
+        student: StudentConfig::tiny(),
+        student_minutes: 0.04,
+        student_iters: 30,
+    }
+}
+
+#[test]
+fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let stop = AtomicBool::new(false);
+    let mut events = Vec::new();
+    let report = tiny_demo(&out)
+        .run(&stop, &mut |e| events.push(e.clone()))
+        .unwrap()
+        .expect("the demo ran to its end");
+    let stages: Vec<&String> = events
+        .iter()
+        .filter_map(|e| match e {
+            JobEvent::Stage(s) => Some(s),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(stages.len(), 5, "{stages:?}");
+    assert!(stages[0].starts_with("synthetic scene ->"), "{stages:?}");
+    assert!(stages[3].starts_with("ONNX export"), "{stages:?}");
+    for f in TEACHER_FILES {
+        assert!(out.join("teacher").join(f).is_file(), "teacher/{f}");
+    }
+    for f in STUDENT_FILES {
+        assert!(out.join("student").join(f).is_file(), "student/{f}");
+    }
+    assert_eq!(report.model.as_deref(), Some(out.join(ONNX_FILE).as_path()));
+    nldf_export::read_model(&out.join(ONNX_FILE)).unwrap();
+    let models: Vec<&str> = report
+        .evaluation
+        .models
+        .iter()
+        .map(|m| m.label.as_str())
+        .collect();
+    assert_eq!(models, ["teacher", "student"]);
+    for m in &report.evaluation.models {
+        assert!(
+            m.psnr.is_finite() && m.psnr > 5.0,
+            "{}: {}",
+            m.model,
+            m.psnr
+        );
+        assert!(!m.frames.is_empty() && m.non_finite_frames == 0);
+    }
+    assert!(report.eval_dir.join("grid.png").is_file());
+    assert!(
+        events
+            .iter()
+            .any(|e| matches!(e, JobEvent::TrainingEnds { stage, .. } if stage == "student"))
+    );
+
+    // A second demo into the same folder reuses the scene and resumes the spent stages.
+    let mut again = Vec::new();
+    tiny_demo(&out)
+        .run(&stop, &mut |e| again.push(e.clone()))
+        .unwrap()
+        .unwrap();
+    assert!(
+        again
+            .iter()
+            .any(|e| matches!(e, JobEvent::Stage(s) if s.starts_with("synthetic scene: reusing")))
+    );
+    assert!(
+        again
+            .iter()
+            .any(|e| matches!(e, JobEvent::Note(s) if s.starts_with("resuming at step")))
+    );
+
+    // The ablation on the demo's teacher: distilled, pixels-only and no-pool variants
+    // (tiny depth only), then the wall-time-matched pixels-only student.
+    let report = AblationJob {
+        data: out.join("data"),
+        run: out.clone(),
+        iters: 3,
+        model: ("tiny".into(), StudentConfig::tiny()),
+        depths: vec![("tiny".into(), StudentConfig::tiny())],
+        wall_time: true,
+    }
+    .plan()
+    .unwrap()
+    .run(&stop, &mut |_| {})
+    .unwrap();
+    let variants: Vec<&str> = report.rows.iter().map(|r| r.table.as_str()).collect();
+    assert_eq!(
+        variants,
+        [
+            "1: distillation",
+            "1: distillation",
+            "2: beam pool",
+            "4: equal wall time",
+            "4: equal wall time"
+        ]
+    );
+    for r in &report.rows {
+        assert!(r.psnr.is_finite(), "{}: {}", r.variant, r.psnr);
+    }
+    assert_eq!(report.rows[0].steps, 3);
+    // The no-pool variant reused the distilled variant's teacher targets.
+    assert!(out.join("ablate_dtiny_nopool").join(TARGETS_FILE).is_file());
+    for f in &report.files {
+        assert!(f.is_file(), "{}", f.display());
+    }
+    assert!(
+        report
+            .markdown
+            .contains("| 2: beam pool | depth tiny, distilled, no pool | 3 |")
+    );
+}

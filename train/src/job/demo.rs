@@ -1,0 +1,189 @@
+//! The whole pipeline on the embedded default, the synthetic talking head: generate the
+//! scene, train the teacher within a time budget, distil the student from it, export the
+//! student as ONNX and evaluate both on the held-out frames. A stage that already finished
+//! in the output folder is reused, and an interrupted one resumes.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use nldf_core::dataset::{AudioChoice, Split};
+use nldf_core::run_files::{ONNX_FILE, STUDENT_DIR, TEACHER_DIR, has_checkpoint};
+use nldf_core::synth::{self, SynthConfig};
+
+use crate::config::TeacherConfig;
+use crate::error::{Error, Result};
+use crate::eval::Evaluation;
+use crate::job::eval::EvalJob;
+use crate::job::student::{StudentJob, StudentSource};
+use crate::job::teacher::{TeacherJob, TeacherSource};
+use crate::job::{JobEvent, OnEvent};
+use crate::student::StudentConfig;
+
+/// What `nldf demo` was asked to do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DemoJob {
+    /// The run folder: the dataset goes to `OUT/data`, the teacher to `OUT/teacher`, the
+    /// student to `OUT/student`, the model to `OUT/model.onnx`, the evaluation to
+    /// `OUT/eval/val`.
+    pub out: PathBuf,
+    /// The synthetic scene (seed, length, size).
+    pub scene: SynthConfig,
+    /// The teacher's network.
+    pub teacher: TeacherConfig,
+    /// Teacher training budget in minutes.
+    pub teacher_minutes: f64,
+    /// The student's network.
+    pub student: StudentConfig,
+    /// Student training budget in minutes (teacher targets included); 0 skips the student
+    /// and the export.
+    pub student_minutes: f64,
+    /// Student training steps (the learning rate decays over them; the budget may end the
+    /// run first).
+    pub student_iters: usize,
+}
+
+/// What the demo made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DemoReport {
+    /// The exported student, when one was trained.
+    pub model: Option<PathBuf>,
+    /// The evaluation of the teacher and the student on the held-out frames.
+    pub evaluation: Evaluation,
+    /// Where the evaluation was written.
+    pub eval_dir: PathBuf,
+}
+
+impl DemoJob {
+    /// Checks the budgets and the scene's settings; nothing is made yet.
+    pub fn check(&self) -> Result<()> {
+        if !(self.teacher_minutes.is_finite() && self.teacher_minutes > 0.0) {
+            return Err(Error::Config(format!(
+                "--minutes must be positive, got {}",
+                self.teacher_minutes
+            )));
+        }
+        if !(self.student_minutes.is_finite() && self.student_minutes >= 0.0) {
+            return Err(Error::Config(format!(
+                "--student-minutes must be zero or positive, got {}",
+                self.student_minutes
+            )));
+        }
+        synth::validate(&self.scene)?;
+        Ok(())
+    }
+
+    /// Runs every stage in turn; `stop` ends the training stage under way with a checkpoint
+    /// and skips the rest.
+    pub fn run(&self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<DemoReport>> {
+        self.check()?;
+        let data = self.out.join("data");
+        if data.join("scene.json").is_file() {
+            on_event(&JobEvent::Stage(format!(
+                "synthetic scene: reusing {}",
+                data.display()
+            )));
+        } else {
+            on_event(&JobEvent::Stage(format!(
+                "synthetic scene -> {}",
+                data.display()
+            )));
+            let total = (self.scene.seconds * self.scene.fps).floor() as usize;
+            let done = std::sync::atomic::AtomicUsize::new(0);
+            let summary = synth::generate(&self.scene, None, &data, false, &|| {
+                done.fetch_add(1, Ordering::Relaxed);
+            })?;
+            on_event(&JobEvent::Progress {
+                what: "synthetic frames".into(),
+                done: done.load(Ordering::Relaxed),
+                total,
+            });
+            on_event(&JobEvent::Wrote {
+                dir: data.clone(),
+                files: summary.files.iter().map(|(f, _)| data.join(f)).collect(),
+            });
+        }
+        let teacher_dir = self.out.join(TEACHER_DIR);
+        let resume = has_checkpoint(&teacher_dir);
+        on_event(&JobEvent::Stage(format!(
+            "teacher ({} min budget{}) -> {}",
+            self.teacher_minutes,
+            if resume { ", resuming" } else { "" },
+            teacher_dir.display()
+        )));
+        TeacherJob {
+            data: data.clone(),
+            run: self.out.clone(),
+            source: TeacherSource::Preset(self.teacher.clone()),
+            iters: None,
+            resume,
+            audio: AudioChoice::Auto,
+            budget_s: Some(self.teacher_minutes * 60.0),
+        }
+        .plan(on_event)?
+        .run(stop, on_event)?;
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        let mut model = None;
+        if self.student_minutes > 0.0 {
+            let student_dir = self.out.join(STUDENT_DIR);
+            let resume = has_checkpoint(&student_dir);
+            on_event(&JobEvent::Stage(format!(
+                "student ({} min budget{}) -> {}",
+                self.student_minutes,
+                if resume { ", resuming" } else { "" },
+                student_dir.display()
+            )));
+            StudentJob {
+                data: data.clone(),
+                run: self.out.clone(),
+                name: STUDENT_DIR.into(),
+                source: StudentSource::Settings {
+                    model: self.student.clone(),
+                    distill: true,
+                    pool: true,
+                    pseudo_frames: None,
+                },
+                iters: Some(self.student_iters),
+                minutes: Some(self.student_minutes),
+                resume,
+            }
+            .plan(on_event)?
+            .run(stop, on_event)?;
+            if stop.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            on_event(&JobEvent::Stage("ONNX export".into()));
+            let onnx = self.out.join(ONNX_FILE);
+            let report =
+                nldf_export::export_student(&student_dir, &onnx, nldf_export::WeightType::F32)?;
+            // Read it back as every loader will, so that a bad file never leaves the demo.
+            nldf_export::read_model(&onnx)?;
+            on_event(&JobEvent::Note(format!(
+                "student at step {}: {} bytes",
+                report.info.step, report.bytes
+            )));
+            on_event(&JobEvent::Wrote {
+                dir: self.out.clone(),
+                files: vec![onnx.clone()],
+            });
+            model = Some(onnx);
+        }
+        on_event(&JobEvent::Stage("evaluation on the held-out frames".into()));
+        let plan = EvalJob {
+            run: self.out.clone(),
+            data,
+            split: Split::Val,
+            frames: None,
+            out: None,
+        }
+        .plan(on_event)?;
+        let evaluation = plan.run(on_event)?;
+        evaluation.check_finite()?;
+        Ok(Some(DemoReport {
+            model,
+            evaluation,
+            eval_dir: plan.out,
+        }))
+    }
+}

@@ -1,0 +1,144 @@
+//! The evaluation job: the run's teacher and every student beside it render the frames of a
+//! split, scored against the ground truth (see [`crate::eval`]).
+
+use std::path::PathBuf;
+
+use nldf_core::dataset::{AudioChoice, Split};
+use nldf_core::run_files::{RENDER_SPEC_FILE, has_checkpoint, teacher_dir};
+
+use crate::data::TrainData;
+use crate::error::{Error, Result};
+use crate::eval::{Evaluation, FrameModel, eval_models};
+use crate::job::{JobEvent, OnEvent, audio_note};
+use crate::student_trainer::StudentRun;
+use crate::teacher_trainer::TeacherRun;
+
+/// What `nldf eval` was asked to do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalJob {
+    /// The run folder: its teacher and every student folder in it are evaluated.
+    pub run: PathBuf,
+    /// The dataset the run was trained on.
+    pub data: PathBuf,
+    pub split: Split,
+    /// At most this many frames, spread evenly over the split.
+    pub frames: Option<usize>,
+    /// Output folder; default `RUN/eval/<split>`.
+    pub out: Option<PathBuf>,
+}
+
+/// A checked evaluation: every model and the data loaded.
+pub struct EvalPlan {
+    pub teacher: TeacherRun,
+    pub students: Vec<StudentRun>,
+    pub data: TrainData,
+    pub split: Split,
+    pub frames: Option<usize>,
+    /// Where the renders, the grid and `metrics.json` go.
+    pub out: PathBuf,
+}
+
+impl EvalJob {
+    /// Opens the teacher and every student of the run (folders holding a student's render
+    /// spec and weights) and loads the data with the teacher's audio features.
+    pub fn plan(&self, on_event: OnEvent) -> Result<EvalPlan> {
+        let name = format!("{:?}", self.split).to_lowercase();
+        let out = self
+            .out
+            .clone()
+            .unwrap_or_else(|| self.run.join("eval").join(&name));
+        let dir = teacher_dir(&self.run);
+        let teacher = TeacherRun::open(&dir, false)
+            .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
+        let mut dirs: Vec<PathBuf> = std::fs::read_dir(&self.run)
+            .map_err(|e| Error::io(&self.run, e))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.join(RENDER_SPEC_FILE).is_file() && has_checkpoint(p))
+            .collect();
+        dirs.sort();
+        let students = dirs
+            .iter()
+            .map(|dir| {
+                StudentRun::open(dir, false)
+                    .map_err(|e| e.context(format!("loading the student from {}", dir.display())))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
+        let data = TrainData::open_with(&self.data, false, &audio)?;
+        on_event(&audio_note(&data));
+        Ok(EvalPlan {
+            teacher,
+            students,
+            data,
+            split: self.split,
+            frames: self.frames,
+            out,
+        })
+    }
+}
+
+impl EvalPlan {
+    /// The models in the order they are evaluated: the teacher, then the students.
+    pub fn models(&self) -> Vec<&dyn FrameModel> {
+        let mut models: Vec<&dyn FrameModel> = vec![&self.teacher];
+        models.extend(self.students.iter().map(|s| s as &dyn FrameModel));
+        models
+    }
+
+    /// Frames the evaluation renders per model.
+    pub fn n_frames(&self) -> usize {
+        self.frames
+            .unwrap_or(usize::MAX)
+            .min(self.data.dataset.frames(self.split).len())
+    }
+
+    /// Renders and scores every model; a model that rendered a NaN or infinite pixel is an
+    /// error after everything is written (its scores are void).
+    pub fn run(&self, on_event: OnEvent) -> Result<Evaluation> {
+        let total = self.n_frames();
+        let mut done = 0;
+        let evaluation = eval_models(
+            &self.models(),
+            &self.data,
+            self.split,
+            self.frames,
+            &self.out,
+            &mut || {
+                done += 1;
+                on_event(&JobEvent::Progress {
+                    what: "rendering".into(),
+                    done,
+                    total,
+                })
+            },
+        )?;
+        Ok(evaluation)
+    }
+}
+
+impl Evaluation {
+    /// An error naming every model that rendered NaN or infinite pixels, if any did.
+    pub fn check_finite(&self) -> Result<()> {
+        let broken: Vec<String> = self
+            .models
+            .iter()
+            .filter(|r| r.non_finite_frames > 0)
+            .map(|r| {
+                format!(
+                    "{} rendered {} of {} frames with NaN or infinite pixels",
+                    r.model,
+                    r.non_finite_frames,
+                    r.frames.len()
+                )
+            })
+            .collect();
+        if broken.is_empty() {
+            Ok(())
+        } else {
+            Err(Error::NonFinite(format!(
+                "{}; their scores are void",
+                broken.join("; ")
+            )))
+        }
+    }
+}

@@ -1,0 +1,174 @@
+//! The student's distillation job: a new student from a shape and training switches or a
+//! configuration file, or a resumed one; the teacher's targets are made (or read from their
+//! cache) before the first step.
+
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+use nldf_core::dataset::AudioChoice;
+use nldf_core::run_files::{CONFIG_FILE, STUDENT_FILES, has_checkpoint, teacher_dir};
+
+use crate::config::{RunConfig, StudentRunConfig, read_config};
+use crate::data::TrainData;
+use crate::error::{Error, Result};
+use crate::job::teacher::{check_resume, train_stage};
+use crate::job::{JobEvent, OnEvent, audio_note, wrote};
+use crate::scores::Scores;
+use crate::student::StudentConfig;
+use crate::student_trainer::StudentRun;
+use crate::teacher_trainer::TeacherRun;
+
+/// Where a new student's configuration comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StudentSource {
+    /// A network shape with the default training settings and these switches.
+    Settings {
+        model: StudentConfig,
+        /// Distil from the teacher (Eq. 9); off: pixels only.
+        distill: bool,
+        /// Train the active beam pool.
+        pool: bool,
+        /// Pseudo views rendered by the teacher, replacing the default count.
+        pseudo_frames: Option<usize>,
+    },
+    /// A `{"model": ..., "train": ...}` file, read strictly.
+    File(PathBuf),
+}
+
+/// What `nldf train student` was asked to do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StudentJob {
+    /// The dataset folder the teacher was trained on.
+    pub data: PathBuf,
+    /// The run folder; its teacher is `RUN/teacher`.
+    pub run: PathBuf,
+    /// The student's folder name in the run.
+    pub name: String,
+    /// The configuration of a new student (ignored when resuming).
+    pub source: StudentSource,
+    /// Training steps (a new run's learning rate decays over them).
+    pub iters: Option<usize>,
+    /// Wall-clock budget in minutes, teacher targets included.
+    pub minutes: Option<f64>,
+    /// Continue the checkpoint in `RUN/<name>`.
+    pub resume: bool,
+}
+
+/// A checked student job: data loaded, teacher opened, run created or opened.
+pub struct StudentPlan {
+    pub run: StudentRun,
+    pub data: TrainData,
+    pub teacher: Option<TeacherRun>,
+}
+
+impl StudentJob {
+    /// The student's folder.
+    pub fn dir(&self) -> PathBuf {
+        self.run.join(&self.name)
+    }
+
+    /// Checks the configuration, the run folder and the teacher, loads the data and
+    /// creates (or opens) the run; nothing is trained yet.
+    pub fn plan(&self, on_event: OnEvent) -> Result<StudentPlan> {
+        let dir = self.dir();
+        let teacher_dir = teacher_dir(&self.run);
+        check_resume(&dir, "student", self.resume)?;
+        let cfg = if self.resume {
+            None
+        } else {
+            let mut cfg = match &self.source {
+                StudentSource::File(path) => read_config::<StudentRunConfig>(path)?,
+                StudentSource::Settings {
+                    model,
+                    distill,
+                    pool,
+                    pseudo_frames,
+                } => {
+                    let mut cfg = StudentRunConfig {
+                        model: model.clone(),
+                        ..StudentRunConfig::default()
+                    };
+                    cfg.train.distill = *distill;
+                    cfg.train.pool = *pool;
+                    if let Some(n) = pseudo_frames {
+                        cfg.train.pseudo_frames = *n;
+                    }
+                    cfg
+                }
+            };
+            if let Some(n) = self.iters {
+                cfg.train.iters = n;
+                cfg.train.lr_decay_steps = n;
+            }
+            cfg.check().map_err(|e| match &self.source {
+                StudentSource::File(path) => {
+                    Error::invalid(path, format!("invalid configuration: {e}"))
+                }
+                StudentSource::Settings { .. } => {
+                    Error::Config(format!("invalid configuration: {e}"))
+                }
+            })?;
+            Some(cfg)
+        };
+        let teacher = if has_checkpoint(&teacher_dir) {
+            Some(TeacherRun::open(&teacher_dir, false)?)
+        } else {
+            None
+        };
+        on_event(&JobEvent::Note(format!("loading {}", self.data.display())));
+        // The teacher's audio features, or a resumed student's own.
+        let audio = match (&teacher, &cfg) {
+            (Some(t), _) => AudioChoice::Matching(t.cfg.model.audio.features.clone()),
+            (None, None) => {
+                let c: StudentRunConfig = read_config(&dir.join(CONFIG_FILE))?;
+                AudioChoice::Matching(c.model.audio.features)
+            }
+            (None, Some(_)) => AudioChoice::Auto,
+        };
+        let data = TrainData::open_with(&self.data, true, &audio)?;
+        on_event(&audio_note(&data));
+        let mut run = match cfg {
+            Some(cfg) => {
+                if cfg.train.distill && teacher.is_none() {
+                    return Err(Error::Config(format!(
+                        "{} holds no teacher to distil from; train one with `nldf train \
+                         teacher --run {}` or pass --no-distill",
+                        teacher_dir.display(),
+                        self.run.display()
+                    )));
+                }
+                StudentRun::create(&dir, cfg, &data, teacher.as_ref())?
+            }
+            None => {
+                let mut run = StudentRun::open(&dir, true)?;
+                if let Some(n) = self.iters {
+                    run.cfg.train.iters = n;
+                }
+                on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
+                run
+            }
+        };
+        if let Some(m) = self.minutes {
+            run.cfg.train.time_budget_s = m * 60.0;
+        }
+        Ok(StudentPlan { run, data, teacher })
+    }
+}
+
+impl StudentPlan {
+    /// Makes the views and the teacher's targets, then trains until the schedule, the
+    /// budget or `stop` ends it; lists the files written.
+    pub fn run(mut self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<Scores>> {
+        self.run
+            .prepare(&self.data, self.teacher.as_ref(), &mut |done, total| {
+                on_event(&JobEvent::Progress {
+                    what: "teacher targets".into(),
+                    done,
+                    total,
+                })
+            })?;
+        let scores = train_stage("student", &mut self.run, &self.data, stop, on_event)?;
+        on_event(&wrote(&self.run.dir, STUDENT_FILES));
+        Ok(scores)
+    }
+}

@@ -1,0 +1,160 @@
+//! The teacher's training job: a new run from a preset or a configuration file, or a
+//! resumed one, checked before any step is taken.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use nldf_core::dataset::AudioChoice;
+use nldf_core::run_files::{CONFIG_FILE, TEACHER_FILES, has_checkpoint, teacher_dir};
+
+use crate::config::{RunConfig, TeacherConfig, TeacherRunConfig, read_config};
+use crate::data::TrainData;
+use crate::error::{Error, Result};
+use crate::job::{JobEvent, OnEvent, audio_note, wrote};
+use crate::run_loop::TrainingRun;
+use crate::scores::Scores;
+use crate::teacher_trainer::TeacherRun;
+
+/// Where a new teacher's configuration comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TeacherSource {
+    /// A preset network with the default training settings.
+    Preset(TeacherConfig),
+    /// A `{"model": ..., "train": ...}` file, read strictly.
+    File(PathBuf),
+}
+
+/// What `nldf train teacher` was asked to do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeacherJob {
+    /// The dataset folder.
+    pub data: PathBuf,
+    /// The run folder; the teacher goes to `RUN/teacher`.
+    pub run: PathBuf,
+    /// The configuration of a new run (ignored when resuming).
+    pub source: TeacherSource,
+    /// Training steps, replacing the configuration's.
+    pub iters: Option<usize>,
+    /// Continue the checkpoint in `RUN/teacher`.
+    pub resume: bool,
+    /// Which audio features a new run reads.
+    pub audio: AudioChoice,
+    /// Wall-clock budget in seconds, replacing the configuration's.
+    pub budget_s: Option<f64>,
+}
+
+/// A checked teacher job: the data is loaded and the run created or opened.
+pub struct TeacherPlan {
+    pub run: TeacherRun,
+    pub data: TrainData,
+}
+
+/// Refuses a new run over a checkpoint, and a resume without one.
+pub(crate) fn check_resume(dir: &std::path::Path, what: &str, resume: bool) -> Result<()> {
+    let exists = has_checkpoint(dir);
+    if exists && !resume {
+        return Err(Error::Config(format!(
+            "{} already holds a {what}; pass --resume to continue it or choose another --run",
+            dir.display()
+        )));
+    }
+    if resume && !exists {
+        return Err(Error::Config(format!(
+            "{} holds no {what} checkpoint to resume",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+impl TeacherJob {
+    /// Checks the configuration and the run folder, loads the data and creates (or opens)
+    /// the run; nothing is trained yet.
+    pub fn plan(&self, on_event: OnEvent) -> Result<TeacherPlan> {
+        let dir = teacher_dir(&self.run);
+        check_resume(&dir, "teacher", self.resume)?;
+        let cfg = if self.resume {
+            None
+        } else {
+            let mut cfg = match &self.source {
+                TeacherSource::File(path) => read_config::<TeacherRunConfig>(path)?,
+                TeacherSource::Preset(model) => TeacherRunConfig {
+                    model: model.clone(),
+                    ..TeacherRunConfig::default()
+                },
+            };
+            if let Some(n) = self.iters {
+                cfg.train.iters = n;
+            }
+            cfg.check().map_err(|e| match &self.source {
+                TeacherSource::File(path) => {
+                    Error::invalid(path, format!("invalid configuration: {e}"))
+                }
+                TeacherSource::Preset(_) => Error::Config(format!("invalid configuration: {e}")),
+            })?;
+            Some(cfg)
+        };
+        on_event(&JobEvent::Note(format!("loading {}", self.data.display())));
+        let audio = match &cfg {
+            Some(_) => self.audio.clone(),
+            None => {
+                let c: TeacherRunConfig = read_config(&dir.join(CONFIG_FILE))?;
+                AudioChoice::Matching(c.model.audio.features)
+            }
+        };
+        let data = TrainData::open_with(&self.data, true, &audio)?;
+        on_event(&audio_note(&data));
+        let mut run = match cfg {
+            Some(cfg) => TeacherRun::create(&dir, cfg, &data)?,
+            None => {
+                let mut run = TeacherRun::open(&dir, true)?;
+                if let Some(n) = self.iters {
+                    run.cfg.train.iters = n;
+                }
+                on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
+                run
+            }
+        };
+        if let Some(b) = self.budget_s {
+            run.cfg.train.time_budget_s = b;
+        }
+        Ok(TeacherPlan { run, data })
+    }
+}
+
+impl TeacherPlan {
+    /// Trains until the schedule, the budget or `stop` ends it; lists the files written.
+    pub fn run(mut self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<Scores>> {
+        let scores = train_stage("teacher", &mut self.run, &self.data, stop, on_event)?;
+        on_event(&wrote(&self.run.dir, TEACHER_FILES));
+        Ok(scores)
+    }
+}
+
+/// Runs the training loop of `run` as stage `stage`, forwarding its events.
+pub(crate) fn train_stage(
+    stage: &str,
+    run: &mut dyn TrainingRun,
+    data: &TrainData,
+    stop: &AtomicBool,
+    on_event: OnEvent,
+) -> Result<Option<Scores>> {
+    on_event(&JobEvent::TrainingStarts {
+        stage: stage.to_string(),
+        step: run.step(),
+        iters: run.schedule().iters,
+    });
+    let scores = crate::run_loop::train_loop(run, data, stop, &mut |event| {
+        on_event(&JobEvent::Training {
+            stage: stage.to_string(),
+            event: event.clone(),
+        })
+    })?;
+    on_event(&JobEvent::TrainingEnds {
+        stage: stage.to_string(),
+        step: run.step(),
+        interrupted: stop.load(Ordering::Relaxed),
+        scores,
+    });
+    Ok(scores)
+}
