@@ -98,6 +98,16 @@ pub fn in_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0")
 }
 
+/// A test's tool (Python, onnxruntime, ffmpeg) is missing, as `message` says: under CI
+/// that fails the test; otherwise the test says it skips and gets `None`.
+pub fn tool_missing<T>(message: impl std::fmt::Display) -> Option<T> {
+    if in_ci() {
+        panic!("{message}");
+    }
+    eprintln!("SKIPPED (CI is unset): {message}");
+    None
+}
+
 /// A copy of the folder `from` at `to`, sub-folders included.
 pub fn copy_dir(from: &Path, to: &Path) {
     std::fs::create_dir_all(to).unwrap();

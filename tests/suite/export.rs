@@ -3,220 +3,26 @@
 //! `full_check`, render the same frame in `examples/onnxruntime_render.py` as in Rust, and
 //! every bad model file must get a one-line error naming it.
 
-use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use candle_core::{DType, Device, Tensor};
-use glam::{Mat4, Vec3};
+use crate::util::{
+    PYTHON_PARITY, Run, TOL, candle_frame, candle_render, configs, foreign_model, max_diff, python,
+    random_audio, random_rays, read_npy, run_python, write_npy, write_run,
+};
+use glam::Mat4;
 use nldf_core::audio::neighbourhood;
-use nldf_core::audio::{AudioWindows, FeatureConfig, FeatureSource};
-use nldf_core::bounds::Bounds;
-use nldf_core::camera::{Camera, Intrinsics, look_at};
+use nldf_core::camera::Camera;
 use nldf_core::dataset::save_audio_npy;
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{Rays, head_rays};
-use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
+use nldf_core::render_spec::BACKGROUND_FILE;
 use nldf_export::contract::{self, ModelInfo};
-use nldf_export::onnx::{ModelProto, StringStringEntryProto};
+use nldf_export::onnx::StringStringEntryProto;
 use nldf_export::{Error, WeightType, export_student, read_model};
-use nldf_train::checkpoint::{save_tensors, weights};
-use nldf_train::nn::{init_seeded, new_varmap, sorted_vars};
-use nldf_train::student::{Student, StudentConfig, student};
-use prost::Message;
+use nldf_train::student::StudentConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-
-/// Parity tolerance of the issue: max abs difference on every output value.
-pub(crate) const TOL: f32 = 1e-4;
-
-/// A student run folder and the candle student whose weights it holds.
-pub(crate) struct Run {
-    _dir: tempfile::TempDir,
-    pub(crate) root: PathBuf,
-    pub(crate) student: Student,
-    varmap: candle_nn::VarMap,
-    pub(crate) spec: RenderSpec,
-}
-
-impl Run {
-    pub(crate) fn student_dir(&self) -> PathBuf {
-        self.root.join("student")
-    }
-
-    pub(crate) fn export(&self, weights: WeightType) -> PathBuf {
-        let out = self.root.join(match weights {
-            WeightType::F32 => "model.onnx",
-            WeightType::F16 => "model_fp16.onnx",
-        });
-        export_student(&self.student_dir(), &out, weights).unwrap();
-        out
-    }
-
-    /// Scales the weights (not the biases) to a trained deep ReLU network's magnitude and
-    /// writes them back into the run folder: He's standard deviation `sqrt(2 / fan_in)` for
-    /// the input and output layers and each block's first layer, and He's divided by the
-    /// square root of the number of blocks for each block's second layer (the residual
-    /// branch), so that the residual stream stays finite through every block.
-    pub(crate) fn scale_weights_like_trained(&self, n_blocks: usize) {
-        // The seeded initialisation is uniform in +-1/sqrt(fan_in): std 1/sqrt(3 fan_in).
-        let he = 6f64.sqrt();
-        for (name, var) in sorted_vars(&self.varmap).unwrap() {
-            if !name.ends_with("weight") || name.starts_with("audio.") {
-                continue;
-            }
-            let factor = if name.contains(".fc2.") {
-                he / (n_blocks as f64).sqrt()
-            } else {
-                he
-            };
-            var.set(&(var.as_tensor() * factor).unwrap()).unwrap();
-        }
-        let metadata = HashMap::from([
-            ("step".to_string(), "7".to_string()),
-            ("kind".to_string(), "student".to_string()),
-        ]);
-        save_tensors(
-            &self.student_dir().join("model.safetensors"),
-            &weights(&self.varmap).unwrap(),
-            metadata,
-        )
-        .unwrap();
-    }
-
-    /// Rounds every weight of the candle student to f16 and back (the fp16 model's
-    /// values).
-    fn round_weights_to_f16(&self) {
-        for (_, var) in sorted_vars(&self.varmap).unwrap() {
-            let rounded = var
-                .as_tensor()
-                .to_dtype(DType::F16)
-                .unwrap()
-                .to_dtype(DType::F32)
-                .unwrap();
-            var.set(&rounded).unwrap();
-        }
-    }
-}
-
-/// A 24 x 18 camera looking at a head in [-0.5, 0.5]^3 from about 2.2 away.
-fn spec_for(cfg: &StudentConfig) -> RenderSpec {
-    let c2w = look_at(Vec3::new(0.3, 0.2, 2.2), Vec3::ZERO, Vec3::Y);
-    RenderSpec {
-        intrinsics: Intrinsics {
-            focal: 30.0,
-            cx: 12.0,
-            cy: 9.0,
-            width: 24,
-            height: 18,
-        },
-        near: 1.4,
-        far: 3.0,
-        fps: 25.0,
-        bounds: Bounds {
-            lo: Vec3::splat(-0.5),
-            hi: Vec3::splat(0.5),
-        },
-        background: BACKGROUND_FILE.to_string(),
-        features: FeatureSource::Nldf(FeatureConfig {
-            n_mels: cfg.audio.n_features,
-            window: cfg.audio.window,
-            ..FeatureConfig::default()
-        }),
-        att_frames: cfg.audio.att_frames,
-        default_pose: c2w.transpose().to_cols_array_2d(),
-    }
-}
-
-/// Writes `RUN/student/` for a seeded, untrained student of shape `cfg`, as the trainer
-/// leaves it: weights with step metadata, config.json, render.json and the background.
-pub(crate) fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().join("run");
-    let student_dir = root.join("student");
-    std::fs::create_dir_all(&student_dir).unwrap();
-    let (varmap, vb) = new_varmap();
-    let model = student(cfg, vb).unwrap();
-    init_seeded(&varmap, seed).unwrap();
-    let metadata = HashMap::from([
-        ("step".to_string(), "7".to_string()),
-        ("kind".to_string(), "student".to_string()),
-    ]);
-    save_tensors(
-        &student_dir.join("model.safetensors"),
-        &weights(&varmap).unwrap(),
-        metadata,
-    )
-    .unwrap();
-    let config = serde_json::json!({ "model": cfg, "seed": seed, "lr": 5e-4 });
-    std::fs::write(student_dir.join("config.json"), config.to_string()).unwrap();
-    let spec = spec_for(cfg);
-    spec.save(&student_dir.join(RENDER_SPEC_FILE)).unwrap();
-    let k = spec.intrinsics;
-    nldf_tests::pattern_image(k.width, k.height, 5)
-        .save_png(&student_dir.join(BACKGROUND_FILE))
-        .unwrap();
-    Run {
-        _dir: dir,
-        root,
-        student: model,
-        varmap,
-        spec,
-    }
-}
-
-/// `n` rays from points around the camera distance towards the head, some missing it.
-pub(crate) fn random_rays(n: usize, seed: u64) -> Rays {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut rays = Rays::with_capacity(n);
-    for _ in 0..n {
-        let o = Vec3::new(
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-1.0..1.0),
-            rng.random_range(1.5..2.5),
-        );
-        let target = Vec3::new(
-            rng.random_range(-0.8..0.8),
-            rng.random_range(-0.8..0.8),
-            rng.random_range(-0.8..0.8),
-        );
-        // Un-normalised, as camera rays are: unit depth along the view axis, give or take.
-        let d = (target - o).normalize() * rng.random_range(0.9..1.3);
-        rays.push(o, d);
-    }
-    rays
-}
-
-/// A random audio track of `n_frames` windows for `cfg`.
-pub(crate) fn random_audio(cfg: &StudentConfig, n_frames: usize, seed: u64) -> AudioWindows {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (window, n_features) = (cfg.audio.window, cfg.audio.n_features);
-    AudioWindows {
-        n_frames,
-        window,
-        n_features,
-        data: (0..n_frames * window * n_features)
-            .map(|_| rng.random_range(-1.0..1.0))
-            .collect(),
-    }
-}
-
-/// The candle reference: pixels `[n, 3]` and segments `[n, m, 3]`, flat.
-pub(crate) fn candle_render(run: &Run, rays: &Rays, audio: &[f32]) -> (Vec<f32>, Vec<f32>) {
-    let a = &run.student.cfg.audio;
-    let nb = Tensor::from_vec(
-        audio.to_vec(),
-        (1, a.att_frames, a.window, a.n_features),
-        &Device::Cpu,
-    )
-    .unwrap();
-    let (segments, pixels) = run
-        .student
-        .render_rays(rays, &nb, run.spec.near, run.spec.far)
-        .unwrap();
-    let flat = |t: Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-    (flat(pixels), flat(segments))
-}
 
 /// The model at `path` run by tract with a concrete ray count: pixels and segments, flat.
 fn tract_render(
@@ -252,35 +58,6 @@ fn tract_render(
             .collect()
     };
     (flat(&out[0]), flat(&out[1]))
-}
-
-pub(crate) fn max_diff(a: &[f32], b: &[f32]) -> f32 {
-    assert_eq!(a.len(), b.len(), "output lengths");
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(
-            0.0,
-            |m, d| if d.is_nan() { f32::INFINITY } else { m.max(d) },
-        )
-}
-
-/// Shapes exercised: the tiny preset (attention on) and the paper's beam (K = 16, L = 10)
-/// on a narrow network without attention, other audio sizes.
-pub(crate) fn configs() -> Vec<StudentConfig> {
-    let mut paper_beam = StudentConfig::tiny();
-    paper_beam.beam = Default::default();
-    paper_beam.depth = 4;
-    paper_beam.width = 16;
-    paper_beam.attention = false;
-    paper_beam.audio.n_features = 5;
-    paper_beam.audio.features = FeatureSource::Nldf(FeatureConfig {
-        n_mels: 5,
-        ..FeatureConfig::default()
-    });
-    paper_beam.audio.att_frames = 4;
-    paper_beam.segments = 3;
-    vec![StudentConfig::tiny(), paper_beam]
 }
 
 #[test]
@@ -379,27 +156,6 @@ fn export_writes_the_contract() {
         .to_rgb8();
     let want = ImageRgb::load(&run.student_dir().join(BACKGROUND_FILE)).unwrap();
     assert_eq!(background.as_raw(), &want.to_rgb8());
-}
-
-/// A valid ONNX model (an Identity) with the given metadata.
-pub(crate) fn foreign_model(metadata: Vec<StringStringEntryProto>) -> Vec<u8> {
-    use nldf_export::graph::{Dim, GraphBuilder};
-    use nldf_export::onnx::{DataType, OperatorSetIdProto};
-    let mut g = GraphBuilder::new(WeightType::F32);
-    g.input("x", DataType::Float, &[Dim::Fixed(2)]);
-    g.node("Identity", "y", &["x"], vec![]);
-    g.output("y", DataType::Float, &[Dim::Fixed(2)]);
-    ModelProto {
-        ir_version: Some(8),
-        opset_import: vec![OperatorSetIdProto {
-            domain: Some(String::new()),
-            version: Some(17),
-        }],
-        graph: Some(g.finish("other", "")),
-        metadata_props: metadata,
-        ..Default::default()
-    }
-    .encode_to_vec()
 }
 
 #[test]
@@ -505,77 +261,6 @@ fn export_bad_checkpoints_name_their_file() {
     assert!(!out.exists());
 }
 
-/// The project's Python (`.venv`, made by `scripts/python_env.sh`) with onnx, onnxruntime
-/// and numpy, or `None` (after saying so) when it is missing outside CI. Under CI a missing
-/// environment fails the test.
-pub(crate) fn python() -> Option<PathBuf> {
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../.venv/bin/python");
-    let ok = Command::new(&venv)
-        .args(["-c", "import onnx, onnxruntime, numpy"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if ok {
-        return Some(venv);
-    }
-    let msg = format!(
-        "{} with onnx, onnxruntime and numpy is missing: run scripts/python_env.sh",
-        venv.display()
-    );
-    if nldf_tests::in_ci() {
-        panic!("{msg}");
-    }
-    eprintln!("SKIPPED (CI is unset): {msg}");
-    None
-}
-
-pub(crate) fn run_python(python: &Path, args: &[&str]) -> String {
-    let out = Command::new(python).args(args).output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "python {args:?} failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
-}
-
-pub(crate) fn write_npy(path: &Path, shape: &[u64], data: &[f32]) {
-    use npyz::WriterBuilder;
-    let mut buf = Vec::new();
-    let mut w = npyz::WriteOptions::new()
-        .default_dtype()
-        .shape(shape)
-        .writer(&mut buf)
-        .begin_nd()
-        .unwrap();
-    w.extend(data.iter().copied()).unwrap();
-    w.finish().unwrap();
-    std::fs::write(path, buf).unwrap();
-}
-
-pub(crate) fn read_npy(path: &Path) -> (Vec<u64>, Vec<f32>) {
-    let bytes = std::fs::read(path).unwrap();
-    let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
-    let shape = npy.shape().to_vec();
-    (shape, npy.into_vec::<f32>().unwrap())
-}
-
-pub(crate) const PYTHON_PARITY: &str = r#"
-import json, sys
-import numpy as np, onnx, onnxruntime as ort
-path, folder = sys.argv[1], sys.argv[2]
-model = onnx.load(path)
-onnx.checker.check_model(model, full_check=True)
-session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
-feeds = {name: np.load(f"{folder}/{name}.npy") for name in ("rays_o", "rays_d", "audio")}
-rgb, segments = session.run(["rgb", "segments"], feeds)
-np.save(f"{folder}/rgb.npy", rgb)
-np.save(f"{folder}/segments.npy", segments)
-dims = [d.dim_param or d.dim_value for d in model.graph.input[0].type.tensor_type.shape.dim]
-print(json.dumps({"ir_version": model.ir_version, "opset": model.opset_import[0].version,
-                  "rays_o": dims, "onnxruntime": ort.__version__}))
-"#;
-
 #[test]
 fn export_passes_onnx_checker_and_python_onnxruntime_matches_candle() {
     let Some(python) = python() else { return };
@@ -623,29 +308,6 @@ fn export_passes_onnx_checker_and_python_onnxruntime_matches_candle() {
             assert!(d_rgb <= TOL && d_seg <= TOL, "{d_rgb} {d_seg}");
         }
     }
-}
-
-/// The candle reference frame: the rays of the frame seen from `c2w` with `intrinsics` that
-/// meet the head's bounds ([`head_rays`]) get the candle student's colour, the other pixels
-/// the background.
-pub fn candle_frame(
-    run: &Run,
-    intrinsics: Intrinsics,
-    c2w: Mat4,
-    audio: &[f32],
-    background: &ImageRgb,
-) -> ImageRgb {
-    let spec = &run.spec;
-    let camera = Camera { intrinsics, c2w };
-    let head = head_rays(&camera, &spec.bounds, spec.near, spec.far);
-    let mut frame = background.clone();
-    if !head.pixels.is_empty() {
-        let (rgb, _) = candle_render(run, &head.rays, audio);
-        for (k, &p) in head.pixels.iter().enumerate() {
-            frame.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
-        }
-    }
-    frame
 }
 
 /// The Rust reference frame from the model's default pose; the camera sees both the head

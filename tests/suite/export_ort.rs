@@ -7,30 +7,14 @@
 
 use std::path::Path;
 
+use crate::util::{
+    PYTHON_PARITY, TOL, candle_render, configs, max_diff, ort_available, python, random_audio,
+    random_rays, read_npy, run_python, write_npy, write_run,
+};
 use nldf_core::audio::neighbourhood;
 use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
-use nldf_infer::ort_library::find_ort_library;
-use nldf_tests::in_ci;
 use nldf_train::student::StudentConfig;
-
-use crate::export::{
-    PYTHON_PARITY, TOL, candle_render, configs, max_diff, python, random_audio, random_rays,
-    read_npy, run_python, write_npy, write_run,
-};
-
-/// Whether the onnxruntime library can be found; outside CI a missing one skips (after
-/// saying so), under CI it fails.
-pub(crate) fn ort_available() -> bool {
-    match find_ort_library() {
-        Ok(_) => true,
-        Err(e) if in_ci() => panic!("{e}"),
-        Err(e) => {
-            eprintln!("SKIPPED (CI is unset): {e}");
-            false
-        }
-    }
-}
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.
 fn python_render(

@@ -7,6 +7,7 @@
 
 use std::collections::HashMap;
 
+use crate::util::write_run;
 use candle_core::{Device, Tensor};
 use nldf_tests::fuzz::{self, Mutator, Verdict, run_cases};
 use nldf_train::config::{StudentRunConfig, TeacherRunConfig};
@@ -147,7 +148,7 @@ fn fuzz_config_reader() {
 #[test]
 fn fuzz_onnx_reader() {
     let cfg = nldf_train::student::StudentConfig::tiny();
-    let run = crate::export::write_run(&cfg, 3);
+    let run = write_run(&cfg, 3);
     let path = run.export(nldf_export::WeightType::F32);
     let seeds = vec![std::fs::read(path).unwrap()];
     fuzz_reader("onnx", seeds, 5, fuzz::onnx);

@@ -3,6 +3,7 @@
 //! are the same rays through the same pixels, and the audio neighbourhood the trainer
 //! encodes is the one the renderer makes from the scene's WAV, bit for bit.
 
+use crate::util::tiny_scene;
 use nldf_core::audio::neighbourhood;
 use nldf_core::dataset::Split;
 use nldf_export::{WeightType, export_student, read_model};
@@ -15,8 +16,6 @@ use nldf_train::data::TrainData;
 use nldf_train::student::StudentConfig;
 use nldf_train::student_trainer::StudentRun;
 use nldf_train::views::{frame_beams, training_views};
-
-use crate::teacher::tiny_scene;
 
 #[test]
 fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {

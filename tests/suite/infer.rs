@@ -6,6 +6,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use crate::util::{
+    Run, candle_frame, configs, foreign_model, ort_available, python, random_audio, write_run,
+    write_test_wav,
+};
 use glam::Mat4;
 use nldf_core::audio::neighbourhood;
 use nldf_core::audio::{Waveform, n_video_frames, write_wav};
@@ -21,9 +25,6 @@ use nldf_infer::poses::{default_track, pose_at};
 use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob, next_frame, paced_wav_stream};
 use nldf_infer::video::{VideoJob, frame_file_name};
 use nldf_train::student::StudentConfig;
-
-use crate::export::{Run, candle_frame, configs, foreign_model, random_audio, write_run};
-use crate::export_ort::ort_available;
 
 /// The parity bound between any two renderers' frames.
 const MIN_PSNR: f64 = 60.0;
@@ -86,25 +87,6 @@ fn infer_frames_agree_across_tract_ort_and_candle() {
             }
         }
     }
-}
-
-/// A 16 kHz tone with a wobbling pitch, `seconds` long.
-pub(crate) fn write_test_wav(path: &Path, seconds: f32) {
-    let n = (16_000.0 * seconds) as usize;
-    let samples = (0..n)
-        .map(|i| {
-            let t = i as f32 / 16_000.0;
-            0.4 * (2.0 * std::f32::consts::PI * (220.0 + 80.0 * (3.0 * t).sin()) * t).sin()
-        })
-        .collect();
-    write_wav(
-        path,
-        &Waveform {
-            sample_rate: 16_000,
-            samples,
-        },
-    )
-    .unwrap();
 }
 
 /// A tiny exported student (seed `seed`) and a WAV of `seconds` beside it.
@@ -461,7 +443,7 @@ fn infer_bad_streams_get_one_line_errors() {
 /// The ffmpeg binary of the `.venv`'s imageio-ffmpeg wheel (scripts/python_env.sh); `None`
 /// (a skip) only outside CI.
 fn venv_ffmpeg() -> Option<PathBuf> {
-    let py = crate::export::python()?;
+    let py = python()?;
     let out = std::process::Command::new(&py)
         .args([
             "-c",
@@ -473,11 +455,7 @@ fn venv_ffmpeg() -> Option<PathBuf> {
         return Some(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()));
     }
     let msg = "the .venv lacks imageio-ffmpeg: run scripts/python_env.sh";
-    if nldf_tests::in_ci() {
-        panic!("{msg}");
-    }
-    eprintln!("SKIPPED (CI is unset): {msg}");
-    None
+    nldf_tests::tool_missing(msg)
 }
 
 /// With ffmpeg, `nldf render` also writes `video.mp4`: one video frame per PNG at the

@@ -16,3 +16,4 @@ mod synth;
 mod synth_head;
 mod teacher;
 mod trust;
+mod util;

@@ -10,6 +10,7 @@
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
+use crate::util::{tiny_run_config, tiny_scene, write_run};
 use candle_core::{Device, Tensor};
 use nldf_core::audio::{Waveform, write_wav};
 use nldf_core::composite::{composite, composite_f64, segment_colors, segment_colors_f64};
@@ -23,9 +24,6 @@ use nldf_train::student::StudentConfig;
 use nldf_train::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-
-use crate::export::write_run;
-use crate::teacher::{tiny_run_config, tiny_scene};
 
 /// A log-uniform value in `[lo, hi]`, or 0 one time in eight.
 fn log_uniform(rng: &mut impl Rng, lo: f64, hi: f64) -> f64 {

@@ -150,6 +150,7 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
     }
 }
 
+use crate::util::{tiny_run_config, tiny_scene};
 use nldf_core::dataset::Split;
 use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
 use nldf_train::data::TrainData;
@@ -225,8 +226,7 @@ fn tiny_student_config(iters: usize) -> StudentRunConfig {
 /// A tiny teacher trained briefly on the tiny scene (shared by the student tests).
 fn tiny_teacher(data: &TrainData) -> (tempfile::TempDir, TeacherRun) {
     let dir = tempfile::tempdir().unwrap();
-    let mut teacher =
-        TeacherRun::create(dir.path(), crate::teacher::tiny_run_config(150), data).unwrap();
+    let mut teacher = TeacherRun::create(dir.path(), tiny_run_config(150), data).unwrap();
     for _ in 0..150 {
         teacher.train_step(data).unwrap();
     }
@@ -235,7 +235,7 @@ fn tiny_teacher(data: &TrainData) -> (tempfile::TempDir, TeacherRun) {
 
 #[test]
 fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_encoder() {
-    let data = TrainData::load(crate::teacher::tiny_scene()).unwrap();
+    let data = TrainData::load(tiny_scene()).unwrap();
     let (_teacher_dir, teacher) = tiny_teacher(&data);
     let dir = tempfile::tempdir().unwrap();
     let mut run =
@@ -319,7 +319,7 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
 
 #[test]
 fn a_student_resumes_bit_exactly_with_its_pool() {
-    let data = TrainData::load(crate::teacher::tiny_scene()).unwrap();
+    let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut cfg = tiny_student_config(20);
     cfg.train.distill = false;

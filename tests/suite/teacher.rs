@@ -1,17 +1,15 @@
 //! The teacher: compositing against the f64 reference, the audio encoder and sampler shapes,
 //! a tiny training run that learns, and a resume that continues bit for bit.
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 use std::sync::atomic::AtomicBool;
 
+use crate::util::{tiny_run_config, tiny_scene};
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use nldf_core::bounds::Bounds;
 use nldf_core::composite::composite_f64;
 use nldf_core::rays::Rays;
-use nldf_core::synth::{SynthConfig, generate};
-use nldf_train::config::{TeacherConfig, TeacherRunConfig, TeacherTrainConfig};
+use nldf_train::config::{TeacherConfig, TeacherRunConfig};
 use nldf_train::data::TrainData;
 use nldf_train::nn::{conv1d, new_varmap};
 use nldf_train::render::composite;
@@ -182,44 +180,6 @@ fn samples_lie_inside_the_bounds_and_misses_are_skipped() {
             let p = Vec3::from_slice(&s.points[3 * (h * 8 + k)..]);
             assert!(p.cmpge(bounds.lo - 1e-5).all() && p.cmple(bounds.hi + 1e-5).all());
         }
-    }
-}
-
-/// A 32 x 32, 2 s synthetic scene shared by the training tests.
-pub(crate) fn tiny_scene() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = tempfile::Builder::new()
-            .prefix("teacher-scene")
-            .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-            .unwrap()
-            .keep();
-        let out = dir.join("scene");
-        let cfg = SynthConfig {
-            seconds: 2.0,
-            size: 32,
-            supersample: 1,
-            ..SynthConfig::default()
-        };
-        generate(&cfg, None, &out, false, &|| {}).unwrap();
-        out
-    })
-}
-
-pub(crate) fn tiny_run_config(iters: usize) -> TeacherRunConfig {
-    TeacherRunConfig {
-        model: TeacherConfig::tiny(),
-        train: TeacherTrainConfig {
-            iters,
-            batch_rays: 256,
-            frames_per_batch: 2,
-            lr: 5e-3,
-            att_start: 4,
-            val_every: 0,
-            val_frames: 2,
-            checkpoint_every: 0,
-            ..TeacherTrainConfig::default()
-        },
     }
 }
 

@@ -7,6 +7,9 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
+use crate::util::{
+    max_diff, random_audio, random_rays, tiny_run_config, tiny_scene, write_run, write_test_wav,
+};
 use candle_core::{Device, Tensor};
 use nldf_core::dataset::Split;
 use nldf_core::image::ImageRgb;
@@ -23,9 +26,6 @@ use nldf_train::scores::{Scores, score_frames};
 use nldf_train::student::StudentConfig;
 use nldf_train::teacher_trainer::TeacherRun;
 use prost::Message;
-
-use crate::export::{max_diff, random_audio, random_rays, write_run};
-use crate::teacher::{tiny_run_config, tiny_scene};
 
 /// An image whose every value is NaN.
 fn nan_image(width: u32, height: u32) -> ImageRgb {
@@ -422,7 +422,7 @@ fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
     let model = dir.path().join("run/model.onnx");
     nldf_export::export_student(&run_dir, &model, WeightType::F32).unwrap();
     let wav = dir.path().join("speech.wav");
-    crate::infer::write_test_wav(&wav, 0.5);
+    write_test_wav(&wav, 0.5);
     let job = |audio: Option<&Path>, features: Option<&Path>, out: &str| VideoJob {
         model: model.clone(),
         audio: audio.map(Path::to_path_buf),
