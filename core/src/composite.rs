@@ -52,7 +52,7 @@ pub fn composite_f64(
 ) -> Composite<f64> {
     let mut transmittance = 1.0f64;
     let mut weights = Vec::with_capacity(densities.len());
-    let (mut color, mut depth, mut opacity) = ([0.0f64; 3], 0.0f64, 0.0f64);
+    let (mut color, mut depth) = ([0.0f64; 3], 0.0f64);
     for k in 0..densities.len() {
         let sigma = densities[k].max(0.0);
         let alpha = 1.0 - (-sigma * deltas[k]).exp();
@@ -63,13 +63,12 @@ pub fn composite_f64(
             color[c] += w * colors[k][c];
         }
         depth += w * t_vals[k];
-        opacity += w;
     }
     Composite {
+        opacity: weights.iter().sum(),
         weights,
         color,
         depth,
-        opacity,
     }
 }
 

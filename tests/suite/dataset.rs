@@ -103,17 +103,7 @@ fn edit_json(dir: &Path, file: &str, edit: impl FnOnce(&mut serde_json::Value)) 
 }
 
 fn write_npy(dir: &Path, shape: &[u64], data: Vec<f32>) {
-    use npyz::WriterBuilder;
-    let mut buf = Vec::new();
-    let mut w = npyz::WriteOptions::new()
-        .default_dtype()
-        .shape(shape)
-        .writer(&mut buf)
-        .begin_nd()
-        .unwrap();
-    w.extend(data).unwrap();
-    w.finish().unwrap();
-    std::fs::write(dir.join("aud.npy"), buf).unwrap();
+    crate::util::write_npy(&dir.join("aud.npy"), shape, &data);
 }
 
 #[test]

@@ -8,10 +8,11 @@
 use std::path::Path;
 
 use crate::util::{
-    PYTHON_PARITY, TOL, candle_render, configs, max_diff, ort_available, python, random_audio,
+    PYTHON_PARITY, Run, TOL, candle_render, configs, max_diff, ort_available, python, random_audio,
     random_rays, read_npy, run_python, write_npy, write_run,
 };
 use nldf_core::audio::neighbourhood;
+use nldf_core::rays::Rays;
 use nldf_export::{WeightType, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_train::student::StudentConfig;
@@ -49,6 +50,38 @@ fn python_render(
 /// Pixels `[n, 3]` and segments `[n, M, 3]`, flat.
 type Outputs = (Vec<f32>, Vec<f32>);
 
+/// The outputs of `run`'s student (exported at `path`) for `rays` and `audio` in candle,
+/// tract and onnxruntime (batches of `batch_size`, 2 threads) and, given its Python,
+/// Python onnxruntime: `(runtime, (pixels, segments))`, candle first.
+fn every_runtime(
+    run: &Run,
+    path: &Path,
+    rays: &Rays,
+    audio: &[f32],
+    batch_size: usize,
+    python: Option<&Path>,
+) -> Vec<(String, Outputs)> {
+    let model = read_model(path).unwrap();
+    let mut outputs: Vec<(String, Outputs)> = Vec::new();
+    outputs.push(("candle".into(), candle_render(run, rays, audio)));
+    for kind in [BackendKind::Tract, BackendKind::Ort] {
+        let options = BackendOptions {
+            batch_size,
+            threads: 2,
+        };
+        let mut backend = backend_for(&model, kind, options).unwrap();
+        let out = backend.run(&rays.origins, &rays.directions, audio).unwrap();
+        outputs.push((kind.name().into(), (out.rgb, out.segments)));
+    }
+    if let Some(python) = python {
+        let folder = run.root.join("io");
+        let shape = model.info.audio.shape();
+        let out = python_render(python, path, &folder, rays, audio, shape);
+        outputs.push(("python onnxruntime".into(), out));
+    }
+    outputs
+}
+
 #[test]
 fn export_candle_tract_ort_and_python_onnxruntime_agree_on_10000_rays() {
     if !ort_available() {
@@ -58,30 +91,10 @@ fn export_candle_tract_ort_and_python_onnxruntime_agree_on_10000_rays() {
     for (c, cfg) in configs().into_iter().enumerate() {
         let run = write_run(&cfg, 91 + c as u64);
         let path = run.export(WeightType::F32);
-        let model = read_model(&path).unwrap();
         let rays = random_rays(10_000, 13);
         let audio = neighbourhood(&random_audio(&cfg, 10, 14), 4, cfg.audio.att_frames);
-        let shape = model.info.audio.shape();
-        // (runtime, (pixels, segments))
-        let mut outputs: Vec<(String, Outputs)> = Vec::new();
-        outputs.push(("candle".into(), candle_render(&run, &rays, &audio)));
-        for kind in [BackendKind::Tract, BackendKind::Ort] {
-            // 10 000 rays at batch 4096: two full batches and a partial one.
-            let options = BackendOptions {
-                batch_size: 4096,
-                threads: 2,
-            };
-            let mut backend = backend_for(&model, kind, options).unwrap();
-            let out = backend
-                .run(&rays.origins, &rays.directions, &audio)
-                .unwrap();
-            outputs.push((kind.name().into(), (out.rgb, out.segments)));
-        }
-        if let Some(python) = &python {
-            let folder = run.root.join("io");
-            let out = python_render(python, &path, &folder, &rays, &audio, shape);
-            outputs.push(("python onnxruntime".into(), out));
-        }
+        // 10 000 rays at batch 4096: two full batches and a partial one.
+        let outputs = every_runtime(&run, &path, &rays, &audio, 4096, python.as_deref());
         for a in 0..outputs.len() {
             for b in a + 1..outputs.len() {
                 let ((na, (rgb_a, seg_a)), (nb, (rgb_b, seg_b))) = (&outputs[a], &outputs[b]);
@@ -122,28 +135,9 @@ fn export_production_size_student_agrees_across_candle_tract_ort_and_python() {
     let run = write_run(&cfg, 88);
     run.scale_weights_like_trained(cfg.n_blocks());
     let path = run.export(WeightType::F32);
-    let model = read_model(&path).unwrap();
     let rays = random_rays(1500, 17);
     let audio = neighbourhood(&random_audio(&cfg, 10, 18), 4, cfg.audio.att_frames);
-    let shape = model.info.audio.shape();
-    let mut outputs: Vec<(String, Outputs)> = Vec::new();
-    outputs.push(("candle".into(), candle_render(&run, &rays, &audio)));
-    for kind in [BackendKind::Tract, BackendKind::Ort] {
-        let options = BackendOptions {
-            batch_size: 1024,
-            threads: 2,
-        };
-        let mut backend = backend_for(&model, kind, options).unwrap();
-        let out = backend
-            .run(&rays.origins, &rays.directions, &audio)
-            .unwrap();
-        outputs.push((kind.name().into(), (out.rgb, out.segments)));
-    }
-    if let Some(python) = &python {
-        let folder = run.root.join("io");
-        let out = python_render(python, &path, &folder, &rays, &audio, shape);
-        outputs.push(("python onnxruntime".into(), out));
-    }
+    let outputs = every_runtime(&run, &path, &rays, &audio, 1024, python.as_deref());
     let (rgb_ref, seg_ref) = &outputs[0].1;
     let magnitude = |v: &[f32]| v.iter().fold(0.0f32, |m, x| m.max(x.abs()));
     let scale = magnitude(rgb_ref).max(magnitude(seg_ref)).max(1.0);

@@ -59,6 +59,55 @@ pub trait TrainingRun {
     fn save(&self) -> Result<()>;
 }
 
+/// Implements the [`TrainingRun`] methods that every run answers from the same fields (its
+/// `dir`, `step` and `cfg.train` schedule) and from its own `elapsed`, `learning_rate`,
+/// `validation_scores` and `save` methods.
+macro_rules! run_fields {
+    ($run:ty) => {
+        fn dir(&self) -> &std::path::Path {
+            &self.dir
+        }
+
+        fn step(&self) -> usize {
+            self.step
+        }
+
+        fn schedule(&self) -> $crate::run_loop::Schedule {
+            let t = &self.cfg.train;
+            $crate::run_loop::Schedule {
+                iters: t.iters,
+                batch_rays: t.batch_rays,
+                log_every: t.log_every,
+                val_every: t.val_every,
+                val_frames: t.val_frames,
+                checkpoint_every: t.checkpoint_every,
+                time_budget_s: t.time_budget_s,
+            }
+        }
+
+        fn elapsed(&self) -> f64 {
+            <$run>::elapsed(self)
+        }
+
+        fn learning_rate(&self) -> f64 {
+            <$run>::learning_rate(self)
+        }
+
+        fn validation_scores(
+            &self,
+            data: &$crate::data::TrainData,
+            n: usize,
+        ) -> $crate::Result<$crate::scores::Scores> {
+            <$run>::validation_scores(self, data, n)
+        }
+
+        fn save(&self) -> $crate::Result<()> {
+            <$run>::save(self)
+        }
+    };
+}
+pub(crate) use run_fields;
+
 /// The value of a scalar loss, or [`Error::NonFinite`] when it is NaN or infinite (checked
 /// before the backward pass, so that a diverged step changes no weight).
 pub fn finite_loss(loss: &Tensor) -> Result<f64> {

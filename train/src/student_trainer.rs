@@ -39,7 +39,7 @@ use crate::loss::{RayLosses, distillation_loss};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
 use crate::pool::{load_pool, save_pool};
-use crate::run_loop::{Schedule, TrainingRun, finite_loss};
+use crate::run_loop::{TrainingRun, finite_loss, run_fields};
 use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
 use crate::targets::{load_targets, save_targets, teacher_targets};
@@ -338,13 +338,7 @@ impl StudentRun {
         let (drawn, pool_refs) = if t.pool {
             let n_pool = (t.hard_ratio.clamp(0.0, 1.0) * t.batch_rays as f64).round() as usize;
             let drawn = self.pool.draw(n_pool, &mut rng);
-            let refs: Vec<BeamRef> = drawn
-                .iter()
-                .map(|&i| BeamRef {
-                    frame: self.pool.entries[i].frame,
-                    pixel: self.pool.entries[i].pixel,
-                })
-                .collect();
+            let refs = self.pool_refs(&drawn);
             (drawn, refs)
         } else {
             (Vec::new(), Vec::new())
@@ -377,6 +371,17 @@ impl StudentRun {
         Ok(step)
     }
 
+    /// The beams of the pool entries `drawn`.
+    fn pool_refs(&self, drawn: &[usize]) -> Vec<BeamRef> {
+        drawn
+            .iter()
+            .map(|&i| BeamRef {
+                frame: self.pool.entries[i].frame,
+                pixel: self.pool.entries[i].pixel,
+            })
+            .collect()
+    }
+
     /// Trains one batch drawn from the pool alone (the audio encoder gets no gradient).
     /// Returns the batch's loss, or `None` when the pool is empty.
     pub fn pool_step(&mut self, data: &TrainData, n: usize) -> Result<Option<f64>> {
@@ -386,13 +391,7 @@ impl StudentRun {
         if drawn.is_empty() {
             return Ok(None);
         }
-        let refs: Vec<BeamRef> = drawn
-            .iter()
-            .map(|&i| BeamRef {
-                frame: self.pool.entries[i].frame,
-                pixel: self.pool.entries[i].pixel,
-            })
-            .collect();
+        let refs = self.pool_refs(&drawn);
         let out = self.step_on(data, &[], &refs, None, true)?;
         self.pool.update(&drawn, &out.per_ray);
         Ok(Some(out.loss))
@@ -601,45 +600,10 @@ struct StepOutput {
 }
 
 impl TrainingRun for StudentRun {
-    fn dir(&self) -> &Path {
-        &self.dir
-    }
-
-    fn step(&self) -> usize {
-        self.step
-    }
-
-    fn schedule(&self) -> Schedule {
-        let t = &self.cfg.train;
-        Schedule {
-            iters: t.iters,
-            batch_rays: t.batch_rays,
-            log_every: t.log_every,
-            val_every: t.val_every,
-            val_frames: t.val_frames,
-            checkpoint_every: t.checkpoint_every,
-            time_budget_s: t.time_budget_s,
-        }
-    }
-
-    fn elapsed(&self) -> f64 {
-        StudentRun::elapsed(self)
-    }
-
-    fn learning_rate(&self) -> f64 {
-        StudentRun::learning_rate(self)
-    }
+    run_fields!(StudentRun);
 
     fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
         let s = StudentRun::train_step(self, data)?;
         Ok((s.loss, s.psnr))
-    }
-
-    fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        StudentRun::validation_scores(self, data, n)
-    }
-
-    fn save(&self) -> Result<()> {
-        StudentRun::save(self)
     }
 }

@@ -27,7 +27,7 @@ use crate::config::{RunConfig, TeacherRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
-use crate::run_loop::{Event, Schedule, TrainingRun, finite_loss, train_loop};
+use crate::run_loop::{Event, TrainingRun, finite_loss, run_fields, train_loop};
 use crate::scores::{Scores, score_validation_frames};
 use crate::teacher::{Teacher, teacher};
 use nldf_core::run_files::CONFIG_FILE;
@@ -254,45 +254,10 @@ impl TeacherRun {
 }
 
 impl TrainingRun for TeacherRun {
-    fn dir(&self) -> &Path {
-        &self.dir
-    }
-
-    fn step(&self) -> usize {
-        self.step
-    }
-
-    fn schedule(&self) -> Schedule {
-        let t = &self.cfg.train;
-        Schedule {
-            iters: t.iters,
-            batch_rays: t.batch_rays,
-            log_every: t.log_every,
-            val_every: t.val_every,
-            val_frames: t.val_frames,
-            checkpoint_every: t.checkpoint_every,
-            time_budget_s: t.time_budget_s,
-        }
-    }
-
-    fn elapsed(&self) -> f64 {
-        TeacherRun::elapsed(self)
-    }
-
-    fn learning_rate(&self) -> f64 {
-        TeacherRun::learning_rate(self)
-    }
+    run_fields!(TeacherRun);
 
     fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
         TeacherRun::train_step(self, data)
-    }
-
-    fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        TeacherRun::validation_scores(self, data, n)
-    }
-
-    fn save(&self) -> Result<()> {
-        TeacherRun::save(self)
     }
 }
 
