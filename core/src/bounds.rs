@@ -50,6 +50,14 @@ impl Bounds {
     }
 }
 
+/// Where a scene's rays are sampled: the head's bounds, within `[near, far]` along each ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeadRange {
+    pub bounds: Bounds,
+    pub near: f32,
+    pub far: f32,
+}
+
 /// Grid cells per axis of the visual-hull carving.
 const HULL_GRID: usize = 40;
 /// Training frames the carving looks at, at most.

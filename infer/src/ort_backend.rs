@@ -138,15 +138,10 @@ impl Backend for OrtBackend {
         self.batch_size
     }
 
-    fn run_batch(
-        &mut self,
-        origins: &[f32],
-        directions: &[f32],
-        audio: &[f32],
-    ) -> Result<RayOutputs> {
-        let n = origins.len() / 3;
+    fn run_batch(&mut self, rays_o: &[f32], rays_d: &[f32], audio: &[f32]) -> Result<RayOutputs> {
+        let n = rays_o.len() / 3;
         let m = self.info.segments;
-        self.run_session(origins, directions, audio, |outputs| {
+        self.run_session(rays_o, rays_d, audio, |outputs| {
             let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {
                 let value = outputs
                     .get(name)

@@ -475,12 +475,10 @@ fn segment_targets_sum_to_the_teachers_pixel() {
     let ds = &data.dataset;
     let bg = &ds.background.data;
     let t = &run.teacher;
-    let pixels = t
-        .render_eval(&rays, bg, &code, &data.bounds, ds.near, ds.far)
-        .unwrap();
+    let pixels = t.render_eval(&rays, bg, &code, &data.head_range()).unwrap();
     for m in [1usize, 4, 5] {
         let seg = t
-            .segment_targets(&rays, bg, &code, &data.bounds, ds.near, ds.far, m)
+            .segment_targets(&rays, bg, &code, &data.head_range(), m)
             .unwrap();
         assert_eq!(seg.len(), rays.len() * m * 3);
         let mut worst = 0.0f32;
@@ -522,7 +520,7 @@ fn importance_sampled_segment_targets_follow_t_intervals() {
     let t = &run.teacher;
     let m = 4;
     let seg = t
-        .segment_targets(&rays, bg, &code, &data.bounds, ds.near, ds.far, m)
+        .segment_targets(&rays, bg, &code, &data.head_range(), m)
         .unwrap();
     // The reference: the same samples and field outputs, composited and split in f64.
     let codes_of = |hit: &[usize]| code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous();

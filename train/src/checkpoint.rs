@@ -158,13 +158,36 @@ pub fn first_non_finite(tensors: &HashMap<String, Tensor>) -> Result<Option<Stri
     Ok(None)
 }
 
+/// Training time across resumes: the seconds of the earlier processes (from the
+/// checkpoint) plus this one's.
+#[derive(Debug, Clone, Copy)]
+pub struct Clock {
+    before: f64,
+    started: std::time::Instant,
+}
+
+impl Clock {
+    /// A clock that has run `before` seconds in earlier processes, running from now.
+    pub fn resumed(before: f64) -> Clock {
+        Clock {
+            before,
+            started: std::time::Instant::now(),
+        }
+    }
+
+    /// Training seconds so far.
+    pub fn elapsed(&self) -> f64 {
+        self.before + self.started.elapsed().as_secs_f64()
+    }
+}
+
 /// Restores the weights in `dir` into `varmap` and, given `adam`, the optimizer state
-/// (checking that both come from the same step). Returns the step and the training seconds.
+/// (checking that both come from the same step). Returns the step and the training clock.
 pub fn open_checkpoint(
     dir: &Path,
     varmap: &VarMap,
     adam: Option<&mut Adam>,
-) -> Result<(usize, f64)> {
+) -> Result<(usize, Clock)> {
     let model_path = dir.join(MODEL_FILE);
     let (tensors, meta) = load_tensors(&model_path)?;
     restore_weights(&model_path, varmap, &tensors)?;
@@ -188,5 +211,5 @@ pub fn open_checkpoint(
         adam.load_state(&state)
             .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
     }
-    Ok((step, elapsed))
+    Ok((step, Clock::resumed(elapsed)))
 }

@@ -23,6 +23,16 @@ pub struct TrainData {
 }
 
 impl TrainData {
+    /// Where the scene's rays are sampled: the head's bounds within the dataset's
+    /// `[near, far]`.
+    pub fn head_range(&self) -> nldf_core::bounds::HeadRange {
+        nldf_core::bounds::HeadRange {
+            bounds: self.bounds,
+            near: self.dataset.near,
+            far: self.dataset.far,
+        }
+    }
+
     /// Loads and validates a dataset and decodes its training frames.
     pub fn load(root: &Path) -> Result<TrainData> {
         Self::open(root, true)

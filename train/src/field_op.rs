@@ -636,23 +636,23 @@ impl CustomOp3 for FieldOp {
 
     fn cpu_fwd(
         &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-        s3: &CpuStorage,
-        l3: &Layout,
+        points_storage: &CpuStorage,
+        points_layout: &Layout,
+        params_storage: &CpuStorage,
+        params_layout: &Layout,
+        rays_storage: &CpuStorage,
+        rays_layout: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
-        let (n, _) = l1.shape().dims2()?;
+        let (n, _) = points_layout.shape().dims2()?;
         let plan = &self.plan;
-        if l2.shape().elem_count() != plan.n_params {
+        if params_layout.shape().elem_count() != plan.n_params {
             candle_core::bail!(
                 "fused field: {} parameters given, the plan needs {}",
-                l2.shape().elem_count(),
+                params_layout.shape().elem_count(),
                 plan.n_params
             );
         }
-        let (n_rays, q) = l3.shape().dims2()?;
+        let (n_rays, q) = rays_layout.shape().dims2()?;
         if q != plan.ray_width || n_rays * plan.n_samples != n {
             candle_core::bail!(
                 "fused field: per-ray terms [{n_rays}, {q}] do not fit {n} samples of {} per ray and width {}",
@@ -660,9 +660,9 @@ impl CustomOp3 for FieldOp {
                 plan.ray_width
             );
         }
-        let points = contiguous(s1, l1, "points")?;
-        let params = contiguous(s2, l2, "params")?;
-        let rays = contiguous(s3, l3, "ray terms")?;
+        let points = contiguous(points_storage, points_layout, "points")?;
+        let params = contiguous(params_storage, params_layout, "params")?;
+        let rays = contiguous(rays_storage, rays_layout, "ray terms")?;
         let (out, stash) = self.run(points, params, rays, n)?;
         if self.keep {
             let mut slot = self

@@ -201,16 +201,16 @@ impl CustomOp3 for StudentOp {
 
     fn cpu_fwd(
         &self,
-        s1: &CpuStorage,
-        l1: &Layout,
-        s2: &CpuStorage,
-        l2: &Layout,
-        s3: &CpuStorage,
-        l3: &Layout,
+        beams_storage: &CpuStorage,
+        beams_layout: &Layout,
+        codes_storage: &CpuStorage,
+        codes_layout: &Layout,
+        params_storage: &CpuStorage,
+        params_layout: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let plan = &self.plan;
-        let (n, b) = l1.shape().dims2()?;
-        let (n2, c) = l2.shape().dims2()?;
+        let (n, b) = beams_layout.shape().dims2()?;
+        let (n2, c) = codes_layout.shape().dims2()?;
         if b != plan.beam_dim || c != plan.code_dim || n2 != n {
             candle_core::bail!(
                 "student op: beams [{n}, {b}] and codes [{n2}, {c}] do not fit the plan's [n, {}] and [n, {}]",
@@ -218,16 +218,16 @@ impl CustomOp3 for StudentOp {
                 plan.code_dim
             );
         }
-        if l3.shape().elem_count() != plan.n_params {
+        if params_layout.shape().elem_count() != plan.n_params {
             candle_core::bail!(
                 "student op: {} parameters given, the plan needs {}",
-                l3.shape().elem_count(),
+                params_layout.shape().elem_count(),
                 plan.n_params
             );
         }
-        let beams = contiguous(s1, l1, "beams")?;
-        let codes = contiguous(s2, l2, "codes")?;
-        let params = contiguous(s3, l3, "params")?;
+        let beams = contiguous(beams_storage, beams_layout, "beams")?;
+        let codes = contiguous(codes_storage, codes_layout, "codes")?;
+        let params = contiguous(params_storage, params_layout, "params")?;
         let (out, stash) = self.run(beams, codes, params, n);
         if self.keep {
             *self

@@ -10,7 +10,6 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
@@ -31,7 +30,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
 use crate::checkpoint::save_json;
-use crate::checkpoint::{CheckpointParts, open_checkpoint, save_checkpoint};
+use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint};
 use crate::config::{RunConfig, StudentRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
@@ -80,8 +79,7 @@ pub struct StudentRun {
     pub student: Student,
     adam: Adam,
     pub step: usize,
-    elapsed_before: f64,
-    started: Instant,
+    clock: Clock,
     pub pool: BeamPool,
     /// The training frames, then the pseudo views (set by [`StudentRun::prepare`]).
     pub views: Vec<View>,
@@ -136,13 +134,11 @@ impl StudentRun {
     /// state).
     pub fn open(dir: &Path, optimizer: bool) -> Result<StudentRun> {
         let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
-        let (step, elapsed) =
+        (run.step, run.clock) =
             open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
-        run.step = step;
-        run.elapsed_before = elapsed;
         let pool_path = dir.join(POOL_FILE);
         if optimizer && pool_path.is_file() {
-            run.pool = load_pool(&pool_path, run.pool.capacity, step)?;
+            run.pool = load_pool(&pool_path, run.pool.capacity, run.step)?;
         }
         Ok(run)
     }
@@ -173,8 +169,7 @@ impl StudentRun {
             student,
             adam,
             step: 0,
-            elapsed_before: 0.0,
-            started: Instant::now(),
+            clock: Clock::resumed(0.0),
             views: Vec::new(),
             beams: Vec::new(),
             targets: Vec::new(),
@@ -225,7 +220,7 @@ impl StudentRun {
 
     /// Training seconds so far, across resumes.
     pub fn elapsed(&self) -> f64 {
-        self.elapsed_before + self.started.elapsed().as_secs_f64()
+        self.clock.elapsed()
     }
 
     /// The learning rate at the current step ([`StudentTrainConfig::learning_rate`]).

@@ -36,15 +36,11 @@ pub fn teacher_targets(
             bg.extend_from_slice(&ds.background.get(i, j));
         }
         let code = codes_of_views(&[view], |ids| teacher.audio_codes(data, ids))?;
-        out.push(teacher.teacher.segment_targets(
-            &rays,
-            &bg,
-            &code,
-            &data.bounds,
-            ds.near,
-            ds.far,
-            m,
-        )?);
+        out.push(
+            teacher
+                .teacher
+                .segment_targets(&rays, &bg, &code, &data.head_range(), m)?,
+        );
         progress(vi + 1, views.len());
     }
     Ok(out)

@@ -12,7 +12,7 @@ use crate::config::TeacherConfig;
 use crate::field::{TeacherField, teacher_field};
 use crate::render::composite;
 use crate::sampler::{RaySamples, sample_importance, sample_stratified};
-use nldf_core::bounds::Bounds;
+use nldf_core::bounds::{Bounds, HeadRange};
 
 /// The audio-conditioned NeRF teacher.
 #[derive(Debug, Clone)]
@@ -229,6 +229,20 @@ type ChunkVisitor<'a> = dyn FnMut(usize, &[f32], &[f32]) -> Result<()> + 'a;
 const EVAL_CHUNK: usize = 4096;
 
 impl Teacher {
+    /// Samples `rays` inside `range` without jitter, every ray with the audio code `code`
+    /// (`[1, audio_dim]`).
+    fn sample_with_code(
+        &self,
+        rays: &Rays,
+        range: &HeadRange,
+        code: &Tensor,
+    ) -> Result<RaySamples> {
+        let code_for = |hit: &[usize]| -> Result<Tensor> {
+            code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous()
+        };
+        self.sample(rays, &range.bounds, range.near, range.far, None, &code_for)
+    }
+
     /// Renders rays for display or scoring: no jitter; samples are evaluated front to back in
     /// four groups, and a ray leaves once its transmittance falls below
     /// `cfg.min_transmittance`; rays that miss the bounds are their background.
@@ -241,14 +255,9 @@ impl Teacher {
         rays: &Rays,
         background: &[f32],
         code: &Tensor,
-        bounds: &Bounds,
-        near: f32,
-        far: f32,
+        range: &HeadRange,
     ) -> Result<Vec<f32>> {
-        let code_for = |hit: &[usize]| -> Result<Tensor> {
-            code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous()
-        };
-        let samples = self.sample(rays, bounds, near, far, None, &code_for)?;
+        let samples = self.sample_with_code(rays, range, code)?;
         let n_samples = samples.n_samples;
         let mut out = background.to_vec();
         let group = n_samples.div_ceil(4);
@@ -324,22 +333,16 @@ impl Teacher {
     /// # Shapes
     /// - `background`: `[n_rays, 3]` flat; `code`: `[1, audio_dim]`
     /// - returns `[n_rays, m, 3]` flat
-    #[allow(clippy::too_many_arguments)]
     pub fn segment_targets(
         &self,
         rays: &Rays,
         background: &[f32],
         code: &Tensor,
-        bounds: &Bounds,
-        near: f32,
-        far: f32,
+        range: &HeadRange,
         m: usize,
     ) -> Result<Vec<f32>> {
         let m = m.max(1);
-        let code_for = |hit: &[usize]| -> Result<Tensor> {
-            code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous()
-        };
-        let samples = self.sample(rays, bounds, near, far, None, &code_for)?;
+        let samples = self.sample_with_code(rays, range, code)?;
         let s = samples.n_samples;
         let mut out = vec![0.0f32; rays.len() * m * 3];
         for r in 0..rays.len() {

@@ -7,7 +7,6 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
-use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
@@ -22,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::adam::{Adam, AdamParams};
 use crate::audio_net::neighbourhoods;
 use crate::checkpoint::save_json;
-use crate::checkpoint::{CheckpointParts, open_checkpoint, save_checkpoint};
+use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint};
 use crate::config::{RunConfig, TeacherRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
@@ -41,11 +40,9 @@ pub struct TeacherRun {
     adam: Adam,
     /// Steps done.
     pub step: usize,
-    /// Training seconds before this process (from the checkpoint).
-    elapsed_before: f64,
     /// Rays of the last training step that hit the head's bounds.
     pub last_hit_rays: usize,
-    started: Instant,
+    clock: Clock,
 }
 
 impl TeacherRun {
@@ -63,10 +60,8 @@ impl TeacherRun {
     /// optimizer state) to continue training or to render.
     pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
         let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
-        let (step, elapsed) =
+        (run.step, run.clock) =
             open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
-        run.step = step;
-        run.elapsed_before = elapsed;
         Ok(run)
     }
 
@@ -84,15 +79,14 @@ impl TeacherRun {
             teacher,
             adam,
             step: 0,
-            elapsed_before: 0.0,
             last_hit_rays: 0,
-            started: Instant::now(),
+            clock: Clock::resumed(0.0),
         })
     }
 
     /// Training seconds so far, across resumes.
     pub fn elapsed(&self) -> f64 {
-        self.elapsed_before + self.started.elapsed().as_secs_f64()
+        self.clock.elapsed()
     }
 
     /// The learning rate at the current step: `lr 0.1^(step / lr_decay_steps)`.
@@ -210,7 +204,7 @@ impl TeacherRun {
         let bg = &ds.background.data;
         let colors = self
             .teacher
-            .render_eval(&rays, bg, &codes, &data.bounds, ds.near, ds.far)?;
+            .render_eval(&rays, bg, &codes, &data.head_range())?;
         Ok(ImageRgb {
             width: ds.intrinsics.width,
             height: ds.intrinsics.height,
