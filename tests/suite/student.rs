@@ -150,7 +150,7 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
     }
 }
 
-use crate::util::{tiny_run_config, tiny_scene};
+use crate::util::{assert_learned, tiny_run_config, tiny_scene};
 use nldf_core::dataset::Split;
 use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
 use nldf_train::data::TrainData;
@@ -285,19 +285,7 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
         losses.push(s.loss);
     }
     let after = run.validation_scores(&data, 2).unwrap();
-    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
-    let last: f64 = losses[140..].iter().sum::<f64>() / 10.0;
-    eprintln!(
-        "student loss {first:.4e} -> {last:.4e}, val PSNR {:.2} -> {:.2} dB",
-        before.psnr, after.psnr
-    );
-    assert!(last < 0.5 * first, "loss {first} -> {last}");
-    assert!(
-        after.psnr > before.psnr + 2.0,
-        "PSNR {} -> {}",
-        before.psnr,
-        after.psnr
-    );
+    assert_learned("student", &losses, 0.5, before.psnr, after.psnr);
     assert!(!run.pool.entries.is_empty() && run.pool.entries.len() <= run.pool.capacity);
 
     // A pool-only batch moves the light field but not the audio encoder.

@@ -3,7 +3,7 @@
 
 use std::sync::atomic::AtomicBool;
 
-use crate::util::{tiny_run_config, tiny_scene};
+use crate::util::{assert_learned, tiny_run_config, tiny_scene};
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use nldf_core::bounds::Bounds;
@@ -194,20 +194,7 @@ fn a_tiny_teacher_learns_the_tiny_scene() {
         losses.push(run.train_step(&data).unwrap().0);
     }
     let after = run.validation_scores(&data, 2).unwrap();
-    let first: f64 = losses[..10].iter().sum::<f64>() / 10.0;
-    let last: f64 = losses[190..].iter().sum::<f64>() / 10.0;
-    eprintln!(
-        "loss {first:.4e} -> {last:.4e}, val PSNR {:.2} -> {:.2} dB",
-        before.psnr, after.psnr
-    );
-    assert!(last < 0.6 * first, "loss {first} -> {last}");
-    assert!(
-        after.psnr > before.psnr + 2.0,
-        "PSNR {} -> {}",
-        before.psnr,
-        after.psnr
-    );
-    assert!(losses.iter().all(|l| l.is_finite()));
+    assert_learned("teacher", &losses, 0.6, before.psnr, after.psnr);
 }
 
 #[test]

@@ -423,3 +423,17 @@ pub(crate) fn tiny_run_config(iters: usize) -> TeacherRunConfig {
         },
     }
 }
+
+/// A training run learned: every loss finite, the mean of the last 10 losses below `ratio`
+/// times the mean of the first 10, and the validation PSNR up by more than 2 dB.
+pub(crate) fn assert_learned(what: &str, losses: &[f64], ratio: f64, before: f64, after: f64) {
+    assert!(
+        losses.iter().all(|l| l.is_finite()),
+        "{what}: a loss is not finite"
+    );
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let (first, last) = (mean(&losses[..10]), mean(&losses[losses.len() - 10..]));
+    eprintln!("{what} loss {first:.4e} -> {last:.4e}, val PSNR {before:.2} -> {after:.2} dB");
+    assert!(last < ratio * first, "{what}: loss {first} -> {last}");
+    assert!(after > before + 2.0, "{what}: PSNR {before} -> {after}");
+}

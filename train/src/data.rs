@@ -23,6 +23,23 @@ pub struct TrainData {
 }
 
 impl TrainData {
+    /// The audio neighbourhoods of the frames `aud_ids`, the audio encoder's input (see
+    /// [`crate::audio_net::neighbourhoods`]).
+    ///
+    /// # Shapes
+    /// - returns `[aud_ids.len(), att_frames, window, n_features]`
+    pub fn neighbourhoods(
+        &self,
+        aud_ids: &[usize],
+        att_frames: usize,
+    ) -> Result<candle_core::Tensor> {
+        Ok(crate::audio_net::neighbourhoods(
+            &self.dataset.audio,
+            aud_ids,
+            att_frames,
+        )?)
+    }
+
     /// Where the scene's rays are sampled: the head's bounds within the dataset's
     /// `[near, far]`.
     pub fn head_range(&self) -> nldf_core::bounds::HeadRange {

@@ -28,7 +28,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::adam::{Adam, AdamParams};
-use crate::audio_net::neighbourhoods;
 use crate::checkpoint::save_json;
 use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint};
 use crate::config::{RunConfig, StudentRunConfig, read_config};
@@ -233,11 +232,7 @@ impl StudentRun {
     /// # Shapes
     /// - returns `[aud_ids.len(), audio_dim]`
     pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
-        let windows = neighbourhoods(
-            &data.dataset.audio,
-            aud_ids,
-            self.cfg.model.audio.att_frames,
-        )?;
+        let windows = data.neighbourhoods(aud_ids, self.cfg.model.audio.att_frames)?;
         Ok(self.student.audio_codes(&windows)?)
     }
 

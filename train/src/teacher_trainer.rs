@@ -19,7 +19,6 @@ use rand::{Rng, RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::adam::{Adam, AdamParams};
-use crate::audio_net::neighbourhoods;
 use crate::checkpoint::save_json;
 use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint};
 use crate::config::{RunConfig, TeacherRunConfig, read_config};
@@ -104,11 +103,7 @@ impl TeacherRun {
     /// # Shapes
     /// - returns `[frames.len(), audio_dim]`
     pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
-        let windows = neighbourhoods(
-            &data.dataset.audio,
-            aud_ids,
-            self.cfg.model.audio.att_frames,
-        )?;
+        let windows = data.neighbourhoods(aud_ids, self.cfg.model.audio.att_frames)?;
         Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
     }
 
