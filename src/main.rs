@@ -3,6 +3,7 @@
 mod ablate_cmd;
 mod bench_cmd;
 mod demo_cmd;
+mod doctor_cmd;
 mod eval_cmd;
 mod export_cmd;
 mod features_cmd;
@@ -50,6 +51,9 @@ enum Command {
     /// Measure training throughput (and, later, rendering speed against error).
     #[command(subcommand)]
     Bench(bench_cmd::BenchCommand),
+    /// Show what nldf finds on this machine: CPU features and threads, the onnxruntime
+    /// library and where it was found, ffmpeg and Python.
+    Doctor,
 }
 
 /// A command-line mistake as one line: clap's message and its hints (`[possible values:
@@ -91,6 +95,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render_cmd::run(args),
         Command::Ablate(args) => ablate_cmd::run(args),
         Command::Bench(cmd) => bench_cmd::run(cmd),
+        Command::Doctor => doctor_cmd::run(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

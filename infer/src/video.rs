@@ -223,10 +223,7 @@ impl VideoPlan {
 
 /// `ffmpeg` on the PATH, if any.
 pub fn ffmpeg_on_path() -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .map(|dir| dir.join("ffmpeg"))
-        .find(|p| p.is_file())
+    crate::ort_library::on_path("ffmpeg")
 }
 
 /// Muxes `folder/frame_%05d.png` at `fps`, with the audio of `wav` when given, into

@@ -300,7 +300,7 @@ fn infer_missing_onnxruntime_library_says_how_to_get_it() {
         .to_string();
     nldf_tests::assert_one_line_naming(&msg, "libonnxruntime.so.1.31.1");
     assert!(
-        msg.contains("ORT_DYLIB_PATH") && msg.contains("python_env.sh"),
+        msg.contains("ORT_DYLIB_PATH") && msg.contains("pip install onnxruntime"),
         "{msg}"
     );
     let msg = find_ort_library_in(None, &[dir.path().to_path_buf()])
@@ -315,6 +315,55 @@ fn infer_missing_onnxruntime_library_says_how_to_get_it() {
     std::fs::write(capi.join("libonnxruntime.so.1.31.1"), b"").unwrap();
     let found = find_ort_library_in(None, &[dir.path().to_path_buf()]).unwrap();
     assert_eq!(found, capi.join("libonnxruntime.so.1.31.1"));
+}
+
+/// Without `ORT_DYLIB_PATH` or a `.venv`, the library comes from the `onnxruntime` package
+/// of the `python3` on the PATH, then from the system's library path; with none of them,
+/// one line says the command that fixes it.
+#[test]
+fn infer_onnxruntime_is_found_in_pythons_package_then_the_system_path() {
+    use nldf_infer::ort_library::OrtSearch;
+    let dir = tempfile::tempdir().unwrap();
+    let package = dir.path().join("site-packages/onnxruntime");
+    std::fs::create_dir_all(package.join("capi")).unwrap();
+    std::fs::write(package.join("capi/libonnxruntime.so.1.31.1"), b"").unwrap();
+    // A stand-in python3 that answers the package query as the real one does.
+    let python = dir.path().join("python3");
+    std::fs::write(&python, format!("#!/bin/sh\necho {}\n", package.display())).unwrap();
+    let mut perms = std::fs::metadata(&python).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut perms, 0o755);
+    std::fs::set_permissions(&python, perms).unwrap();
+    let system = dir.path().join("lib");
+    std::fs::create_dir_all(&system).unwrap();
+    std::fs::write(system.join("libonnxruntime.so.1.32.0"), b"").unwrap();
+    let empty = dir.path().join("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+
+    let search = OrtSearch {
+        dylib_path: None,
+        roots: vec![empty.clone()],
+        python: Some(python.clone()),
+        system_dirs: vec![system.clone()],
+    };
+    let found = search.find().unwrap();
+    assert_eq!(found.path, package.join("capi/libonnxruntime.so.1.31.1"));
+    assert_eq!(found.version().as_deref(), Some("1.31.1"));
+    assert!(found.place.contains("python3"), "{}", found.place);
+
+    let no_python = OrtSearch {
+        python: None,
+        ..search.clone()
+    };
+    let found = no_python.find().unwrap();
+    assert_eq!(found.path, system.join("libonnxruntime.so.1.32.0"));
+    assert!(found.place.contains("system"), "{}", found.place);
+
+    let nothing = OrtSearch {
+        system_dirs: vec![empty],
+        ..no_python
+    };
+    let msg = nothing.find().unwrap_err().to_string();
+    nldf_tests::assert_one_line_naming(&msg, "pip install onnxruntime");
 }
 
 #[test]

@@ -1,0 +1,116 @@
+//! What nldf finds on this machine, for `nldf doctor`: the CPU's vector features and
+//! threads, the onnxruntime library (and where in the search order it was found), ffmpeg
+//! and Python.
+
+use std::path::Path;
+use std::process::Command;
+
+use crate::ort_library::{OrtSearch, on_path};
+use crate::video::ffmpeg_on_path;
+
+/// One line of the report: what was checked, and what was found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Finding {
+    pub what: &'static str,
+    pub found: String,
+}
+
+/// Everything `nldf doctor` reports.
+pub fn findings() -> Vec<Finding> {
+    let mut out = vec![
+        Finding {
+            what: "CPU",
+            found: cpu_model().unwrap_or_else(|| "unknown".into()),
+        },
+        Finding {
+            what: "vector features",
+            found: cpu_features(),
+        },
+        Finding {
+            what: "threads",
+            found: std::thread::available_parallelism()
+                .map_or_else(|_| "unknown".into(), |n| n.get().to_string()),
+        },
+    ];
+    out.push(Finding {
+        what: "onnxruntime",
+        found: match OrtSearch::from_env().find() {
+            Ok(f) => format!(
+                "{} ({}; from {})",
+                f.version().unwrap_or_else(|| "version unknown".into()),
+                f.path.display(),
+                f.place
+            ),
+            Err(e) => format!("not found: {e}"),
+        },
+    });
+    out.push(Finding {
+        what: "ffmpeg",
+        found: match ffmpeg_on_path() {
+            Some(p) => first_line(&p, "-version").unwrap_or_else(|| p.display().to_string()),
+            None => "not on the PATH (videos are written as PNG frames only; --ffmpeg PATH \
+                     names one)"
+                .into(),
+        },
+    });
+    out.push(Finding {
+        what: "python3",
+        found: match on_path("python3") {
+            Some(p) => first_line(&p, "--version").unwrap_or_else(|| p.display().to_string()),
+            None => "not on the PATH".into(),
+        },
+    });
+    out
+}
+
+/// The first line a program prints for `flag`.
+fn first_line(program: &Path, flag: &str) -> Option<String> {
+    let out = Command::new(program).arg(flag).output().ok()?;
+    let text = if out.stdout.is_empty() {
+        out.stderr
+    } else {
+        out.stdout
+    };
+    String::from_utf8_lossy(&text)
+        .lines()
+        .next()
+        .map(|l| l.trim().to_string())
+}
+
+/// The CPU's model name, from `/proc/cpuinfo`.
+fn cpu_model() -> Option<String> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    info.lines()
+        .find(|l| l.starts_with("model name"))
+        .and_then(|l| l.split(':').nth(1))
+        .map(|m| m.trim().to_string())
+}
+
+/// The vector features the kernels and runtimes use, present or absent.
+fn cpu_features() -> String {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let features = [
+            ("AVX2", std::arch::is_x86_feature_detected!("avx2")),
+            ("FMA", std::arch::is_x86_feature_detected!("fma")),
+            ("AVX-512F", std::arch::is_x86_feature_detected!("avx512f")),
+            (
+                "AVX-512 VNNI",
+                std::arch::is_x86_feature_detected!("avx512vnni"),
+            ),
+            (
+                "AVX-512 FP16",
+                std::arch::is_x86_feature_detected!("avx512fp16"),
+            ),
+        ];
+        features
+            .iter()
+            .map(|(name, on)| format!("{name} {}", if *on { "yes" } else { "no" }))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        "not an x86-64 CPU: nldf's AVX-512 kernels fall back to portable code".to_string()
+    }
+}
