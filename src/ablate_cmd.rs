@@ -8,7 +8,7 @@ use anyhow::Result;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 
-use crate::progress::{EventPrinter, stop_on_ctrl_c};
+use crate::progress::{EventPrinter, stop_flag};
 use crate::train_cmd::StudentDepth;
 
 #[derive(clap::Args, Debug)]
@@ -63,7 +63,7 @@ pub fn run(args: AblateArgs) -> Result<()> {
         depths: args.depths.iter().map(|&d| shape(d)).collect(),
         wall_time: !args.no_wall_time,
     };
-    let stop = stop_on_ctrl_c()?;
+    let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);
     let report = job.plan()?.run(&stop, &mut show)?;

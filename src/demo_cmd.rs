@@ -10,7 +10,7 @@ use nldf_core::synth::SynthConfig;
 use nldf_train::job::JobEvent;
 use nldf_train::job::demo::DemoJob;
 
-use crate::progress::{EventPrinter, stop_on_ctrl_c};
+use crate::progress::{EventPrinter, stop_flag};
 use crate::train_cmd::TeacherPreset;
 
 #[derive(clap::Args, Debug)]
@@ -41,6 +41,15 @@ pub struct DemoArgs {
 
 /// Runs `nldf demo`.
 pub fn run(args: DemoArgs) -> Result<()> {
+    if !(args.minutes.is_finite() && args.minutes > 0.0) {
+        anyhow::bail!("--minutes must be positive, got {}", args.minutes);
+    }
+    if !(args.student_minutes.is_finite() && args.student_minutes >= 0.0) {
+        anyhow::bail!(
+            "--student-minutes must be zero or positive, got {}",
+            args.student_minutes
+        );
+    }
     let job = DemoJob {
         out: args.out.clone(),
         scene: SynthConfig {
@@ -56,7 +65,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         student_iters: args.student_iters,
     };
     job.check()?;
-    let stop = stop_on_ctrl_c()?;
+    let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);
     let Some(report) = job.run(&stop, &mut show)? else {
@@ -68,5 +77,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         .models
         .first()
         .map_or(0, |m| m.frames.len());
-    crate::eval_cmd::print_evaluation(&report.evaluation, &report.eval_dir, n)
+    crate::eval_cmd::print_evaluation(&report.evaluation, &report.eval_dir, n)?;
+    report.evaluation.check_finite()?;
+    Ok(())
 }

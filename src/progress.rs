@@ -32,6 +32,7 @@ impl EventPrinter {
             JobEvent::Stage(line) => println!("== {line}"),
             JobEvent::Note(line) => eprintln!("{line}"),
             JobEvent::TrainingStarts { stage, step, iters } => {
+                arm_ctrl_c();
                 let bar = progress_bar(*iters as u64, stage);
                 bar.set_position(*step as u64);
                 self.last_val.clear();
@@ -112,18 +113,25 @@ impl EventPrinter {
     }
 }
 
-/// A flag set by Ctrl-C: training stops at the next step with a checkpoint.
-pub fn stop_on_ctrl_c() -> anyhow::Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
-    use anyhow::Context;
-    use std::sync::atomic::{AtomicBool, Ordering};
+/// The flag that stops training at the next step with a checkpoint. Ctrl-C sets it once a
+/// training stage has started ([`arm_ctrl_c`]); before that, Ctrl-C ends the process as usual.
+pub fn stop_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    use std::sync::atomic::AtomicBool;
     use std::sync::{Arc, OnceLock};
     static STOP: OnceLock<Arc<AtomicBool>> = OnceLock::new();
-    if let Some(s) = STOP.get() {
-        return Ok(s.clone());
-    }
-    let flag = Arc::new(AtomicBool::new(false));
-    let handler = flag.clone();
-    ctrlc::set_handler(move || handler.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
-    Ok(STOP.get_or_init(|| flag).clone())
+    STOP.get_or_init(|| Arc::new(AtomicBool::new(false)))
+        .clone()
+}
+
+/// Makes Ctrl-C set [`stop_flag`] (once per process).
+fn arm_ctrl_c() {
+    use std::sync::OnceLock;
+    use std::sync::atomic::Ordering;
+    static ARMED: OnceLock<()> = OnceLock::new();
+    ARMED.get_or_init(|| {
+        let flag = stop_flag();
+        if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)) {
+            eprintln!("Ctrl-C will end training without a checkpoint: {e}");
+        }
+    });
 }

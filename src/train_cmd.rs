@@ -10,7 +10,7 @@ use nldf_train::job::JobEvent;
 use nldf_train::job::student::{StudentJob, StudentSource};
 use nldf_train::job::teacher::{TeacherJob, TeacherSource};
 
-use crate::progress::{EventPrinter, stop_on_ctrl_c};
+use crate::progress::{EventPrinter, stop_flag};
 
 #[derive(Subcommand, Debug)]
 pub enum TrainCommand {
@@ -225,7 +225,7 @@ impl TeacherArgs {
 
 /// Runs `nldf train student`.
 fn run_student(args: StudentArgs) -> Result<()> {
-    let stop = stop_on_ctrl_c()?;
+    let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);
     args.job().plan(&mut show)?.run(&stop, &mut show)?;
@@ -234,7 +234,7 @@ fn run_student(args: StudentArgs) -> Result<()> {
 
 /// Runs `nldf train teacher`.
 fn run_teacher(args: TeacherArgs) -> Result<()> {
-    let stop = stop_on_ctrl_c()?;
+    let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);
     args.job().plan(&mut show)?.run(&stop, &mut show)?;

@@ -53,7 +53,9 @@ impl Bounds {
 /// Where a scene's rays are sampled: the head's bounds, within `[near, far]` along each ray.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HeadRange {
+    /// The head's box.
     pub bounds: Bounds,
+    /// Where rays start and end, in units of the ray direction's length.
     pub near: f32,
     pub far: f32,
 }

@@ -630,11 +630,13 @@ fn npy_header_shape(bytes: &[u8]) -> Option<Vec<u64>> {
 
 /// [`load_audio_npy`] on bytes already read; `path` names them in errors.
 pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
-    // npyz multiplies the header's dimensions unchecked: a shape whose size overflows must
-    // be refused before it reads the header.
+    // npyz multiplies the header's dimensions unchecked (the size, and the strides from the
+    // last dimension back): a shape whose non-zero dimensions overflow when multiplied must
+    // be refused before it reads the header, even when another dimension is 0.
     if let Some(shape) = npy_header_shape(bytes)
         && shape
             .iter()
+            .filter(|&&d| d != 0)
             .try_fold(1u64, |acc, &d| acc.checked_mul(d))
             .is_none()
     {

@@ -121,6 +121,7 @@ pub fn rays_for_image(camera: &Camera) -> Rays {
 /// Rays of an image with the pixel each goes through.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct PixelRays {
+    /// The rays, in pixel order.
     pub rays: Rays,
     /// The row-major pixel index (`j * width + i`) of each ray.
     pub pixels: Vec<usize>,

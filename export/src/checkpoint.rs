@@ -44,6 +44,12 @@ impl StudentCheckpoint {
         let model = config.get("model").ok_or_else(|| {
             Error::invalid(&config_path, "has no `model` field (not a student config?)")
         })?;
+        if let Some(key) = missing_key(model) {
+            return Err(Error::invalid(
+                &config_path,
+                format!("`{key}` is missing (not a config the trainer wrote?)"),
+            ));
+        }
         let shape: StudentConfig = serde_json::from_value(model.clone()).map_err(|e| {
             Error::invalid(
                 &config_path,
@@ -200,4 +206,27 @@ pub fn parse_weights(path: &Path, bytes: &[u8]) -> Result<(HashMap<String, Weigh
         );
     }
     Ok((weights, step))
+}
+
+/// The first key of a student's shape (under `model`, and under `model.audio`) that the
+/// stored `model` lacks: the trainer writes every key, so a missing one is a damaged or
+/// foreign file, not a default to fill in.
+fn missing_key(model: &serde_json::Value) -> Option<String> {
+    let full = serde_json::to_value(StudentConfig::default()).ok()?;
+    let keys = |v: &serde_json::Value| -> Vec<String> {
+        v.as_object()
+            .map(|o| o.keys().cloned().collect())
+            .unwrap_or_default()
+    };
+    for key in keys(&full) {
+        if model.get(&key).is_none() {
+            return Some(format!("model.{key}"));
+        }
+    }
+    for key in keys(&full["audio"]) {
+        if model["audio"].get(&key).is_none() {
+            return Some(format!("model.audio.{key}"));
+        }
+    }
+    None
 }

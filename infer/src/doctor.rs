@@ -11,7 +11,9 @@ use crate::video::ffmpeg_on_path;
 /// One line of the report: what was checked, and what was found.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Finding {
+    /// What was checked.
     pub what: &'static str,
+    /// What was found, or what is missing and how to get it.
     pub found: String,
 }
 
@@ -41,7 +43,11 @@ pub fn findings() -> Vec<Finding> {
                 f.path.display(),
                 f.place
             ),
-            Err(e) => format!("not found: {e}"),
+            Err(e) => {
+                let message = e.to_string();
+                let message = message.strip_prefix("onnxruntime: ").unwrap_or(&message);
+                format!("not found: {message}")
+            }
         },
     });
     out.push(Finding {

@@ -46,6 +46,7 @@ pub struct OrtSearch {
 /// A library found, and where.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FoundOrt {
+    /// The library file.
     pub path: PathBuf,
     /// Which place of the search order held it.
     pub place: &'static str,
@@ -157,7 +158,7 @@ pub fn venv_library(root: &Path) -> Option<PathBuf> {
         .filter(|e| e.file_name().to_string_lossy().starts_with("python3"))
         .filter_map(|e| newest_library(&e.path().join("site-packages/onnxruntime/capi")))
         .collect();
-    found.sort();
+    found.sort_by_key(|p| version_key(p));
     found.pop()
 }
 
@@ -190,7 +191,7 @@ fn newest_library(dir: &Path) -> Option<PathBuf> {
                 && p.is_file()
         })
         .collect();
-    found.sort();
+    found.sort_by_key(|p| version_key(p));
     found.pop()
 }
 
@@ -200,4 +201,13 @@ pub fn on_path(name: &str) -> Option<PathBuf> {
     std::env::split_paths(&path)
         .map(|dir| dir.join(name))
         .find(|p| p.is_file())
+}
+
+/// The numbers in a path, in order, so that `python3.12` sorts after `python3.9` and
+/// `libonnxruntime.so.1.31.1` after `libonnxruntime.so.1.9.0`.
+fn version_key(path: &Path) -> Vec<u64> {
+    path.to_string_lossy()
+        .split(|c: char| !c.is_ascii_digit())
+        .filter_map(|d| d.parse().ok())
+        .collect()
 }

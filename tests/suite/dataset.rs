@@ -291,9 +291,19 @@ fn float64_audio_loads_as_f32() {
 
 #[test]
 fn an_npy_header_whose_shape_overflows_is_refused_in_one_line() {
-    // A valid v1.0 header whose dimensions multiply past u64: the npy reader must answer
-    // with an error, not an arithmetic overflow.
-    let dict = "{'descr': '<f4', 'fortran_order': False, 'shape': (4294967296, 16, 4294967296), }";
+    // Valid v1.0 headers whose dimensions multiply past u64 (also behind a zero dimension,
+    // which npyz's strides multiply past): the npy reader must answer with an error, not an
+    // arithmetic overflow.
+    for shape in [
+        "(4294967296, 16, 4294967296)",
+        "(0, 8589934592, 8589934592)",
+    ] {
+        overflowing_npy_is_refused(shape);
+    }
+}
+
+fn overflowing_npy_is_refused(shape: &str) {
+    let dict = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
     let mut header = dict.to_string();
     while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');

@@ -236,3 +236,30 @@ pub fn eval_models(
     save_json(&out.join("metrics.json"), &evaluation)?;
     Ok(evaluation)
 }
+
+impl Evaluation {
+    /// An error naming every model that rendered NaN or infinite pixels, if any did.
+    pub fn check_finite(&self) -> Result<()> {
+        let broken: Vec<String> = self
+            .models
+            .iter()
+            .filter(|r| r.non_finite_frames > 0)
+            .map(|r| {
+                format!(
+                    "{} rendered {} of {} frames with NaN or infinite pixels",
+                    r.model,
+                    r.non_finite_frames,
+                    r.frames.len()
+                )
+            })
+            .collect();
+        if broken.is_empty() {
+            Ok(())
+        } else {
+            Err(Error::NonFinite(format!(
+                "{}; their scores are void",
+                broken.join("; ")
+            )))
+        }
+    }
+}

@@ -11,9 +11,13 @@ use crate::kernels::matmul_tn;
 /// A weight `[out, inp]` (and bias `[out]`) inside the flat parameter tensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Affine {
+    /// Offset of the weight `[out, inp]` in the flat parameters.
     pub weight: usize,
+    /// Offset of the bias `[out]`, when the layer has one.
     pub bias: Option<usize>,
+    /// Output width.
     pub out: usize,
+    /// Input width.
     pub inp: usize,
 }
 

@@ -2,8 +2,7 @@
 //! of [`crate::kernels`].
 //!
 //! At 88 x 256 and 4096 rays, candle's own ops spend more time on zero-filled gradient
-//! buffers, bias sums and element-wise passes than on the matrix products (measured:
-//! about 10 % of the machine's peak). This op keeps the activations the backward needs
+//! buffers, bias sums and element-wise passes than on the matrix products. This op keeps the activations the backward needs
 //! (every block's hidden and output rows) and computes all gradients in one pass: the ReLU
 //! mask and the bias sum in one sweep, the residual added in the product's epilogue. The
 //! weights enter as one flat tensor (a `cat` of the variables), so candle's optimizer and

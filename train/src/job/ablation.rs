@@ -6,7 +6,7 @@
 //! `RUN/ablation.json` and `RUN/ablation.png` (validation PSNR against wall time).
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{LOG_FILE, TARGETS_FILE, has_checkpoint, teacher_dir};
@@ -43,11 +43,17 @@ pub struct AblationJob {
 /// One row of the ablation.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AblationRow {
+    /// The paper's table the row belongs to (`1: distillation`, ...).
     pub table: String,
+    /// What the variant is.
     pub variant: String,
+    /// Its student folder.
     pub folder: PathBuf,
+    /// Training steps done.
     pub steps: usize,
+    /// Training minutes (its teacher targets included).
     pub minutes: f64,
+    /// Scores over every validation frame.
     pub psnr: f64,
     pub ssim: f64,
     pub face_psnr: Option<f64>,
@@ -57,9 +63,11 @@ pub struct AblationRow {
 /// What the ablation wrote.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AblationReport {
+    /// One row per variant, in training order.
     pub rows: Vec<AblationRow>,
     /// The Markdown table (also in `ablation.md`).
     pub markdown: String,
+    /// `ablation.md`, `ablation.json` and `ablation.png`.
     pub files: Vec<PathBuf>,
 }
 
@@ -70,6 +78,8 @@ type Variant = (String, String, String, StudentJob);
 pub struct AblationPlan {
     job: AblationJob,
     teacher: TeacherRun,
+    /// The teacher's training minutes, as its checkpoint records them.
+    teacher_minutes: f64,
     data: TrainData,
     variants: Vec<Variant>,
 }
@@ -78,11 +88,14 @@ impl AblationJob {
     /// Opens the teacher and the data and lists the variants; nothing is trained yet.
     pub fn plan(&self) -> Result<AblationPlan> {
         if self.iters == 0 {
-            return Err(Error::Config("--iters must be at least 1".into()));
+            return Err(Error::Config(
+                "the ablation needs at least 1 training step per variant".into(),
+            ));
         }
         let dir = teacher_dir(&self.run);
         let teacher = TeacherRun::open(&dir, false)
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
+        let teacher_minutes = teacher.elapsed() / 60.0;
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
         let data = TrainData::open_with(&self.data, false, &audio)?;
         let base = |model: &StudentConfig, distill: bool, pool: bool| StudentJob {
@@ -131,6 +144,7 @@ impl AblationJob {
         Ok(AblationPlan {
             job: self.clone(),
             teacher,
+            teacher_minutes,
             data,
             variants,
         })
@@ -141,7 +155,7 @@ impl AblationPlan {
     /// Trains (or reuses) every variant, scores each on the whole validation split and
     /// writes the reports.
     pub fn run(self, stop: &AtomicBool, on_event: OnEvent) -> Result<AblationReport> {
-        let teacher_minutes = self.teacher.elapsed() / 60.0;
+        let teacher_minutes = self.teacher_minutes;
         let n_val = self.data.dataset.frames(Split::Val).len().max(1);
         let mut rows = Vec::new();
         let mut train =
@@ -180,6 +194,10 @@ impl AblationPlan {
             };
         for (table, label, name, job) in &self.variants {
             rows.push(train(table, label, name, job.clone())?);
+            if stop.load(Ordering::Relaxed) {
+                // Interrupted: report the variants trained so far; a new run resumes.
+                return write_reports(&self.job.run, &self.teacher, teacher_minutes, rows);
+            }
         }
         if self.job.wall_time {
             let d = &self.job.model.0;
@@ -299,6 +317,8 @@ fn share_targets(run: &Path, dir: &Path) -> Result<()> {
         return Ok(());
     };
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    std::fs::copy(&source, dir.join(TARGETS_FILE)).map_err(|e| Error::io(&source, e))?;
+    let dest = dir.join(TARGETS_FILE);
+    std::fs::copy(&source, &dest)
+        .map_err(|e| Error::io(&dest, e).context(format!("copying {}", source.display())))?;
     Ok(())
 }

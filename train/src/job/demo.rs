@@ -58,13 +58,13 @@ impl DemoJob {
     pub fn check(&self) -> Result<()> {
         if !(self.teacher_minutes.is_finite() && self.teacher_minutes > 0.0) {
             return Err(Error::Config(format!(
-                "--minutes must be positive, got {}",
+                "the teacher's budget must be positive, got {} minutes",
                 self.teacher_minutes
             )));
         }
         if !(self.student_minutes.is_finite() && self.student_minutes >= 0.0) {
             return Err(Error::Config(format!(
-                "--student-minutes must be zero or positive, got {}",
+                "the student's budget must be zero or positive, got {} minutes",
                 self.student_minutes
             )));
         }
@@ -73,7 +73,8 @@ impl DemoJob {
     }
 
     /// Runs every stage in turn; `stop` ends the training stage under way with a checkpoint
-    /// and skips the rest.
+    /// and skips the rest. The evaluation is returned even when a model rendered NaN or
+    /// infinite pixels: see [`Evaluation::check_finite`].
     pub fn run(&self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<DemoReport>> {
         self.check()?;
         let data = self.out.join("data");
@@ -179,7 +180,6 @@ impl DemoJob {
         }
         .plan(on_event)?;
         let evaluation = plan.run(on_event)?;
-        evaluation.check_finite()?;
         Ok(Some(DemoReport {
             model,
             evaluation,

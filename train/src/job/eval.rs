@@ -29,10 +29,15 @@ pub struct EvalJob {
 
 /// A checked evaluation: every model and the data loaded.
 pub struct EvalPlan {
+    /// The run's teacher.
     pub teacher: TeacherRun,
+    /// Every student folder of the run, in name order.
     pub students: Vec<StudentRun>,
+    /// The dataset with the teacher's audio features.
     pub data: TrainData,
+    /// The split rendered.
     pub split: Split,
+    /// At most this many frames of it.
     pub frames: Option<usize>,
     /// Where the renders, the grid and `metrics.json` go.
     pub out: PathBuf,
@@ -113,32 +118,5 @@ impl EvalPlan {
             },
         )?;
         Ok(evaluation)
-    }
-}
-
-impl Evaluation {
-    /// An error naming every model that rendered NaN or infinite pixels, if any did.
-    pub fn check_finite(&self) -> Result<()> {
-        let broken: Vec<String> = self
-            .models
-            .iter()
-            .filter(|r| r.non_finite_frames > 0)
-            .map(|r| {
-                format!(
-                    "{} rendered {} of {} frames with NaN or infinite pixels",
-                    r.model,
-                    r.non_finite_frames,
-                    r.frames.len()
-                )
-            })
-            .collect();
-        if broken.is_empty() {
-            Ok(())
-        } else {
-            Err(Error::NonFinite(format!(
-                "{}; their scores are void",
-                broken.join("; ")
-            )))
-        }
     }
 }

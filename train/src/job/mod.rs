@@ -11,9 +11,14 @@ pub mod student;
 pub mod teacher;
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use nldf_core::run_files::has_checkpoint;
 
 use crate::data::TrainData;
+use crate::error::{Error, Result};
 use crate::run_loop::Event;
+use crate::run_loop::TrainingRun;
 use crate::scores::Scores;
 
 /// What a job reports as it goes.
@@ -67,4 +72,50 @@ pub(crate) fn wrote(dir: &Path, files: &[&str]) -> JobEvent {
         dir: dir.to_path_buf(),
         files: files.iter().map(|f| dir.join(f)).collect(),
     }
+}
+
+/// Refuses a new run over a checkpoint, and a resume without one.
+pub(crate) fn check_resume(dir: &std::path::Path, what: &str, resume: bool) -> Result<()> {
+    let exists = has_checkpoint(dir);
+    if exists && !resume {
+        return Err(Error::Config(format!(
+            "{} already holds a {what}; pass --resume to continue it or choose another --run",
+            dir.display()
+        )));
+    }
+    if resume && !exists {
+        return Err(Error::Config(format!(
+            "{} holds no {what} checkpoint to resume",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Runs the training loop of `run` as stage `stage`, forwarding its events.
+pub(crate) fn train_stage(
+    stage: &str,
+    run: &mut dyn TrainingRun,
+    data: &TrainData,
+    stop: &AtomicBool,
+    on_event: OnEvent,
+) -> Result<Option<Scores>> {
+    on_event(&JobEvent::TrainingStarts {
+        stage: stage.to_string(),
+        step: run.step(),
+        iters: run.schedule().iters,
+    });
+    let scores = crate::run_loop::train_loop(run, data, stop, &mut |event| {
+        on_event(&JobEvent::Training {
+            stage: stage.to_string(),
+            event: event.clone(),
+        })
+    })?;
+    on_event(&JobEvent::TrainingEnds {
+        stage: stage.to_string(),
+        step: run.step(),
+        interrupted: stop.load(Ordering::Relaxed),
+        scores,
+    });
+    Ok(scores)
 }

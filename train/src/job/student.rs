@@ -11,8 +11,7 @@ use nldf_core::run_files::{CONFIG_FILE, STUDENT_FILES, has_checkpoint, teacher_d
 use crate::config::{RunConfig, StudentRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::job::teacher::{check_resume, train_stage};
-use crate::job::{JobEvent, OnEvent, audio_note, wrote};
+use crate::job::{JobEvent, OnEvent, audio_note, check_resume, train_stage, wrote};
 use crate::scores::Scores;
 use crate::student::StudentConfig;
 use crate::student_trainer::StudentRun;
@@ -56,8 +55,11 @@ pub struct StudentJob {
 
 /// A checked student job: data loaded, teacher opened, run created or opened.
 pub struct StudentPlan {
+    /// The run, created or opened.
     pub run: StudentRun,
+    /// The dataset with the teacher's audio features, its training frames decoded.
     pub data: TrainData,
+    /// The teacher to distil from, when the run folder has one.
     pub teacher: Option<TeacherRun>,
 }
 

@@ -2,16 +2,15 @@
 //! resumed one, checked before any step is taken.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use nldf_core::dataset::AudioChoice;
-use nldf_core::run_files::{CONFIG_FILE, TEACHER_FILES, has_checkpoint, teacher_dir};
+use nldf_core::run_files::{CONFIG_FILE, TEACHER_FILES, teacher_dir};
 
 use crate::config::{RunConfig, TeacherConfig, TeacherRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::job::{JobEvent, OnEvent, audio_note, wrote};
-use crate::run_loop::TrainingRun;
+use crate::job::{JobEvent, OnEvent, audio_note, check_resume, train_stage, wrote};
 use crate::scores::Scores;
 use crate::teacher_trainer::TeacherRun;
 
@@ -45,26 +44,10 @@ pub struct TeacherJob {
 
 /// A checked teacher job: the data is loaded and the run created or opened.
 pub struct TeacherPlan {
+    /// The run, created or opened.
     pub run: TeacherRun,
+    /// The dataset with the run's audio features, its training frames decoded.
     pub data: TrainData,
-}
-
-/// Refuses a new run over a checkpoint, and a resume without one.
-pub(crate) fn check_resume(dir: &std::path::Path, what: &str, resume: bool) -> Result<()> {
-    let exists = has_checkpoint(dir);
-    if exists && !resume {
-        return Err(Error::Config(format!(
-            "{} already holds a {what}; pass --resume to continue it or choose another --run",
-            dir.display()
-        )));
-    }
-    if resume && !exists {
-        return Err(Error::Config(format!(
-            "{} holds no {what} checkpoint to resume",
-            dir.display()
-        )));
-    }
-    Ok(())
 }
 
 impl TeacherJob {
@@ -129,32 +112,4 @@ impl TeacherPlan {
         on_event(&wrote(&self.run.dir, TEACHER_FILES));
         Ok(scores)
     }
-}
-
-/// Runs the training loop of `run` as stage `stage`, forwarding its events.
-pub(crate) fn train_stage(
-    stage: &str,
-    run: &mut dyn TrainingRun,
-    data: &TrainData,
-    stop: &AtomicBool,
-    on_event: OnEvent,
-) -> Result<Option<Scores>> {
-    on_event(&JobEvent::TrainingStarts {
-        stage: stage.to_string(),
-        step: run.step(),
-        iters: run.schedule().iters,
-    });
-    let scores = crate::run_loop::train_loop(run, data, stop, &mut |event| {
-        on_event(&JobEvent::Training {
-            stage: stage.to_string(),
-            event: event.clone(),
-        })
-    })?;
-    on_event(&JobEvent::TrainingEnds {
-        stage: stage.to_string(),
-        step: run.step(),
-        interrupted: stop.load(Ordering::Relaxed),
-        scores,
-    });
-    Ok(scores)
 }
