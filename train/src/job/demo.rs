@@ -90,12 +90,28 @@ impl DemoJob {
             )));
             let total = (self.scene.seconds * self.scene.fps).floor() as usize;
             let done = std::sync::atomic::AtomicUsize::new(0);
-            let summary = synth::generate(&self.scene, None, &data, false, &|| {
-                done.fetch_add(1, Ordering::Relaxed);
-            })?;
+            // The scene renders on its own thread; this one reports its frames as they come.
+            let summary = std::thread::scope(|scope| {
+                let synth = scope.spawn(|| {
+                    synth::generate(&self.scene, None, &data, false, &|| {
+                        done.fetch_add(1, Ordering::Relaxed);
+                    })
+                });
+                while !synth.is_finished() {
+                    on_event(&JobEvent::Progress {
+                        what: "synthetic frames".into(),
+                        done: done.load(Ordering::Relaxed).min(total.saturating_sub(1)),
+                        total,
+                    });
+                    std::thread::sleep(std::time::Duration::from_millis(200));
+                }
+                synth
+                    .join()
+                    .map_err(|_| Error::Config("the synthetic scene's thread panicked".into()))
+            })??;
             on_event(&JobEvent::Progress {
                 what: "synthetic frames".into(),
-                done: done.load(Ordering::Relaxed),
+                done: total,
                 total,
             });
             on_event(&JobEvent::Wrote {
