@@ -27,7 +27,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// The whole pipeline on the synthetic talking head: scene, teacher, evaluation.
+    /// The whole pipeline on the synthetic talking head: scene, teacher, student, ONNX
+    /// export and evaluation of both on the held-out frames.
     Demo(demo_cmd::DemoArgs),
     /// Generate the synthetic talking head as an AD-NeRF dataset (frames, background, audio,
     /// audio features, camera poses, depth, parsing masks and scene.json ground truth).
@@ -48,7 +49,8 @@ enum Command {
     /// The paper's ablations on one dataset: distillation, the beam pool, depth, and a
     /// pixels-only student at the same total wall time.
     Ablate(ablate_cmd::AblateArgs),
-    /// Measure training throughput (and, later, rendering speed against error).
+    /// Benchmarks: training steps, the positional encoding, frame rendering (tract and
+    /// onnxruntime) and streaming latency, each written as JSON and Markdown.
     #[command(subcommand)]
     Bench(bench_cmd::BenchCommand),
     /// Show what nldf finds on this machine: CPU features and threads, the onnxruntime
