@@ -16,53 +16,77 @@ use crate::train_cmd::TeacherPreset;
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
     /// Run folder: the dataset goes to OUT/data, the teacher to OUT/teacher, the evaluation
-    /// to OUT/eval/val.
-    #[arg(long, default_value = "runs/demo")]
-    pub out: PathBuf,
+    /// to OUT/eval/val [default: runs/demo, with --quick runs/demo_quick].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Seed of the synthetic scene.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Teacher training budget in minutes of wall-clock time.
-    #[arg(long, default_value_t = 20.0)]
-    pub minutes: f64,
+    /// Teacher training budget in minutes of wall-clock time [default: 20, with --quick
+    /// 1].
+    #[arg(long)]
+    pub minutes: Option<f64>,
     /// Student training budget in minutes (its teacher targets included; 0 skips the
-    /// student and the export).
-    #[arg(long, default_value_t = 20.0)]
-    pub student_minutes: f64,
+    /// student and the export) [default: 20, with --quick 1].
+    #[arg(long)]
+    pub student_minutes: Option<f64>,
     /// Student depth (28 trains about three times as many steps as 88 in the same time on
     /// a 2-core machine).
     #[arg(long, value_enum, default_value_t = crate::train_cmd::StudentDepth::D28)]
     pub student_depth: crate::train_cmd::StudentDepth,
     /// Student training steps (the learning rate decays over them; the budget may end
-    /// the run first).
-    #[arg(long, default_value_t = 3000)]
-    pub student_iters: usize,
+    /// the run first) [default: 3000, with --quick 400].
+    #[arg(long)]
+    pub student_iters: Option<usize>,
+    /// A first look in a few minutes: a 64 x 64 scene of 4 s and short budgets (far from
+    /// converged; the default run is the one to judge quality by).
+    #[arg(long)]
+    pub quick: bool,
 }
 
 /// Runs `nldf demo`.
 pub fn run(args: DemoArgs) -> Result<()> {
-    if !(args.minutes.is_finite() && args.minutes > 0.0) {
-        anyhow::bail!("--minutes must be positive, got {}", args.minutes);
+    let quick = args.quick;
+    let pick = |full: f64, fast: f64| if quick { fast } else { full };
+    let minutes = args.minutes.unwrap_or(pick(20.0, 1.0));
+    let student_minutes = args.student_minutes.unwrap_or(pick(20.0, 1.0));
+    if !(minutes.is_finite() && minutes > 0.0) {
+        anyhow::bail!("--minutes must be positive, got {minutes}");
     }
-    if !(args.student_minutes.is_finite() && args.student_minutes >= 0.0) {
-        anyhow::bail!(
-            "--student-minutes must be zero or positive, got {}",
-            args.student_minutes
-        );
+    if !(student_minutes.is_finite() && student_minutes >= 0.0) {
+        anyhow::bail!("--student-minutes must be zero or positive, got {student_minutes}");
     }
-    let job = DemoJob {
-        out: args.out.clone(),
-        scene: SynthConfig {
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from(if quick {
+            "runs/demo_quick"
+        } else {
+            "runs/demo"
+        })
+    });
+    let scene = if quick {
+        SynthConfig {
+            seed: args.seed,
+            seconds: 4.0,
+            size: 64,
+            supersample: 1,
+            ..SynthConfig::default()
+        }
+    } else {
+        SynthConfig {
             seed: args.seed,
             size: 128,
             supersample: 3,
             ..SynthConfig::default()
-        },
+        }
+    };
+    let job = DemoJob {
+        out,
+        scene,
         teacher: TeacherPreset::Small.config(),
-        teacher_minutes: args.minutes,
+        teacher_minutes: minutes,
         student: args.student_depth.config(),
-        student_minutes: args.student_minutes,
-        student_iters: args.student_iters,
+        student_minutes,
+        student_iters: args.student_iters.unwrap_or(if quick { 400 } else { 3000 }),
     };
     job.check()?;
     let stop = stop_flag();
