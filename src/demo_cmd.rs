@@ -88,7 +88,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
         student_minutes,
         student_iters: args.student_iters.unwrap_or(if quick { 400 } else { 3000 }),
     };
-    job.check()?;
     let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);

@@ -45,11 +45,22 @@ pub trait RunConfig: DeserializeOwned {
     fn check(&self) -> Result<()>;
 }
 
+/// [`RunConfig::check`], its error saying "invalid configuration" and naming `file` when
+/// the configuration came from one.
+pub fn check_config<T: RunConfig>(cfg: &T, file: Option<&Path>) -> Result<()> {
+    cfg.check().map_err(|e| {
+        let problem = format!("invalid configuration: {e}");
+        match file {
+            Some(path) => Error::invalid(path, problem),
+            None => Error::Config(problem),
+        }
+    })
+}
+
 /// [`parse_config`], then [`RunConfig::check`]: either error names `path`.
 pub fn parse_checked<T: RunConfig>(path: &Path, text: &str) -> Result<T> {
     let cfg: T = parse_config(path, text)?;
-    cfg.check()
-        .map_err(|e| Error::invalid(path, format!("invalid configuration: {e}")))?;
+    check_config(&cfg, Some(path))?;
     Ok(cfg)
 }
 

@@ -71,8 +71,8 @@ pub struct AblationReport {
     pub files: Vec<PathBuf>,
 }
 
-/// One fixed-iteration variant: table, label, folder name, student job.
-type Variant = (String, String, String, StudentJob);
+/// One fixed-iteration variant: table, label, and the student job (named for its folder).
+type Variant = (String, String, StudentJob);
 
 /// A checked ablation: the teacher and the data are loaded, the variants listed.
 pub struct AblationPlan {
@@ -82,6 +82,9 @@ pub struct AblationPlan {
     teacher_minutes: f64,
     data: TrainData,
     variants: Vec<Variant>,
+    /// The pixels-only student of Table 4, whose budget is set once the distilled variant
+    /// has trained; `None` without it.
+    wall_time: Option<StudentJob>,
 }
 
 impl AblationJob {
@@ -98,10 +101,10 @@ impl AblationJob {
         let teacher_minutes = teacher.elapsed() / 60.0;
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
         let data = TrainData::open_with(&self.data, false, &audio)?;
-        let base = |model: &StudentConfig, distill: bool, pool: bool| StudentJob {
+        let base = |name: String, model: &StudentConfig, distill: bool, pool: bool| StudentJob {
             data: self.data.clone(),
             run: self.run.clone(),
-            name: String::new(),
+            name,
             source: StudentSource::Settings {
                 model: model.clone(),
                 distill,
@@ -117,36 +120,37 @@ impl AblationJob {
             (
                 "1: distillation".into(),
                 format!("depth {d}, distilled"),
-                format!("ablate_d{d}"),
-                base(model, true, true),
+                base(format!("ablate_d{d}"), model, true, true),
             ),
             (
                 "1: distillation".into(),
                 format!("depth {d}, pixels only"),
-                format!("ablate_d{d}_pixels"),
-                base(model, false, true),
+                base(format!("ablate_d{d}_pixels"), model, false, true),
             ),
             (
                 "2: beam pool".into(),
                 format!("depth {d}, distilled, no pool"),
-                format!("ablate_d{d}_nopool"),
-                base(model, true, false),
+                base(format!("ablate_d{d}_nopool"), model, true, false),
             ),
         ];
         for (dn, shape) in self.depths.iter().filter(|(dn, _)| dn != d) {
             variants.push((
                 "3: depth".into(),
                 format!("depth {dn}, distilled"),
-                format!("ablate_d{dn}"),
-                base(shape, true, true),
+                base(format!("ablate_d{dn}"), shape, true, true),
             ));
         }
+        let wall_time = self.wall_time.then(|| StudentJob {
+            iters: Some(1_000_000),
+            ..base(format!("ablate_d{d}_pixels_walltime"), model, false, true)
+        });
         Ok(AblationPlan {
             job: self.clone(),
             teacher,
             teacher_minutes,
             data,
             variants,
+            wall_time,
         })
     }
 }
@@ -158,72 +162,54 @@ impl AblationPlan {
         let teacher_minutes = self.teacher_minutes;
         let n_val = self.data.dataset.frames(Split::Val).len().max(1);
         let mut rows = Vec::new();
-        let mut train =
-            |table: &str, label: &str, name: &str, job: StudentJob| -> Result<AblationRow> {
-                let job = StudentJob {
-                    name: name.to_string(),
-                    ..job
-                };
-                let dir = job.dir();
-                // A finished variant resumes with nothing left to do.
-                let job = StudentJob {
-                    resume: has_checkpoint(&dir),
-                    ..job
-                };
-                on_event(&JobEvent::Stage(format!(
-                    "{table}: {label} -> {}",
-                    dir.display()
-                )));
-                if matches!(job.source, StudentSource::Settings { distill: true, .. }) {
-                    share_targets(&self.job.run, &dir)?;
-                }
-                job.plan(on_event)?.run(stop, on_event)?;
-                let run = StudentRun::open(&dir, false)?;
-                let s = run.validation_scores(&self.data, n_val)?;
-                Ok(AblationRow {
-                    table: table.into(),
-                    variant: label.into(),
-                    folder: dir,
-                    steps: run.step,
-                    minutes: run.elapsed() / 60.0,
-                    psnr: s.psnr,
-                    ssim: s.ssim,
-                    face_psnr: s.face_psnr,
-                    mouth_psnr: s.mouth_psnr,
-                })
+        let mut train = |table: &str, label: &str, job: StudentJob| -> Result<AblationRow> {
+            let dir = job.dir();
+            // A finished variant resumes with nothing left to do.
+            let job = StudentJob {
+                resume: has_checkpoint(&dir),
+                ..job
             };
-        for (table, label, name, job) in &self.variants {
-            rows.push(train(table, label, name, job.clone())?);
+            on_event(&JobEvent::Stage(format!(
+                "{table}: {label} -> {}",
+                dir.display()
+            )));
+            if matches!(job.source, StudentSource::Settings { distill: true, .. }) {
+                share_targets(&self.job.run, &dir)?;
+            }
+            job.plan(on_event)?.run(stop, on_event)?;
+            let run = StudentRun::open(&dir, false)?;
+            let s = run.validation_scores(&self.data, n_val)?;
+            Ok(AblationRow {
+                table: table.into(),
+                variant: label.into(),
+                folder: dir,
+                steps: run.step,
+                minutes: run.elapsed() / 60.0,
+                psnr: s.psnr,
+                ssim: s.ssim,
+                face_psnr: s.face_psnr,
+                mouth_psnr: s.mouth_psnr,
+            })
+        };
+        for (table, label, job) in &self.variants {
+            rows.push(train(table, label, job.clone())?);
             if stop.load(Ordering::Relaxed) {
                 // Interrupted: report the variants trained so far; a new run resumes.
                 return write_reports(&self.job.run, &self.teacher, teacher_minutes, rows);
             }
         }
-        if self.job.wall_time {
+        if let Some(pixels) = self.wall_time.clone() {
             let d = &self.job.model.0;
             // Teacher time plus the distilled student's (its targets included).
             let distilled = rows.first().map(|r: &AblationRow| r.minutes).unwrap_or(0.0);
             let budget = teacher_minutes + distilled;
-            let (_, _, _, first) = &self.variants[0];
-            let pixels = StudentJob {
-                source: match &first.source {
-                    StudentSource::Settings { model, .. } => StudentSource::Settings {
-                        model: model.clone(),
-                        distill: false,
-                        pool: true,
-                        pseudo_frames: None,
-                    },
-                    other => other.clone(),
-                },
-                iters: Some(1_000_000),
-                minutes: Some(budget),
-                ..first.clone()
-            };
             rows.push(train(
                 "4: equal wall time",
                 &format!("depth {d}, pixels only, {budget:.1} min (teacher + distilled student)"),
-                &format!("ablate_d{d}_pixels_walltime"),
-                pixels,
+                StudentJob {
+                    minutes: Some(budget),
+                    ..pixels
+                },
             )?);
             rows.push(AblationRow {
                 table: "4: equal wall time".into(),

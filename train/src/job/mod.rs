@@ -13,6 +13,7 @@ pub mod teacher;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use nldf_core::dataset::AudioChoice;
 use nldf_core::run_files::has_checkpoint;
 
 use crate::data::TrainData;
@@ -56,6 +57,15 @@ pub enum JobEvent {
 
 /// The receiver of a job's events.
 pub type OnEvent<'a> = &'a mut dyn FnMut(&JobEvent);
+
+/// Loads the dataset at `root` for training (its training frames decoded) with the audio
+/// features `audio` says, and notes which features it read.
+pub(crate) fn load_data(root: &Path, audio: &AudioChoice, on_event: OnEvent) -> Result<TrainData> {
+    on_event(&JobEvent::Note(format!("loading {}", root.display())));
+    let data = TrainData::open_with(root, true, audio)?;
+    on_event(&audio_note(&data));
+    Ok(data)
+}
 
 /// The note saying which audio features a stage read.
 pub(crate) fn audio_note(data: &TrainData) -> JobEvent {

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use nldf_core::dataset::AudioChoice;
-use nldf_core::run_files::{CONFIG_FILE, STUDENT_FILES, has_checkpoint, teacher_dir};
+use nldf_core::run_files::{STUDENT_FILES, has_checkpoint, teacher_dir};
 
-use crate::config::{RunConfig, StudentRunConfig, read_config};
+use crate::config::{StudentRunConfig, check_config, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::job::{JobEvent, OnEvent, audio_note, check_resume, train_stage, wrote};
+use crate::job::{JobEvent, OnEvent, check_resume, load_data, train_stage, wrote};
 use crate::scores::Scores;
 use crate::student::StudentConfig;
 use crate::student_trainer::StudentRun;
@@ -75,85 +75,73 @@ impl StudentJob {
         let dir = self.dir();
         let teacher_dir = teacher_dir(&self.run);
         check_resume(&dir, "student", self.resume)?;
-        let cfg = if self.resume {
-            None
-        } else {
-            let mut cfg = match &self.source {
-                StudentSource::File(path) => read_config::<StudentRunConfig>(path)?,
-                StudentSource::Settings {
-                    model,
-                    distill,
-                    pool,
-                    pseudo_frames,
-                } => {
-                    let mut cfg = StudentRunConfig {
-                        model: model.clone(),
-                        ..StudentRunConfig::default()
-                    };
-                    cfg.train.distill = *distill;
-                    cfg.train.pool = *pool;
-                    if let Some(n) = pseudo_frames {
-                        cfg.train.pseudo_frames = *n;
-                    }
-                    cfg
-                }
-            };
-            if let Some(n) = self.iters {
-                cfg.train.iters = n;
-                cfg.train.lr_decay_steps = n;
-            }
-            cfg.check().map_err(|e| match &self.source {
-                StudentSource::File(path) => {
-                    Error::invalid(path, format!("invalid configuration: {e}"))
-                }
-                StudentSource::Settings { .. } => {
-                    Error::Config(format!("invalid configuration: {e}"))
-                }
-            })?;
-            Some(cfg)
-        };
         let teacher = if has_checkpoint(&teacher_dir) {
             Some(TeacherRun::open(&teacher_dir, false)?)
         } else {
             None
         };
-        on_event(&JobEvent::Note(format!("loading {}", self.data.display())));
-        // The teacher's audio features, or a resumed student's own.
-        let audio = match (&teacher, &cfg) {
-            (Some(t), _) => AudioChoice::Matching(t.cfg.model.audio.features.clone()),
-            (None, None) => {
-                let c: StudentRunConfig = read_config(&dir.join(CONFIG_FILE))?;
-                AudioChoice::Matching(c.model.audio.features)
+        // The teacher's audio features, else a resumed student's own.
+        let teachers_audio = teacher
+            .as_ref()
+            .map(|t| AudioChoice::Matching(t.cfg.model.audio.features.clone()));
+        let (mut run, data) = if self.resume {
+            let mut run = StudentRun::open(&dir, true)?;
+            if let Some(n) = self.iters {
+                run.cfg.train.iters = n;
             }
-            (None, Some(_)) => AudioChoice::Auto,
-        };
-        let data = TrainData::open_with(&self.data, true, &audio)?;
-        on_event(&audio_note(&data));
-        let mut run = match cfg {
-            Some(cfg) => {
-                if cfg.train.distill && teacher.is_none() {
-                    return Err(Error::Config(format!(
-                        "{} holds no teacher to distil from; train one with `nldf train \
-                         teacher --run {}` or pass --no-distill",
-                        teacher_dir.display(),
-                        self.run.display()
-                    )));
-                }
-                StudentRun::create(&dir, cfg, &data, teacher.as_ref())?
+            let own = AudioChoice::Matching(run.cfg.model.audio.features.clone());
+            let data = load_data(&self.data, &teachers_audio.unwrap_or(own), on_event)?;
+            on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
+            (run, data)
+        } else {
+            let cfg = self.new_config()?;
+            if cfg.train.distill && teacher.is_none() {
+                return Err(Error::Config(format!(
+                    "{} holds no teacher to distil from; train one with `nldf train \
+                     teacher --run {}` or pass --no-distill",
+                    teacher_dir.display(),
+                    self.run.display()
+                )));
             }
-            None => {
-                let mut run = StudentRun::open(&dir, true)?;
-                if let Some(n) = self.iters {
-                    run.cfg.train.iters = n;
-                }
-                on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
-                run
-            }
+            let audio = teachers_audio.unwrap_or(AudioChoice::Auto);
+            let data = load_data(&self.data, &audio, on_event)?;
+            let run = StudentRun::create(&dir, cfg, &data, teacher.as_ref())?;
+            (run, data)
         };
         if let Some(m) = self.minutes {
             run.cfg.train.time_budget_s = m * 60.0;
         }
         Ok(StudentPlan { run, data, teacher })
+    }
+
+    /// The checked configuration of a new student.
+    fn new_config(&self) -> Result<StudentRunConfig> {
+        let (mut cfg, file) = match &self.source {
+            StudentSource::File(path) => (read_config::<StudentRunConfig>(path)?, Some(path)),
+            StudentSource::Settings {
+                model,
+                distill,
+                pool,
+                pseudo_frames,
+            } => {
+                let mut cfg = StudentRunConfig {
+                    model: model.clone(),
+                    ..StudentRunConfig::default()
+                };
+                cfg.train.distill = *distill;
+                cfg.train.pool = *pool;
+                if let Some(n) = pseudo_frames {
+                    cfg.train.pseudo_frames = *n;
+                }
+                (cfg, None)
+            }
+        };
+        if let Some(n) = self.iters {
+            cfg.train.iters = n;
+            cfg.train.lr_decay_steps = n;
+        }
+        check_config(&cfg, file.map(PathBuf::as_path))?;
+        Ok(cfg)
     }
 }
 

@@ -5,12 +5,12 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 use nldf_core::dataset::AudioChoice;
-use nldf_core::run_files::{CONFIG_FILE, TEACHER_FILES, teacher_dir};
+use nldf_core::run_files::{TEACHER_FILES, teacher_dir};
 
-use crate::config::{RunConfig, TeacherConfig, TeacherRunConfig, read_config};
+use crate::config::{TeacherConfig, TeacherRunConfig, check_config, read_config};
 use crate::data::TrainData;
-use crate::error::{Error, Result};
-use crate::job::{JobEvent, OnEvent, audio_note, check_resume, train_stage, wrote};
+use crate::error::Result;
+use crate::job::{JobEvent, OnEvent, check_resume, load_data, train_stage, wrote};
 use crate::scores::Scores;
 use crate::teacher_trainer::TeacherRun;
 
@@ -56,52 +56,44 @@ impl TeacherJob {
     pub fn plan(&self, on_event: OnEvent) -> Result<TeacherPlan> {
         let dir = teacher_dir(&self.run);
         check_resume(&dir, "teacher", self.resume)?;
-        let cfg = if self.resume {
-            None
-        } else {
-            let mut cfg = match &self.source {
-                TeacherSource::File(path) => read_config::<TeacherRunConfig>(path)?,
-                TeacherSource::Preset(model) => TeacherRunConfig {
-                    model: model.clone(),
-                    ..TeacherRunConfig::default()
-                },
-            };
+        let (mut run, data) = if self.resume {
+            // The checkpoint's config says which audio features the run reads.
+            let mut run = TeacherRun::open(&dir, true)?;
             if let Some(n) = self.iters {
-                cfg.train.iters = n;
+                run.cfg.train.iters = n;
             }
-            cfg.check().map_err(|e| match &self.source {
-                TeacherSource::File(path) => {
-                    Error::invalid(path, format!("invalid configuration: {e}"))
-                }
-                TeacherSource::Preset(_) => Error::Config(format!("invalid configuration: {e}")),
-            })?;
-            Some(cfg)
-        };
-        on_event(&JobEvent::Note(format!("loading {}", self.data.display())));
-        let audio = match &cfg {
-            Some(_) => self.audio.clone(),
-            None => {
-                let c: TeacherRunConfig = read_config(&dir.join(CONFIG_FILE))?;
-                AudioChoice::Matching(c.model.audio.features)
-            }
-        };
-        let data = TrainData::open_with(&self.data, true, &audio)?;
-        on_event(&audio_note(&data));
-        let mut run = match cfg {
-            Some(cfg) => TeacherRun::create(&dir, cfg, &data)?,
-            None => {
-                let mut run = TeacherRun::open(&dir, true)?;
-                if let Some(n) = self.iters {
-                    run.cfg.train.iters = n;
-                }
-                on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
-                run
-            }
+            let audio = AudioChoice::Matching(run.cfg.model.audio.features.clone());
+            let data = load_data(&self.data, &audio, on_event)?;
+            on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
+            (run, data)
+        } else {
+            let cfg = self.new_config()?;
+            let data = load_data(&self.data, &self.audio, on_event)?;
+            (TeacherRun::create(&dir, cfg, &data)?, data)
         };
         if let Some(b) = self.budget_s {
             run.cfg.train.time_budget_s = b;
         }
         Ok(TeacherPlan { run, data })
+    }
+
+    /// The checked configuration of a new run.
+    fn new_config(&self) -> Result<TeacherRunConfig> {
+        let (mut cfg, file) = match &self.source {
+            TeacherSource::File(path) => (read_config::<TeacherRunConfig>(path)?, Some(path)),
+            TeacherSource::Preset(model) => (
+                TeacherRunConfig {
+                    model: model.clone(),
+                    ..TeacherRunConfig::default()
+                },
+                None,
+            ),
+        };
+        if let Some(n) = self.iters {
+            cfg.train.iters = n;
+        }
+        check_config(&cfg, file.map(PathBuf::as_path))?;
+        Ok(cfg)
     }
 }
 
