@@ -106,10 +106,7 @@ pub fn encode_beams_parallel(
         .for_each(|(c, chunk)| {
             let lo = c * ENCODE_CHUNK;
             let n = chunk.len() / width.max(1);
-            let part = Rays {
-                origins: rays.origins[3 * lo..3 * (lo + n)].to_vec(),
-                directions: rays.directions[3 * lo..3 * (lo + n)].to_vec(),
-            };
+            let part = rays.slice(lo..lo + n);
             match jitter_seed {
                 Some(seed) => {
                     let mut rng = ChaCha8Rng::seed_from_u64(seed);

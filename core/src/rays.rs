@@ -95,6 +95,14 @@ impl Rays {
         Vec3::from_slice(&self.origins[3 * r..3 * r + 3])
     }
 
+    /// A copy of rays `range`.
+    pub fn slice(&self, range: std::ops::Range<usize>) -> Rays {
+        Rays {
+            origins: self.origins[3 * range.start..3 * range.end].to_vec(),
+            directions: self.directions[3 * range.start..3 * range.end].to_vec(),
+        }
+    }
+
     /// Direction of ray `r`.
     pub fn direction(&self, r: usize) -> Vec3 {
         Vec3::from_slice(&self.directions[3 * r..3 * r + 3])

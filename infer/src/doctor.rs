@@ -22,7 +22,7 @@ pub fn findings() -> Vec<Finding> {
     let mut out = vec![
         Finding {
             what: "CPU",
-            found: cpu_model().unwrap_or_else(|| "unknown".into()),
+            found: nldf_core::host::cpu_model().unwrap_or_else(|| "unknown".into()),
         },
         Finding {
             what: "vector features",
@@ -81,15 +81,6 @@ fn first_line(program: &Path, flag: &str) -> Option<String> {
         .lines()
         .next()
         .map(|l| l.trim().to_string())
-}
-
-/// The CPU's model name, from `/proc/cpuinfo`.
-fn cpu_model() -> Option<String> {
-    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
-    info.lines()
-        .find(|l| l.starts_with("model name"))
-        .and_then(|l| l.split(':').nth(1))
-        .map(|m| m.trim().to_string())
 }
 
 /// The vector features the kernels and runtimes use, present or absent.

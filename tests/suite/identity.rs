@@ -10,7 +10,6 @@ use nldf_export::{WeightType, export_student, read_model};
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::FrameRenderer;
-use nldf_train::audio_net::neighbourhoods;
 use nldf_train::config::StudentRunConfig;
 use nldf_train::data::TrainData;
 use nldf_train::student::StudentConfig;
@@ -74,7 +73,8 @@ fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {
         }
         // Audio: the trainer's neighbourhood tensor against the renderer's from the WAV.
         let aud_id = frames[fi].aud_id;
-        let trained: Vec<f32> = neighbourhoods(&data.dataset.audio, &[aud_id], att)
+        let trained: Vec<f32> = data
+            .neighbourhoods(&[aud_id], att)
             .unwrap()
             .flatten_all()
             .unwrap()

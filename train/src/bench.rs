@@ -30,15 +30,7 @@ impl Machine {
     /// Reads the CPU model (`/proc/cpuinfo`), core count and the git commit of the working
     /// directory, each `unknown` when it cannot be read.
     pub fn here() -> Machine {
-        let cpu = std::fs::read_to_string("/proc/cpuinfo")
-            .ok()
-            .and_then(|t| {
-                t.lines()
-                    .find(|l| l.starts_with("model name"))
-                    .and_then(|l| l.split(':').nth(1))
-                    .map(|s| s.trim().to_string())
-            })
-            .unwrap_or_else(|| "unknown".into());
+        let cpu = nldf_core::host::cpu_model().unwrap_or_else(|| "unknown".into());
         let commit = std::process::Command::new("git")
             .args(["rev-parse", "--short", "HEAD"])
             .output()

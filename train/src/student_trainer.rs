@@ -527,10 +527,7 @@ impl StudentRun {
         let spec = &self.cfg.model.beam;
         for (c, chunk) in head.pixels.chunks(RENDER_CHUNK).enumerate() {
             let lo = c * RENDER_CHUNK;
-            let sub = Rays {
-                origins: head.rays.origins[3 * lo..3 * (lo + chunk.len())].to_vec(),
-                directions: head.rays.directions[3 * lo..3 * (lo + chunk.len())].to_vec(),
-            };
+            let sub = head.rays.slice(lo..lo + chunk.len());
             let beams = encode_beams_parallel(&sub, ds.near, ds.far, spec, None);
             let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
             let codes = code
