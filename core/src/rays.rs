@@ -6,7 +6,7 @@ use glam::Vec3;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::bounds::Bounds;
+use crate::bounds::HeadRange;
 use crate::camera::Camera;
 
 /// A pixel rectangle `[x, y, w, h]` (AD-NeRF's `face_rect`).
@@ -143,12 +143,14 @@ impl PixelRays {
     }
 }
 
-/// The rays of `camera`'s image that meet the head's `bounds` within `[near, far]`, row by
+/// The rays of `camera`'s image that meet the head's bounds within `[near, far]`, row by
 /// row, with their pixels: the only rays the student is trained on and the only ones a
 /// renderer sends through a network; every other pixel is the background. Training,
 /// evaluation and inference all take a frame's rays from here.
-pub fn head_rays(camera: &Camera, bounds: &Bounds, near: f32, far: f32) -> PixelRays {
-    pixel_rays(camera, |o, d| bounds.intersect(o, d, near, far).is_some())
+pub fn head_rays(camera: &Camera, head: &HeadRange) -> PixelRays {
+    pixel_rays(camera, |o, d| {
+        head.bounds.intersect(o, d, head.near, head.far).is_some()
+    })
 }
 
 /// Every ray of `camera`'s image with its pixel, row by row (as [`rays_for_image`]).

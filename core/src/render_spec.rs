@@ -8,7 +8,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::audio::FeatureSource;
-use crate::bounds::Bounds;
+use crate::bounds::{Bounds, HeadRange};
 use crate::camera::Intrinsics;
 use crate::dataset::{Dataset, Split};
 use crate::error::{Error, Result};
@@ -45,6 +45,15 @@ pub struct RenderSpec {
 }
 
 impl RenderSpec {
+    /// Where the scene's rays are sampled: the head's bounds within `[near, far]`.
+    pub fn head_range(&self) -> HeadRange {
+        HeadRange {
+            bounds: self.bounds,
+            near: self.near,
+            far: self.far,
+        }
+    }
+
     /// The spec of a dataset, with the given head bounds and attention width.
     pub fn of_dataset(dataset: &Dataset, bounds: Bounds, att_frames: usize) -> RenderSpec {
         let default_pose = dataset

@@ -129,7 +129,7 @@ impl FrameRenderer {
         };
         let spec = &self.backend.info().spec;
         if self.skip_rays {
-            head_rays(&camera, &spec.bounds, spec.near, spec.far)
+            head_rays(&camera, &spec.head_range())
         } else {
             all_pixel_rays(&camera)
         }

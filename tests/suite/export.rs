@@ -321,9 +321,7 @@ fn reference_frame(run: &Run, audio: &[f32]) -> Vec<f32> {
             intrinsics: spec.intrinsics,
             c2w,
         },
-        &spec.bounds,
-        spec.near,
-        spec.far,
+        &spec.head_range(),
     );
     assert!(
         !head.pixels.is_empty() && head.pixels.len() < spec.intrinsics.n_pixels(),

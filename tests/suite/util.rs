@@ -347,7 +347,7 @@ pub(crate) fn candle_frame(
 ) -> ImageRgb {
     let spec = &run.spec;
     let camera = Camera { intrinsics, c2w };
-    let head = head_rays(&camera, &spec.bounds, spec.near, spec.far);
+    let head = head_rays(&camera, &spec.head_range());
     let mut frame = background.clone();
     if !head.pixels.is_empty() {
         let (rgb, _) = candle_render(run, &head.rays, audio);

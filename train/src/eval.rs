@@ -34,7 +34,7 @@ pub trait FrameModel {
 /// Rays of a frame that hit the head's bounds.
 fn hit_rays(data: &TrainData, frame: &Frame) -> usize {
     let ds = &data.dataset;
-    nldf_core::rays::head_rays(&ds.camera(frame), &data.bounds, ds.near, ds.far)
+    nldf_core::rays::head_rays(&ds.camera(frame), &data.head_range())
         .pixels
         .len()
 }

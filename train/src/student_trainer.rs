@@ -522,7 +522,7 @@ impl StudentRun {
         data: &TrainData,
     ) -> Result<ImageRgb> {
         let ds = &data.dataset;
-        let head = head_rays(camera, &data.bounds, ds.near, ds.far);
+        let head = head_rays(camera, &data.head_range());
         let mut image = background.clone();
         let spec = &self.cfg.model.beam;
         for (c, chunk) in head.pixels.chunks(RENDER_CHUNK).enumerate() {

@@ -98,7 +98,7 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
                 .get(view.source)
                 .map(|m| m.iter().copied().collect())
                 .unwrap_or_default();
-            let head = head_rays(&view.camera, &data.bounds, ds.near, ds.far);
+            let head = head_rays(&view.camera, &data.head_range());
             let mut fb = FrameBeams::default();
             for r in 0..head.pixels.len() {
                 let (i, j) = head.pixel_ij(r, width);
