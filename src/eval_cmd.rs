@@ -11,11 +11,28 @@ use nldf_train::job::eval::EvalJob;
 
 use crate::progress::EventPrinter;
 
-/// Dataset splits.
+/// Dataset splits: AD-NeRF's two, and the evaluation splits `nldf synth` writes (the head
+/// turned beyond the recorded range and seen closer and farther; another voice; a pose
+/// sweep out to twice the recorded range).
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum SplitArg {
     Train,
     Val,
+    Novel,
+    Voice,
+    Sweep,
+}
+
+impl From<SplitArg> for Split {
+    fn from(s: SplitArg) -> Split {
+        match s {
+            SplitArg::Train => Split::Train,
+            SplitArg::Val => Split::Val,
+            SplitArg::Novel => Split::Novel,
+            SplitArg::Voice => Split::Voice,
+            SplitArg::Sweep => Split::Sweep,
+        }
+    }
 }
 
 #[derive(clap::Args, Debug)]
@@ -42,10 +59,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let job = EvalJob {
         run: args.run,
         data: args.data,
-        split: match args.split {
-            SplitArg::Train => Split::Train,
-            SplitArg::Val => Split::Val,
-        },
+        split: args.split.into(),
         frames: args.frames,
         out: args.out,
     };

@@ -28,6 +28,13 @@ pub struct SynthArgs {
     /// Sub-pixel rays per pixel along each axis (anti-aliasing).
     #[arg(long, default_value_t = 3)]
     pub supersample: u32,
+    /// How far the `novel` evaluation split turns the head: this factor times the
+    /// training frames' largest yaw and pitch.
+    #[arg(long, default_value_t = 1.5)]
+    pub novel_turn: f32,
+    /// Seed of the `voice` evaluation split's speaker (default: --seed + 1).
+    #[arg(long)]
+    pub voice_seed: Option<u64>,
     /// Replace the output folder even if it holds something other than an earlier scene.
     #[arg(long)]
     pub force: bool,
@@ -49,20 +56,23 @@ pub fn run(args: SynthArgs) -> Result<()> {
         seconds,
         size: args.size,
         supersample: args.supersample,
+        novel_turn: args.novel_turn,
+        voice_seed: args.voice_seed,
         ..default
     };
     synth::validate(&cfg)?;
-    let n_frames = (seconds * 25.0).floor() as u64;
-    let bar = progress_bar(n_frames, "rendering frames");
+    let bar = progress_bar(synth::frames_rendered(&cfg) as u64, "rendering frames");
     let start = Instant::now();
     let summary = synth::generate(&cfg, audio, &args.out, args.force, &|| bar.inc(1))
         .with_context(|| format!("generating the synthetic scene in {}", args.out.display()))?;
     bar.finish_and_clear();
     println!(
-        "wrote {} frames ({} train, {} val) of {}x{} in {:.1} s to {}:",
+        "wrote {} frames ({} train, {} val, and {} of the novel, voice and sweep \
+         evaluation splits) of {}x{} in {:.1} s to {}:",
         summary.n_frames,
         summary.n_train,
         summary.n_frames - summary.n_train,
+        summary.n_eval,
         cfg.size,
         cfg.size,
         start.elapsed().as_secs_f32(),

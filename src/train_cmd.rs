@@ -66,12 +66,18 @@ pub struct StudentArgs {
     /// Train without the active beam pool.
     #[arg(long)]
     pub no_pool: bool,
-    /// Pseudo views rendered by the teacher besides the training frames (poses turned
-    /// about the head, audio codes of two frames mixed; default 0: none).
+    /// Pseudo views rendered by the teacher besides the training frames: training frames'
+    /// cameras turned about the head to poses the recording lacks, each with its recorded
+    /// audio (default 0: none).
     #[arg(long)]
     pub pseudo_frames: Option<usize>,
+    /// How far the pseudo views reach: their yaw and pitch range as a factor of the
+    /// recorded one (default 2: twice as wide).
+    #[arg(long)]
+    pub pose_range: Option<f32>,
     /// JSON run configuration ({"model": {...}, "train": {...}}; missing fields take the
-    /// defaults; --depth, --width, --no-distill, --no-pool and --pseudo-frames are ignored
+    /// defaults; --depth, --width, --no-distill, --no-pool, --pseudo-frames and --pose-range
+    /// are ignored
     /// with it).
     #[arg(long)]
     pub config: Option<PathBuf>,
@@ -190,6 +196,7 @@ impl StudentArgs {
                     distill: !self.no_distill,
                     pool: !self.no_pool,
                     pseudo_frames: self.pseudo_frames,
+                    pose_range: self.pose_range,
                 }
             }
         };

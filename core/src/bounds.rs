@@ -20,6 +20,11 @@ pub struct Bounds {
 }
 
 impl Bounds {
+    /// The box's centre.
+    pub fn centre(&self) -> Vec3 {
+        0.5 * (self.lo + self.hi)
+    }
+
     /// The box grown by `margin` times its size on every side.
     pub fn padded(&self, margin: f32) -> Bounds {
         let pad = (self.hi - self.lo) * margin;

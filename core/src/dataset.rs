@@ -111,19 +111,68 @@ impl TransformsFile {
     }
 }
 
-/// Which part of a dataset.
+/// Which part of a dataset. `Train` and `Val` are AD-NeRF's; the others are evaluation
+/// splits that `nldf synth` writes with exact ground truth and that training never reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Split {
     Train,
     Val,
+    /// The held-out frames' audio with the head turned beyond the recorded range, and
+    /// seen from a closer and a farther camera.
+    Novel,
+    /// Held-out speech of another voice driving the head at the held-out poses; its audio
+    /// lives in [`VOICE_DIR`].
+    Voice,
+    /// One held-out frame's audio with the head turned step by step from the front out to
+    /// twice the recorded range (the pose-sweep strip).
+    Sweep,
 }
 
+/// The folder of the `voice` split's audio (`aud.wav`, `aud.npy`, `aud.json`).
+pub const VOICE_DIR: &str = "voice";
+
 impl Split {
+    /// Every split, in the order tables list them.
+    pub const ALL: [Split; 5] = [
+        Split::Train,
+        Split::Val,
+        Split::Novel,
+        Split::Voice,
+        Split::Sweep,
+    ];
+
     /// The transforms file name of the split.
     pub fn file_name(self) -> &'static str {
         match self {
             Split::Train => "transforms_train.json",
             Split::Val => "transforms_val.json",
+            Split::Novel => "transforms_novel.json",
+            Split::Voice => "transforms_voice.json",
+            Split::Sweep => "transforms_sweep.json",
+        }
+    }
+
+    /// The split's name in lower case (`val`, `novel`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Val => "val",
+            Split::Novel => "novel",
+            Split::Voice => "voice",
+            Split::Sweep => "sweep",
+        }
+    }
+
+    /// Whether the split is one of the evaluation splits beyond AD-NeRF's two.
+    pub fn is_extra(self) -> bool {
+        !matches!(self, Split::Train | Split::Val)
+    }
+
+    /// The folder, under the dataset's root, of the audio the split's `aud_id`s index.
+    pub fn audio_dir(self, root: &Path) -> PathBuf {
+        match self {
+            Split::Voice => root.join(VOICE_DIR),
+            _ => root.to_path_buf(),
         }
     }
 }
@@ -163,7 +212,11 @@ pub struct Dataset {
     /// The file `audio` was read or computed from (`aud.npy` or `aud.wav`).
     pub audio_file: PathBuf,
     pub train: Vec<Frame>,
+    /// The held-out frames: the `val` split's, or those of the split
+    /// [`Dataset::load_held_out`] was asked for.
     pub val: Vec<Frame>,
+    /// Which split `val` holds.
+    pub held_out: Split,
 }
 
 fn find_with_ext(dir: &Path, stem: &str) -> Option<PathBuf> {
@@ -297,14 +350,94 @@ impl Dataset {
             audio_file,
             train,
             val,
+            held_out: Split::Val,
         })
     }
 
-    /// The frames of a split.
+    /// Loads the dataset as [`Dataset::load_with`] does, with `split`'s frames held out
+    /// instead of `val`'s. For `voice`, the audio is that of [`VOICE_DIR`], read as `audio`
+    /// says: the held-out frames index it, so the training frames must not be rendered
+    /// with this dataset.
+    pub fn load_held_out(root: &Path, audio: &AudioChoice, split: Split) -> Result<Dataset> {
+        let mut ds = Self::load_with(root, audio)?;
+        if !split.is_extra() {
+            return Ok(ds);
+        }
+        let path = root.join(split.file_name());
+        if !path.is_file() {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "is missing: the {} split is written by `nldf synth` (scenes made by an \
+                     earlier version have none; make the scene again)",
+                    split.name()
+                ),
+            ));
+        }
+        let file = TransformsFile::load(&path)?;
+        check_intrinsics(&path, &file, ds.intrinsics.width, ds.intrinsics.height)?;
+        if (file.focal_len, file.cx, file.cy) != (ds.intrinsics.focal, ds.intrinsics.cx, ds.intrinsics.cy) {
+            return Err(Error::invalid(
+                &path,
+                "intrinsics differ from transforms_train.json",
+            ));
+        }
+        if split == Split::Voice {
+            let n_audio_frames = file
+                .frames
+                .iter()
+                .map(|f| f.aud_id.max(0) as usize + 1)
+                .max()
+                .unwrap_or(0);
+            let (audio, source, audio_file) =
+                load_audio(&split.audio_dir(root), audio, ds.fps, n_audio_frames)?;
+            if source != ds.audio_source {
+                return Err(Error::invalid(
+                    &audio_file,
+                    format!(
+                        "holds {}, the dataset's own audio {}",
+                        source.describe(),
+                        ds.audio_source.describe()
+                    ),
+                ));
+            }
+            (ds.audio, ds.audio_source, ds.audio_file) = (audio, source, audio_file);
+        }
+        let image_dir = ds
+            .train
+            .first()
+            .and_then(|f| f.image_path.parent())
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| root.join(IMAGE_DIRS[0]));
+        let parsing_dir = root.join("parsing");
+        let parsing_dir = parsing_dir.is_dir().then_some(parsing_dir);
+        ds.val = file
+            .frames
+            .iter()
+            .enumerate()
+            .map(|(n, e)| {
+                validate_frame(
+                    &path,
+                    n,
+                    e,
+                    &ds.intrinsics,
+                    &ds.audio,
+                    &image_dir,
+                    parsing_dir.as_deref(),
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        ds.held_out = split;
+        Ok(ds)
+    }
+
+    /// The frames of a split: the training frames, or the held-out ones when `split` is
+    /// the split held out (empty for any other).
     pub fn frames(&self, split: Split) -> &[Frame] {
         match split {
             Split::Train => &self.train,
-            Split::Val => &self.val,
+            s if s == self.held_out => &self.val,
+            _ => &[],
         }
     }
 

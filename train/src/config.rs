@@ -378,18 +378,22 @@ pub struct StudentTrainConfig {
     /// Jitter the beam points along each ray while training (R2L).
     pub jitter: bool,
     /// Views beyond the training frames whose teacher colours the student also learns
-    /// from (R2L's pseudo data; distillation only): each turns a training frame's pose
-    /// about the head's centre and mixes the audio codes of two training frames, so the
-    /// student sees the teacher's answer between the recorded poses and sounds, where the
-    /// held-out frames lie. 0 (the default): training frames only. Measured on the
-    /// synthetic scene, 256 of them at half of each batch cost 0.4 dB on held-out frames
-    /// and 2.6 dB at the mouth (README), so they are off unless asked for.
+    /// from (R2L's pseudo data; distillation only): each turns a training frame's camera
+    /// about the head's centre to a pose drawn from the widened recorded range
+    /// (`pose_range`), keeping that frame's recorded audio, so the student sees the
+    /// teacher's answer at poses the recording lacks. The teacher renders them in chunks
+    /// while the student trains (see `pseudo_per_step`). 0: training frames only.
     pub pseudo_frames: usize,
-    /// Share of each batch's frames drawn from the pseudo views.
+    /// Share of each batch's frames drawn from the pseudo views (of those rendered so far).
     pub pseudo_fraction: f32,
-    /// Largest turn of a pseudo view about the vertical and the horizontal axis, degrees.
-    pub pseudo_yaw_deg: f32,
-    pub pseudo_pitch_deg: f32,
+    /// How wide the pseudo views' yaw and pitch range, as a factor of the recorded range
+    /// about its middle (1: the recorded poses only; 2: twice as wide).
+    pub pose_range: f32,
+    /// Largest change of a pseudo view's camera distance, as a fraction of it.
+    pub pseudo_zoom: f32,
+    /// Pseudo views the teacher renders before each training step until all are done, so
+    /// the student starts at once.
+    pub pseudo_per_step: usize,
     /// Steps between lines of `log.csv`.
     pub log_every: usize,
     /// Steps between validations (0: only at the end).
@@ -433,8 +437,9 @@ impl Default for StudentTrainConfig {
             jitter: true,
             pseudo_frames: 0,
             pseudo_fraction: 0.5,
-            pseudo_yaw_deg: 6.0,
-            pseudo_pitch_deg: 3.0,
+            pose_range: 2.0,
+            pseudo_zoom: 0.08,
+            pseudo_per_step: 2,
             log_every: 10,
             val_every: 250,
             val_frames: 4,
@@ -462,8 +467,9 @@ impl RunConfig for StudentRunConfig {
         in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;
         in_range("train.pseudo_fraction", t.pseudo_fraction, 0.0, 1.0)?;
-        in_range("train.pseudo_yaw_deg", t.pseudo_yaw_deg, 0.0, 45.0)?;
-        in_range("train.pseudo_pitch_deg", t.pseudo_pitch_deg, 0.0, 45.0)?;
+        in_range("train.pose_range", t.pose_range, 0.0, 10.0)?;
+        in_range("train.pseudo_zoom", t.pseudo_zoom, 0.0, 0.5)?;
+        in_range("train.pseudo_per_step", t.pseudo_per_step, 1, 1 << 10)?;
         Ok(())
     }
 }

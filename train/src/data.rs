@@ -63,7 +63,18 @@ impl TrainData {
 
     /// [`TrainData::open`] with the audio features `audio` says (a trained run's, say).
     pub fn open_with(root: &Path, decode: bool, audio: &AudioChoice) -> Result<TrainData> {
-        let dataset = Dataset::load_with(root, audio)?;
+        Self::open_held_out(root, decode, audio, Split::Val)
+    }
+
+    /// [`TrainData::open_with`] with `held_out`'s frames (and, for `voice`, its audio) as
+    /// the held-out ones (see [`Dataset::load_held_out`]).
+    pub fn open_held_out(
+        root: &Path,
+        decode: bool,
+        audio: &AudioChoice,
+        held_out: Split,
+    ) -> Result<TrainData> {
+        let dataset = Dataset::load_held_out(root, audio, held_out)?;
         let (mut images, mut mouth_pixels) = (Vec::new(), Vec::new());
         if decode {
             let width = dataset.intrinsics.width as usize;

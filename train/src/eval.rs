@@ -151,7 +151,11 @@ pub fn eval_models(
 ) -> Result<Evaluation> {
     let all = data.dataset.frames(split);
     if all.is_empty() {
-        return Err(Error::Config(format!("the {split:?} split has no frames")));
+        return Err(Error::Config(format!(
+            "the {} split of {} has no frames",
+            split.name(),
+            data.dataset.root.display()
+        )));
     }
     let n = max_frames.unwrap_or(all.len()).clamp(1, all.len());
     let frames: Vec<_> = (0..n).map(|k| &all[k * all.len() / n]).collect();
@@ -216,7 +220,7 @@ pub fn eval_models(
         .map(|(mi, (model, scores))| EvalReport {
             model: model.describe(),
             label: model.label(),
-            split: format!("{split:?}").to_lowercase(),
+            split: split.name().into(),
             step: model.step(),
             psnr: mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::NAN),
             ssim: mean(scores.iter().map(|s| s.ssim).collect()).unwrap_or(f64::NAN),

@@ -40,10 +40,10 @@ use crate::pool::{load_pool, save_pool};
 use crate::run_loop::{TrainingRun, finite_loss, run_fields};
 use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
-use crate::targets::{load_targets, save_targets, teacher_targets};
+use crate::targets::{load_targets, save_targets, teacher_targets, view_targets};
 use crate::teacher_trainer::TeacherRun;
 use crate::views::{
-    FrameBeams, View, codes_of_views, frame_beams, training_views, views_fingerprint,
+    FrameBeams, View, frame_beams, training_views, views_fingerprint,
 };
 
 /// Rays per forward pass when rendering.
@@ -84,8 +84,12 @@ pub struct StudentRun {
     pub views: Vec<View>,
     /// Hit pixels per view.
     pub beams: Vec<FrameBeams>,
-    /// Teacher segment colours per view, aligned with `beams` (distillation).
+    /// Teacher segment colours per view, aligned with `beams` (distillation); empty for a
+    /// pseudo view the teacher has not rendered yet.
     pub targets: Vec<Vec<f32>>,
+    /// The teacher that renders the pseudo views' targets between steps, and the next
+    /// view to render ([`StudentRun::prepare_deferred`]).
+    pending: Option<(TeacherRun, usize)>,
 }
 
 impl StudentRun {
@@ -172,6 +176,7 @@ impl StudentRun {
             views: Vec::new(),
             beams: Vec::new(),
             targets: Vec::new(),
+            pending: None,
         })
     }
 
@@ -185,9 +190,65 @@ impl StudentRun {
         teacher: Option<&TeacherRun>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
+        if let Some(n) = self.prepare_cached(data, teacher.map(|t| t.step))? {
+            let teacher = teacher.ok_or_else(|| self.no_teacher())?;
+            self.targets = teacher_targets(teacher, data, &self.views, &self.beams, n, progress)?;
+            self.save_targets(teacher.step)?;
+        }
+        Ok(())
+    }
+
+    /// [`StudentRun::prepare`], except that without a matching cache only the recorded
+    /// frames' targets are rendered now: the pseudo views' are rendered
+    /// `pseudo_per_step` at a time before each training step, so the student starts at
+    /// once and learns from each pseudo view as soon as it exists. The cache is written
+    /// once all are done.
+    pub fn prepare_deferred(
+        &mut self,
+        data: &TrainData,
+        teacher: Option<TeacherRun>,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<()> {
+        let Some(m) = self.prepare_cached(data, teacher.as_ref().map(|t| t.step))? else {
+            return Ok(());
+        };
+        let teacher = teacher.ok_or_else(|| self.no_teacher())?;
+        let n_recorded = self.views.iter().filter(|v| v.recorded).count();
+        self.targets = teacher_targets(
+            &teacher,
+            data,
+            &self.views[..n_recorded],
+            &self.beams[..n_recorded],
+            m,
+            progress,
+        )?;
+        self.targets.resize(self.views.len(), Vec::new());
+        if n_recorded == self.views.len() {
+            self.save_targets(teacher.step)?;
+        } else {
+            self.pending = Some((teacher, n_recorded));
+        }
+        Ok(())
+    }
+
+    /// Pseudo views whose targets are still to be rendered.
+    pub fn pending_pseudo_views(&self) -> usize {
+        self.pending
+            .as_ref()
+            .map_or(0, |(_, next)| self.views.len() - next)
+    }
+
+    /// The views, their hit pixels, the render spec and background files, and the cached
+    /// targets when they fit; `Some(segments)` when targets must be rendered.
+    fn prepare_cached(
+        &mut self,
+        data: &TrainData,
+        teacher_step: Option<usize>,
+    ) -> Result<Option<usize>> {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         self.views = training_views(data, &self.cfg.train);
         self.beams = frame_beams(data, &self.views);
+        self.pending = None;
         let spec =
             RenderSpec::of_dataset(&data.dataset, data.bounds, self.cfg.model.audio.att_frames);
         spec.save(&self.dir.join(RENDER_SPEC_FILE))?;
@@ -195,26 +256,55 @@ impl StudentRun {
             .background
             .save_png(&self.dir.join(BACKGROUND_FILE))?;
         if !self.cfg.train.distill {
-            return Ok(());
+            return Ok(None);
         }
         let m = self.cfg.model.segments;
         let path = self.dir.join(TARGETS_FILE);
-        let teacher_step = teacher.map(|t| t.step);
         let fingerprint = views_fingerprint(&self.views);
+        // Without a teacher at hand, a cache made by any teacher step is used.
         if path.is_file()
             && let Some(cached) = load_targets(&path, &self.beams, m, teacher_step, &fingerprint)?
         {
             self.targets = cached;
-            return Ok(());
+            return Ok(None);
         }
-        let teacher = teacher.ok_or_else(|| {
-            Error::Config(format!(
-                "distillation needs the teacher's segment colours: {} is missing and no teacher was given",
-                path.display()
-            ))
-        })?;
-        self.targets = teacher_targets(teacher, data, &self.views, &self.beams, m, progress)?;
-        save_targets(&path, &self.targets, m, teacher.step, &fingerprint)
+        Ok(Some(m))
+    }
+
+    fn no_teacher(&self) -> Error {
+        Error::Config(format!(
+            "distillation needs the teacher's segment colours: {} is missing and no teacher was given",
+            self.dir.join(TARGETS_FILE).display()
+        ))
+    }
+
+    fn save_targets(&self, teacher_step: usize) -> Result<()> {
+        save_targets(
+            &self.dir.join(TARGETS_FILE),
+            &self.targets,
+            self.cfg.model.segments,
+            teacher_step,
+            &views_fingerprint(&self.views),
+        )
+    }
+
+    /// Renders the next `pseudo_per_step` pending pseudo views' targets; writes the cache
+    /// once the last is done.
+    fn render_pending(&mut self, data: &TrainData) -> Result<()> {
+        let Some((teacher, next)) = self.pending.take() else {
+            return Ok(());
+        };
+        let m = self.cfg.model.segments;
+        let end = (next + self.cfg.train.pseudo_per_step).min(self.views.len());
+        for v in next..end {
+            self.targets[v] = view_targets(&teacher, data, &self.views[v], &self.beams[v], m)?;
+        }
+        if end == self.views.len() {
+            self.save_targets(teacher.step)
+        } else {
+            self.pending = Some((teacher, end));
+            Ok(())
+        }
     }
 
     /// Training seconds so far, across resumes.
@@ -236,13 +326,16 @@ impl StudentRun {
         Ok(self.student.audio_codes(&windows)?)
     }
 
-    /// Audio codes of views (mixed for pseudo views).
+    /// Audio codes of views (each its recorded frame's).
     ///
     /// # Shapes
     /// - returns `[views.len(), audio_dim]`
     fn view_codes(&self, data: &TrainData, views: &[u32]) -> Result<Tensor> {
-        let v: Vec<&View> = views.iter().map(|&i| &self.views[i as usize]).collect();
-        codes_of_views(&v, |ids| self.audio_codes(data, ids))
+        let ids: Vec<usize> = views
+            .iter()
+            .map(|&i| self.views[i as usize].aud_id)
+            .collect();
+        self.audio_codes(data, &ids)
     }
 
     /// Draws the main batch: per picked frame, rays from the mouth, the face and the rest
@@ -251,7 +344,11 @@ impl StudentRun {
         let t = &self.cfg.train;
         let usable = |recorded: bool| -> Vec<usize> {
             (0..self.beams.len())
-                .filter(|&f| self.views[f].recorded == recorded && !self.beams[f].pixels.is_empty())
+                .filter(|&f| {
+                    self.views[f].recorded == recorded
+                        && !self.beams[f].pixels.is_empty()
+                        && (recorded || self.targets.get(f).is_some_and(|t| !t.is_empty()))
+                })
                 .collect()
         };
         let (real, pseudo) = (usable(true), usable(false));
@@ -316,6 +413,7 @@ impl StudentRun {
     /// One training step on a main batch and, with the pool on and filled, a pool batch
     /// whose audio codes are detached: the pool trains the light field only.
     pub fn train_step(&mut self, data: &TrainData) -> Result<StudentStep> {
+        self.render_pending(data)?;
         let t = self.cfg.train.clone();
         let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
         rng.set_stream(self.step as u64 + 1);

@@ -13,7 +13,7 @@ use crate::checkpoint::{load_tensors, save_tensors};
 use crate::data::TrainData;
 use crate::error::Result;
 use crate::teacher_trainer::TeacherRun;
-use crate::views::{FrameBeams, View, codes_of_views};
+use crate::views::{FrameBeams, View};
 
 /// The teacher's Eq. 5 segment colours of every hit pixel of every view (`[n_pixels, m,
 /// 3]` flat per view). `progress(done, total)` is called per view.
@@ -25,25 +25,38 @@ pub fn teacher_targets(
     m: usize,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<Vec<f32>>> {
-    let ds = &data.dataset;
     let mut out = Vec::with_capacity(views.len());
     for (vi, (view, fb)) in views.iter().zip(beams).enumerate() {
-        let mut rays = Rays::with_capacity(fb.pixels.len());
-        let mut bg = Vec::with_capacity(3 * fb.pixels.len());
-        for &(i, j) in &fb.pixels {
-            let (o, d) = view.camera.ray(i as f32, j as f32);
-            rays.push(o, d);
-            bg.extend_from_slice(&ds.background.get(i, j));
-        }
-        let code = codes_of_views(&[view], |ids| teacher.audio_codes(data, ids))?;
-        out.push(
-            teacher
-                .teacher
-                .segment_targets(&rays, &bg, &code, &data.head_range(), m)?,
-        );
+        out.push(view_targets(teacher, data, view, fb, m)?);
         progress(vi + 1, views.len());
     }
     Ok(out)
+}
+
+/// The teacher's Eq. 5 segment colours of one view's hit pixels, with the view's recorded
+/// audio code (`[fb.pixels.len(), m, 3]` flat).
+pub fn view_targets(
+    teacher: &TeacherRun,
+    data: &TrainData,
+    view: &View,
+    fb: &FrameBeams,
+    m: usize,
+) -> Result<Vec<f32>> {
+    let ds = &data.dataset;
+    let mut rays = Rays::with_capacity(fb.pixels.len());
+    let mut bg = Vec::with_capacity(3 * fb.pixels.len());
+    for &(i, j) in &fb.pixels {
+        let (o, d) = view.camera.ray(i as f32, j as f32);
+        rays.push(o, d);
+        bg.extend_from_slice(&ds.background.get(i, j));
+    }
+    if rays.is_empty() {
+        return Ok(Vec::new());
+    }
+    let code = teacher.audio_codes(data, &[view.aud_id])?;
+    Ok(teacher
+        .teacher
+        .segment_targets(&rays, &bg, &code, &data.head_range(), m)?)
 }
 
 /// Writes the targets with the teacher's step and the views' fingerprint.

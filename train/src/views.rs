@@ -1,8 +1,8 @@
 //! The views the student learns from: the recorded training frames and, with R2L's pseudo
-//! data, the teacher's views at poses around them; each view's hit pixels split into face,
-//! mouth and the rest; the audio code of each view.
+//! data, the teacher's views at poses beyond them with their recorded audio; each view's
+//! hit pixels split into face, mouth and the rest.
 
-use candle_core::Tensor;
+use glam::{Mat4, Vec3};
 use nldf_core::camera::{Camera, turn_about};
 use nldf_core::dataset::Split;
 use nldf_core::rays::head_rays;
@@ -12,7 +12,6 @@ use rayon::prelude::*;
 
 use crate::config::StudentTrainConfig;
 use crate::data::TrainData;
-use crate::error::Result;
 
 /// The pixels of one training frame whose rays hit the head's bounds (the only ones the
 /// student sees), split by where they lie.
@@ -27,23 +26,49 @@ pub struct FrameBeams {
 }
 
 /// A view the student learns from: a training frame, or a pseudo view (R2L's pseudo data)
-/// whose pose and audio lie between the training frames'.
+/// at a pose the recording lacks, with the recorded audio of a training frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct View {
     pub camera: Camera,
-    /// Audio ids whose codes are mixed: `weight code(a) + (1 - weight) code(b)`.
-    pub audio: (usize, usize),
-    pub weight: f32,
+    /// The audio id whose code the view is rendered with: always a recorded frame's, since
+    /// a mix of two frames' codes is a sound the teacher never heard (it cost 2.6 dB at the
+    /// mouth when measured).
+    pub aud_id: usize,
     /// The training frame the view comes from (its face and mouth regions are used).
     pub source: usize,
     /// Whether the view is a training frame, with a ground-truth image.
     pub recorded: bool,
 }
 
+/// The direction of a camera seen from `centre`, as yaw (about +y, from +z towards +x) and
+/// pitch (towards +y), radians, and its distance.
+pub fn view_angles(camera: &Camera, centre: Vec3) -> (f32, f32, f32) {
+    let v = camera.origin() - centre;
+    let r = v.length().max(1e-12);
+    (v.x.atan2(v.z), (v.y / r).clamp(-1.0, 1.0).asin(), r)
+}
+
+/// The recorded range of the training cameras' yaw and pitch about the head's centre,
+/// `([yaw_lo, yaw_hi], [pitch_lo, pitch_hi])`, radians.
+pub fn recorded_range(data: &TrainData) -> ([f32; 2], [f32; 2]) {
+    let ds = &data.dataset;
+    let centre = data.bounds.centre();
+    let mut yaw = [f32::INFINITY, f32::NEG_INFINITY];
+    let mut pitch = yaw;
+    for f in ds.frames(Split::Train) {
+        let (y, p, _) = view_angles(&ds.camera(f), centre);
+        yaw = [yaw[0].min(y), yaw[1].max(y)];
+        pitch = [pitch[0].min(p), pitch[1].max(p)];
+    }
+    (yaw, pitch)
+}
+
 /// The training frames as views, then `cfg.pseudo_frames` pseudo views (with distillation
-/// on): each a seeded training frame's camera turned about the head's centre by up to
-/// `pseudo_yaw_deg` and `pseudo_pitch_deg`, with the audio codes of two seeded training
-/// frames mixed by a uniform weight.
+/// on). Each pseudo view takes a seeded training frame, its audio and its distance, and
+/// turns its camera about the head's centre to a yaw and pitch drawn uniformly from the
+/// recorded range widened `cfg.pose_range` times about its middle (the training data's own
+/// units: 1 keeps to the recorded poses, 2 reaches twice as far out), then moves it closer
+/// or farther by up to `cfg.pseudo_zoom` of its distance.
 pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
     let ds = &data.dataset;
     let frames = ds.frames(Split::Train);
@@ -52,8 +77,7 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         .enumerate()
         .map(|(fi, f)| View {
             camera: ds.camera(f),
-            audio: (f.aud_id, f.aud_id),
-            weight: 1.0,
+            aud_id: f.aud_id,
             source: fi,
             recorded: true,
         })
@@ -62,21 +86,38 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         return views;
     }
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5eed_5eed);
-    let centre = 0.5 * (data.bounds.lo + data.bounds.hi);
+    let centre = data.bounds.centre();
+    let (yaw, pitch) = recorded_range(data);
+    let widen = |[lo, hi]: [f32; 2]| {
+        let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo) * cfg.pose_range);
+        (mid - half, mid + half)
+    };
+    let (yaw, pitch) = (widen(yaw), widen(pitch));
+    let draw = |rng: &mut ChaCha8Rng, (lo, hi): (f32, f32)| {
+        if hi > lo { rng.random_range(lo..=hi) } else { lo }
+    };
     for _ in 0..cfg.pseudo_frames {
         let source = rng.random_range(0..frames.len());
-        let other = rng.random_range(0..frames.len());
-        let weight: f32 = rng.random_range(0.0..=1.0);
-        let yaw = cfg.pseudo_yaw_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
-        let pitch = cfg.pseudo_pitch_deg.to_radians() * rng.random_range(-1.0f32..=1.0);
         let base = ds.camera(&frames[source]);
+        let (y0, p0, _) = view_angles(&base, centre);
+        let (y1, p1) = (draw(&mut rng, yaw), draw(&mut rng, pitch));
+        let zoom = 1.0 + cfg.pseudo_zoom * rng.random_range(-1.0f32..=1.0);
+        // Pitch first about the camera's own right axis, then yaw about +y: the turned
+        // camera looks at the centre from (y1, p1).
+        let turned = turn_about(centre, y1 - y0, 0.0) * base.c2w;
+        let right = turned.x_axis.truncate().normalize_or_zero();
+        let tilt = Mat4::from_translation(centre)
+            * Mat4::from_axis_angle(right, -(p1 - p0))
+            * Mat4::from_translation(-centre);
+        let mut c2w = tilt * turned;
+        let origin = c2w.w_axis.truncate();
+        c2w.w_axis = (centre + zoom * (origin - centre)).extend(1.0);
         views.push(View {
             camera: Camera {
                 intrinsics: base.intrinsics,
-                c2w: turn_about(centre, yaw, pitch) * base.c2w,
+                c2w,
             },
-            audio: (frames[source].aud_id, frames[other].aud_id),
-            weight,
+            aud_id: frames[source].aud_id,
             source,
             recorded: false,
         });
@@ -118,31 +159,7 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
         .collect()
 }
 
-/// The audio codes of `views`: `weight code(a) + (1 - weight) code(b)` row by row, with
-/// `codes(ids)` the encoder's codes of audio ids (`[ids.len(), dim]`). Recorded frames
-/// (weight 1) need only their own code, so the second encoder call is made only for
-/// batches holding a pseudo view.
-///
-/// # Shapes
-/// - returns `[views.len(), dim]`
-pub fn codes_of_views(
-    views: &[&View],
-    codes: impl Fn(&[usize]) -> Result<Tensor>,
-) -> Result<Tensor> {
-    let a: Vec<usize> = views.iter().map(|v| v.audio.0).collect();
-    let codes_a = codes(&a)?;
-    if views.iter().all(|v| v.weight == 1.0) {
-        return Ok(codes_a);
-    }
-    let b: Vec<usize> = views.iter().map(|v| v.audio.1).collect();
-    let n = views.len();
-    let dev = codes_a.device().clone();
-    let w = Tensor::from_vec(views.iter().map(|v| v.weight).collect(), (n, 1), &dev)?;
-    let rest = Tensor::from_vec(views.iter().map(|v| 1.0 - v.weight).collect(), (n, 1), &dev)?;
-    Ok((codes_a.broadcast_mul(&w)? + codes(&b)?.broadcast_mul(&rest)?)?)
-}
-
-/// A fingerprint of the views (poses, audio and mixing weights), stored with the cached
+/// A fingerprint of the views (poses and audio), stored with the cached
 /// targets so that a cache made for other views is never used (FNV-1a over their bits).
 pub fn views_fingerprint(views: &[View]) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
@@ -157,9 +174,7 @@ pub fn views_fingerprint(views: &[View]) -> String {
             .to_cols_array()
             .iter()
             .for_each(|x| eat(x.to_bits() as u64));
-        eat(v.audio.0 as u64);
-        eat(v.audio.1 as u64);
-        eat(v.weight.to_bits() as u64);
+        eat(v.aud_id as u64);
     }
     format!("{h:016x}")
 }

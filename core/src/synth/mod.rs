@@ -9,6 +9,7 @@
 
 pub mod head;
 mod sdf;
+mod splits;
 pub mod speech;
 mod trace;
 
@@ -62,6 +63,11 @@ pub struct SynthConfig {
     pub max_shift: f32,
     /// Audio features written to `aud.npy`.
     pub features: FeatureConfig,
+    /// How far the `novel` split turns the head: this factor times the largest yaw and
+    /// pitch of the training frames.
+    pub novel_turn: f32,
+    /// Seed of the `voice` split's speaker; `seed + 1` when absent.
+    pub voice_seed: Option<u64>,
 }
 
 impl Default for SynthConfig {
@@ -77,6 +83,8 @@ impl Default for SynthConfig {
             max_yaw_deg: 12.0,
             max_shift: 0.015,
             features: FeatureConfig::default(),
+            novel_turn: 1.5,
+            voice_seed: None,
         }
     }
 }
@@ -136,6 +144,12 @@ pub fn validate(cfg: &SynthConfig) -> Result<()> {
     }
     if cfg.max_yaw_deg > 45.0 || cfg.max_shift > 0.1 {
         return bad("head motion is limited to 45 degrees and 0.1 units".into());
+    }
+    if !(cfg.novel_turn.is_finite() && (1.0..=3.0).contains(&cfg.novel_turn)) {
+        return bad(format!(
+            "--novel-turn must be in [1, 3] (times the recorded yaw and pitch), got {}",
+            cfg.novel_turn
+        ));
     }
     cfg.features.validate()
 }
@@ -242,6 +256,34 @@ pub struct SceneFile {
     /// Axis-aligned head bounds in head space (min, max), valid for every face state.
     pub head_bounds: [[f32; 3]; 2],
     pub frames: Vec<SceneFrame>,
+    /// The largest |yaw| and |pitch| of the training frames, degrees: the recorded range
+    /// that the `novel` and `sweep` splits turn beyond.
+    #[serde(default)]
+    pub recorded_range_deg: [f32; 2],
+    /// Ground truth of the evaluation splits, which training never reads.
+    #[serde(default)]
+    pub eval_frames: Vec<EvalFrame>,
+    /// The `voice` split's speaker.
+    #[serde(default)]
+    pub eval_voice: Option<Voice>,
+}
+
+/// Ground truth of one frame of an evaluation split (`novel`, `voice`, `sweep`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EvalFrame {
+    /// The split's name.
+    pub split: String,
+    pub img_id: i64,
+    /// Row of the split's audio features (the recording's, or the `voice/` folder's).
+    pub aud_id: i64,
+    /// What the view is: `turned`, `closer`, `farther`, `recorded pose`, `turn 1.5x`.
+    pub view: String,
+    pub mouth_open: f32,
+    pub mouth_width: f32,
+    pub blink: f32,
+    pub pose: HeadPose,
+    /// Distance of the camera from the world origin.
+    pub camera_distance: f32,
 }
 
 /// The `generator` value of `scene.json`.
@@ -264,9 +306,23 @@ pub struct Summary {
     pub out: PathBuf,
     pub n_frames: usize,
     pub n_train: usize,
+    /// Frames of the evaluation splits (`novel`, `voice`, `sweep`).
+    pub n_eval: usize,
     /// The files and folders written, relative to `out`, with the number of files in each
     /// (1 for a file).
     pub files: Vec<(PathBuf, usize)>,
+}
+
+/// The number of frames [`generate`] renders for `cfg`: the recording's, then those of the
+/// evaluation splits.
+pub fn frames_rendered(cfg: &SynthConfig) -> usize {
+    let n = (cfg.seconds * cfg.fps).floor() as usize;
+    n + splits::n_eval_frames(n - n_train(n))
+}
+
+/// Training frames of a scene of `n_frames`: the first ten elevenths, at least one.
+fn n_train(n_frames: usize) -> usize {
+    (n_frames * 10 / 11).max(1).min(n_frames)
 }
 
 /// Whether `out` may be replaced: absent, empty, an earlier scene, or `force`.
@@ -374,15 +430,40 @@ fn write_scene(
     let windows = feature_windows(cfg, &wave, n_frames)?;
     let (intrinsics, cameras) = frame_cameras(cfg, &tracks.poses);
     write_inputs(cfg, dir, &background, &wave, &windows)?;
-    let face_rects = render_frames(cfg, dir, &head, &background, &tracks, &cameras, tick)?;
-    let n_train = write_transforms(cfg, dir, intrinsics, &cameras, &face_rects, &tracks.blink)?;
-    scene_file(cfg, head, voice, audio_source, intrinsics, &tracks)
-        .save(&dir.join("scene.json"))?;
+    let n_train = n_train(n_frames);
+    let extra = splits::EvalSplits::new(cfg, &tracks, n_train)?;
+    let mut views: Vec<(FaceState, Camera)> = (0..n_frames)
+        .map(|i| (tracks.face(i), cameras[i]))
+        .collect();
+    views.extend(
+        extra
+            .frames
+            .iter()
+            .map(|f| (f.face(), camera_at(intrinsics, &f.pose, f.camera_distance))),
+    );
+    let face_rects = render_frames(cfg, dir, &head, &background, &views, tick)?;
+    let (near, far) = near_far(&cameras);
+    write_transforms(
+        cfg,
+        dir,
+        intrinsics,
+        (near, far),
+        &cameras,
+        &face_rects[..n_frames],
+        &tracks.blink,
+    )?;
+    extra.write(cfg, dir, intrinsics, (near, far), &face_rects[n_frames..])?;
+    let mut scene = scene_file(cfg, head, voice, audio_source, intrinsics, &tracks);
+    scene.recorded_range_deg = extra.recorded_range_deg;
+    scene.eval_frames = extra.frames.clone();
+    scene.eval_voice = Some(extra.voice.clone());
+    scene.save(&dir.join("scene.json"))?;
     Ok(Summary {
         out: dir.to_path_buf(),
         n_frames,
         n_train,
-        files: scene_files(n_frames),
+        n_eval: extra.frames.len(),
+        files: scene_files(n_frames + extra.frames.len()),
     })
 }
 
@@ -474,19 +555,28 @@ fn frame_cameras(cfg: &SynthConfig, poses: &[HeadPose]) -> (Intrinsics, Vec<Came
         width: cfg.size,
         height: cfg.size,
     };
-    let world_camera = look_at(
-        Vec3::new(0.0, 0.0, cfg.camera_distance),
-        Vec3::ZERO,
-        Vec3::Y,
-    );
     let cameras = poses
         .iter()
-        .map(|p| Camera {
-            intrinsics,
-            c2w: p.matrix().inverse() * world_camera,
-        })
+        .map(|p| camera_at(intrinsics, p, cfg.camera_distance))
         .collect();
     (intrinsics, cameras)
+}
+
+/// The camera in head space of a world camera on +z at `distance`, looking at the origin,
+/// with the head in `pose`.
+fn camera_at(intrinsics: Intrinsics, pose: &HeadPose, distance: f32) -> Camera {
+    let world_camera = look_at(Vec3::new(0.0, 0.0, distance), Vec3::ZERO, Vec3::Y);
+    Camera {
+        intrinsics,
+        c2w: pose.matrix().inverse() * world_camera,
+    }
+}
+
+/// The rays' near and far bounds: 0.2 before and 0.4 past the cameras' mean distance from
+/// the head (AD-NeRF's rule).
+fn near_far(cameras: &[Camera]) -> (f32, f32) {
+    let mean = cameras.iter().map(|c| c.origin().length()).sum::<f32>() / cameras.len() as f32;
+    (mean - 0.2, mean + 0.4)
 }
 
 /// Creates the per-frame folders and writes the background, the audio and its features.
@@ -506,27 +596,21 @@ fn write_inputs(
     save_audio_features(dir, windows, &FeatureSource::Nldf(cfg.features.clone()))
 }
 
-/// Renders the frames in parallel, writes each one's files, calls `tick` once per frame and
-/// returns each frame's face rectangle.
+/// Renders the views in parallel (view `i` is image `i`), writes each one's files, calls
+/// `tick` once per frame and returns each frame's face rectangle.
 fn render_frames(
     cfg: &SynthConfig,
     dir: &Path,
     head: &HeadParams,
     background: &ImageRgb,
-    tracks: &Tracks,
-    cameras: &[Camera],
+    views: &[(FaceState, Camera)],
     tick: &(dyn Fn() + Sync),
 ) -> Result<Vec<Rect>> {
-    (0..tracks.len())
+    (0..views.len())
         .into_par_iter()
         .map(|i| {
-            let frame = render_head(
-                head,
-                &tracks.face(i),
-                &cameras[i],
-                background,
-                cfg.supersample,
-            );
+            let (face, camera) = &views[i];
+            let frame = render_head(head, face, camera, background, cfg.supersample);
             write_frame(dir, i, &frame, cfg.size)?;
             tick();
             Ok(face_rect(&frame.regions, cfg.size))
@@ -560,21 +644,17 @@ fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, size: u32) -> Result<()>
 }
 
 /// Writes the train and val transforms (the first ten elevenths of the frames, at least one,
-/// train; the rest val), with near and far around the cameras' mean distance from the head,
-/// and returns the number of train frames.
+/// train; the rest val) with the rays' `near` and `far` bounds.
 fn write_transforms(
     cfg: &SynthConfig,
     dir: &Path,
     intrinsics: Intrinsics,
+    (near, far): (f32, f32),
     cameras: &[Camera],
     face_rects: &[Rect],
     blink: &[f32],
-) -> Result<usize> {
+) -> Result<()> {
     let n_frames = cameras.len();
-    let (near, far) = {
-        let mean = cameras.iter().map(|c| c.origin().length()).sum::<f32>() / n_frames as f32;
-        (mean - 0.2, mean + 0.4)
-    };
     let entries: Vec<FrameEntry> = (0..n_frames)
         .map(|i| FrameEntry {
             img_id: i as i64,
@@ -584,9 +664,22 @@ fn write_transforms(
             eye: Some(blink[i]),
         })
         .collect();
-    let n_train = n_frames * 10 / 11;
-    let n_train = n_train.max(1).min(n_frames);
-    let transforms = |frames: &[FrameEntry]| TransformsFile {
+    let n_train = n_train(n_frames);
+    let transforms = |frames: &[FrameEntry]| {
+        transforms_file(cfg, intrinsics, (near, far), frames.to_vec())
+    };
+    transforms(&entries[..n_train]).save(&dir.join(Split::Train.file_name()))?;
+    transforms(&entries[n_train..]).save(&dir.join(Split::Val.file_name()))
+}
+
+/// A transforms file of the scene holding `frames`.
+fn transforms_file(
+    cfg: &SynthConfig,
+    intrinsics: Intrinsics,
+    (near, far): (f32, f32),
+    frames: Vec<FrameEntry>,
+) -> TransformsFile {
+    TransformsFile {
         focal_len: intrinsics.focal,
         cx: intrinsics.cx,
         cy: intrinsics.cy,
@@ -595,11 +688,8 @@ fn write_transforms(
         fps: Some(cfg.fps),
         width: Some(cfg.size),
         height: Some(cfg.size),
-        frames: frames.to_vec(),
-    };
-    transforms(&entries[..n_train]).save(&dir.join(Split::Train.file_name()))?;
-    transforms(&entries[n_train..]).save(&dir.join(Split::Val.file_name()))?;
-    Ok(n_train)
+        frames,
+    }
 }
 
 /// `scene.json`: how the scene was made and every frame's ground truth.
@@ -621,6 +711,9 @@ fn scene_file(
         intrinsics,
         depth_scale: DEPTH_SCALE,
         head_bounds: [lo.to_array(), hi.to_array()],
+        recorded_range_deg: [0.0; 2],
+        eval_frames: Vec::new(),
+        eval_voice: None,
         frames: (0..tracks.len())
             .map(|i| SceneFrame {
                 img_id: i as i64,
@@ -635,11 +728,16 @@ fn scene_file(
     }
 }
 
-/// The files and folders of a scene of `n_frames` frames, as [`Summary::files`] lists them.
+/// The files and folders of a scene of `n_frames` frames (evaluation splits included), as
+/// [`Summary::files`] lists them.
 fn scene_files(n_frames: usize) -> Vec<(PathBuf, usize)> {
     [
         ("transforms_train.json", 1),
         ("transforms_val.json", 1),
+        ("transforms_novel.json", 1),
+        ("transforms_voice.json", 1),
+        ("transforms_sweep.json", 1),
+        ("voice", 3),
         ("bc.png", 1),
         ("aud.wav", 1),
         ("aud.npy", 1),

@@ -110,6 +110,7 @@ impl AblationJob {
                 distill,
                 pool,
                 pseudo_frames: None,
+                pose_range: None,
             },
             iters: Some(self.iters),
             minutes: None,

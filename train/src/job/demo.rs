@@ -88,7 +88,7 @@ impl DemoJob {
                 "synthetic scene -> {}",
                 data.display()
             )));
-            let total = (self.scene.seconds * self.scene.fps).floor() as usize;
+            let total = synth::frames_rendered(&self.scene);
             let done = std::sync::atomic::AtomicUsize::new(0);
             // The scene renders on its own thread; this one reports its frames as they come.
             let summary = std::thread::scope(|scope| {
@@ -160,6 +160,7 @@ impl DemoJob {
                     distill: true,
                     pool: true,
                     pseudo_frames: None,
+                    pose_range: None,
                 },
                 iters: Some(self.student_iters),
                 minutes: Some(self.student_minutes),

@@ -47,11 +47,11 @@ impl EvalJob {
     /// Opens the teacher and every student of the run (folders holding a student's render
     /// spec and weights) and loads the data with the teacher's audio features.
     pub fn plan(&self, on_event: OnEvent) -> Result<EvalPlan> {
-        let name = format!("{:?}", self.split).to_lowercase();
+        let name = self.split.name();
         let out = self
             .out
             .clone()
-            .unwrap_or_else(|| self.run.join("eval").join(&name));
+            .unwrap_or_else(|| self.run.join("eval").join(name));
         let dir = teacher_dir(&self.run);
         let teacher = TeacherRun::open(&dir, false)
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
@@ -69,7 +69,7 @@ impl EvalJob {
             })
             .collect::<Result<Vec<_>>>()?;
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
-        let data = TrainData::open_with(&self.data, false, &audio)?;
+        let data = TrainData::open_held_out(&self.data, false, &audio, self.split)?;
         on_event(&audio_note(&data));
         Ok(EvalPlan {
             teacher,

@@ -29,6 +29,8 @@ pub enum StudentSource {
         pool: bool,
         /// Pseudo views rendered by the teacher, replacing the default count.
         pseudo_frames: Option<usize>,
+        /// Their pose range (a factor of the recorded range), replacing the default.
+        pose_range: Option<f32>,
     },
     /// A `{"model": ..., "train": ...}` file, read strictly.
     File(PathBuf),
@@ -123,6 +125,7 @@ impl StudentJob {
                 distill,
                 pool,
                 pseudo_frames,
+                pose_range,
             } => {
                 let mut cfg = StudentRunConfig {
                     model: model.clone(),
@@ -132,6 +135,9 @@ impl StudentJob {
                 cfg.train.pool = *pool;
                 if let Some(n) = pseudo_frames {
                     cfg.train.pseudo_frames = *n;
+                }
+                if let Some(r) = pose_range {
+                    cfg.train.pose_range = *r;
                 }
                 (cfg, None)
             }
@@ -150,13 +156,21 @@ impl StudentPlan {
     /// budget or `stop` ends it; lists the files written.
     pub fn run(mut self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<Scores>> {
         self.run
-            .prepare(&self.data, self.teacher.as_ref(), &mut |done, total| {
+            .prepare_deferred(&self.data, self.teacher.take(), &mut |done, total| {
                 on_event(&JobEvent::Progress {
                     what: "teacher targets".into(),
                     done,
                     total,
                 })
             })?;
+        let pending = self.run.pending_pseudo_views();
+        if pending > 0 {
+            on_event(&JobEvent::Note(format!(
+                "the teacher renders {pending} pseudo views, {} before each step, while the \
+                 student trains",
+                self.run.cfg.train.pseudo_per_step
+            )));
+        }
         let scores = train_stage("student", &mut self.run, &self.data, stop, on_event)?;
         on_event(&wrote(&self.run.dir, STUDENT_FILES));
         Ok(scores)
