@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
+use nldf_train::job::posed::PosedJob;
 
 use crate::progress::{EventPrinter, stop_flag};
 use crate::train_cmd::StudentDepth;
@@ -34,6 +35,21 @@ pub struct AblateArgs {
     /// Skip the wall-time-matched pixels-only student.
     #[arg(long)]
     pub no_wall_time: bool,
+    /// Run the posed ablation instead, with this many student minutes after the teacher's:
+    /// the teacher, a distilled student with pseudo views, one without and a pixels-only
+    /// student (given the teacher's minutes too), scored on the val, novel and voice
+    /// splits, with a pose-sweep strip (RUN/posed.md, RUN/posed_sweep.png).
+    #[arg(long)]
+    pub posed_minutes: Option<f64>,
+    /// Pseudo views of the posed ablation's student that has them.
+    #[arg(long, default_value_t = 300)]
+    pub pseudo_frames: usize,
+    /// Their pose range, as a factor of the recorded yaw and pitch range.
+    #[arg(long, default_value_t = 2.0)]
+    pub pose_range: f32,
+    /// Frames scored per split in the posed ablation (default: all).
+    #[arg(long)]
+    pub frames: Option<usize>,
 }
 
 /// The name of a depth in folder names and tables.
@@ -55,6 +71,29 @@ pub fn run(args: AblateArgs) -> Result<()> {
         }
         (depth_name(d), cfg)
     };
+    let stop = stop_flag();
+    let mut printer = EventPrinter::default();
+    let mut show = |e: &JobEvent| printer.show(e);
+    if let Some(minutes) = args.posed_minutes {
+        let job = PosedJob {
+            data: args.data.clone(),
+            run: args.run.clone(),
+            model: shape(args.depth).1,
+            minutes,
+            pseudo_frames: args.pseudo_frames,
+            pose_range: args.pose_range,
+            frames: args.frames,
+        };
+        let report = job.run(&stop, &mut show)?;
+        print!("{}", report.markdown);
+        let names: Vec<String> = report
+            .files
+            .iter()
+            .map(|f| f.display().to_string())
+            .collect();
+        println!("wrote {}", names.join(", "));
+        return Ok(());
+    }
     let job = AblationJob {
         data: args.data.clone(),
         run: args.run.clone(),
@@ -63,9 +102,6 @@ pub fn run(args: AblateArgs) -> Result<()> {
         depths: args.depths.iter().map(|&d| shape(d)).collect(),
         wall_time: !args.no_wall_time,
     };
-    let stop = stop_flag();
-    let mut printer = EventPrinter::default();
-    let mut show = |e: &JobEvent| printer.show(e);
     let report = job.plan()?.run(&stop, &mut show)?;
     print!("{}", report.markdown);
     let names: Vec<String> = report

@@ -7,6 +7,7 @@
 pub mod ablation;
 pub mod demo;
 pub mod eval;
+pub mod posed;
 pub mod student;
 pub mod teacher;
 
