@@ -9,6 +9,7 @@ mod identity;
 mod infer;
 mod jobs;
 mod metrics;
+mod posed;
 mod rendering;
 mod stress;
 mod student;

@@ -438,7 +438,7 @@ impl Default for StudentTrainConfig {
             pseudo_frames: 0,
             pseudo_fraction: 0.5,
             pose_range: 2.0,
-            pseudo_zoom: 0.08,
+            pseudo_zoom: 0.15,
             pseudo_per_step: 2,
             log_every: 10,
             val_every: 250,

@@ -68,7 +68,8 @@ pub fn recorded_range(data: &TrainData) -> ([f32; 2], [f32; 2]) {
 /// turns its camera about the head's centre to a yaw and pitch drawn uniformly from the
 /// recorded range widened `cfg.pose_range` times about its middle (the training data's own
 /// units: 1 keeps to the recorded poses, 2 reaches twice as far out), then moves it closer
-/// or farther by up to `cfg.pseudo_zoom` of its distance.
+/// or farther by up to `cfg.pseudo_zoom` of its distance (closer only while the head's
+/// bounds stay beyond the rays' near bound).
 pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
     let ds = &data.dataset;
     let frames = ds.frames(Split::Train);
@@ -93,6 +94,7 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         (mid - half, mid + half)
     };
     let (yaw, pitch) = (widen(yaw), widen(pitch));
+    let closest = ds.near + 0.5 * (data.bounds.hi - data.bounds.lo).max_element();
     let draw = |rng: &mut ChaCha8Rng, (lo, hi): (f32, f32)| {
         if hi > lo { rng.random_range(lo..=hi) } else { lo }
     };
@@ -102,16 +104,26 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         let (y0, p0, _) = view_angles(&base, centre);
         let (y1, p1) = (draw(&mut rng, yaw), draw(&mut rng, pitch));
         let zoom = 1.0 + cfg.pseudo_zoom * rng.random_range(-1.0f32..=1.0);
-        // Pitch first about the camera's own right axis, then yaw about +y: the turned
-        // camera looks at the centre from (y1, p1).
+        // Yaw about +y through the centre, then pitch in the vertical plane through the
+        // centre and the camera: the turned camera sees the centre from (y1, p1) exactly.
         let turned = turn_about(centre, y1 - y0, 0.0) * base.c2w;
-        let right = turned.x_axis.truncate().normalize_or_zero();
-        let tilt = Mat4::from_translation(centre)
-            * Mat4::from_axis_angle(right, -(p1 - p0))
-            * Mat4::from_translation(-centre);
+        let offset = turned.w_axis.truncate() - centre;
+        let axis = offset.cross(Vec3::Y).normalize_or_zero();
+        let tilt = if axis == Vec3::ZERO {
+            Mat4::IDENTITY
+        } else {
+            Mat4::from_translation(centre)
+                * Mat4::from_axis_angle(axis, p1 - p0)
+                * Mat4::from_translation(-centre)
+        };
         let mut c2w = tilt * turned;
-        let origin = c2w.w_axis.truncate();
-        c2w.w_axis = (centre + zoom * (origin - centre)).extend(1.0);
+        let offset = c2w.w_axis.truncate() - centre;
+        let r = offset.length();
+        // Closer only as far as keeps the head's bounds beyond the rays' near bound (the
+        // teacher would otherwise cut into the face), and never closer than recorded when
+        // the recording itself is nearer than that.
+        let r_new = (zoom * r).max(closest.min(r));
+        c2w.w_axis = (centre + offset * (r_new / r.max(1e-12))).extend(1.0);
         views.push(View {
             camera: Camera {
                 intrinsics: base.intrinsics,

@@ -1,7 +1,8 @@
 //! The ablation that decides whether the teacher earns its time: the teacher, a distilled
 //! student with pseudo views, one without, and a pixels-only student, every student given
-//! the same total wall time (the distilled ones `minutes` after the teacher's, the
-//! pixels-only one the teacher's minutes plus `minutes`), each scored on every evaluation
+//! the same total wall time (the distilled ones `minutes` after the teacher's, their
+//! teacher targets included; the pixels-only one the teacher's minutes plus the longest
+//! distilled student's), each scored on every evaluation
 //! split the dataset has (`val`, `novel`, `voice`), with a pose-sweep strip: one row per
 //! model rendering the `sweep` split (the head turning from the front out to twice the
 //! recorded range) under the ground truth. Writes `RUN/posed.md`, `RUN/posed.json` and
@@ -115,6 +116,8 @@ impl PosedJob {
             minutes: Some(minutes),
             resume: false,
         };
+        // The pixels-only student's budget is set once the distilled ones have trained:
+        // the teacher's minutes plus the longest distilled student's own.
         let variants = [
             (
                 format!(
@@ -131,15 +134,25 @@ impl PosedJob {
             ),
             (
                 "student, pixels only".to_string(),
-                student("pixels", false, 0, teacher_minutes + self.minutes),
+                student("pixels", false, 0, 0.0),
                 false,
             ),
         ];
-        let mut students = Vec::new();
+        let mut students: Vec<(String, StudentRun, bool)> = Vec::new();
         for (label, job, distilled) in &variants {
             let dir = job.dir();
+            let minutes = if *distilled {
+                job.minutes
+            } else {
+                let longest = students
+                    .iter()
+                    .map(|(_, s, _)| s.elapsed() / 60.0)
+                    .fold(self.minutes, f64::max);
+                Some(teacher_minutes + longest)
+            };
             let job = StudentJob {
                 resume: has_checkpoint(&dir),
+                minutes,
                 ..job.clone()
             };
             on_event(&JobEvent::Stage(format!("{label} -> {}", dir.display())));

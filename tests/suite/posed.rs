@@ -1,0 +1,196 @@
+//! Posed as the user likes: the synthetic scene's evaluation splits (the head turned beyond
+//! the recorded range, seen closer and farther, another voice, a pose sweep), and the
+//! student's pseudo views, which keep their recorded audio and reach the widened pose range.
+
+use nldf_core::dataset::{AudioChoice, Dataset, Split, VOICE_DIR};
+use nldf_core::rays::head_rays;
+use nldf_core::synth::SceneFile;
+use nldf_train::config::StudentTrainConfig;
+use nldf_train::data::TrainData;
+use nldf_train::views::{recorded_range, training_views, view_angles};
+
+use crate::util::tiny_scene;
+
+/// The scene's ground truth of the split's frames, in file order.
+fn truth<'a>(scene: &'a SceneFile, split: &str) -> Vec<&'a nldf_core::synth::EvalFrame> {
+    scene.eval_frames.iter().filter(|f| f.split == split).collect()
+}
+
+#[test]
+fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_training_never_reads()
+{
+    let root = tiny_scene();
+    let scene = SceneFile::load(&root.join("scene.json")).unwrap();
+    let base = Dataset::load(root).unwrap();
+    let (n, n_train, n_val) = (scene.frames.len(), base.train.len(), base.val.len());
+    assert!(n_val >= 2, "{n_val} held-out frames");
+    // Training reads the recording's first frames only.
+    assert!(base.train.iter().all(|f| (f.img_id as usize) < n_train));
+    // The recorded range is the training frames' largest |yaw| and |pitch|.
+    let largest = |f: fn(&nldf_core::synth::HeadPose) -> f32| {
+        scene.frames[..n_train]
+            .iter()
+            .map(|s| f(&s.pose).abs())
+            .fold(0.0f32, f32::max)
+    };
+    let [yaw_max, pitch_max] = scene.recorded_range_deg;
+    assert_eq!(yaw_max, largest(|p| p.yaw_deg));
+    assert_eq!(pitch_max, largest(|p| p.pitch_deg));
+    assert!(yaw_max > 0.5 && pitch_max > 0.1, "{yaw_max} {pitch_max}");
+
+    let load = |split| Dataset::load_held_out(root, &AudioChoice::Auto, split).unwrap();
+    let novel = load(Split::Novel);
+    let frames = novel.frames(Split::Novel);
+    assert_eq!(frames.len(), 3 * n_val);
+    assert!(novel.frames(Split::Val).is_empty());
+    let gt = truth(&scene, "novel");
+    for (k, (f, t)) in frames.iter().zip(&gt).enumerate() {
+        assert_eq!(f.img_id, t.img_id);
+        assert!(f.img_id as usize >= n, "an evaluation image follows the recording");
+        // Each held-out frame's audio, three views of it.
+        assert_eq!(f.aud_id, n_train + k / 3);
+        let recorded = &scene.frames[f.aud_id].pose;
+        let distance = novel.camera(f).origin().length();
+        let recorded_distance = base.camera(&base.val[k / 3]).origin().length();
+        match k % 3 {
+            0 => {
+                // Turned to 1.5x the recorded range: beyond every training frame.
+                assert!((t.pose.yaw_deg.abs() - 1.5 * yaw_max).abs() < 1e-4);
+                assert!((t.pose.pitch_deg.abs() - 1.5 * pitch_max).abs() < 1e-4);
+                assert!(t.pose.yaw_deg.abs() > yaw_max + 0.4 * yaw_max);
+                assert!((distance - recorded_distance).abs() < 1e-3);
+            }
+            1 => {
+                assert_eq!(t.pose, *recorded);
+                assert!((distance / recorded_distance - 0.93).abs() < 0.02, "{distance}");
+            }
+            _ => {
+                assert_eq!(t.pose, *recorded);
+                assert!((distance / recorded_distance - 1.15).abs() < 0.02, "{distance}");
+            }
+        }
+    }
+    // The turned view is another image of the same face.
+    let turned = novel.load_image(&frames[0]).unwrap();
+    let held_out = base.load_image(&base.val[0]).unwrap();
+    assert!(nldf_core::metrics::psnr(&turned, &held_out).unwrap() < 40.0);
+
+    // Another voice at the held-out poses, with its own audio in voice/.
+    let voice = load(Split::Voice);
+    let frames = voice.frames(Split::Voice);
+    assert_eq!(frames.len(), n_val);
+    assert!(voice.audio_file.starts_with(root.join(VOICE_DIR)));
+    assert_eq!(voice.audio.n_frames, n_val);
+    assert_eq!(voice.audio_source, base.audio_source);
+    for (k, f) in frames.iter().enumerate() {
+        assert_eq!(f.aud_id, k);
+        assert!((voice.camera(f).c2w - base.camera(&base.val[k]).c2w).abs_diff_eq(glam::Mat4::ZERO, 1e-6));
+    }
+    let n_feat = voice.audio.window * voice.audio.n_features;
+    let (own, other) = (
+        &base.audio.data[n_train * n_feat..(n_train + n_val) * n_feat],
+        &voice.audio.data[..n_val * n_feat],
+    );
+    let diff = own.iter().zip(other).map(|(a, b)| (a - b).abs()).sum::<f32>() / own.len() as f32;
+    assert!(diff > 0.1, "the voice's features differ from the recording's: {diff}");
+    let speaker = scene.eval_voice.as_ref().unwrap();
+    assert_ne!(Some(speaker), scene.voice.as_ref());
+
+    // The sweep: one held-out frame's audio, turned from the front to twice the range.
+    let sweep = load(Split::Sweep);
+    let gt = truth(&scene, "sweep");
+    assert_eq!(sweep.frames(Split::Sweep).len(), 7);
+    assert_eq!(gt[0].pose.yaw_deg, 0.0);
+    assert!((gt[6].pose.yaw_deg - 2.0 * yaw_max).abs() < 1e-4);
+    assert!(gt.windows(2).all(|w| w[1].pose.yaw_deg > w[0].pose.yaw_deg));
+}
+
+#[test]
+fn an_evaluation_split_the_scene_lacks_is_refused_naming_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scene");
+    let mut files = vec![];
+    for entry in walk(tiny_scene()) {
+        files.push(entry);
+    }
+    for rel in files {
+        let to = root.join(&rel);
+        std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+        std::fs::copy(tiny_scene().join(&rel), &to).unwrap();
+    }
+    std::fs::remove_file(root.join("transforms_novel.json")).unwrap();
+    let e = Dataset::load_held_out(&root, &AudioChoice::Auto, Split::Novel)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("transforms_novel.json") && e.contains("nldf synth"), "{e}");
+    assert!(!e.contains('\n'), "{e}");
+    // The other splits still load.
+    Dataset::load_held_out(&root, &AudioChoice::Auto, Split::Voice).unwrap();
+}
+
+/// Every file under `root`, relative to it.
+fn walk(root: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for e in std::fs::read_dir(&dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(root).unwrap().to_path_buf());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let frames = data.dataset.frames(Split::Train);
+    let cfg = StudentTrainConfig {
+        pseudo_frames: 300,
+        pose_range: 2.0,
+        pseudo_zoom: 0.15,
+        ..StudentTrainConfig::default()
+    };
+    let views = training_views(&data, &cfg);
+    assert_eq!(views.len(), frames.len() + 300);
+    let (yaw, pitch) = recorded_range(&data);
+    let widened = |[lo, hi]: [f32; 2]| {
+        let (mid, half) = (0.5 * (lo + hi), hi - lo);
+        (mid - half, mid + half)
+    };
+    let (wy, wp) = (widened(yaw), widened(pitch));
+    let centre = data.bounds.centre();
+    let closest = data.dataset.near + 0.5 * (data.bounds.hi - data.bounds.lo).max_element();
+    let mut outside = 0;
+    for v in &views[frames.len()..] {
+        assert!(!v.recorded);
+        // Never a mix: the source frame's own recorded audio.
+        assert_eq!(v.aud_id, frames[v.source].aud_id);
+        let (y, p, r) = view_angles(&v.camera, centre);
+        assert!(y >= wy.0 - 2e-3 && y <= wy.1 + 2e-3, "yaw {y} outside {wy:?}");
+        assert!(p >= wp.0 - 2e-3 && p <= wp.1 + 2e-3, "pitch {p} outside {wp:?}");
+        outside += usize::from(y < yaw[0] || y > yaw[1] || p < pitch[0] || p > pitch[1]);
+        let (_, _, r0) = view_angles(&data.dataset.camera(&frames[v.source]), centre);
+        assert!(r >= closest.min(r0) - 1e-4, "distance {r} inside the near bound");
+        assert!(r <= 1.15 * r0 + 1e-4);
+        // The camera still looks at the head.
+        assert!(!head_rays(&v.camera, &data.head_range()).pixels.is_empty());
+    }
+    assert!(outside > 100, "{outside} of 300 pseudo views leave the recorded range");
+
+    // A range of 1 and no zoom keep to the recorded poses and distances.
+    let tight = StudentTrainConfig {
+        pose_range: 1.0,
+        pseudo_zoom: 0.0,
+        ..cfg
+    };
+    for v in &training_views(&data, &tight)[frames.len()..] {
+        let (y, p, _) = view_angles(&v.camera, centre);
+        assert!(y >= yaw[0] - 2e-3 && y <= yaw[1] + 2e-3, "{y} {yaw:?}");
+        assert!(p >= pitch[0] - 2e-3 && p <= pitch[1] + 2e-3, "{p} {pitch:?}");
+    }
+}
