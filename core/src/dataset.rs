@@ -376,7 +376,9 @@ impl Dataset {
         }
         let file = TransformsFile::load(&path)?;
         check_intrinsics(&path, &file, ds.intrinsics.width, ds.intrinsics.height)?;
-        if (file.focal_len, file.cx, file.cy) != (ds.intrinsics.focal, ds.intrinsics.cx, ds.intrinsics.cy) {
+        if (file.focal_len, file.cx, file.cy)
+            != (ds.intrinsics.focal, ds.intrinsics.cx, ds.intrinsics.cy)
+        {
             return Err(Error::invalid(
                 &path,
                 "intrinsics differ from transforms_train.json",

@@ -4,12 +4,15 @@
 
 use std::sync::atomic::AtomicBool;
 
+use nldf_core::dataset::Split;
 use nldf_core::run_files::{ONNX_FILE, STUDENT_FILES, TARGETS_FILE, TEACHER_FILES};
 use nldf_core::synth::SynthConfig;
 use nldf_train::config::TeacherConfig;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::demo::DemoJob;
+use nldf_train::job::eval::EvalJob;
+use nldf_train::job::posed::PosedJob;
 use nldf_train::student::StudentConfig;
 
 fn tiny_demo(out: &std::path::Path) -> DemoJob {
@@ -136,4 +139,62 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
             .markdown
             .contains("| 2: beam pool | depth tiny, distilled, no pool | 3 |")
     );
+
+    // `nldf eval --split novel`: the teacher and every student on the turned, closer and
+    // farther views, in one table.
+    let eval = EvalJob {
+        run: out.clone(),
+        data: out.join("data"),
+        split: Split::Novel,
+        frames: Some(3),
+        out: None,
+    };
+    let plan = eval.plan(&mut |_| {}).unwrap();
+    assert_eq!(plan.out, out.join("eval").join("novel"));
+    let evaluation = plan.run(&mut |_| {}).unwrap();
+    assert!(evaluation.models.len() >= 2);
+    for m in &evaluation.models {
+        assert_eq!((m.split.as_str(), m.frames.len()), ("novel", 3));
+        assert!(m.psnr.is_finite() && m.mouth_psnr.is_some(), "{}", m.model);
+    }
+
+    // The posed ablation: three students at equal total wall time, scored on val, novel
+    // and voice, with the pose-sweep strip.
+    let report = PosedJob {
+        data: out.join("data"),
+        run: out.clone(),
+        model: StudentConfig::tiny(),
+        minutes: 0.01,
+        pseudo_frames: 4,
+        pose_range: 2.0,
+        frames: Some(2),
+    }
+    .run(&stop, &mut |_| {})
+    .unwrap();
+    assert_eq!(report.rows.len(), 4);
+    assert!(report.rows[0].variant.starts_with("teacher"));
+    for r in &report.rows {
+        let splits: Vec<&str> = r.scores.iter().map(|s| s.split.as_str()).collect();
+        assert_eq!(splits, ["val", "novel", "voice"], "{}", r.variant);
+        assert!(r.scores.iter().all(|s| s.psnr.is_finite()), "{}", r.variant);
+    }
+    // The pixels-only student had the teacher's minutes on top of a distilled student's.
+    let teacher_minutes = report.rows[0].own_minutes;
+    let pixels = &report.rows[3];
+    assert!(pixels.variant.contains("pixels only"));
+    let rows: Vec<(f64, f64)> = report
+        .rows
+        .iter()
+        .map(|r| (r.own_minutes, r.total_minutes))
+        .collect();
+    assert!(
+        pixels.own_minutes >= teacher_minutes + report.rows[1].own_minutes - 0.01,
+        "{rows:?}"
+    );
+    for f in &report.files {
+        assert!(f.is_file(), "{}", f.display());
+    }
+    let strip = nldf_core::image::ImageRgb::load(&out.join("posed_sweep.png")).unwrap();
+    // Ground truth and four models in rows, the seven sweep poses in columns.
+    assert_eq!((strip.width, strip.height), (7 * 34 + 2, 5 * 34 + 2));
 }

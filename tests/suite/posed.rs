@@ -13,12 +13,15 @@ use crate::util::tiny_scene;
 
 /// The scene's ground truth of the split's frames, in file order.
 fn truth<'a>(scene: &'a SceneFile, split: &str) -> Vec<&'a nldf_core::synth::EvalFrame> {
-    scene.eval_frames.iter().filter(|f| f.split == split).collect()
+    scene
+        .eval_frames
+        .iter()
+        .filter(|f| f.split == split)
+        .collect()
 }
 
 #[test]
-fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_training_never_reads()
-{
+fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_training_never_reads() {
     let root = tiny_scene();
     let scene = SceneFile::load(&root.join("scene.json")).unwrap();
     let base = Dataset::load(root).unwrap();
@@ -46,7 +49,10 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
     let gt = truth(&scene, "novel");
     for (k, (f, t)) in frames.iter().zip(&gt).enumerate() {
         assert_eq!(f.img_id, t.img_id);
-        assert!(f.img_id as usize >= n, "an evaluation image follows the recording");
+        assert!(
+            f.img_id as usize >= n,
+            "an evaluation image follows the recording"
+        );
         // Each held-out frame's audio, three views of it.
         assert_eq!(f.aud_id, n_train + k / 3);
         let recorded = &scene.frames[f.aud_id].pose;
@@ -62,11 +68,17 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
             }
             1 => {
                 assert_eq!(t.pose, *recorded);
-                assert!((distance / recorded_distance - 0.93).abs() < 0.02, "{distance}");
+                assert!(
+                    (distance / recorded_distance - 0.93).abs() < 0.02,
+                    "{distance}"
+                );
             }
             _ => {
                 assert_eq!(t.pose, *recorded);
-                assert!((distance / recorded_distance - 1.15).abs() < 0.02, "{distance}");
+                assert!(
+                    (distance / recorded_distance - 1.15).abs() < 0.02,
+                    "{distance}"
+                );
             }
         }
     }
@@ -84,15 +96,26 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
     assert_eq!(voice.audio_source, base.audio_source);
     for (k, f) in frames.iter().enumerate() {
         assert_eq!(f.aud_id, k);
-        assert!((voice.camera(f).c2w - base.camera(&base.val[k]).c2w).abs_diff_eq(glam::Mat4::ZERO, 1e-6));
+        assert!(
+            (voice.camera(f).c2w - base.camera(&base.val[k]).c2w)
+                .abs_diff_eq(glam::Mat4::ZERO, 1e-6)
+        );
     }
     let n_feat = voice.audio.window * voice.audio.n_features;
     let (own, other) = (
         &base.audio.data[n_train * n_feat..(n_train + n_val) * n_feat],
         &voice.audio.data[..n_val * n_feat],
     );
-    let diff = own.iter().zip(other).map(|(a, b)| (a - b).abs()).sum::<f32>() / own.len() as f32;
-    assert!(diff > 0.1, "the voice's features differ from the recording's: {diff}");
+    let diff = own
+        .iter()
+        .zip(other)
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f32>()
+        / own.len() as f32;
+    assert!(
+        diff > 0.1,
+        "the voice's features differ from the recording's: {diff}"
+    );
     let speaker = scene.eval_voice.as_ref().unwrap();
     assert_ne!(Some(speaker), scene.voice.as_ref());
 
@@ -122,7 +145,10 @@ fn an_evaluation_split_the_scene_lacks_is_refused_naming_its_file() {
     let e = Dataset::load_held_out(&root, &AudioChoice::Auto, Split::Novel)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("transforms_novel.json") && e.contains("nldf synth"), "{e}");
+    assert!(
+        e.contains("transforms_novel.json") && e.contains("nldf synth"),
+        "{e}"
+    );
     assert!(!e.contains('\n'), "{e}");
     // The other splits still load.
     Dataset::load_held_out(&root, &AudioChoice::Auto, Split::Voice).unwrap();
@@ -171,16 +197,28 @@ fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
         // Never a mix: the source frame's own recorded audio.
         assert_eq!(v.aud_id, frames[v.source].aud_id);
         let (y, p, r) = view_angles(&v.camera, centre);
-        assert!(y >= wy.0 - 2e-3 && y <= wy.1 + 2e-3, "yaw {y} outside {wy:?}");
-        assert!(p >= wp.0 - 2e-3 && p <= wp.1 + 2e-3, "pitch {p} outside {wp:?}");
+        assert!(
+            y >= wy.0 - 2e-3 && y <= wy.1 + 2e-3,
+            "yaw {y} outside {wy:?}"
+        );
+        assert!(
+            p >= wp.0 - 2e-3 && p <= wp.1 + 2e-3,
+            "pitch {p} outside {wp:?}"
+        );
         outside += usize::from(y < yaw[0] || y > yaw[1] || p < pitch[0] || p > pitch[1]);
         let (_, _, r0) = view_angles(&data.dataset.camera(&frames[v.source]), centre);
-        assert!(r >= closest.min(r0) - 1e-4, "distance {r} inside the near bound");
+        assert!(
+            r >= closest.min(r0) - 1e-4,
+            "distance {r} inside the near bound"
+        );
         assert!(r <= 1.15 * r0 + 1e-4);
         // The camera still looks at the head.
         assert!(!head_rays(&v.camera, &data.head_range()).pixels.is_empty());
     }
-    assert!(outside > 100, "{outside} of 300 pseudo views leave the recorded range");
+    assert!(
+        outside > 100,
+        "{outside} of 300 pseudo views leave the recorded range"
+    );
 
     // A range of 1 and no zoom keep to the recorded poses and distances.
     let tight = StudentTrainConfig {
@@ -191,6 +229,9 @@ fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
     for v in &training_views(&data, &tight)[frames.len()..] {
         let (y, p, _) = view_angles(&v.camera, centre);
         assert!(y >= yaw[0] - 2e-3 && y <= yaw[1] + 2e-3, "{y} {yaw:?}");
-        assert!(p >= pitch[0] - 2e-3 && p <= pitch[1] + 2e-3, "{p} {pitch:?}");
+        assert!(
+            p >= pitch[0] - 2e-3 && p <= pitch[1] + 2e-3,
+            "{p} {pitch:?}"
+        );
     }
 }

@@ -247,16 +247,36 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     // pixel whose ray meets the head.
     let n_train = data.dataset.frames(Split::Train).len();
     assert_eq!(run.views.len(), n_train + 6);
-    assert!(
-        run.views[..n_train]
-            .iter()
-            .all(|v| v.recorded && v.weight == 1.0)
-    );
+    assert!(run.views[..n_train].iter().all(|v| v.recorded));
     assert!(run.views[n_train..].iter().all(|v| !v.recorded));
     for (fb, t) in run.beams.iter().zip(&run.targets) {
         assert_eq!(t.len(), 3 * run.cfg.model.segments * fb.pixels.len());
     }
     assert!(run.beams[n_train..].iter().all(|fb| !fb.pixels.is_empty()));
+
+    // Deferred, the pseudo views' targets come 2 per step while the student trains, and
+    // end equal to those rendered up front; the cache is written once the last is done.
+    {
+        teacher.save().unwrap();
+        let reopened = TeacherRun::open(_teacher_dir.path(), false).unwrap();
+        let later = tempfile::tempdir().unwrap();
+        let mut cfg = tiny_student_config(150);
+        cfg.train.pseudo_per_step = 2;
+        let mut deferred = StudentRun::create(later.path(), cfg, &data, Some(&teacher)).unwrap();
+        deferred
+            .prepare_deferred(&data, Some(reopened), &mut |_, _| {})
+            .unwrap();
+        assert_eq!(deferred.pending_pseudo_views(), 6);
+        assert!(deferred.targets[n_train..].iter().all(Vec::is_empty));
+        assert_eq!(deferred.targets[..n_train], run.targets[..n_train]);
+        assert!(!later.path().join("targets.safetensors").exists());
+        for left in [4, 2, 0] {
+            deferred.train_step(&data).unwrap();
+            assert_eq!(deferred.pending_pseudo_views(), left);
+        }
+        assert_eq!(deferred.targets, run.targets);
+        assert!(later.path().join("targets.safetensors").is_file());
+    }
     // The student's audio encoder starts as the teacher's.
     let vars_of = |varmap: &candle_nn::VarMap, prefix: &str| -> Vec<(String, Vec<f32>)> {
         let mut v: Vec<(String, Vec<f32>)> = varmap

@@ -163,7 +163,8 @@ pub fn first_non_finite(tensors: &HashMap<String, Tensor>) -> Result<Option<Stri
 #[derive(Debug, Clone, Copy)]
 pub struct Clock {
     before: f64,
-    started: std::time::Instant,
+    /// When it started running; `None` for a stopped clock.
+    started: Option<std::time::Instant>,
 }
 
 impl Clock {
@@ -171,13 +172,22 @@ impl Clock {
     pub fn resumed(before: f64) -> Clock {
         Clock {
             before,
-            started: std::time::Instant::now(),
+            started: Some(std::time::Instant::now()),
+        }
+    }
+
+    /// A clock stopped at `before` seconds: that of a run opened to render or score, whose
+    /// training time must not grow while it waits.
+    pub fn stopped(before: f64) -> Clock {
+        Clock {
+            before,
+            started: None,
         }
     }
 
     /// Training seconds so far.
     pub fn elapsed(&self) -> f64 {
-        self.before + self.started.elapsed().as_secs_f64()
+        self.before + self.started.map_or(0.0, |s| s.elapsed().as_secs_f64())
     }
 }
 
@@ -196,6 +206,12 @@ pub fn open_checkpoint(
         .get("elapsed_s")
         .and_then(|s| s.parse().ok())
         .unwrap_or(0.0);
+    // A run opened with its optimizer resumes training: its clock runs from now.
+    let clock = if adam.is_some() {
+        Clock::resumed(elapsed)
+    } else {
+        Clock::stopped(elapsed)
+    };
     if let Some(adam) = adam {
         let state_path = dir.join(STATE_FILE);
         let (state, state_meta) = load_tensors(&state_path)?;
@@ -211,5 +227,5 @@ pub fn open_checkpoint(
         adam.load_state(&state)
             .map_err(|e| Error::invalid(&state_path, e.to_string()))?;
     }
-    Ok((step, Clock::resumed(elapsed)))
+    Ok((step, clock))
 }

@@ -42,9 +42,7 @@ use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
 use crate::targets::{load_targets, save_targets, teacher_targets, view_targets};
 use crate::teacher_trainer::TeacherRun;
-use crate::views::{
-    FrameBeams, View, frame_beams, training_views, views_fingerprint,
-};
+use crate::views::{FrameBeams, View, frame_beams, training_views, views_fingerprint};
 
 /// Rays per forward pass when rendering.
 const RENDER_CHUNK: usize = 8192;

@@ -96,7 +96,11 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
     let (yaw, pitch) = (widen(yaw), widen(pitch));
     let closest = ds.near + 0.5 * (data.bounds.hi - data.bounds.lo).max_element();
     let draw = |rng: &mut ChaCha8Rng, (lo, hi): (f32, f32)| {
-        if hi > lo { rng.random_range(lo..=hi) } else { lo }
+        if hi > lo {
+            rng.random_range(lo..=hi)
+        } else {
+            lo
+        }
     };
     for _ in 0..cfg.pseudo_frames {
         let source = rng.random_range(0..frames.len());

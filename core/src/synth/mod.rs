@@ -9,8 +9,8 @@
 
 pub mod head;
 mod sdf;
-mod splits;
 pub mod speech;
+mod splits;
 mod trace;
 
 use std::f32::consts::PI;
@@ -665,9 +665,8 @@ fn write_transforms(
         })
         .collect();
     let n_train = n_train(n_frames);
-    let transforms = |frames: &[FrameEntry]| {
-        transforms_file(cfg, intrinsics, (near, far), frames.to_vec())
-    };
+    let transforms =
+        |frames: &[FrameEntry]| transforms_file(cfg, intrinsics, (near, far), frames.to_vec());
     transforms(&entries[..n_train]).save(&dir.join(Split::Train.file_name()))?;
     transforms(&entries[n_train..]).save(&dir.join(Split::Val.file_name()))
 }

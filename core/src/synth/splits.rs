@@ -13,9 +13,7 @@
 use std::path::Path;
 
 use super::speech::{Voice, mouth_track, synthesize_speech};
-use super::{
-    EvalFrame, HeadPose, SynthConfig, Tracks, feature_windows, stream, transforms_file,
-};
+use super::{EvalFrame, HeadPose, SynthConfig, Tracks, feature_windows, stream, transforms_file};
 use crate::audio::{FeatureSource, write_wav};
 use crate::camera::Intrinsics;
 use crate::dataset::{FrameEntry, Split, save_audio_features};
@@ -117,7 +115,14 @@ impl EvalSplits {
                 mouth_width: mouth[k].mouth_width,
                 blink: tracks.blink[i],
             };
-            push(Split::Voice, k, "recorded pose".into(), face, tracks.poses[i], d);
+            push(
+                Split::Voice,
+                k,
+                "recorded pose".into(),
+                face,
+                tracks.poses[i],
+                d,
+            );
         }
         if let Some(&m) = held_out.get(held_out.len() / 2) {
             let p = tracks.poses[m];
@@ -127,7 +132,14 @@ impl EvalSplits {
                     pitch_deg: f * range[1],
                     ..p
                 };
-                push(Split::Sweep, m, format!("turn {f}x"), tracks.face(m), pose, d);
+                push(
+                    Split::Sweep,
+                    m,
+                    format!("turn {f}x"),
+                    tracks.face(m),
+                    pose,
+                    d,
+                );
             }
         }
         Ok(EvalSplits {
@@ -174,7 +186,11 @@ impl EvalSplits {
         write_wav(&voice_dir.join(crate::dataset::AUDIO_WAV), &self.voice_wave)?;
         if n_voice > 0 {
             let windows = feature_windows(cfg, &self.voice_wave, n_voice)?;
-            save_audio_features(&voice_dir, &windows, &FeatureSource::Nldf(cfg.features.clone()))?;
+            save_audio_features(
+                &voice_dir,
+                &windows,
+                &FeatureSource::Nldf(cfg.features.clone()),
+            )?;
         }
         Ok(())
     }

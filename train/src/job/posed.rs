@@ -169,9 +169,15 @@ impl PosedJob {
         let mut reports: Vec<Vec<EvalReport>> = vec![Vec::new(); models.len()];
         for split in SPLITS {
             let data = TrainData::open_held_out(&self.data, false, &audio, split)?;
-            on_event(&JobEvent::Stage(format!("scoring the {} split", split.name())));
+            on_event(&JobEvent::Stage(format!(
+                "scoring the {} split",
+                split.name()
+            )));
             let out = self.run.join("eval_posed").join(split.name());
-            let total = self.frames.unwrap_or(usize::MAX).min(data.dataset.val.len());
+            let total = self
+                .frames
+                .unwrap_or(usize::MAX)
+                .min(data.dataset.val.len());
             let mut done = 0;
             let evaluation = eval_models(&models, &data, split, self.frames, &out, &mut || {
                 done += 1;
@@ -200,7 +206,10 @@ impl PosedJob {
         for (k, (label, run, distilled)) in students.iter().enumerate() {
             let own = run.elapsed() / 60.0;
             rows.push(PosedRow {
-                variant: format!("{} ({}x{})", label, run.cfg.model.depth, run.cfg.model.width),
+                variant: format!(
+                    "{} ({}x{})",
+                    label, run.cfg.model.depth, run.cfg.model.width
+                ),
                 folder: run.dir.clone(),
                 steps: run.step,
                 own_minutes: own,
