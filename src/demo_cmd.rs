@@ -1,16 +1,22 @@
 //! `nldf demo`: the whole pipeline on the embedded default, the synthetic talking head:
 //! generate the scene, train the teacher within a time budget, distil the student from it,
-//! evaluate both on the held-out frames and export the student as ONNX. Each stage that
-//! already finished in the output folder is reused, and an interrupted stage resumes.
+//! export the student as ONNX, evaluate both on the held-out frames, and render the student
+//! speaking with a voice it never heard. Each stage that already finished in the output
+//! folder is reused, and an interrupted stage resumes. It ends with a table of quality and
+//! speed and the paths of the video, the comparison grid, the training curves and the model.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
+use nldf_core::dataset::{AUDIO_WAV, Split, VOICE_DIR};
+use nldf_core::run_files::{CURVE_FILE, STUDENT_DIR, TEACHER_DIR};
 use nldf_core::synth::SynthConfig;
+use nldf_infer::backend::{BackendKind, BackendOptions};
+use nldf_infer::video::{VideoJob, VideoReport};
 use nldf_train::job::JobEvent;
-use nldf_train::job::demo::DemoJob;
+use nldf_train::job::demo::{DemoJob, DemoReport};
 
-use crate::progress::{EventPrinter, stop_flag};
+use crate::progress::{EventPrinter, progress_bar, stop_flag};
 use crate::train_cmd::TeacherPreset;
 
 #[derive(clap::Args, Debug)]
@@ -102,5 +108,90 @@ pub fn run(args: DemoArgs) -> Result<()> {
         .map_or(0, |m| m.frames.len());
     crate::eval_cmd::print_evaluation(&report.evaluation, &report.eval_dir, n)?;
     report.evaluation.check_finite()?;
+    let video = match &report.model {
+        Some(model) => Some(render_new_voice(&job.out, model)?),
+        None => None,
+    };
+    print_summary(&job.out, &report, video.as_ref());
     Ok(())
+}
+
+/// Renders the exported student speaking with the `voice` split's speaker, a voice it never
+/// heard, at the held-out frames' poses, into OUT/video (replacing an earlier demo's), with
+/// tract: an MP4 when ffmpeg is found, PNG frames always.
+fn render_new_voice(out: &Path, model: &Path) -> Result<VideoReport> {
+    let data = out.join("data");
+    let video = out.join("video");
+    if video.exists() {
+        std::fs::remove_dir_all(&video)
+            .with_context(|| format!("removing the earlier demo video {}", video.display()))?;
+    }
+    println!(
+        "== rendering a voice the student never heard -> {}",
+        video.display()
+    );
+    let job = VideoJob {
+        model: model.to_path_buf(),
+        audio: Some(data.join(VOICE_DIR).join(AUDIO_WAV)),
+        features: None,
+        poses: Some(data.join(Split::Val.file_name())),
+        out: video,
+        backend: BackendKind::Tract,
+        options: BackendOptions::default(),
+        size: None,
+        mp4: true,
+        ffmpeg: None,
+    };
+    let plan = job.plan()?;
+    let bar = progress_bar(plan.n_frames() as u64, "frames");
+    let report = plan.render(|p| bar.set_position(p.done as u64))?;
+    bar.finish_and_clear();
+    Ok(report)
+}
+
+/// The closing table (teacher and student quality on the held-out frames, and speed) and
+/// the paths of what the demo made.
+fn print_summary(out: &Path, report: &DemoReport, video: Option<&VideoReport>) {
+    println!("\n== nldf demo: done");
+    println!("| model | PSNR (dB) | SSIM | mouth PSNR (dB) | frames/s |");
+    println!("|---|---|---|---|---|");
+    for r in &report.evaluation.models {
+        let mouth = r.mouth_psnr.map_or("-".into(), |m| format!("{m:.2}"));
+        let candle_fps = 1.0 / r.render_s_per_frame.max(1e-9);
+        let fps = match video {
+            Some(v) if r.label != "teacher" => format!(
+                "{:.1} (ONNX, tract); {candle_fps:.1} (candle)",
+                v.n_frames as f64 / v.render_seconds.max(1e-9)
+            ),
+            _ => format!("{candle_fps:.1} (candle)"),
+        };
+        println!(
+            "| {} | {:.2} | {:.4} | {mouth} | {fps} |",
+            r.model, r.psnr, r.ssim
+        );
+    }
+    println!(
+        "(scores over the {} held-out frames; frames/s of whole frames on this machine)",
+        report
+            .evaluation
+            .models
+            .first()
+            .map_or(0, |m| m.frames.len())
+    );
+    let show = |what: &str, path: PathBuf| println!("  {what:<16} {}", path.display());
+    if let Some(v) = video {
+        match &v.video {
+            Some(mp4) => show("video", mp4.clone()),
+            None => show("video frames", v.out.clone()),
+        }
+    }
+    show("comparison grid", report.eval_dir.join("grid.png"));
+    show("teacher curve", out.join(TEACHER_DIR).join(CURVE_FILE));
+    if report.model.is_some() {
+        show("student curve", out.join(STUDENT_DIR).join(CURVE_FILE));
+    }
+    if let Some(model) = &report.model {
+        show("model", model.clone());
+    }
+    show("scores", report.eval_dir.join("metrics.json"));
 }
