@@ -407,11 +407,38 @@ pub struct StudentTrainConfig {
 }
 
 impl StudentTrainConfig {
-    /// The learning rate at `step`: `lr 0.1^(max(0, step - lr_hold_steps) / lr_decay_steps)`.
-    pub fn learning_rate(&self, step: usize) -> f64 {
-        let decaying = step.saturating_sub(self.lr_hold_steps);
-        self.lr * 0.1f64.powf(decaying as f64 / self.lr_decay_steps.max(1) as f64)
+    /// The learning rate at `step` after `elapsed_s` training seconds
+    /// ([`decayed_learning_rate`] with the hold).
+    pub fn learning_rate(&self, step: usize, elapsed_s: f64) -> f64 {
+        decayed_learning_rate(
+            self.lr,
+            step.saturating_sub(self.lr_hold_steps),
+            self.lr_decay_steps,
+            elapsed_s,
+            self.time_budget_s,
+        )
     }
+}
+
+/// `lr 0.1^p`: the learning rate decays tenfold over `decay_steps` steps, and, when a time
+/// budget is set, also tenfold over the budget, whichever is further along
+/// (`p = max(step / decay_steps, elapsed_s / budget_s)`). A run cut by its budget thus ends
+/// at a tenth of its rate, as a run of `decay_steps` does, instead of stopping while the
+/// rate is still high.
+pub fn decayed_learning_rate(
+    lr: f64,
+    step: usize,
+    decay_steps: usize,
+    elapsed_s: f64,
+    budget_s: f64,
+) -> f64 {
+    let by_steps = step as f64 / decay_steps.max(1) as f64;
+    let by_time = if budget_s > 0.0 && elapsed_s.is_finite() {
+        (elapsed_s / budget_s).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    lr * 0.1f64.powf(by_steps.max(by_time))
 }
 
 impl Default for StudentTrainConfig {
@@ -486,15 +513,25 @@ mod tests {
             lr_decay_steps: 50,
             ..StudentTrainConfig::default()
         };
-        assert_eq!(t.learning_rate(0), 5e-4);
-        assert_eq!(t.learning_rate(100), 5e-4);
-        assert!((t.learning_rate(150) - 5e-5).abs() < 1e-18);
-        assert!((t.learning_rate(200) - 5e-6).abs() < 1e-18);
+        assert_eq!(t.learning_rate(0, 0.0), 5e-4);
+        assert_eq!(t.learning_rate(100, 0.0), 5e-4);
+        assert!((t.learning_rate(150, 0.0) - 5e-5).abs() < 1e-18);
+        assert!((t.learning_rate(200, 0.0) - 5e-6).abs() < 1e-18);
         // Without a hold (the default) the decay starts at step 0.
         let plain = StudentTrainConfig {
             lr_hold_steps: 0,
             ..t
         };
-        assert!((plain.learning_rate(50) - 5e-5).abs() < 1e-18);
+        assert!((plain.learning_rate(50, 0.0) - 5e-5).abs() < 1e-18);
+        // A time budget decays the rate tenfold over the budget, whichever comes first.
+        let timed = StudentTrainConfig {
+            lr_decay_steps: 1_000_000,
+            time_budget_s: 600.0,
+            ..plain
+        };
+        assert!((timed.learning_rate(10, 300.0) - 5e-4 * 0.1f64.sqrt()).abs() < 1e-12);
+        assert!((timed.learning_rate(10, 600.0) - 5e-5).abs() < 1e-15);
+        assert!((timed.learning_rate(10, 900.0) - 5e-5).abs() < 1e-15);
+        assert!((timed.learning_rate(500_000, 60.0) - 5e-4 * 0.1f64.sqrt()).abs() < 1e-12);
     }
 }

@@ -310,9 +310,9 @@ impl StudentRun {
         self.clock.elapsed()
     }
 
-    /// The learning rate at the current step ([`StudentTrainConfig::learning_rate`]).
+    /// The learning rate now ([`StudentTrainConfig::learning_rate`]).
     pub fn learning_rate(&self) -> f64 {
-        self.cfg.train.learning_rate(self.step)
+        self.cfg.train.learning_rate(self.step, self.elapsed())
     }
 
     /// Audio codes of frames.

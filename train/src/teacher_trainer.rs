@@ -88,10 +88,17 @@ impl TeacherRun {
         self.clock.elapsed()
     }
 
-    /// The learning rate at the current step: `lr 0.1^(step / lr_decay_steps)`.
+    /// The learning rate now: tenfold down over `lr_decay_steps`, or over the time budget
+    /// when one is set and further along ([`crate::config::decayed_learning_rate`]).
     pub fn learning_rate(&self) -> f64 {
         let t = &self.cfg.train;
-        t.lr * 0.1f64.powf(self.step as f64 / t.lr_decay_steps.max(1) as f64)
+        crate::config::decayed_learning_rate(
+            t.lr,
+            self.step,
+            t.lr_decay_steps,
+            self.elapsed(),
+            t.time_budget_s,
+        )
     }
 
     fn attention_on(&self) -> bool {
