@@ -11,6 +11,10 @@ pub struct ExportArgs {
     /// Run folder (with a trained RUN/student).
     #[arg(long)]
     pub run: PathBuf,
+    /// The student's folder inside RUN (another student of the run, e.g. an ablation's
+    /// `posed_distilled`).
+    #[arg(long, default_value = "student")]
+    pub student: String,
     /// Output file (default RUN/model.onnx).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -21,7 +25,7 @@ pub struct ExportArgs {
 
 /// Runs `nldf export`.
 pub fn run(args: ExportArgs) -> Result<()> {
-    let student = args.run.join("student");
+    let student = args.run.join(&args.student);
     if !student.is_dir() {
         bail!(
             "{} has no trained student (expected {})",

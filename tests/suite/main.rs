@@ -10,6 +10,7 @@ mod infer;
 mod jobs;
 mod metrics;
 mod posed;
+mod shipped;
 mod rendering;
 mod stress;
 mod student;

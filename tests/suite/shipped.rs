@@ -45,11 +45,14 @@ fn the_shipped_model_matches_its_card_and_renders_finite_frames() {
     // Every metadata entry but the embedded background is in the card's table, verbatim.
     let mut listed = 0;
     for entry in &model.proto.metadata_props {
-        if entry.key == nldf_export::contract::keys::BACKGROUND_FILE || entry.value.len() > 200
-        {
+        let (key, value) = (
+            entry.key.as_deref().unwrap_or_default(),
+            entry.value.as_deref().unwrap_or_default(),
+        );
+        if key == nldf_export::contract::keys::BACKGROUND_FILE || value.len() > 200 {
             continue;
         }
-        let row = format!("| `{}` | `{}` |", entry.key, entry.value);
+        let row = format!("| `{key}` | `{value}` |");
         assert!(card.contains(&row), "the card lacks the row {row}");
         listed += 1;
     }
