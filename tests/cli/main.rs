@@ -853,6 +853,26 @@ fn command_line_misuse_is_refused() {
             vec![d.join("model.onnx")],
         ),
         (
+            "synth turning the novel split less than the recorded range",
+            args(&["synth", "--out", &o, "--novel-turn", "0.5"]),
+            vec!["--novel-turn"],
+            vec![out.clone()],
+        ),
+        (
+            "a posed ablation with no student minutes",
+            args(&[
+                "ablate",
+                "--data",
+                &s(&f.data),
+                "--run",
+                &o,
+                "--posed-minutes",
+                "0",
+            ]),
+            vec!["minutes"],
+            vec![out.clone()],
+        ),
+        (
             "a demo with negative minutes",
             args(&["demo", "--out", &o, "--minutes=-1"]),
             vec!["--minutes"],

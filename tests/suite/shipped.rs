@@ -77,7 +77,10 @@ fn the_shipped_model_matches_its_card_and_renders_finite_frames() {
             let audio = neighbourhood(&windows, 10 + f, info.audio.att_frames);
             let frame = renderer.render(*c2w, &audio).unwrap();
             assert_eq!(frame.image.non_finite_values(), 0, "{kind:?} frame {f}");
-            assert!(frame.head_pixels > 100, "{kind:?} frame {f} misses the head");
+            assert!(
+                frame.head_pixels > 100,
+                "{kind:?} frame {f} misses the head"
+            );
             frames.push(frame.image);
         }
     }

@@ -536,10 +536,16 @@ mod tests {
             ..plain
         };
         let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
-        assert!(close(timed.learning_rate(10, 300.0), 5e-4 * 0.1f64.powf(10.0 / 1e6)));
+        assert!(close(
+            timed.learning_rate(10, 300.0),
+            5e-4 * 0.1f64.powf(10.0 / 1e6)
+        ));
         assert!(close(timed.learning_rate(10, 480.0), 5e-4 * 0.1f64.sqrt()));
         assert!(close(timed.learning_rate(0, 600.0), 5e-5));
         assert!(close(timed.learning_rate(0, 900.0), 5e-5));
-        assert!(close(timed.learning_rate(500_000, 60.0), 5e-4 * 0.1f64.sqrt()));
+        assert!(close(
+            timed.learning_rate(500_000, 60.0),
+            5e-4 * 0.1f64.sqrt()
+        ));
     }
 }
