@@ -28,10 +28,12 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// The whole pipeline on the synthetic talking head: scene, teacher, student, ONNX
-    /// export and evaluation of both on the held-out frames.
+    /// export, evaluation of both on the held-out frames, and a video of the student
+    /// speaking with a voice it never heard; ends with a table of quality and speed.
     Demo(demo_cmd::DemoArgs),
     /// Generate the synthetic talking head as an AD-NeRF dataset (frames, background, audio,
-    /// audio features, camera poses, depth, parsing masks and scene.json ground truth).
+    /// audio features, camera poses, depth, parsing masks and scene.json ground truth), with
+    /// the novel, voice and sweep evaluation splits.
     Synth(synth_cmd::SynthArgs),
     /// Train a stage of the pipeline: the teacher NeRF, then the light-field student.
     #[command(subcommand)]
@@ -39,7 +41,8 @@ enum Command {
     /// Make a WAV file's audio features with nldf's front end, as an AD-NeRF `aud.npy` with
     /// its settings in `aud.json` beside it.
     Features(features_cmd::FeaturesArgs),
-    /// Render held-out frames with a trained model and score them (PSNR, SSIM, mouth PSNR).
+    /// Render held-out frames (or the novel, voice or sweep split) with a run's teacher and
+    /// students and score them (PSNR, SSIM, head and mouth PSNR).
     Eval(eval_cmd::EvalArgs),
     /// Export a run's trained student (with its audio encoder) as one ONNX model.
     Export(export_cmd::ExportArgs),
@@ -47,7 +50,8 @@ enum Command {
     /// an MP4 with the audio when ffmpeg is on the PATH).
     Render(render_cmd::RenderArgs),
     /// The paper's ablations on one dataset: distillation, the beam pool, depth, and a
-    /// pixels-only student at the same total wall time.
+    /// pixels-only student at the same total wall time; or, with --posed-minutes, students
+    /// with and without pseudo views scored beyond the recorded poses.
     Ablate(ablate_cmd::AblateArgs),
     /// Benchmarks: training steps, the positional encoding, frame rendering (tract and
     /// onnxruntime) and streaming latency, each written as JSON and Markdown.
