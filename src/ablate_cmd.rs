@@ -85,13 +85,7 @@ pub fn run(args: AblateArgs) -> Result<()> {
             frames: args.frames,
         };
         let report = job.run(&stop, &mut show)?;
-        print!("{}", report.markdown);
-        let names: Vec<String> = report
-            .files
-            .iter()
-            .map(|f| f.display().to_string())
-            .collect();
-        println!("wrote {}", names.join(", "));
+        print_report(&report.markdown, &report.files);
         return Ok(());
     }
     let job = AblationJob {
@@ -103,12 +97,13 @@ pub fn run(args: AblateArgs) -> Result<()> {
         wall_time: !args.no_wall_time,
     };
     let report = job.plan()?.run(&stop, &mut show)?;
-    print!("{}", report.markdown);
-    let names: Vec<String> = report
-        .files
-        .iter()
-        .map(|f| f.display().to_string())
-        .collect();
-    println!("wrote {}", names.join(", "));
+    print_report(&report.markdown, &report.files);
     Ok(())
+}
+
+/// Prints an ablation's table and the files it wrote.
+fn print_report(markdown: &str, files: &[PathBuf]) {
+    print!("{markdown}");
+    let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    println!("wrote {}", names.join(", "));
 }

@@ -187,10 +187,8 @@ fn print_summary(out: &Path, report: &DemoReport, video: Option<&VideoReport>) {
     }
     show("comparison grid", report.eval_dir.join("grid.png"));
     show("teacher curve", out.join(TEACHER_DIR).join(CURVE_FILE));
-    if report.model.is_some() {
-        show("student curve", out.join(STUDENT_DIR).join(CURVE_FILE));
-    }
     if let Some(model) = &report.model {
+        show("student curve", out.join(STUDENT_DIR).join(CURVE_FILE));
         show("model", model.clone());
     }
     show("scores", report.eval_dir.join("metrics.json"));

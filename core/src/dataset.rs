@@ -132,15 +132,6 @@ pub enum Split {
 pub const VOICE_DIR: &str = "voice";
 
 impl Split {
-    /// Every split, in the order tables list them.
-    pub const ALL: [Split; 5] = [
-        Split::Train,
-        Split::Val,
-        Split::Novel,
-        Split::Voice,
-        Split::Sweep,
-    ];
-
     /// The transforms file name of the split.
     pub fn file_name(self) -> &'static str {
         match self {
@@ -253,17 +244,7 @@ impl Dataset {
         })?;
         let background = ImageRgb::load(&bc_path)?;
         let (width, height) = (background.width, background.height);
-        for (path, t) in [(&train_path, &train_file), (&val_path, &val_file)] {
-            check_intrinsics(path, t, width, height)?;
-        }
-        if (train_file.focal_len, train_file.cx, train_file.cy)
-            != (val_file.focal_len, val_file.cx, val_file.cy)
-        {
-            return Err(Error::invalid(
-                &val_path,
-                "intrinsics differ from transforms_train.json",
-            ));
-        }
+        check_intrinsics(&train_path, &train_file, width, height)?;
         let intrinsics = Intrinsics {
             focal: train_file.focal_len,
             cx: train_file.cx,
@@ -271,6 +252,7 @@ impl Dataset {
             width,
             height,
         };
+        check_held_out_intrinsics(&val_path, &val_file, &intrinsics)?;
 
         let fps = train_file.fps.unwrap_or(25.0);
         if !(fps.is_finite() && fps > 0.0) {
@@ -279,43 +261,11 @@ impl Dataset {
                 format!("fps must be positive, got {fps}"),
             ));
         }
-        let n_audio_frames = train_file
-            .frames
-            .iter()
-            .chain(&val_file.frames)
-            .map(|f| f.aud_id.max(0) as usize + 1)
-            .max()
-            .unwrap_or(0);
+        let n_audio_frames = n_audio_frames(train_file.frames.iter().chain(&val_file.frames));
         let (audio, audio_source, audio_file) = load_audio(root, audio, fps, n_audio_frames)?;
-        let image_dir = IMAGE_DIRS
-            .iter()
-            .map(|d| root.join(d))
-            .find(|d| d.is_dir())
-            .ok_or_else(|| {
-                Error::invalid(
-                    root.join("head_imgs"),
-                    "no image folder (head_imgs/, ori_imgs/ or gt_imgs/)",
-                )
-            })?;
-        let parsing_dir = root.join("parsing");
-        let parsing_dir = parsing_dir.is_dir().then_some(parsing_dir);
-        let frames = |path: &Path, t: &TransformsFile| -> Result<Vec<Frame>> {
-            t.frames
-                .iter()
-                .enumerate()
-                .map(|(n, e)| {
-                    validate_frame(
-                        path,
-                        n,
-                        e,
-                        &intrinsics,
-                        &audio,
-                        &image_dir,
-                        parsing_dir.as_deref(),
-                    )
-                })
-                .collect()
-        };
+        let dirs = FrameDirs::find(root)?;
+        let frames =
+            |path: &Path, t: &TransformsFile| validate_frames(path, t, &intrinsics, &audio, &dirs);
         let train = frames(&train_path, &train_file)?;
         let val = frames(&val_path, &val_file)?;
         if train.is_empty() {
@@ -375,24 +325,14 @@ impl Dataset {
             ));
         }
         let file = TransformsFile::load(&path)?;
-        check_intrinsics(&path, &file, ds.intrinsics.width, ds.intrinsics.height)?;
-        if (file.focal_len, file.cx, file.cy)
-            != (ds.intrinsics.focal, ds.intrinsics.cx, ds.intrinsics.cy)
-        {
-            return Err(Error::invalid(
-                &path,
-                "intrinsics differ from transforms_train.json",
-            ));
-        }
+        check_held_out_intrinsics(&path, &file, &ds.intrinsics)?;
         if split == Split::Voice {
-            let n_audio_frames = file
-                .frames
-                .iter()
-                .map(|f| f.aud_id.max(0) as usize + 1)
-                .max()
-                .unwrap_or(0);
-            let (audio, source, audio_file) =
-                load_audio(&split.audio_dir(root), audio, ds.fps, n_audio_frames)?;
+            let (audio, source, audio_file) = load_audio(
+                &split.audio_dir(root),
+                audio,
+                ds.fps,
+                n_audio_frames(file.frames.iter()),
+            )?;
             if source != ds.audio_source {
                 return Err(Error::invalid(
                     &audio_file,
@@ -405,30 +345,13 @@ impl Dataset {
             }
             (ds.audio, ds.audio_source, ds.audio_file) = (audio, source, audio_file);
         }
-        let image_dir = ds
-            .train
-            .first()
-            .and_then(|f| f.image_path.parent())
-            .map(Path::to_path_buf)
-            .unwrap_or_else(|| root.join(IMAGE_DIRS[0]));
-        let parsing_dir = root.join("parsing");
-        let parsing_dir = parsing_dir.is_dir().then_some(parsing_dir);
-        ds.val = file
-            .frames
-            .iter()
-            .enumerate()
-            .map(|(n, e)| {
-                validate_frame(
-                    &path,
-                    n,
-                    e,
-                    &ds.intrinsics,
-                    &ds.audio,
-                    &image_dir,
-                    parsing_dir.as_deref(),
-                )
-            })
-            .collect::<Result<Vec<_>>>()?;
+        ds.val = validate_frames(
+            &path,
+            &file,
+            &ds.intrinsics,
+            &ds.audio,
+            &FrameDirs::find(root)?,
+        )?;
         ds.held_out = split;
         Ok(ds)
     }
@@ -487,6 +410,69 @@ impl Dataset {
         }
         Ok(())
     }
+}
+
+/// Where a dataset's frame images and parsing masks are.
+struct FrameDirs {
+    /// The first of [`IMAGE_DIRS`] that exists.
+    image: PathBuf,
+    /// `parsing/`, when the dataset has one.
+    parsing: Option<PathBuf>,
+}
+
+impl FrameDirs {
+    fn find(root: &Path) -> Result<FrameDirs> {
+        let image = IMAGE_DIRS
+            .iter()
+            .map(|d| root.join(d))
+            .find(|d| d.is_dir())
+            .ok_or_else(|| {
+                Error::invalid(
+                    root.join("head_imgs"),
+                    "no image folder (head_imgs/, ori_imgs/ or gt_imgs/)",
+                )
+            })?;
+        let parsing = root.join("parsing");
+        Ok(FrameDirs {
+            image,
+            parsing: parsing.is_dir().then_some(parsing),
+        })
+    }
+}
+
+/// Audio frames the entries need: one past the largest `aud_id`.
+fn n_audio_frames<'a>(entries: impl Iterator<Item = &'a FrameEntry>) -> usize {
+    entries
+        .map(|f| f.aud_id.max(0) as usize + 1)
+        .max()
+        .unwrap_or(0)
+}
+
+/// Every frame of a transforms file, validated ([`validate_frame`]).
+fn validate_frames(
+    path: &Path,
+    t: &TransformsFile,
+    k: &Intrinsics,
+    audio: &AudioWindows,
+    dirs: &FrameDirs,
+) -> Result<Vec<Frame>> {
+    t.frames
+        .iter()
+        .enumerate()
+        .map(|(n, e)| validate_frame(path, n, e, k, audio, &dirs.image, dirs.parsing.as_deref()))
+        .collect()
+}
+
+/// A held-out transforms file's intrinsics: valid, and the training file's.
+fn check_held_out_intrinsics(path: &Path, t: &TransformsFile, k: &Intrinsics) -> Result<()> {
+    check_intrinsics(path, t, k.width, k.height)?;
+    if (t.focal_len, t.cx, t.cy) != (k.focal, k.cx, k.cy) {
+        return Err(Error::invalid(
+            path,
+            "intrinsics differ from transforms_train.json",
+        ));
+    }
+    Ok(())
 }
 
 fn check_intrinsics(path: &Path, t: &TransformsFile, width: u32, height: u32) -> Result<()> {

@@ -9,7 +9,7 @@ use nldf_train::config::StudentTrainConfig;
 use nldf_train::data::TrainData;
 use nldf_train::views::{recorded_range, training_views, view_angles};
 
-use crate::util::tiny_scene;
+use crate::util::{files_under, tiny_scene};
 
 /// The scene's ground truth of the split's frames, in file order.
 fn truth<'a>(scene: &'a SceneFile, split: &str) -> Vec<&'a nldf_core::synth::EvalFrame> {
@@ -132,14 +132,10 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
 fn an_evaluation_split_the_scene_lacks_is_refused_naming_its_file() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("scene");
-    let mut files = vec![];
-    for entry in walk(tiny_scene()) {
-        files.push(entry);
-    }
-    for rel in files {
+    for (rel, bytes) in files_under(tiny_scene()) {
         let to = root.join(&rel);
         std::fs::create_dir_all(to.parent().unwrap()).unwrap();
-        std::fs::copy(tiny_scene().join(&rel), &to).unwrap();
+        std::fs::write(&to, bytes).unwrap();
     }
     std::fs::remove_file(root.join("transforms_novel.json")).unwrap();
     let e = Dataset::load_held_out(&root, &AudioChoice::Auto, Split::Novel)
@@ -152,23 +148,6 @@ fn an_evaluation_split_the_scene_lacks_is_refused_naming_its_file() {
     assert!(!e.contains('\n'), "{e}");
     // The other splits still load.
     Dataset::load_held_out(&root, &AudioChoice::Auto, Split::Voice).unwrap();
-}
-
-/// Every file under `root`, relative to it.
-fn walk(root: &std::path::Path) -> Vec<std::path::PathBuf> {
-    let mut out = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for e in std::fs::read_dir(&dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.push(p.strip_prefix(root).unwrap().to_path_buf());
-            }
-        }
-    }
-    out
 }
 
 #[test]

@@ -1,13 +1,14 @@
 //! The synthetic talking head end to end: determinism, loading back, and a mouth that follows
 //! the audio.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use nldf_core::dataset::{Dataset, Split};
 use nldf_core::region::Region;
 use nldf_core::synth::{SceneFile, SynthConfig, generate};
+
+use crate::util::files_under;
 
 fn small(seed: u64, seconds: f32, size: u32) -> SynthConfig {
     SynthConfig {
@@ -17,25 +18,6 @@ fn small(seed: u64, seconds: f32, size: u32) -> SynthConfig {
         supersample: 1,
         ..SynthConfig::default()
     }
-}
-
-fn files_under(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                out.insert(
-                    path.strip_prefix(root).unwrap().to_path_buf(),
-                    std::fs::read(&path).unwrap(),
-                );
-            }
-        }
-    }
-    out
 }
 
 /// A 12 s scene at 64 x 64, made once per test process for the tests that only read it

@@ -2,7 +2,7 @@
 //! and their candle reference renders, random rays and audio, the tiny synthetic scene and
 //! teacher settings, the Python and onnxruntime environments, `.npy` and WAV files.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
@@ -436,4 +436,24 @@ pub(crate) fn assert_learned(what: &str, losses: &[f64], ratio: f64, before: f64
     eprintln!("{what} loss {first:.4e} -> {last:.4e}, val PSNR {before:.2} -> {after:.2} dB");
     assert!(last < ratio * first, "{what}: loss {first} -> {last}");
     assert!(after > before + 2.0, "{what}: PSNR {before} -> {after}");
+}
+
+/// Every file under `root`, by its path relative to `root`, with its bytes.
+pub(crate) fn files_under(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                out.insert(
+                    path.strip_prefix(root).unwrap().to_path_buf(),
+                    std::fs::read(&path).unwrap(),
+                );
+            }
+        }
+    }
+    out
 }

@@ -97,10 +97,12 @@ impl PosedJob {
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
         let teacher_minutes = teacher.elapsed() / 60.0;
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
-        // Every split must be there before hours of training start.
-        for split in SPLITS.into_iter().chain([Split::Sweep]) {
-            TrainData::open_held_out(&self.data, false, &audio, split)?;
-        }
+        // Every split is loaded before hours of training start, and scored from here.
+        let held_out = SPLITS
+            .into_iter()
+            .chain([Split::Sweep])
+            .map(|split| TrainData::open_held_out(&self.data, false, &audio, split))
+            .collect::<Result<Vec<_>>>()?;
         let student = |name: &str, distill: bool, pseudo: usize, minutes: f64| StudentJob {
             data: self.data.clone(),
             run: self.run.clone(),
@@ -167,8 +169,7 @@ impl PosedJob {
         let mut models: Vec<&dyn FrameModel> = vec![&teacher];
         models.extend(students.iter().map(|(_, s, _)| s as &dyn FrameModel));
         let mut reports: Vec<Vec<EvalReport>> = vec![Vec::new(); models.len()];
-        for split in SPLITS {
-            let data = TrainData::open_held_out(&self.data, false, &audio, split)?;
+        for (split, data) in SPLITS.into_iter().zip(&held_out) {
             on_event(&JobEvent::Stage(format!(
                 "scoring the {} split",
                 split.name()
@@ -179,7 +180,7 @@ impl PosedJob {
                 .unwrap_or(usize::MAX)
                 .min(data.dataset.val.len());
             let mut done = 0;
-            let evaluation = eval_models(&models, &data, split, self.frames, &out, &mut || {
+            let evaluation = eval_models(&models, data, split, self.frames, &out, &mut || {
                 done += 1;
                 on_event(&JobEvent::Progress {
                     what: format!("{} frames", split.name()),
@@ -192,9 +193,8 @@ impl PosedJob {
                 reports[k].push(r);
             }
         }
-        let sweep = TrainData::open_held_out(&self.data, false, &audio, Split::Sweep)?;
         let strip = self.run.join("posed_sweep.png");
-        sweep_strip(&models, &sweep, &strip)?;
+        sweep_strip(&models, &held_out[SPLITS.len()], &strip)?;
         let mut rows = vec![PosedRow {
             variant: teacher.describe(),
             folder: dir.clone(),
