@@ -28,6 +28,10 @@ pub enum BenchCommand {
     /// `nldf render --stream` fed a WAV at real-time speed: the latency from each frame's
     /// audio to its PNG.
     Stream(StreamBenchArgs),
+    /// Run time against error: the teacher and every student of a run, exported in f32,
+    /// f16 and int8, in onnxruntime and tract, scored on the held-out splits and timed per
+    /// whole frame side by side; a table, JSON and a plot with the Pareto front.
+    Frontier(crate::frontier_cmd::FrontierArgs),
     /// The positional encoding's sines and cosines three ways (direct f32, f32
     /// double-angle climb, nldf's f64 climb): time per value and error against f64.
     Encoding(EncodingBenchArgs),
@@ -140,6 +144,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Render(args) => render(args),
         BenchCommand::Stream(args) => stream(args),
         BenchCommand::Encoding(args) => encoding(args),
+        BenchCommand::Frontier(args) => crate::frontier_cmd::run(args),
     }
 }
 

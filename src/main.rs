@@ -7,6 +7,7 @@ mod doctor_cmd;
 mod eval_cmd;
 mod export_cmd;
 mod features_cmd;
+mod frontier_cmd;
 mod progress;
 mod render_cmd;
 mod synth_cmd;

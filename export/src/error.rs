@@ -15,6 +15,9 @@ pub enum Error {
     /// The file is an ONNX model, but not one that `nldf export` wrote.
     #[error("{}: not an nldf model ({reason}); make one with `nldf export`", path.display())]
     Foreign { path: PathBuf, reason: String },
+    /// An int8 export lacks what its calibration must provide.
+    #[error("int8 export: {0}")]
+    Calibration(String),
 }
 
 /// Result with [`Error`].

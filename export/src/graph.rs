@@ -17,6 +17,54 @@ pub enum Dim {
     Symbolic(String),
 }
 
+/// The range of values entering each int8 product, by product name (`mlp.body.3.fc1`),
+/// measured by running the f32 model on calibration rays.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ActivationRanges {
+    ranges: std::collections::BTreeMap<String, (f32, f32)>,
+}
+
+impl ActivationRanges {
+    /// Widens `product`'s range to hold the finite `values`.
+    pub fn observe(&mut self, product: &str, values: &[f32]) {
+        let (lo, hi) = values
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
+        if lo > hi {
+            return;
+        }
+        let r = self
+            .ranges
+            .entry(product.to_string())
+            .or_insert((f32::INFINITY, f32::NEG_INFINITY));
+        *r = (r.0.min(lo), r.1.max(hi));
+    }
+
+    /// `product`'s range, once observed.
+    pub fn get(&self, product: &str) -> Option<(f32, f32)> {
+        self.ranges.get(product).copied()
+    }
+
+    /// Every product's range, by name.
+    pub fn iter(&self) -> impl Iterator<Item = (&str, (f32, f32))> {
+        self.ranges.iter().map(|(k, v)| (k.as_str(), *v))
+    }
+}
+
+/// A product done in int8 under [`WeightType::Int8`] and the tensor it reads.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Tap {
+    /// The product's name, the checkpoint's layer path (`mlp.body.3.fc1`).
+    pub product: String,
+    /// The f32 tensor it reads, `[n_rays, width]`.
+    pub tensor: String,
+    /// Its feature width.
+    pub width: usize,
+}
+
 /// How weight initializers are stored.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum WeightType {
@@ -25,6 +73,11 @@ pub enum WeightType {
     F32,
     /// f16 (half the file size), cast back to f32 in the graph.
     F16,
+    /// int8 for the products every ray passes through (the student's input and hidden
+    /// layers: symmetric, one scale per output channel), with the activations quantized
+    /// to uint8 over ranges calibrated on training rays (`QuantizeLinear`, then
+    /// `MatMulInteger`); every other weight in f32. About a quarter of the file size.
+    Int8,
 }
 
 /// An integer attribute.
@@ -83,6 +136,49 @@ pub fn tensor_f16(name: &str, dims: &[usize], data: &[f32]) -> TensorProto {
     }
 }
 
+/// An int8 tensor initializer.
+pub fn tensor_i8(name: &str, dims: &[usize], data: &[i8]) -> TensorProto {
+    TensorProto {
+        name: Some(name.to_string()),
+        dims: dims.iter().map(|&d| d as i64).collect(),
+        data_type: Some(DataType::Int8 as i32),
+        raw_data: Some(data.iter().map(|&v| v as u8).collect()),
+        ..Default::default()
+    }
+}
+
+/// Symmetric int8 quantization of a weight matrix `w` `[out, in]`, one scale per output
+/// channel: `s_o = max_i |w_oi| / 127`, `q_oi = round(w_oi / s_o)` in `[-127, 127]`
+/// (a row of zeros gets scale 1). Returns `q` transposed to `[in, out]`, the layout of
+/// `MatMulInteger`'s second input, and the `out` scales.
+pub fn quantize_per_channel(w: &[f32], out_dim: usize, in_dim: usize) -> (Vec<i8>, Vec<f32>) {
+    let scales: Vec<f32> = w
+        .chunks_exact(in_dim)
+        .map(|row| {
+            let largest = row.iter().fold(0f32, |m, v| m.max(v.abs()));
+            if largest > 0.0 { largest / 127.0 } else { 1.0 }
+        })
+        .collect();
+    let mut q = vec![0i8; in_dim * out_dim];
+    for (o, (row, &s)) in w.chunks_exact(in_dim).zip(&scales).enumerate() {
+        for (i, &v) in row.iter().enumerate() {
+            q[i * out_dim + o] = (v / s).round().clamp(-127.0, 127.0) as i8;
+        }
+    }
+    (q, scales)
+}
+
+/// A uint8 tensor initializer.
+pub fn tensor_u8(name: &str, dims: &[usize], data: &[u8]) -> TensorProto {
+    TensorProto {
+        name: Some(name.to_string()),
+        dims: dims.iter().map(|&d| d as i64).collect(),
+        data_type: Some(DataType::Uint8 as i32),
+        raw_data: Some(data.to_vec()),
+        ..Default::default()
+    }
+}
+
 /// An i64 tensor initializer.
 pub fn tensor_i64(name: &str, dims: &[usize], data: &[i64]) -> TensorProto {
     TensorProto {
@@ -123,6 +219,10 @@ pub fn value_info(name: &str, elem: DataType, dims: &[Dim]) -> ValueInfoProto {
 #[derive(Debug, Default)]
 pub struct GraphBuilder {
     weights: WeightType,
+    /// Calibrated input ranges of the int8 products, by product name.
+    ranges: ActivationRanges,
+    /// Products and the tensors they read ([`GraphBuilder::tap`]).
+    taps: Vec<Tap>,
     nodes: Vec<NodeProto>,
     initializers: Vec<TensorProto>,
     inputs: Vec<ValueInfoProto>,
@@ -130,10 +230,20 @@ pub struct GraphBuilder {
 }
 
 impl GraphBuilder {
-    /// An empty graph whose weights are stored as `weights`.
+    /// An empty graph whose weights are stored as `weights` (for
+    /// [`WeightType::Int8`] see [`GraphBuilder::int8`]).
     pub fn new(weights: WeightType) -> GraphBuilder {
         GraphBuilder {
             weights,
+            ..Default::default()
+        }
+    }
+
+    /// An empty graph with int8 products whose inputs have the calibrated `ranges`.
+    pub fn int8(ranges: ActivationRanges) -> GraphBuilder {
+        GraphBuilder {
+            weights: WeightType::Int8,
+            ranges,
             ..Default::default()
         }
     }
@@ -162,11 +272,18 @@ impl GraphBuilder {
         name.to_string()
     }
 
-    /// A trained weight, stored as the builder's [`WeightType`]; returns the name of its
-    /// f32 value (the initializer itself, or a `Cast` of it named `{name}.f32`).
+    /// How the builder stores weights.
+    pub fn weight_type(&self) -> WeightType {
+        self.weights
+    }
+
+    /// A trained weight, stored as the builder's [`WeightType`] (in f32 under
+    /// [`WeightType::Int8`], which quantizes only [`GraphBuilder::matmul_int8`]'s
+    /// matrices); returns the name of its f32 value (the initializer itself, or a `Cast`
+    /// of it named `{name}.f32`).
     pub fn weight(&mut self, name: &str, dims: &[usize], data: &[f32]) -> String {
         match self.weights {
-            WeightType::F32 => self.constant_f32(name, dims, data),
+            WeightType::F32 | WeightType::Int8 => self.constant_f32(name, dims, data),
             WeightType::F16 => {
                 self.initializers.push(tensor_f16(name, dims, data));
                 self.node(
@@ -177,6 +294,88 @@ impl GraphBuilder {
                 )
             }
         }
+    }
+
+    /// Records that the product `product` reads the tensor `x`: under
+    /// [`WeightType::Int8`] these are the products done in integers, and
+    /// [`GraphBuilder::taps`] lists them so that a calibration run can measure their
+    /// inputs' ranges.
+    pub fn tap(&mut self, product: &str, x: &str, width: usize) {
+        self.taps.push(Tap {
+            product: product.to_string(),
+            tensor: x.to_string(),
+            width,
+        });
+    }
+
+    /// The products recorded by [`GraphBuilder::tap`], in graph order.
+    pub fn taps(&self) -> &[Tap] {
+        &self.taps
+    }
+
+    /// `x W^T` in int8 with the activations' calibrated range, for `x` `[n, in]` and the
+    /// f32 weight `w` `[out, in]` stored as `{name}.weight_q` `[in, out]`
+    /// ([`quantize_per_channel`]). The range `[lo, hi]` of `x` measured on calibration
+    /// rays ([`ActivationRanges`]), widened to hold 0, gives the uint8 step
+    /// `s_x = (hi - lo) / 255` and zero point `z_x = round(-lo / s_x)`; then
+    /// `x_q = QuantizeLinear(x, s_x, z_x)` and
+    /// `Cast(MatMulInteger(x_q, W_q, z_x)) * (s_x s_w)`, the per-channel products' scales
+    /// folded into one constant. Every ray's result depends on that ray alone, whatever
+    /// shares its batch (a range measured per call would not). Returns the name of the f32
+    /// product `[n, out]`, bias not added.
+    pub fn matmul_int8(
+        &mut self,
+        name: &str,
+        x: &str,
+        w: &[f32],
+        out_dim: usize,
+        in_dim: usize,
+    ) -> Result<String, String> {
+        let (lo, hi) = self
+            .ranges
+            .get(name)
+            .ok_or_else(|| format!("no calibrated activation range for `{name}`"))?;
+        let (lo, hi) = (lo.min(0.0), hi.max(0.0));
+        let step = if hi > lo { (hi - lo) / 255.0 } else { 1.0 };
+        if !(step.is_finite() && step > 0.0) {
+            return Err(format!(
+                "`{name}`: activation range [{lo}, {hi}] is not finite"
+            ));
+        }
+        let zero = (-lo / step).round().clamp(0.0, 255.0) as u8;
+        let (q, scales) = quantize_per_channel(w, out_dim, in_dim);
+        let w_q = format!("{name}.weight_q");
+        self.initializers
+            .push(tensor_i8(&w_q, &[in_dim, out_dim], &q));
+        let combined: Vec<f32> = scales.iter().map(|s| s * step).collect();
+        let combined = self.constant_f32(&format!("{name}.scale"), &[out_dim], &combined);
+        let x_step = self.constant_f32(&format!("{name}.x_step"), &[], &[step]);
+        let x_zero = format!("{name}.x_zero");
+        self.initializers.push(tensor_u8(&x_zero, &[], &[zero]));
+        let x_q = self.node(
+            "QuantizeLinear",
+            &format!("{name}.x_q"),
+            &[x, &x_step, &x_zero],
+            vec![],
+        );
+        let acc = self.node(
+            "MatMulInteger",
+            &format!("{name}.int32"),
+            &[&x_q, &w_q, &x_zero],
+            vec![],
+        );
+        let acc = self.node(
+            "Cast",
+            &format!("{name}.int32_f32"),
+            &[&acc],
+            vec![attr_int("to", DataType::Float as i64)],
+        );
+        Ok(self.node(
+            "Mul",
+            &format!("{name}.product"),
+            &[&acc, &combined],
+            vec![],
+        ))
     }
 
     /// Appends a node `name` applying `op` to `inputs`; its one output is also called `name`,
@@ -219,5 +418,39 @@ impl GraphBuilder {
             output: self.outputs,
             value_info: Vec::new(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn per_channel_quantization_rounds_each_row_within_half_its_step() {
+        // Rows of very different magnitudes, one of zeros; [out = 3, in = 4].
+        let w = [
+            0.5, -1.0, 0.25, 0.0, 1e-3, 2e-3, -4e-3, 0.0, 0.0, 0.0, 0.0, 0.0,
+        ];
+        let (q, scales) = quantize_per_channel(&w, 3, 4);
+        assert_eq!(scales, [1.0 / 127.0, 4e-3 / 127.0, 1.0]);
+        for o in 0..3 {
+            let row_max = (0..4).map(|i| q[i * 3 + o].unsigned_abs()).max().unwrap();
+            // Each non-zero row uses the full int8 range.
+            assert_eq!(row_max, if o == 2 { 0 } else { 127 });
+            for i in 0..4 {
+                let back = q[i * 3 + o] as f32 * scales[o];
+                assert!((back - w[o * 4 + i]).abs() <= 0.5 * scales[o] * (1.0 + 1e-6));
+            }
+        }
+    }
+
+    #[test]
+    fn activation_ranges_grow_over_finite_values_only() {
+        let mut r = ActivationRanges::default();
+        r.observe("a", &[0.5, f32::NAN, 2.0]);
+        r.observe("a", &[-1.0, f32::INFINITY]);
+        r.observe("b", &[f32::NAN]);
+        assert_eq!(r.get("a"), Some((-1.0, 2.0)));
+        assert_eq!(r.get("b"), None);
     }
 }

@@ -17,6 +17,6 @@ pub mod onnx;
 pub mod student;
 
 pub use error::{Error, Result};
-pub use graph::WeightType;
+pub use graph::{ActivationRanges, Tap, WeightType};
 pub use load::{ExportedModel, read_model};
-pub use student::{ExportReport, export_student};
+pub use student::{ExportReport, calibration_model, export_student, export_student_int8};

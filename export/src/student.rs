@@ -12,7 +12,9 @@ use crate::contract::{
     NetworkShape, OUTPUT_RGB, OUTPUT_SEGMENTS, RAY_AXIS,
 };
 use crate::error::{Error, Result};
-use crate::graph::{Dim, GraphBuilder, WeightType, attr_float, attr_int, attr_ints};
+use crate::graph::{
+    ActivationRanges, Dim, GraphBuilder, Tap, WeightType, attr_float, attr_int, attr_ints,
+};
 use crate::onnx::{DataType, GraphProto, ModelProto, OperatorSetIdProto};
 
 /// AD-NeRF's LeakyReLU slope.
@@ -33,7 +35,8 @@ pub struct ExportReport {
 
 /// Exports the student in `student_dir` (`RUN/student/`) to `out`, written atomically.
 /// With [`WeightType::F16`] the weights are stored in half precision and cast back to f32
-/// in the graph.
+/// in the graph; [`WeightType::Int8`] needs calibrated ranges: see
+/// [`export_student_int8`].
 pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Result<ExportReport> {
     let ckpt = StudentCheckpoint::open(student_dir)?;
     if weights == WeightType::F16
@@ -50,7 +53,49 @@ pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Re
         ));
     }
     let (model, info, n_values) = student_model(&ckpt, weights)?;
-    let bytes = prost::Message::encode_to_vec(&model);
+    write_model(&model, info, n_values, out)
+}
+
+/// Exports the student in `student_dir` with int8 products ([`WeightType::Int8`]) whose
+/// inputs have the `ranges` measured on calibration rays by running
+/// [`calibration_model`]'s graph.
+pub fn export_student_int8(
+    student_dir: &Path,
+    out: &Path,
+    ranges: &ActivationRanges,
+) -> Result<ExportReport> {
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    let (model, info, n_values, _) = build(&ckpt, GraphBuilder::int8(ranges.clone()))?;
+    write_model(&model, info, n_values, out)
+}
+
+/// The f32 model of the student in `student_dir` that also outputs the input of every
+/// product [`WeightType::Int8`] does in integers, to calibrate their ranges: its encoded
+/// bytes, its metadata, and those products ([`Tap::tensor`] names the extra output of
+/// each).
+pub fn calibration_model(student_dir: &Path) -> Result<(Vec<u8>, ModelInfo, Vec<Tap>)> {
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    let (mut model, info, _, taps) = build(&ckpt, GraphBuilder::new(WeightType::F32))?;
+    if let Some(graph) = model.graph.as_mut() {
+        for tap in &taps {
+            graph.output.push(crate::graph::value_info(
+                &tap.tensor,
+                DataType::Float,
+                &[Dim::Symbolic(RAY_AXIS.to_string()), Dim::Fixed(tap.width)],
+            ));
+        }
+    }
+    Ok((prost::Message::encode_to_vec(&model), info, taps))
+}
+
+/// Encodes `model` and writes it to `out` atomically.
+fn write_model(
+    model: &ModelProto,
+    info: ModelInfo,
+    n_values: usize,
+    out: &Path,
+) -> Result<ExportReport> {
+    let bytes = prost::Message::encode_to_vec(model);
     if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
@@ -88,12 +133,29 @@ pub fn model_info(ckpt: &StudentCheckpoint, graph: &GraphProto) -> ModelInfo {
 }
 
 /// The ONNX model of `ckpt`, its metadata and the number of values its initializers hold.
+/// [`WeightType::Int8`] needs calibrated ranges: see [`export_student_int8`].
 pub fn student_model(
     ckpt: &StudentCheckpoint,
     weights: WeightType,
 ) -> Result<(ModelProto, ModelInfo, usize)> {
+    if weights == WeightType::Int8 {
+        return Err(Error::Calibration(
+            "the activations' ranges must be measured on training rays first \
+             (`nldf export --int8 --data DIR` does it)"
+                .into(),
+        ));
+    }
+    let (model, info, n_values, _) = build(ckpt, GraphBuilder::new(weights))?;
+    Ok((model, info, n_values))
+}
+
+/// The ONNX model of `ckpt` built with `g`, its metadata, the number of values its
+/// initializers hold, and the products [`WeightType::Int8`] does in integers.
+fn build(
+    ckpt: &StudentCheckpoint,
+    mut g: GraphBuilder,
+) -> Result<(ModelProto, ModelInfo, usize, Vec<Tap>)> {
     let s = &ckpt.shape;
-    let mut g = GraphBuilder::new(weights);
     let rays = Dim::Symbolic(RAY_AXIS.to_string());
     let origins = g.input(
         INPUT_ORIGINS,
@@ -140,6 +202,7 @@ pub fn student_model(
         s.audio.n_features,
         s.segments,
     );
+    let taps = g.taps().to_vec();
     let graph = g.finish(GRAPH_NAME, &doc);
     let info = model_info(ckpt, &graph);
     let model = ModelProto {
@@ -156,7 +219,7 @@ pub fn student_model(
         graph: Some(graph),
         metadata_props: info.to_metadata(),
     };
-    Ok((model, info, n_values))
+    Ok((model, info, n_values, taps))
 }
 
 /// Beam encoding: points `x_k = o + t_k d` at the K evenly spaced `t_k` of
@@ -240,6 +303,29 @@ fn encode_beams(
     // tract splits a product whose input is a feature-axis Concat into one small product
     // per block (21 for L = 10), several times slower than the single product.
     g.node("Clip", "beam.encoded", &[&encoded, &lo, &hi], vec![])
+}
+
+/// `x W^T + b` with the checkpoint's Linear `name` for a product every ray passes through:
+/// in int8 under [`WeightType::Int8`] ([`GraphBuilder::matmul_int8`]), else as [`linear`].
+fn ray_linear(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    name: &str,
+    x: &str,
+    in_dim: usize,
+    out_dim: usize,
+) -> Result<String> {
+    g.tap(name, x, in_dim);
+    if g.weight_type() != WeightType::Int8 {
+        return linear(g, ckpt, name, x, in_dim, out_dim);
+    }
+    let w = ckpt.weight(&format!("{name}.weight"), &[out_dim, in_dim])?;
+    let b = ckpt.weight(&format!("{name}.bias"), &[out_dim])?;
+    let product = g
+        .matmul_int8(name, x, w, out_dim, in_dim)
+        .map_err(Error::Calibration)?;
+    let b = g.weight(&format!("{name}.bias"), &[out_dim], b);
+    Ok(g.node("Add", name, &[&product, &b], vec![]))
 }
 
 /// `x W^T + b` with the checkpoint's Linear `name` (`weight` `[out, in]`, `bias` `[out]`).
@@ -391,7 +477,6 @@ fn residual_mlp(
         w_beam.extend_from_slice(&row[..beam_dim]);
         w_code.extend_from_slice(&row[beam_dim..]);
     }
-    let w_beam = g.weight("mlp.input.weight.beam", &[w, beam_dim], &w_beam);
     let w_code = g.weight("mlp.input.weight.audio", &[w, s.audio.dim], &w_code);
     let bias = g.weight("mlp.input.bias", &[w], bias);
     let audio_term = g.node(
@@ -400,21 +485,32 @@ fn residual_mlp(
         &[code, &w_code, &bias],
         vec![attr_int("transB", 1)],
     );
-    let x = g.node(
-        "Gemm",
-        "mlp.input",
-        &[beams, &w_beam, &audio_term],
-        vec![attr_int("transB", 1)],
-    );
+    g.tap("mlp.input.beam", beams, beam_dim);
+    let x = if g.weight_type() == WeightType::Int8 {
+        let product = g
+            .matmul_int8("mlp.input.beam", beams, &w_beam, w, beam_dim)
+            .map_err(Error::Calibration)?;
+        g.node("Add", "mlp.input", &[&product, &audio_term], vec![])
+    } else {
+        let w_beam = g.weight("mlp.input.weight.beam", &[w, beam_dim], &w_beam);
+        g.node(
+            "Gemm",
+            "mlp.input",
+            &[beams, &w_beam, &audio_term],
+            vec![attr_int("transB", 1)],
+        )
+    };
     let mut h = g.node("Relu", "mlp.input.act", &[&x], vec![]);
     for i in 0..s.n_blocks() {
         let p = format!("mlp.body.{i}");
-        let y = linear(g, ckpt, &format!("{p}.fc1"), &h, w, w)?;
+        let y = ray_linear(g, ckpt, &format!("{p}.fc1"), &h, w, w)?;
         let y = g.node("Relu", &format!("{p}.fc1.act"), &[&y], vec![]);
-        let y = linear(g, ckpt, &format!("{p}.fc2"), &y, w, w)?;
+        let y = ray_linear(g, ckpt, &format!("{p}.fc2"), &y, w, w)?;
         let sum = g.node("Add", &format!("{p}.skip"), &[&h, &y], vec![]);
         h = g.node("Relu", &format!("{p}.act"), &[&sum], vec![]);
     }
+    // The output layer stays in f32 under int8: its 3 M outputs are the colours
+    // themselves, and it costs a twentieth of a hidden layer.
     let out = linear(g, ckpt, "mlp.output", &h, w, 3 * s.segments)?;
     let shape = g.constant_i64("mlp.segment_shape", &[3], &[0, s.segments as i64, 3]);
     let segments = g.node("Reshape", OUTPUT_SEGMENTS, &[&out, &shape], vec![]);

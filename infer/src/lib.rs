@@ -14,6 +14,7 @@ pub mod audio;
 pub mod backend;
 #[cfg(feature = "ort")]
 pub mod bench;
+pub mod calibrate;
 pub mod doctor;
 pub mod error;
 pub mod frame;

@@ -13,8 +13,9 @@ use crate::util::{
 };
 use nldf_core::audio::neighbourhood;
 use nldf_core::rays::Rays;
-use nldf_export::{WeightType, read_model};
+use nldf_export::{WeightType, export_student_int8, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
+use nldf_infer::calibrate::{CalibrationFrame, activation_ranges};
 use nldf_train::student::StudentConfig;
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.
@@ -157,3 +158,99 @@ fn export_production_size_student_agrees_across_candle_tract_ort_and_python() {
     }
     println!("88 x 256: worst relative difference of any pair {worst:.2e}");
 }
+
+/// int8 export at the default student's size (28 x 256, K = 16, L = 10, attention on),
+/// weights at a trained ReLU network's magnitude, calibrated on other rays than those it
+/// is tested on: tract, onnxruntime (batches of 1024) and Python onnxruntime (one call of
+/// 1500) run the same integer products and agree with one another within
+/// `INT8_RUNTIME_TOL` of the largest output, so a ray's colour does not depend on its
+/// batch; each stays within the quantization's error of the f32 candle student (relative
+/// RMS of the pixels at most `INT8_RMS`), while differing from it (the products really
+/// are integer ones).
+#[test]
+fn export_int8_agrees_across_runtimes_and_stays_near_the_f32_student() {
+    if !ort_available() {
+        return;
+    }
+    let python = python();
+    let cfg = StudentConfig::paper_d28();
+    let run = write_run(&cfg, 28);
+    run.scale_weights_like_trained(cfg.n_blocks());
+    let f32_model = read_model(&run.export(WeightType::F32)).unwrap();
+    let calibration: Vec<CalibrationFrame> = (0..3)
+        .map(|i| {
+            let rays = random_rays(1000, 40 + i);
+            CalibrationFrame {
+                origins: rays.origins,
+                directions: rays.directions,
+                audio: neighbourhood(
+                    &random_audio(&cfg, 10, 20),
+                    3 * i as usize,
+                    cfg.audio.att_frames,
+                ),
+            }
+        })
+        .collect();
+    let ranges = activation_ranges(&run.student_dir(), &f32_model.info, &calibration).unwrap();
+    let path = run.root.join("model_int8.onnx");
+    export_student_int8(&run.student_dir(), &path, &ranges).unwrap();
+    let graph = read_model(&path).unwrap().proto.graph.unwrap();
+    let count = |op: &str| {
+        graph
+            .node
+            .iter()
+            .filter(|n| n.op_type.as_deref() == Some(op))
+            .count()
+    };
+    // The input layer's beam part and both layers of every block.
+    assert_eq!(count("MatMulInteger"), 1 + 2 * cfg.n_blocks());
+    assert_eq!(count("QuantizeLinear"), 1 + 2 * cfg.n_blocks());
+    let f32_bytes = f32_model.bytes.len() as u64;
+    let int8_bytes = std::fs::metadata(&path).unwrap().len();
+    assert!(
+        (int8_bytes as f64) < 0.35 * f32_bytes as f64,
+        "{int8_bytes} vs {f32_bytes}"
+    );
+    let rays = random_rays(1500, 19);
+    let audio = neighbourhood(&random_audio(&cfg, 10, 20), 4, cfg.audio.att_frames);
+    let outputs = every_runtime(&run, &path, &rays, &audio, 1024, python.as_deref());
+    let (rgb_ref, _) = &outputs[0].1;
+    let rms =
+        |v: &[f32]| (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+    let scale = rgb_ref.iter().fold(0.0f32, |m, x| m.max(x.abs())).max(1.0);
+    for (name, (rgb, _)) in &outputs[1..] {
+        let diff: Vec<f32> = rgb.iter().zip(rgb_ref).map(|(a, b)| a - b).collect();
+        let rel = rms(&diff) / rms(rgb_ref);
+        println!(
+            "28 x 256 int8, 1500 rays: {name} vs the f32 candle student: relative RMS {rel:.2e}"
+        );
+        assert!(rel.is_finite() && rel <= INT8_RMS, "{name}: {rel}");
+        assert!(rel > 1e-6, "{name}: identical to the f32 student");
+    }
+    for a in 1..outputs.len() {
+        for b in a + 1..outputs.len() {
+            let ((na, (rgb_a, seg_a)), (nb, (rgb_b, seg_b))) = (&outputs[a], &outputs[b]);
+            let d = max_diff(rgb_a, rgb_b).max(max_diff(seg_a, seg_b)) / scale;
+            let diff: Vec<f32> = rgb_a.iter().zip(rgb_b).map(|(a, b)| a - b).collect();
+            let rel = rms(&diff) / rms(rgb_ref);
+            println!(
+                "28 x 256 int8: {na} vs {nb}: max relative difference {d:.2e}, relative RMS \
+                 {rel:.2e}"
+            );
+            assert!(d <= INT8_RUNTIME_TOL, "{na} vs {nb}: {d}");
+            assert!(rel <= INT8_RUNTIME_RMS, "{na} vs {nb}: {rel}");
+        }
+    }
+}
+
+/// Relative RMS error allowed between the int8 model's pixels and the f32 student's.
+const INT8_RMS: f64 = 0.05;
+
+/// Largest difference allowed between two runtimes running the same int8 model, relative
+/// to the largest output: a value that lands on a rounding tie in one runtime's f32
+/// arithmetic and not in the other's moves one uint8 step, and the layers above carry it.
+const INT8_RUNTIME_TOL: f32 = 2e-2;
+
+/// Relative RMS difference allowed between two runtimes running the same int8 model: a
+/// tenth of the quantization's own error allowance.
+const INT8_RUNTIME_RMS: f64 = 0.1 * INT8_RMS;

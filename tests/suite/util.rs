@@ -48,6 +48,7 @@ impl Run {
         let out = self.root.join(match weights {
             WeightType::F32 => "model.onnx",
             WeightType::F16 => "model_fp16.onnx",
+            WeightType::Int8 => "model_int8.onnx",
         });
         export_student(&self.student_dir(), &out, weights).unwrap();
         out

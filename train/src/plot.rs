@@ -161,3 +161,130 @@ pub fn plot_xy(path: &Path, title: &str, axes: (&str, &str), series: &[Series]) 
         &buf,
     )?)
 }
+
+/// One point of a run-time against error plot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrontierDot {
+    /// Legend label of its group (one colour per group, e.g. a runtime and precision).
+    pub group: String,
+    /// Milliseconds per whole frame (x, log axis).
+    pub ms: f64,
+    /// PSNR in dB (y).
+    pub psnr: f64,
+    /// On the Pareto front: ringed, joined by the front's line and labelled with `name`.
+    pub on_front: bool,
+    /// Short name written beside a point on the front.
+    pub name: String,
+}
+
+/// Draws PSNR against milliseconds per frame on a log axis into `path` (written
+/// atomically): one colour per group, the Pareto front ringed and joined by a dashed
+/// grey line. Points with a non-finite or non-positive value are left out.
+pub fn plot_frontier(path: &Path, title: &str, dots: &[FrontierDot]) -> Result<()> {
+    register_font();
+    let (w, h) = SIZE;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    let fail = |e: String| Error::invalid(path, format!("cannot draw the plot: {e}"));
+    let dots: Vec<&FrontierDot> = dots
+        .iter()
+        .filter(|d| d.ms.is_finite() && d.ms > 0.0 && d.psnr.is_finite())
+        .collect();
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+        let (x_lo, x_hi) = dots.iter().fold((f64::INFINITY, 0.0f64), |(a, b), d| {
+            (a.min(d.ms), b.max(d.ms))
+        });
+        let (x_lo, x_hi) = if x_lo.is_finite() {
+            (x_lo / 1.5, x_hi * 1.5)
+        } else {
+            (1.0, 1000.0)
+        };
+        let (lo, hi) = dots
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+                (a.min(d.psnr), b.max(d.psnr))
+            });
+        let (lo, hi) = if lo.is_finite() {
+            ((lo - 1.0).floor(), (hi + 1.0).ceil())
+        } else {
+            (0.0, 40.0)
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(16)
+            .x_label_area_size(40)
+            .y_label_area_size(56)
+            .build_cartesian_2d((x_lo..x_hi).log_scale(), lo..hi)
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .x_desc("milliseconds per whole frame (log scale)")
+            .y_desc("PSNR (dB)")
+            .x_labels(10)
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .label_style(("sans-serif", 14))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        let mut front: Vec<(f64, f64)> = dots
+            .iter()
+            .filter(|d| d.on_front)
+            .map(|d| (d.ms, d.psnr))
+            .collect();
+        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let grey = RGBColor(120, 120, 120);
+        chart
+            .draw_series(LineSeries::new(front.clone(), grey.stroke_width(1)))
+            .map_err(|e| fail(e.to_string()))?
+            .label("Pareto front")
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], grey.stroke_width(1)));
+        chart
+            .draw_series(
+                front
+                    .iter()
+                    .map(|&p| Circle::new(p, 8, grey.stroke_width(2))),
+            )
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .draw_series(dots.iter().filter(|d| d.on_front).map(|d| {
+                EmptyElement::at((d.ms, d.psnr))
+                    + Text::new(d.name.clone(), (10, -16), ("sans-serif", 13).into_font())
+            }))
+            .map_err(|e| fail(e.to_string()))?;
+        let mut groups: Vec<&str> = Vec::new();
+        for d in &dots {
+            if !groups.contains(&d.group.as_str()) {
+                groups.push(&d.group);
+            }
+        }
+        for (i, group) in groups.iter().enumerate() {
+            let (r, g, b) = palette(i);
+            let color = RGBColor(r, g, b);
+            chart
+                .draw_series(
+                    dots.iter()
+                        .filter(|d| d.group == *group)
+                        .map(|d| Circle::new((d.ms, d.psnr), 4, color.filled())),
+                )
+                .map_err(|e| fail(e.to_string()))?
+                .label(*group)
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        root.present().map_err(|e| fail(e.to_string()))?;
+    }
+    Ok(nldf_core::image::save_png_bytes(
+        path,
+        w,
+        h,
+        image::ExtendedColorType::Rgb8,
+        &buf,
+    )?)
+}

@@ -1,0 +1,698 @@
+//! `nldf bench frontier`: run time against error. Every way nldf can render a run's
+//! held-out frames (the teacher in candle; every student exported in f32, f16 and int8,
+//! each in onnxruntime and tract) renders the same frames one after another, is scored
+//! against the ground truth (PSNR, SSIM, mouth PSNR) and timed per whole frame (ray
+//! set-up, network and compositing): the median over the `val` frames with 2 threads,
+//! and over a few frames with 1 thread. Writes `frontier.json` (machine, commit, load,
+//! settings, points), `frontier.md` and `frontier.png` (PSNR against time on a log axis,
+//! the Pareto front marked), and states the students' speed-up over the teacher at
+//! matched PSNR.
+
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use nldf_core::audio::neighbourhood;
+use nldf_core::dataset::{Frame, Split};
+use nldf_core::image::ImageRgb;
+use nldf_export::WeightType;
+use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
+use nldf_train::bench::Machine;
+use nldf_train::data::TrainData;
+use nldf_train::eval::{EvalReport, FrameModel, eval_models};
+use nldf_train::job::JobEvent;
+use nldf_train::job::eval::EvalJob;
+use nldf_train::plot::{FrontierDot, plot_frontier};
+use nldf_train::student_trainer::StudentRun;
+use serde::Serialize;
+
+use crate::progress::EventPrinter;
+
+#[derive(clap::Args, Debug)]
+pub struct FrontierArgs {
+    /// Run folder: its teacher and every student in it.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The dataset the run was trained on (its `val` split, and `novel` and `voice` where
+    /// `nldf synth` wrote them).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder [default: RUN/frontier].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// At most this many frames per split, spread evenly.
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Frames timed with 1 thread per point.
+    #[arg(long, default_value_t = 6)]
+    pub one_thread_frames: usize,
+    /// Training frames that calibrate the int8 exports.
+    #[arg(long, default_value_t = 16)]
+    pub calibration_frames: usize,
+    /// Rays per network call.
+    #[arg(long, default_value_t = BackendOptions::default().batch_size)]
+    pub batch: usize,
+}
+
+/// Threads of the main timing.
+const THREADS: usize = 2;
+
+/// Precisions every student is exported in.
+const PRECISIONS: [WeightType; 3] = [WeightType::F32, WeightType::F16, WeightType::Int8];
+
+fn precision_name(w: WeightType) -> &'static str {
+    match w {
+        WeightType::F32 => "fp32",
+        WeightType::F16 => "fp16",
+        WeightType::Int8 => "int8",
+    }
+}
+
+/// An exported student in one runtime, rendering whole frames and timing each.
+struct OnnxPoint {
+    student: String,
+    describe: String,
+    precision: WeightType,
+    kind: BackendKind,
+    step: usize,
+    macs_per_ray: f64,
+    path: PathBuf,
+    renderer: RefCell<FrameRenderer>,
+    seconds: RefCell<Vec<f64>>,
+}
+
+impl OnnxPoint {
+    fn audio(&self, data: &TrainData, frame: &Frame) -> Vec<f32> {
+        let renderer = self.renderer.borrow();
+        neighbourhood(
+            &data.dataset.audio,
+            frame.aud_id,
+            renderer.info().audio.att_frames,
+        )
+    }
+}
+
+impl FrameModel for OnnxPoint {
+    fn label(&self) -> String {
+        format!(
+            "{}.{}.{}",
+            self.student,
+            precision_name(self.precision),
+            self.kind.name()
+        )
+    }
+    fn describe(&self) -> String {
+        format!(
+            "{} {} {}",
+            self.describe,
+            precision_name(self.precision),
+            self.kind.name()
+        )
+    }
+    fn step(&self) -> usize {
+        self.step
+    }
+    fn macs_per_ray(&self) -> f64 {
+        self.macs_per_ray
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<ImageRgb> {
+        let audio = self.audio(data, frame);
+        let started = Instant::now();
+        let out = self
+            .renderer
+            .borrow_mut()
+            .render(frame.c2w, &audio)
+            .map_err(|e| {
+                nldf_train::error::Error::Config(format!("{}: {e}", self.path.display()))
+            })?;
+        self.seconds
+            .borrow_mut()
+            .push(started.elapsed().as_secs_f64());
+        Ok(out.image)
+    }
+}
+
+/// A candle model (the teacher) whose whole frames are timed.
+struct Timed<'a> {
+    model: &'a dyn FrameModel,
+    seconds: RefCell<Vec<f64>>,
+}
+
+impl FrameModel for Timed<'_> {
+    fn label(&self) -> String {
+        self.model.label()
+    }
+    fn describe(&self) -> String {
+        format!("{} candle", self.model.describe())
+    }
+    fn step(&self) -> usize {
+        self.model.step()
+    }
+    fn macs_per_ray(&self) -> f64 {
+        self.model.macs_per_ray()
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<ImageRgb> {
+        let started = Instant::now();
+        let image = self.model.render_frame(data, frame)?;
+        self.seconds
+            .borrow_mut()
+            .push(started.elapsed().as_secs_f64());
+        Ok(image)
+    }
+}
+
+/// Scores of one point on one split.
+#[derive(Debug, Clone, Serialize)]
+struct SplitScore {
+    split: String,
+    frames: usize,
+    psnr: f64,
+    ssim: f64,
+    mouth_psnr: Option<f64>,
+}
+
+/// One way of rendering: its scores and times.
+#[derive(Debug, Clone, Serialize)]
+struct Point {
+    model: String,
+    /// `candle`, `fp32`, `fp16` or `int8`.
+    precision: String,
+    runtime: String,
+    /// The model file (exports only).
+    file: Option<PathBuf>,
+    file_bytes: Option<u64>,
+    step: usize,
+    gmac_per_frame: f64,
+    /// Median milliseconds per whole frame over the `val` frames, 2 threads.
+    ms_2_threads: f64,
+    /// Median milliseconds per whole frame over the first frames, 1 thread.
+    ms_1_thread: Option<f64>,
+    scores: Vec<SplitScore>,
+    /// No other point is both faster (2 threads) and better on `val` PSNR.
+    on_front: bool,
+}
+
+impl Point {
+    fn psnr(&self, split: &str) -> Option<f64> {
+        self.scores
+            .iter()
+            .find(|s| s.split == split)
+            .map(|s| s.psnr)
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn score(r: &EvalReport) -> SplitScore {
+    SplitScore {
+        split: r.split.clone(),
+        frames: r.frames.len(),
+        psnr: r.psnr,
+        ssim: r.ssim,
+        mouth_psnr: r.mouth_psnr,
+    }
+}
+
+/// The splits to score: `val`, then `novel` and `voice` where the dataset has them.
+fn splits(data: &Path) -> Vec<Split> {
+    let mut splits = vec![Split::Val];
+    for s in [Split::Novel, Split::Voice] {
+        if data.join(format!("transforms_{}.json", s.name())).is_file() {
+            splits.push(s);
+        }
+    }
+    splits
+}
+
+/// Exports every student of the run in every precision into `dir`; returns
+/// `(student folder name, description, precision, file)`.
+fn export_all(
+    students: &[StudentRun],
+    data: &Path,
+    calibration_frames: usize,
+    dir: &Path,
+) -> Result<Vec<(String, StudentRun, WeightType, PathBuf)>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut out = Vec::new();
+    for s in students {
+        let name = s.label();
+        for w in PRECISIONS {
+            let path = dir.join(format!("{name}.{}.onnx", precision_name(w)));
+            let report = match w {
+                WeightType::Int8 => {
+                    nldf_infer::calibrate::export_int8(&s.dir, data, calibration_frames, &path)
+                        .map_err(anyhow::Error::from)
+                }
+                _ => nldf_export::export_student(&s.dir, &path, w).map_err(anyhow::Error::from),
+            };
+            match report {
+                Ok(_) => {
+                    eprintln!("exported {}", path.display());
+                    out.push((name.clone(), StudentRun::open(&s.dir, false)?, w, path));
+                }
+                // A student whose weights do not fit half precision has no f16 point.
+                Err(e) if w == WeightType::F16 => {
+                    eprintln!("{name}: no fp16 point: {e:#}")
+                }
+                Err(e) => return Err(e.context(format!("exporting {name}"))),
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn open_point(
+    (student, run, precision, path): &(String, StudentRun, WeightType, PathBuf),
+    kind: BackendKind,
+    threads: usize,
+    batch: usize,
+) -> Result<OnnxPoint> {
+    let model = nldf_export::read_model(path)?;
+    let backend = backend_for(
+        &model,
+        kind,
+        BackendOptions {
+            batch_size: batch,
+            threads,
+        },
+    )?;
+    Ok(OnnxPoint {
+        student: student.clone(),
+        describe: run.describe(),
+        precision: *precision,
+        kind,
+        step: run.step,
+        macs_per_ray: run.macs_per_ray(),
+        path: path.clone(),
+        renderer: RefCell::new(FrameRenderer::new(backend, None)?),
+        seconds: RefCell::new(Vec::new()),
+    })
+}
+
+/// Runs `nldf bench frontier`.
+pub fn run(args: FrontierArgs) -> Result<()> {
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.run.join("frontier"));
+    let machine = Machine::here();
+    let mut printer = EventPrinter::default();
+    let mut show = |e: &JobEvent| printer.show(e);
+    let splits = splits(&args.data);
+    let val = EvalJob {
+        run: args.run.clone(),
+        data: args.data.clone(),
+        split: Split::Val,
+        frames: args.frames,
+        out: None,
+    }
+    .plan(&mut show)?;
+    if val.students.is_empty() {
+        bail!(
+            "{} has no trained student to put on the frontier",
+            args.run.display()
+        );
+    }
+    let exports = export_all(
+        &val.students,
+        &args.data,
+        args.calibration_frames,
+        &out.join("models"),
+    )?;
+    // Every export in both runtimes; `val` scores them all, the other splits score the
+    // onnxruntime points (tract runs the same graphs: the suite's parity tests).
+    let mut points: Vec<OnnxPoint> = Vec::new();
+    for e in &exports {
+        for kind in [BackendKind::Ort, BackendKind::Tract] {
+            points.push(open_point(e, kind, THREADS, args.batch)?);
+        }
+    }
+    let teacher = Timed {
+        model: &val.teacher,
+        seconds: RefCell::new(Vec::new()),
+    };
+    let mut reports: Vec<Vec<EvalReport>> = Vec::new();
+    for &split in &splits {
+        let plan = if split == Split::Val {
+            None
+        } else {
+            Some(
+                EvalJob {
+                    run: args.run.clone(),
+                    data: args.data.clone(),
+                    split,
+                    frames: args.frames,
+                    out: None,
+                }
+                .plan(&mut show)?,
+            )
+        };
+        let data = plan.as_ref().map_or(&val.data, |p| &p.data);
+        let mut models: Vec<&dyn FrameModel> = vec![&teacher];
+        models.extend(
+            points
+                .iter()
+                .filter(|p| split == Split::Val || p.kind == BackendKind::Ort)
+                .map(|p| p as &dyn FrameModel),
+        );
+        let n = args
+            .frames
+            .unwrap_or(usize::MAX)
+            .min(data.dataset.frames(split).len());
+        eprintln!(
+            "{}: {} frames x {} ways of rendering",
+            split.name(),
+            n,
+            models.len()
+        );
+        let bar = crate::progress::progress_bar(n as u64, split.name());
+        let evaluation = eval_models(
+            &models,
+            data,
+            split,
+            args.frames,
+            &out.join(split.name()),
+            &mut || bar.inc(1),
+        )?;
+        bar.finish_and_clear();
+        evaluation.check_finite()?;
+        reports.push(evaluation.models);
+    }
+    // Medians over the `val` pass: the first frames each point rendered.
+    let n_val = reports[0].first().map_or(0, |r| r.frames.len());
+    let val_median =
+        |s: &RefCell<Vec<f64>>| median(s.borrow().iter().take(n_val).copied().collect());
+    // 1-thread times: each export in each runtime on the first frames of `val`.
+    let frames = val.data.dataset.frames(Split::Val);
+    let k = args.one_thread_frames.min(frames.len());
+    let mut one_thread = Vec::new();
+    for e in &exports {
+        for kind in [BackendKind::Ort, BackendKind::Tract] {
+            let p = open_point(e, kind, 1, args.batch)?;
+            for f in &frames[..k] {
+                p.render_frame(&val.data, f)?;
+            }
+            // The first frame pays for plans and caches.
+            one_thread.push(median(p.seconds.borrow().iter().skip(1).copied().collect()));
+        }
+    }
+    let mut table: Vec<Point> = Vec::new();
+    let hits = |r: &EvalReport| r.macs_per_frame / 1e9;
+    let scores_of = |label: &str| -> Vec<SplitScore> {
+        reports
+            .iter()
+            .filter_map(|rs| rs.iter().find(|r| r.label == label).map(score))
+            .collect()
+    };
+    let teacher_report = &reports[0][0];
+    table.push(Point {
+        model: teacher.describe(),
+        precision: "candle".into(),
+        runtime: "candle".into(),
+        file: None,
+        file_bytes: None,
+        step: teacher_report.step,
+        gmac_per_frame: hits(teacher_report),
+        ms_2_threads: 1e3 * val_median(&teacher.seconds),
+        ms_1_thread: None,
+        scores: scores_of(&teacher.label()),
+        on_front: false,
+    });
+    for (i, p) in points.iter().enumerate() {
+        let label = p.label();
+        let report = reports[0]
+            .iter()
+            .find(|r| r.label == label)
+            .context("a point lacks its val report")?;
+        table.push(Point {
+            model: p.describe.clone(),
+            precision: precision_name(p.precision).into(),
+            runtime: p.kind.name().into(),
+            file: Some(p.path.clone()),
+            file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
+            step: p.step,
+            gmac_per_frame: hits(report),
+            ms_2_threads: 1e3 * val_median(&p.seconds),
+            ms_1_thread: one_thread.get(i).map(|s| 1e3 * s),
+            scores: scores_of(&label),
+            on_front: false,
+        });
+    }
+    mark_front(&mut table);
+    let summary = speed_ups(&table);
+    write_outputs(&out, &machine, &args, &splits, &table, &summary)?;
+    Ok(())
+}
+
+/// Marks the points no other point beats on both time (2 threads) and `val` PSNR.
+fn mark_front(table: &mut [Point]) {
+    let keys: Vec<(f64, f64)> = table
+        .iter()
+        .map(|p| (p.ms_2_threads, p.psnr("val").unwrap_or(f64::NAN)))
+        .collect();
+    for (i, p) in table.iter_mut().enumerate() {
+        let (t, q) = keys[i];
+        p.on_front = t.is_finite()
+            && q.is_finite()
+            && !keys
+                .iter()
+                .enumerate()
+                .any(|(j, &(t2, q2))| j != i && t2 <= t && q2 >= q && (t2 < t || q2 > q));
+    }
+}
+
+/// The fastest export within 1 dB of the teacher on each split, and its speed-up over the
+/// teacher (whole frames, 2 threads, the same run).
+#[derive(Debug, Clone, Serialize)]
+struct SpeedUp {
+    split: String,
+    teacher_psnr: f64,
+    point: Option<String>,
+    point_psnr: Option<f64>,
+    speed_up: Option<f64>,
+}
+
+fn speed_ups(table: &[Point]) -> Vec<SpeedUp> {
+    let teacher = &table[0];
+    teacher
+        .scores
+        .iter()
+        .map(|ts| {
+            let best = table[1..]
+                .iter()
+                .filter(|p| p.psnr(&ts.split).is_some_and(|q| q >= ts.psnr - 1.0))
+                .min_by(|a, b| a.ms_2_threads.total_cmp(&b.ms_2_threads));
+            SpeedUp {
+                split: ts.split.clone(),
+                teacher_psnr: ts.psnr,
+                point: best.map(|p| format!("{} {} {}", p.model, p.precision, p.runtime)),
+                point_psnr: best.and_then(|p| p.psnr(&ts.split)),
+                speed_up: best.map(|p| teacher.ms_2_threads / p.ms_2_threads),
+            }
+        })
+        .collect()
+}
+
+/// A point's name in the plot: the network's shape and kind, and the precision.
+fn short_name(p: &Point) -> String {
+    let model = p
+        .model
+        .trim_end_matches(" candle")
+        .replace("student ", "")
+        .replace(", pixels only", " pixels")
+        .replace(" (32 samples/ray)", "");
+    if p.runtime == "candle" {
+        model
+    } else {
+        format!("{model} {}", p.precision)
+    }
+}
+
+fn write_outputs(
+    out: &Path,
+    machine: &Machine,
+    args: &FrontierArgs,
+    splits: &[Split],
+    table: &[Point],
+    summary: &[SpeedUp],
+) -> Result<()> {
+    let settings = serde_json::json!({
+        "run": args.run, "data": args.data, "frames": args.frames,
+        "threads": THREADS, "one_thread_frames": args.one_thread_frames,
+        "calibration_frames": args.calibration_frames, "batch": args.batch,
+    });
+    let json = serde_json::json!({
+        "machine": machine, "settings": settings, "points": table, "speed_up": summary,
+    });
+    let json_path = out.join("frontier.json");
+    nldf_core::files::write_atomic(&json_path, serde_json::to_string_pretty(&json)?.as_bytes())?;
+    let mut md = String::new();
+    md.push_str(&format!(
+        "# Run time against error\n\n{} ({} cores), commit {}, load {} at the start. Whole \
+         frames (ray set-up, network, compositing), median over the val frames with {THREADS} \
+         threads and over {} frames with 1 thread; scores over every frame of each split.\n\n",
+        machine.cpu,
+        machine.cores,
+        machine.commit,
+        machine
+            .load_average_1m
+            .map_or("unknown".into(), |l| format!("{l:.2}")),
+        args.one_thread_frames.saturating_sub(1),
+    ));
+    md.push_str("| model | precision | runtime | MB | GMAC / frame | ms / frame (2 threads) | frames/s | ms (1 thread) |");
+    for s in splits {
+        md.push_str(&format!(" {} PSNR | {} mouth |", s.name(), s.name()));
+    }
+    md.push_str(" val SSIM | front |\n|");
+    md.push_str(&"---|".repeat(8 + 2 * splits.len() + 2));
+    md.push('\n');
+    for p in table {
+        let val_ssim = p
+            .scores
+            .iter()
+            .find(|s| s.split == "val")
+            .map_or(f64::NAN, |s| s.ssim);
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.2} | {} |",
+            p.model,
+            p.precision,
+            p.runtime,
+            p.file_bytes
+                .map_or("".into(), |b| format!("{:.2}", b as f64 / 1e6)),
+            p.gmac_per_frame,
+            p.ms_2_threads,
+            1e3 / p.ms_2_threads,
+            p.ms_1_thread.map_or("".into(), |t| format!("{t:.1}")),
+        ));
+        for s in splits {
+            match p.scores.iter().find(|x| x.split == s.name()) {
+                Some(x) => md.push_str(&format!(
+                    " {:.2} | {} |",
+                    x.psnr,
+                    x.mouth_psnr.map_or("".into(), |m| format!("{m:.2}"))
+                )),
+                None => md.push_str(" | |"),
+            }
+        }
+        md.push_str(&format!(
+            " {val_ssim:.4} | {} |\n",
+            if p.on_front { "yes" } else { "" }
+        ));
+    }
+    md.push_str("\nFastest export within 1 dB of the teacher's PSNR, whole frames side by side:\n\n| split | teacher PSNR | fastest within 1 dB | its PSNR | speed-up |\n|---|---|---|---|---|\n");
+    for s in summary {
+        md.push_str(&format!(
+            "| {} | {:.2} | {} | {} | {} |\n",
+            s.split,
+            s.teacher_psnr,
+            s.point.as_deref().unwrap_or("none"),
+            s.point_psnr.map_or("".into(), |q| format!("{q:.2}")),
+            s.speed_up.map_or("".into(), |x| format!("{x:.1}x")),
+        ));
+    }
+    let md_path = out.join("frontier.md");
+    nldf_core::files::write_atomic(&md_path, md.as_bytes())?;
+    let dots: Vec<FrontierDot> = table
+        .iter()
+        .map(|p| FrontierDot {
+            group: if p.runtime == "candle" {
+                "teacher (candle)".into()
+            } else {
+                format!("{} {}", p.runtime, p.precision)
+            },
+            name: short_name(p),
+            ms: p.ms_2_threads,
+            psnr: p.psnr("val").unwrap_or(f64::NAN),
+            on_front: p.on_front,
+        })
+        .collect();
+    let png_path = out.join("frontier.png");
+    plot_frontier(
+        &png_path,
+        &format!(
+            "val PSNR against time per frame, {} threads, {}",
+            THREADS, machine.cpu
+        ),
+        &dots,
+    )?;
+    println!("{md}");
+    println!(
+        "wrote {}, {} and {}",
+        json_path.display(),
+        md_path.display(),
+        png_path.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(model: &str, ms: f64, val: f64) -> Point {
+        Point {
+            model: model.into(),
+            precision: "fp32".into(),
+            runtime: "ort".into(),
+            file: None,
+            file_bytes: None,
+            step: 0,
+            gmac_per_frame: 1.0,
+            ms_2_threads: ms,
+            ms_1_thread: None,
+            scores: vec![SplitScore {
+                split: "val".into(),
+                frames: 1,
+                psnr: val,
+                ssim: 1.0,
+                mouth_psnr: None,
+            }],
+            on_front: false,
+        }
+    }
+
+    #[test]
+    fn the_front_keeps_only_points_nothing_beats_on_both_axes() {
+        let mut table = vec![
+            point("teacher", 500.0, 37.0),
+            point("a", 100.0, 35.0),
+            point("b", 200.0, 34.0), // slower and worse than a
+            point("c", 50.0, 30.0),
+            point("d", 100.0, 35.0), // ties a: neither beats the other
+            point("nan", f64::NAN, 40.0),
+        ];
+        mark_front(&mut table);
+        let front: Vec<&str> = table
+            .iter()
+            .filter(|p| p.on_front)
+            .map(|p| p.model.as_str())
+            .collect();
+        assert_eq!(front, ["teacher", "a", "c", "d"]);
+    }
+
+    #[test]
+    fn the_speed_up_is_the_fastest_point_within_1_db_of_the_teacher() {
+        let table = vec![
+            point("teacher", 500.0, 37.0),
+            point("slow", 250.0, 36.5),
+            point("fast", 100.0, 36.1),
+            point("fastest", 20.0, 35.9), // 1.1 dB below: not matched
+        ];
+        let s = &speed_ups(&table)[0];
+        assert_eq!(s.point.as_deref(), Some("fast fp32 ort"));
+        assert_eq!(s.speed_up, Some(5.0));
+        assert_eq!(median(vec![3.0, 1.0, 2.0, 10.0]), 2.5);
+    }
+}
