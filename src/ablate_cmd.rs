@@ -58,6 +58,8 @@ fn depth_name(d: StudentDepth) -> String {
         StudentDepth::D28 => "28".to_string(),
         StudentDepth::D50 => "50".to_string(),
         StudentDepth::D88 => "88".to_string(),
+        StudentDepth::D28W128 => "28x128".to_string(),
+        StudentDepth::Realtime => "realtime".to_string(),
         StudentDepth::Tiny => "tiny".to_string(),
     }
 }

@@ -1,12 +1,14 @@
 //! `nldf bench frontier`: run time against error. Every way nldf can render a run's
-//! held-out frames (the teacher in candle; every student exported in f32, f16 and int8,
-//! each in onnxruntime and tract) renders the same frames one after another, is scored
-//! against the ground truth (PSNR, SSIM, mouth PSNR) and timed per whole frame (ray
-//! set-up, network and compositing): the median over the `val` frames with 2 threads,
-//! and over a few frames with 1 thread. Writes `frontier.json` (machine, commit, load,
-//! settings, points), `frontier.md` and `frontier.png` (PSNR against time on a log axis,
-//! the Pareto front marked), and states the students' speed-up over the teacher at
-//! matched PSNR.
+//! held-out frames renders the same frames one after another: the teacher in candle (with
+//! its empty-space skipping and early stop, without early stop, and without either, as
+//! AD-NeRF renders), and every student exported in f32, f16 and int8, each in onnxruntime
+//! and tract. Each is scored against the ground truth (PSNR, SSIM, mouth PSNR) and timed
+//! per whole frame (ray set-up, network and compositing): the median over the `val` frames
+//! with 2 threads, and over a few frames with 1 thread. AD-NeRF's own setting (8 x 256,
+//! 64 + 128 samples) is timed on a few frames with seeded weights. Writes `frontier.json`
+//! (machine, commit, load, settings, points), `frontier.md` and `frontier.png` (PSNR
+//! against time on a log axis, the Pareto front marked), and states the students'
+//! speed-up over the teacher at matched PSNR.
 
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
@@ -25,6 +27,7 @@ use nldf_train::job::JobEvent;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::plot::{FrontierDot, plot_frontier};
 use nldf_train::student_trainer::StudentRun;
+use nldf_train::teacher_trainer::TeacherRun;
 use serde::Serialize;
 
 use crate::progress::EventPrinter;
@@ -53,6 +56,10 @@ pub struct FrontierArgs {
     /// Rays per network call.
     #[arg(long, default_value_t = BackendOptions::default().batch_size)]
     pub batch: usize,
+    /// Frames timed for AD-NeRF's setting (8 x 256, 64 + 128 samples per ray, every pixel
+    /// and every sample, seeded weights: its time, not its quality); 0 leaves it out.
+    #[arg(long, default_value_t = 2)]
+    pub adnerf_frames: usize,
 }
 
 /// Threads of the main timing.
@@ -133,28 +140,58 @@ impl FrameModel for OnnxPoint {
     }
 }
 
-/// A candle model (the teacher) whose whole frames are timed.
+/// The teacher in candle with its savings on or off, its whole frames timed.
 struct Timed<'a> {
-    model: &'a dyn FrameModel,
+    run: &'a TeacherRun,
+    /// Sample only inside the head's bounds.
+    skip: bool,
+    /// Leave a ray once its transmittance is spent.
+    early_stop: bool,
     seconds: RefCell<Vec<f64>>,
+}
+
+impl<'a> Timed<'a> {
+    fn new(run: &'a TeacherRun, skip: bool, early_stop: bool) -> Timed<'a> {
+        Timed {
+            run,
+            skip,
+            early_stop,
+            seconds: RefCell::new(Vec::new()),
+        }
+    }
+
+    fn savings(&self) -> &'static str {
+        match (self.skip, self.early_stop) {
+            (true, true) => "",
+            (true, false) => ", no early stop",
+            (false, true) => ", no skipping",
+            (false, false) => ", no skipping, no early stop",
+        }
+    }
 }
 
 impl FrameModel for Timed<'_> {
     fn label(&self) -> String {
-        self.model.label()
+        format!(
+            "{}{}",
+            self.run.label(),
+            self.savings().replace(", no ", ".no_").replace(' ', "_")
+        )
     }
     fn describe(&self) -> String {
-        format!("{} candle", self.model.describe())
+        format!("{}{} candle", self.run.describe(), self.savings())
     }
     fn step(&self) -> usize {
-        self.model.step()
+        self.run.step
     }
     fn macs_per_ray(&self) -> f64 {
-        self.model.macs_per_ray()
+        self.run.macs_per_ray()
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<ImageRgb> {
         let started = Instant::now();
-        let image = self.model.render_frame(data, frame)?;
+        let image = self
+            .run
+            .render_frame_with(data, frame, self.skip, self.early_stop)?;
         self.seconds
             .borrow_mut()
             .push(started.elapsed().as_secs_f64());
@@ -339,10 +376,12 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             points.push(open_point(e, kind, THREADS, args.batch)?);
         }
     }
-    let teacher = Timed {
-        model: &val.teacher,
-        seconds: RefCell::new(Vec::new()),
-    };
+    let teacher = Timed::new(&val.teacher, true, true);
+    // The teacher without its savings: scored and timed on `val` only.
+    let plain = [
+        Timed::new(&val.teacher, true, false),
+        Timed::new(&val.teacher, false, false),
+    ];
     let mut reports: Vec<Vec<EvalReport>> = Vec::new();
     for &split in &splits {
         let plan = if split == Split::Val {
@@ -361,6 +400,9 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         };
         let data = plan.as_ref().map_or(&val.data, |p| &p.data);
         let mut models: Vec<&dyn FrameModel> = vec![&teacher];
+        if split == Split::Val {
+            models.extend(plain.iter().map(|t| t as &dyn FrameModel));
+        }
         models.extend(
             points
                 .iter()
@@ -430,6 +472,30 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         scores: scores_of(&teacher.label()),
         on_front: false,
     });
+    for t in &plain {
+        let report = reports[0]
+            .iter()
+            .find(|r| r.label == t.label())
+            .context("a teacher variant lacks its val report")?;
+        table.push(Point {
+            model: t.describe(),
+            precision: "candle".into(),
+            runtime: "candle".into(),
+            file: None,
+            file_bytes: None,
+            step: report.step,
+            gmac_per_frame: hits(report),
+            ms_2_threads: 1e3 * val_median(&t.seconds),
+            ms_1_thread: None,
+            scores: scores_of(&t.label()),
+            on_front: false,
+        });
+    }
+    let adnerf = if args.adnerf_frames > 0 {
+        Some(time_adnerf_setting(&val.data, args.adnerf_frames)?)
+    } else {
+        None
+    };
     for (i, p) in points.iter().enumerate() {
         let label = p.label();
         let report = reports[0]
@@ -452,8 +518,34 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     }
     mark_front(&mut table);
     let summary = speed_ups(&table);
-    write_outputs(&out, &machine, &args, &splits, &table, &summary)?;
+    write_outputs(&out, &machine, &args, &splits, &table, &summary, adnerf)?;
     Ok(())
+}
+
+/// AD-NeRF's setting timed as the paper compares against it: 8 x 256 with 64 coarse + 128
+/// fine samples, every pixel of the frame sampled over `[near, far]` and every sample
+/// evaluated. The weights are seeded (training it takes hours on 2 cores), so this is its
+/// time per frame, not its quality; returns milliseconds per frame (median of `n`
+/// frames) and multiply-adds per frame.
+fn time_adnerf_setting(data: &TrainData, n: usize) -> Result<(f64, f64)> {
+    use nldf_train::config::TeacherRunConfig;
+    let cfg = TeacherRunConfig {
+        model: crate::train_cmd::TeacherPreset::AdNerf.config(),
+        ..TeacherRunConfig::default()
+    };
+    let scratch = tempfile::tempdir().context("creating a temporary folder")?;
+    let run = TeacherRun::create(scratch.path(), cfg, data)?;
+    let timed = Timed::new(&run, false, false);
+    let frames = data.dataset.frames(Split::Val);
+    eprintln!("timing AD-NeRF's setting on {n} frames (seeded weights)");
+    for f in frames.iter().take(n) {
+        timed.render_frame(data, f)?;
+    }
+    let pixels = (data.dataset.intrinsics.width * data.dataset.intrinsics.height) as f64;
+    Ok((
+        1e3 * median(timed.seconds.borrow().clone()),
+        pixels * run.macs_per_ray(),
+    ))
 }
 
 /// Marks the points no other point beats on both time (2 threads) and `val` PSNR.
@@ -527,14 +619,17 @@ fn write_outputs(
     splits: &[Split],
     table: &[Point],
     summary: &[SpeedUp],
+    adnerf: Option<(f64, f64)>,
 ) -> Result<()> {
     let settings = serde_json::json!({
         "run": args.run, "data": args.data, "frames": args.frames,
         "threads": THREADS, "one_thread_frames": args.one_thread_frames,
         "calibration_frames": args.calibration_frames, "batch": args.batch,
     });
+    let adnerf_json = adnerf.map(|(ms, macs)| serde_json::json!({"ms_2_threads": ms, "gmac_per_frame": macs / 1e9, "frames": args.adnerf_frames}));
     let json = serde_json::json!({
         "machine": machine, "settings": settings, "points": table, "speed_up": summary,
+        "adnerf_setting": adnerf_json,
     });
     let json_path = out.join("frontier.json");
     nldf_core::files::write_atomic(&json_path, serde_json::to_string_pretty(&json)?.as_bytes())?;
@@ -601,6 +696,48 @@ fn write_outputs(
             s.point_psnr.map_or("".into(), |q| format!("{q:.2}")),
             s.speed_up.map_or("".into(), |x| format!("{x:.1}x")),
         ));
+    }
+    if let Some((ms, macs)) = adnerf {
+        md.push_str(&format!(
+            "\nAD-NeRF's setting (8 x 256, 64 + 128 samples, every pixel and sample, seeded \
+             weights: time only), median of {} frames: {ms:.0} ms per frame, {:.0} GMAC. \
+             Against it, whole frames, {THREADS} threads:\n\n| point | ms / frame | speed-up |\n|---|---|---|\n",
+            args.adnerf_frames,
+            macs / 1e9
+        ));
+        let mut listed: Vec<&Point> = summary
+            .iter()
+            .filter_map(|s| {
+                let name = s.point.as_deref()?;
+                table
+                    .iter()
+                    .find(|p| format!("{} {} {}", p.model, p.precision, p.runtime) == name)
+            })
+            .collect();
+        if let Some(fastest) = table
+            .iter()
+            .filter(|p| p.runtime != "candle")
+            .min_by(|a, b| a.ms_2_threads.total_cmp(&b.ms_2_threads))
+        {
+            listed.push(fastest);
+        }
+        let mut seen: Vec<*const Point> = Vec::new();
+        listed.retain(|p| {
+            let new = !seen.contains(&(*p as *const Point));
+            seen.push(*p as *const Point);
+            new
+        });
+        for p in listed {
+            md.push_str(&format!(
+                "| {} {} {} (val {:.2} dB) | {:.1} | {:.0}x |\n",
+                p.model,
+                p.precision,
+                p.runtime,
+                p.psnr("val").unwrap_or(f64::NAN),
+                p.ms_2_threads,
+                ms / p.ms_2_threads
+            ));
+        }
     }
     let md_path = out.join("frontier.md");
     nldf_core::files::write_atomic(&md_path, md.as_bytes())?;

@@ -55,7 +55,8 @@ enum Command {
     /// with and without pseudo views scored beyond the recorded poses.
     Ablate(ablate_cmd::AblateArgs),
     /// Benchmarks: training steps, the positional encoding, frame rendering (tract and
-    /// onnxruntime) and streaming latency, each written as JSON and Markdown.
+    /// onnxruntime), streaming latency, and the run-time against error frontier of a run's
+    /// teacher and students (fp32, fp16, int8), each written as JSON and Markdown.
     #[command(subcommand)]
     Bench(bench_cmd::BenchCommand),
     /// Show what nldf finds on this machine: CPU features and threads, the onnxruntime

@@ -29,6 +29,12 @@ pub enum StudentDepth {
     D50,
     #[value(name = "88")]
     D88,
+    /// 28 layers at width 128: about three times the steps of 28 x 256 in the same time,
+    /// and the demo's student.
+    #[value(name = "28x128")]
+    D28W128,
+    /// 16 x 128 with K = 8 beam points: the real-time preset, and the demo's student.
+    Realtime,
     /// 6 x 32 with 4 beam points: tests and smoke runs.
     Tiny,
 }
@@ -41,6 +47,11 @@ impl StudentDepth {
             StudentDepth::D28 => StudentConfig::paper_d28(),
             StudentDepth::D50 => StudentConfig::paper_d50(),
             StudentDepth::D88 => StudentConfig::paper_d88(),
+            StudentDepth::D28W128 => StudentConfig {
+                width: 128,
+                ..StudentConfig::paper_d28()
+            },
+            StudentDepth::Realtime => StudentConfig::realtime(),
             StudentDepth::Tiny => StudentConfig::tiny(),
         }
     }

@@ -109,6 +109,20 @@ impl StudentConfig {
         }
     }
 
+    /// The real-time preset: 16 layers at width 128 with K = 8 beam points (L = 10), a
+    /// seventh of the 28 x 256 student's multiply-adds per ray; picked on the measured
+    /// run-time against error frontier (`nldf bench frontier`).
+    pub fn realtime() -> StudentConfig {
+        StudentConfig {
+            beam: BeamSpec {
+                n_points: 8,
+                ..BeamSpec::default()
+            },
+            width: 128,
+            ..Self::paper(16)
+        }
+    }
+
     /// 28 layers at width 256 (paper Table 3).
     pub fn paper_d28() -> StudentConfig {
         Self::paper(28)

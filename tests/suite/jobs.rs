@@ -29,6 +29,7 @@ fn tiny_demo(out: &std::path::Path) -> DemoJob {
         student: StudentConfig::tiny(),
         student_minutes: 0.04,
         student_iters: 30,
+        student_distill: true,
     }
 }
 

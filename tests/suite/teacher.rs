@@ -462,7 +462,15 @@ fn segment_targets_sum_to_the_teachers_pixel() {
     let ds = &data.dataset;
     let bg = &ds.background.data;
     let t = &run.teacher;
-    let pixels = t.render_eval(&rays, bg, &code, &data.head_range()).unwrap();
+    let pixels = t
+        .render_eval(
+            &rays,
+            bg,
+            &code,
+            &data.head_range(),
+            t.cfg.min_transmittance,
+        )
+        .unwrap();
     for m in [1usize, 4, 5] {
         let seg = t
             .segment_targets(&rays, bg, &code, &data.head_range(), m)

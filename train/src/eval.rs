@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use nldf_core::beam::BeamSpec;
 use nldf_core::dataset::Split;
 use nldf_core::image::{ImageRgb, error_map, grid};
 use nldf_core::metrics::{cap_psnr, psnr, ssim};
@@ -74,9 +75,14 @@ impl FrameModel for StudentRun {
         let m = &self.cfg.model;
         let t = &self.cfg.train;
         format!(
-            "student {}x{}{}{}",
+            "student {}x{}{}{}{}",
             m.depth,
             m.width,
+            if m.beam.n_points == BeamSpec::default().n_points {
+                String::new()
+            } else {
+                format!(" (K = {})", m.beam.n_points)
+            },
             if t.distill { "" } else { ", pixels only" },
             if t.pool { "" } else { ", no pool" }
         )

@@ -244,8 +244,9 @@ impl Teacher {
     }
 
     /// Renders rays for display or scoring: no jitter; samples are evaluated front to back in
-    /// four groups, and a ray leaves once its transmittance falls below
-    /// `cfg.min_transmittance`; rays that miss the bounds are their background.
+    /// four groups, and a ray leaves once its transmittance falls below `min_transmittance`
+    /// (`cfg.min_transmittance`, or 0 to evaluate every sample); rays that miss the bounds
+    /// are their background.
     ///
     /// # Shapes
     /// - `background`: `[n_rays, 3]` flat; `code`: `[1, audio_dim]`
@@ -256,6 +257,7 @@ impl Teacher {
         background: &[f32],
         code: &Tensor,
         range: &HeadRange,
+        min_transmittance: f32,
     ) -> Result<Vec<f32>> {
         let samples = self.sample_with_code(rays, range, code)?;
         let n_samples = samples.n_samples;
@@ -271,7 +273,7 @@ impl Teacher {
                 let g1 = (g0 + group).min(n_samples);
                 let g = g1 - g0;
                 let active: Vec<usize> = (0..chunk.len())
-                    .filter(|&a| trans[a] >= self.cfg.min_transmittance)
+                    .filter(|&a| trans[a] >= min_transmittance)
                     .collect();
                 if active.is_empty() {
                     break;

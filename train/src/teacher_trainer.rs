@@ -28,7 +28,13 @@ use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::run_loop::{Event, TrainingRun, finite_loss, run_fields, train_loop};
 use crate::scores::{Scores, score_validation_frames};
 use crate::teacher::{Teacher, teacher};
+use glam::Vec3;
+use nldf_core::bounds::Bounds;
 use nldf_core::run_files::CONFIG_FILE;
+
+/// Half the side of the box that stands for "no bounds" when a frame is rendered without
+/// skipping: far beyond any scene's cameras, so every ray's samples span `[near, far]`.
+const NO_SKIP_REACH: f32 = 1e4;
 
 /// A teacher being trained: its folder, configuration, weights and optimizer.
 pub struct TeacherRun {
@@ -200,13 +206,42 @@ impl TeacherRun {
 
     /// Renders a whole frame of the dataset (any split).
     pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        self.render_frame_with(data, frame, true, true)
+    }
+
+    /// Renders a whole frame with the two savings of [`TeacherRun::render_frame`] each
+    /// optional: `skip` samples only inside the head's bounds (off: every ray is sampled
+    /// over its whole `[near, far]` span, as AD-NeRF renders), `early_stop` leaves a ray
+    /// once its transmittance falls below `min_transmittance` (off: every sample is
+    /// evaluated).
+    pub fn render_frame_with(
+        &self,
+        data: &TrainData,
+        frame: &Frame,
+        skip: bool,
+        early_stop: bool,
+    ) -> Result<ImageRgb> {
         let ds = &data.dataset;
         let rays = rays_for_image(&ds.camera(frame));
         let codes = self.audio_codes(data, &[frame.aud_id])?;
         let bg = &ds.background.data;
+        let mut range = data.head_range();
+        if !skip {
+            // A box holding every point within `far` of any camera.
+            let reach = Vec3::splat(NO_SKIP_REACH);
+            range.bounds = Bounds {
+                lo: -reach,
+                hi: reach,
+            };
+        }
+        let min_transmittance = if early_stop {
+            self.teacher.cfg.min_transmittance
+        } else {
+            0.0
+        };
         let colors = self
             .teacher
-            .render_eval(&rays, bg, &codes, &data.head_range())?;
+            .render_eval(&rays, bg, &codes, &range, min_transmittance)?;
         Ok(ImageRgb {
             width: ds.intrinsics.width,
             height: ds.intrinsics.height,
