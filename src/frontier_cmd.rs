@@ -160,26 +160,23 @@ impl<'a> Timed<'a> {
         }
     }
 
-    fn savings(&self) -> &'static str {
+    /// What the savings left off add to the teacher's description and to its label.
+    fn savings(&self) -> (&'static str, &'static str) {
         match (self.skip, self.early_stop) {
-            (true, true) => "",
-            (true, false) => ", no early stop",
-            (false, true) => ", no skipping",
-            (false, false) => ", no skipping, no early stop",
+            (true, true) => ("", ""),
+            (true, false) => (", no early stop", ".no_early_stop"),
+            (false, true) => (", no skipping", ".no_skipping"),
+            (false, false) => (", no skipping, no early stop", ".no_skipping.no_early_stop"),
         }
     }
 }
 
 impl FrameModel for Timed<'_> {
     fn label(&self) -> String {
-        format!(
-            "{}{}",
-            self.run.label(),
-            self.savings().replace(", no ", ".no_").replace(' ', "_")
-        )
+        format!("{}{}", self.run.label(), self.savings().1)
     }
     fn describe(&self) -> String {
-        format!("{}{} candle", self.run.describe(), self.savings())
+        format!("{}{} candle", self.run.describe(), self.savings().0)
     }
     fn step(&self) -> usize {
         self.run.step
@@ -273,14 +270,24 @@ fn splits(data: &Path) -> Vec<Split> {
     splits
 }
 
-/// Exports every student of the run in every precision into `dir`; returns
-/// `(student folder name, description, precision, file)`.
+/// One student exported in one precision.
+struct Export {
+    /// The student's folder name.
+    student: String,
+    describe: String,
+    step: usize,
+    macs_per_ray: f64,
+    precision: WeightType,
+    path: PathBuf,
+}
+
+/// Exports every student of the run in every precision into `dir`.
 fn export_all(
     students: &[StudentRun],
     data: &Path,
     calibration_frames: usize,
     dir: &Path,
-) -> Result<Vec<(String, StudentRun, WeightType, PathBuf)>> {
+) -> Result<Vec<Export>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut out = Vec::new();
     for s in students {
@@ -297,7 +304,14 @@ fn export_all(
             match report {
                 Ok(_) => {
                     eprintln!("exported {}", path.display());
-                    out.push((name.clone(), StudentRun::open(&s.dir, false)?, w, path));
+                    out.push(Export {
+                        student: name.clone(),
+                        describe: s.describe(),
+                        step: s.step,
+                        macs_per_ray: s.macs_per_ray(),
+                        precision: w,
+                        path,
+                    });
                 }
                 // A student whose weights do not fit half precision has no f16 point.
                 Err(e) if w == WeightType::F16 => {
@@ -310,13 +324,8 @@ fn export_all(
     Ok(out)
 }
 
-fn open_point(
-    (student, run, precision, path): &(String, StudentRun, WeightType, PathBuf),
-    kind: BackendKind,
-    threads: usize,
-    batch: usize,
-) -> Result<OnnxPoint> {
-    let model = nldf_export::read_model(path)?;
+fn open_point(e: &Export, kind: BackendKind, threads: usize, batch: usize) -> Result<OnnxPoint> {
+    let model = nldf_export::read_model(&e.path)?;
     let backend = backend_for(
         &model,
         kind,
@@ -326,13 +335,13 @@ fn open_point(
         },
     )?;
     Ok(OnnxPoint {
-        student: student.clone(),
-        describe: run.describe(),
-        precision: *precision,
+        student: e.student.clone(),
+        describe: e.describe.clone(),
+        precision: e.precision,
         kind,
-        step: run.step,
-        macs_per_ray: run.macs_per_ray(),
-        path: path.clone(),
+        step: e.step,
+        macs_per_ray: e.macs_per_ray,
+        path: e.path.clone(),
         renderer: RefCell::new(FrameRenderer::new(backend, None)?),
         seconds: RefCell::new(Vec::new()),
     })
@@ -458,25 +467,12 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             .filter_map(|rs| rs.iter().find(|r| r.label == label).map(score))
             .collect()
     };
-    let teacher_report = &reports[0][0];
-    table.push(Point {
-        model: teacher.describe(),
-        precision: "candle".into(),
-        runtime: "candle".into(),
-        file: None,
-        file_bytes: None,
-        step: teacher_report.step,
-        gmac_per_frame: hits(teacher_report),
-        ms_2_threads: 1e3 * val_median(&teacher.seconds),
-        ms_1_thread: None,
-        scores: scores_of(&teacher.label()),
-        on_front: false,
-    });
-    for t in &plain {
+    // The teacher first: `speed_ups` compares every point with the first row.
+    for t in std::iter::once(&teacher).chain(&plain) {
         let report = reports[0]
             .iter()
             .find(|r| r.label == t.label())
-            .context("a teacher variant lacks its val report")?;
+            .context("a teacher lacks its val report")?;
         table.push(Point {
             model: t.describe(),
             precision: "candle".into(),

@@ -86,6 +86,16 @@ pub fn activation_ranges(
     frames: &[CalibrationFrame],
 ) -> Result<ActivationRanges> {
     let (bytes, _, taps) = calibration_model(student_dir)?;
+    ranges_of(&bytes, &taps, info, frames)
+}
+
+/// The ranges of `taps` in the calibration model `bytes` run on `frames`.
+fn ranges_of(
+    bytes: &[u8],
+    taps: &[Tap],
+    info: &ModelInfo,
+    frames: &[CalibrationFrame],
+) -> Result<ActivationRanges> {
     let mut parsed = tract_onnx::onnx()
         .model_for_read(&mut &bytes[..])
         .map_err(|e| Error::backend(NAME, e))?;
@@ -139,7 +149,7 @@ pub fn activation_ranges(
             }
         }
     }
-    check_every_tap(&taps, &ranges)?;
+    check_every_tap(taps, &ranges)?;
     Ok(ranges)
 }
 
@@ -162,8 +172,8 @@ pub fn export_int8(
     n_frames: usize,
     out: &Path,
 ) -> Result<ExportReport> {
-    let (_, info, _) = calibration_model(student_dir)?;
+    let (bytes, info, taps) = calibration_model(student_dir)?;
     let frames = training_frames(data, &info, n_frames)?;
-    let ranges = activation_ranges(student_dir, &info, &frames)?;
+    let ranges = ranges_of(&bytes, &taps, &info, &frames)?;
     Ok(export_student_int8(student_dir, out, &ranges)?)
 }

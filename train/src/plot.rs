@@ -29,6 +29,32 @@ fn register_font() {
     });
 }
 
+/// The series' legend in the lower right corner.
+fn draw_legend<'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
+) -> std::result::Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
+/// Writes a drawn [`SIZE`] RGB buffer to `path` as a PNG, atomically.
+fn save_plot(path: &Path, buf: &[u8]) -> Result<()> {
+    let (w, h) = SIZE;
+    Ok(nldf_core::image::save_png_bytes(
+        path,
+        w,
+        h,
+        image::ExtendedColorType::Rgb8,
+        buf,
+    )?)
+}
+
 /// One line of a plot: PSNR (y) against wall-clock minutes (x).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Series {
@@ -143,23 +169,10 @@ pub fn plot_xy(path: &Path, title: &str, axes: (&str, &str), series: &[Series]) 
                     .map_err(|e| fail(e.to_string()))?;
             }
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+        draw_legend(&mut chart).map_err(fail)?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    Ok(nldf_core::image::save_png_bytes(
-        path,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-        &buf,
-    )?)
+    save_plot(path, &buf)
 }
 
 /// One point of a run-time against error plot.
@@ -270,21 +283,8 @@ pub fn plot_frontier(path: &Path, title: &str, dots: &[FrontierDot]) -> Result<(
                 .label(*group)
                 .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| fail(e.to_string()))?;
+        draw_legend(&mut chart).map_err(fail)?;
         root.present().map_err(|e| fail(e.to_string()))?;
     }
-    Ok(nldf_core::image::save_png_bytes(
-        path,
-        w,
-        h,
-        image::ExtendedColorType::Rgb8,
-        &buf,
-    )?)
+    save_plot(path, &buf)
 }
