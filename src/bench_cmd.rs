@@ -28,6 +28,10 @@ pub enum BenchCommand {
     /// `nldf render --stream` fed a WAV at real-time speed: the latency from each frame's
     /// audio to its PNG.
     Stream(StreamBenchArgs),
+    /// `nldf render --skip-still`: frames re-rendering only the pixels the audio moves,
+    /// against full renders, on a still pose, a pose held 2 s at a time and a moving pose:
+    /// time per frame and error against the full frames.
+    Still(StillBenchArgs),
     /// Run time against error: the teacher and every student of a run, exported in f32,
     /// f16 and int8, in onnxruntime and tract, scored on the held-out splits and timed per
     /// whole frame side by side; a table, JSON and a plot with the Pareto front.
@@ -98,6 +102,34 @@ pub struct StreamBenchArgs {
 }
 
 #[derive(clap::Args, Debug)]
+pub struct StillBenchArgs {
+    /// The exported model (`nldf export`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Speech to render (its first --seconds are used).
+    #[arg(long)]
+    pub audio: PathBuf,
+    /// Seconds of audio per pose track.
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// Runtime for the network.
+    #[arg(long, value_enum, default_value_t = crate::render_cmd::BackendArg::Ort)]
+    pub backend: crate::render_cmd::BackendArg,
+    /// Colour spread (in 1/255 steps) above which a pixel is re-rendered.
+    #[arg(long, default_value_t = 2.0)]
+    pub threshold: f32,
+    /// Rays per network call.
+    #[arg(long, default_value_t = BackendOptions::default().batch_size)]
+    pub batch: usize,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Folder for still.json and still.md.
+    #[arg(long, default_value = "runs/bench")]
+    pub out: PathBuf,
+}
+
+#[derive(clap::Args, Debug)]
 pub struct StudentStepArgs {
     /// Dataset to draw batches from (default: the synthetic scene in a temporary folder).
     #[arg(long)]
@@ -143,6 +175,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::StudentStep(args) => student_step(args),
         BenchCommand::Render(args) => render(args),
         BenchCommand::Stream(args) => stream(args),
+        BenchCommand::Still(args) => still(args),
         BenchCommand::Encoding(args) => encoding(args),
         BenchCommand::Frontier(args) => crate::frontier_cmd::run(args),
     }
@@ -523,4 +556,105 @@ fn stream(args: StreamBenchArgs) -> Result<()> {
         "result": report,
     });
     write_bench_files(&args.out, "stream", &json, &md)
+}
+
+fn still(args: StillBenchArgs) -> Result<()> {
+    use nldf_core::audio::neighbourhood;
+    use nldf_infer::backend::backend_for;
+    use nldf_infer::frame::FrameRenderer;
+    use nldf_infer::poses::{default_pose, default_track};
+    use nldf_infer::still::{SkipConfig, bench_track, probe_frames};
+    let machine = Machine::here();
+    let options = crate::render_cmd::backend_options(args.batch, args.threads)?;
+    if !(args.seconds.is_finite() && args.seconds > 0.0) {
+        anyhow::bail!("--seconds must be positive, got {}", args.seconds);
+    }
+    let model = nldf_export::read_model(&args.model)?;
+    let info = model.info.clone();
+    let windows = nldf_infer::audio::windows_from_wav(&info, &args.model, &args.audio)?;
+    let frames =
+        ((args.seconds * info.spec.fps as f64).round() as usize).clamp(1, windows.n_frames.max(1));
+    let att = info.audio.att_frames;
+    let config = SkipConfig {
+        threshold: args.threshold / 255.0,
+        ..SkipConfig::default()
+    };
+    config.validate()?;
+    let audio = |f: usize| neighbourhood(&windows, f, att);
+    let probes: Vec<Vec<f32>> = probe_frames(frames, config.probes)
+        .into_iter()
+        .map(audio)
+        .collect();
+    let kind: nldf_infer::BackendKind = args.backend.into();
+    let mut full = FrameRenderer::new(backend_for(&model, kind, options)?, None)?;
+    let mut skipping = FrameRenderer::new(backend_for(&model, kind, options)?, None)?;
+    let moving = default_track(&info, frames);
+    let hold = (2.0 * info.spec.fps).round().max(1.0) as usize;
+    let tracks = [
+        ("still pose", vec![default_pose(&info, 0); frames]),
+        (
+            "pose held 2 s at a time",
+            (0..frames).map(|f| moving[f - f % hold]).collect(),
+        ),
+        ("moving pose (the default sway)", moving.clone()),
+    ];
+    let mut rows = Vec::new();
+    for (label, poses) in &tracks {
+        eprintln!("{label}: {frames} frames in full and with skipping");
+        rows.push(bench_track(
+            &mut full,
+            &mut skipping,
+            label,
+            poses,
+            &audio,
+            config,
+            probes.clone(),
+        )?);
+    }
+    let opt = |v: Option<f64>| v.map_or("identical".into(), |p| format!("{p:.2} dB"));
+    let mut md = format!(
+        "| skipping still pixels, {} x {} student, {} | value |\n|---|---|\n\
+         | machine | {} |\n\
+         | settings | {:.1} s of {} ({} frames), {} with {} threads, batch {}; threshold {}/255, margin {} px, {} probes, a full frame every {} still frames |\n",
+        info.network.depth,
+        info.network.width,
+        kind,
+        machine_cell(&machine),
+        frames as f64 / info.spec.fps as f64,
+        args.audio.display(),
+        frames,
+        kind,
+        options.threads,
+        options.batch_size,
+        args.threshold,
+        config.margin,
+        config.probes,
+        config.refresh,
+    );
+    md += "\n| track | full ms/frame (mean, median) | skipping ms/frame (mean, median) | speed-up | network rays | full frames | PSNR vs full | worst frame | max error |\n|---|---|---|---|---|---|---|---|---|\n";
+    for r in &rows {
+        md += &format!(
+            "| {} | {:.1}, {:.1} | {:.1}, {:.1} | {:.2}x | {:.1} % | {} of {} | {} | {} | {:.1}/255 |\n",
+            r.label,
+            r.full_ms_mean,
+            r.full_ms_median,
+            r.skip_ms_mean,
+            r.skip_ms_median,
+            r.speedup,
+            100.0 * r.ray_share,
+            r.full_frames,
+            r.frames,
+            opt(r.psnr_vs_full),
+            opt(r.worst_frame_psnr),
+            255.0 * r.max_abs_error,
+        );
+    }
+    let json = serde_json::json!({
+        "bench": "still",
+        "machine": machine,
+        "model": args.model,
+        "settings": {"audio": args.audio, "seconds": args.seconds, "frames": frames, "backend": kind.to_string(), "threads": options.threads, "batch": options.batch_size, "skip": config},
+        "tracks": rows,
+    });
+    write_bench_files(&args.out, "still", &json, &md)
 }

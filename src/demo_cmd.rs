@@ -162,6 +162,7 @@ fn render_new_voice(out: &Path, model: &Path) -> Result<VideoReport> {
         size: None,
         mp4: true,
         ffmpeg: None,
+        skip: None,
     };
     let plan = job.plan()?;
     let bar = progress_bar(plan.n_frames() as u64, "frames");

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use nldf_infer::backend::{BackendKind, BackendOptions};
+use nldf_infer::still::SkipConfig;
 use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob};
 use nldf_infer::video::VideoJob;
 
@@ -78,6 +79,15 @@ pub struct RenderArgs {
     /// With --stream: render every frame, however far behind the audio that falls.
     #[arg(long, requires = "stream")]
     pub no_drop: bool,
+    /// While the pose holds still (a --poses track with repeated poses), re-render only the
+    /// pixels the audio moves: those whose colour spreads over 8 probe frames of the clip,
+    /// grown by 2 pixels; a full frame whenever the pose moves and once a second.
+    #[arg(long, conflicts_with = "stream")]
+    pub skip_still: bool,
+    /// With --skip-still: the colour spread (in 1/255 steps) above which a pixel is
+    /// re-rendered.
+    #[arg(long, default_value_t = 2.0, requires = "skip_still")]
+    pub skip_threshold: f32,
 }
 
 /// The backend options of `--batch` and `--threads` (default: all cores), checked with the
@@ -130,6 +140,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
         size: args.size,
         mp4: !args.no_video,
         ffmpeg: args.ffmpeg,
+        skip: args.skip_still.then(|| SkipConfig {
+            threshold: args.skip_threshold / 255.0,
+            ..SkipConfig::default()
+        }),
     };
     let plan = job.plan()?;
     let k = plan.renderer().intrinsics();
@@ -150,6 +164,12 @@ pub fn run(args: RenderArgs) -> Result<()> {
         100.0 * report.head_fraction,
         report.write_seconds,
     );
+    if job.skip.is_some() {
+        println!(
+            "skipping still pixels: {} of {} frames rendered in full",
+            report.full_frames, report.n_frames
+        );
+    }
     if report.ffmpeg_missing {
         println!("ffmpeg is not on the PATH: wrote PNG frames only (no MP4)");
     }

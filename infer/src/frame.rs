@@ -143,17 +143,28 @@ impl FrameRenderer {
     pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
         let rays = self.rays(c2w);
         let mut image = self.background.clone();
-        if !rays.pixels.is_empty() {
-            let out = self
-                .backend
-                .run(&rays.rays.origins, &rays.rays.directions, audio)?;
-            for (r, &p) in rays.pixels.iter().enumerate() {
-                image.data[3 * p..3 * p + 3].copy_from_slice(&out.rgb[3 * r..3 * r + 3]);
-            }
+        let rgb = self.run_rays(&rays, audio)?;
+        for (r, &p) in rays.pixels.iter().enumerate() {
+            image.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * r..3 * r + 3]);
         }
         Ok(Frame {
             image,
             head_pixels: rays.pixels.len(),
         })
+    }
+
+    /// The colours of `rays` with the audio neighbourhood `audio` (none for no rays).
+    ///
+    /// # Shapes
+    /// - `audio`: `[att_frames, window, n_features]` flat
+    /// - returns `[rays.pixels.len(), 3]` flat
+    pub fn run_rays(&mut self, rays: &PixelRays, audio: &[f32]) -> Result<Vec<f32>> {
+        if rays.pixels.is_empty() {
+            return Ok(Vec::new());
+        }
+        Ok(self
+            .backend
+            .run(&rays.rays.origins, &rays.rays.directions, audio)?
+            .rgb)
     }
 }

@@ -8,6 +8,7 @@
 //! pose and an audio neighbourhood, sending only the rays that meet the head's bounds
 //! through the network; [`audio`] and [`poses`] make each frame's inputs; [`video`] renders
 //! a whole WAV into PNG frames and an MP4, written through a staging folder ([`output`]);
+//! [`still`] re-renders only the pixels the audio moves while the pose holds still;
 //! [`stream`] renders audio that is still arriving, with bounded latency.
 
 pub mod audio;
@@ -23,6 +24,7 @@ pub mod ort_backend;
 pub mod ort_library;
 pub mod output;
 pub mod poses;
+pub mod still;
 pub mod stream;
 pub mod tract_backend;
 pub mod video;

@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::frame::FrameRenderer;
 use crate::output::Staging;
 use crate::poses::{default_track, pose_at, poses_from_transforms};
+use crate::still::{FrameKind, SkipConfig, StillSkipper, probe_frames};
 
 /// File name of frame `f` in the output folder.
 pub fn frame_file_name(f: usize) -> String {
@@ -53,6 +54,9 @@ pub struct VideoJob {
     pub mp4: bool,
     /// The ffmpeg binary; `None`: `ffmpeg` on the PATH.
     pub ffmpeg: Option<PathBuf>,
+    /// Re-render only the pixels the audio moves while the pose holds still
+    /// ([`crate::still`]); `None`: every frame in full.
+    pub skip: Option<SkipConfig>,
 }
 
 /// A checked job, ready to render: the model is loaded in its runtime, the audio features
@@ -62,6 +66,7 @@ pub struct VideoPlan {
     renderer: FrameRenderer,
     windows: AudioWindows,
     poses: Vec<Mat4>,
+    skipper: Option<StillSkipper>,
     staging: Staging,
     audio: Option<PathBuf>,
     ffmpeg: Option<PathBuf>,
@@ -99,6 +104,8 @@ pub struct VideoReport {
     pub write_seconds: f64,
     /// Mean fraction of the pixels that went through the network.
     pub head_fraction: f64,
+    /// Frames rendered in full (all of them without skipping).
+    pub full_frames: usize,
     /// The MP4, when ffmpeg was found and asked for.
     pub video: Option<PathBuf>,
     /// True when an MP4 was asked for but ffmpeg is not on the PATH.
@@ -141,6 +148,17 @@ impl VideoJob {
             }
             (None, true) => ffmpeg_on_path(),
         };
+        let skipper = match self.skip {
+            Some(config) => {
+                let att = model.info.audio.att_frames;
+                let probes = probe_frames(windows.n_frames, config.probes)
+                    .into_iter()
+                    .map(|f| neighbourhood(&windows, f, att))
+                    .collect();
+                Some(StillSkipper::new(config, probes)?)
+            }
+            None => None,
+        };
         let staging = Staging::create(&self.out)?;
         let renderer =
             FrameRenderer::new(backend_for(&model, self.backend, self.options)?, self.size)?;
@@ -148,6 +166,7 @@ impl VideoJob {
             renderer,
             windows,
             poses,
+            skipper,
             staging,
             audio: self.audio.clone(),
             ffmpeg,
@@ -181,10 +200,22 @@ impl VideoPlan {
         let fps = self.renderer.info().spec.fps;
         let mut files = Vec::with_capacity(total + 1);
         let (mut render_seconds, mut write_seconds, mut head) = (0.0, 0.0, 0usize);
+        let mut full_frames = 0;
         for f in 0..total {
             let started = Instant::now();
             let audio = neighbourhood(&self.windows, f, att);
-            let frame = self.renderer.render(pose_at(&self.poses, f), &audio)?;
+            let pose = pose_at(&self.poses, f);
+            let frame = match &mut self.skipper {
+                Some(skipper) => {
+                    let out = skipper.render(&mut self.renderer, pose, &audio)?;
+                    full_frames += usize::from(out.kind == FrameKind::Full);
+                    out.frame
+                }
+                None => {
+                    full_frames += 1;
+                    self.renderer.render(pose, &audio)?
+                }
+            };
             render_seconds += started.elapsed().as_secs_f64();
             let started = Instant::now();
             let name = frame_file_name(f);
@@ -216,6 +247,7 @@ impl VideoPlan {
             render_seconds,
             write_seconds,
             head_fraction: head as f64 / (total.max(1) * k.n_pixels()) as f64,
+            full_frames,
             ffmpeg_missing: self.mp4_asked && self.ffmpeg.is_none(),
         })
     }

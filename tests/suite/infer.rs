@@ -116,6 +116,7 @@ fn job(model: &Path, audio: &Path, out: &Path) -> VideoJob {
         size: None,
         mp4: false,
         ffmpeg: None,
+        skip: None,
     }
 }
 
@@ -568,4 +569,155 @@ fn infer_render_muxes_an_mp4_with_the_audio_when_ffmpeg_is_there() {
     .to_string();
     assert!(err.contains("no ffmpeg binary"), "{err}");
     assert!(!run.root.join("video2").exists());
+}
+
+/// Skipping still pixels: on a still pose, with every frame's audio among the probes, no
+/// pixel that is kept from the full frame differs from the full render by more than the
+/// threshold (the pixels over it are re-rendered, exactly as in full); a full frame comes
+/// every `refresh` frames; on a moving pose every frame is full and identical; and
+/// `nldf render --skip-still` writes the same frames as the skipper.
+#[test]
+fn infer_skipping_still_pixels_stays_within_its_threshold() {
+    use nldf_infer::still::{FrameKind, SkipConfig, StillSkipper, bench_track, probe_frames};
+    let (run, path, wav) = tiny_model_and_wav(117, 0.6);
+    let model = read_model(&path).unwrap();
+    let info = model.info.clone();
+    let windows = windows_from_wav(&info, &path, &wav).unwrap();
+    let n = windows.n_frames;
+    let att = info.audio.att_frames;
+    let audio = |f: usize| neighbourhood(&windows, f, att);
+    let renderer = || {
+        FrameRenderer::new(
+            backend_for(&model, BackendKind::Tract, TEST_OPTIONS).unwrap(),
+            None,
+        )
+        .unwrap()
+    };
+    let (mut full, mut skipping) = (renderer(), renderer());
+    // The threshold: the median spread of a head pixel over the clip's frames, so that
+    // about half the head is re-rendered.
+    let pose = default_track(&info, 1)[0];
+    let head = full.rays(pose).pixels.len();
+    let mut spread = vec![(f32::INFINITY, f32::NEG_INFINITY); 3 * head];
+    for f in 0..n {
+        let rgb = full.run_rays(&full.rays(pose), &audio(f)).unwrap();
+        for (s, v) in spread.iter_mut().zip(rgb) {
+            *s = (s.0.min(v), s.1.max(v));
+        }
+    }
+    let mut widths: Vec<f32> = spread
+        .chunks(3)
+        .map(|p| p.iter().map(|(lo, hi)| hi - lo).fold(0.0, f32::max))
+        .collect();
+    widths.sort_by(f32::total_cmp);
+    let config = SkipConfig {
+        threshold: widths[head / 2],
+        margin: 1,
+        refresh: 6,
+        probes: n,
+    };
+    let all: Vec<Vec<f32>> = probe_frames(n, n).into_iter().map(audio).collect();
+    assert_eq!(all.len(), n);
+    let mut skipper = StillSkipper::new(config, all.clone()).unwrap();
+    let mut kinds = Vec::new();
+    for f in 0..n {
+        let reference = full.render(pose, &audio(f)).unwrap();
+        let out = skipper.render(&mut skipping, pose, &audio(f)).unwrap();
+        let worst = out
+            .frame
+            .image
+            .data
+            .iter()
+            .zip(&reference.image.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(worst <= config.threshold + 1e-6, "frame {f}: {worst}");
+        if out.kind == FrameKind::Full {
+            assert_eq!(out.frame, reference);
+        } else {
+            assert!(out.frame.head_pixels <= reference.head_pixels);
+        }
+        kinds.push(out.kind);
+    }
+    let moving = skipper.moving_pixels().unwrap();
+    println!("{moving} of {head} head pixels re-rendered over {n} frames: {kinds:?}");
+    assert!(0 < moving && moving < head, "{moving} of {head}");
+    for (f, k) in kinds.iter().enumerate() {
+        let expected = match f % config.refresh {
+            0 => FrameKind::Full,
+            1 if f == 1 => FrameKind::Probed,
+            _ => FrameKind::Partial,
+        };
+        assert_eq!(*k, expected, "frame {f}");
+    }
+    // A moving pose: every frame in full, identical to the full render.
+    let track = default_track(&info, 4);
+    let r = bench_track(
+        &mut full,
+        &mut skipping,
+        "moving",
+        &track,
+        &audio,
+        config,
+        all.clone(),
+    )
+    .unwrap();
+    assert_eq!((r.full_frames, r.psnr_vs_full, r.ray_share), (4, None, 1.0));
+    // Settings out of range are refused.
+    for bad in [
+        SkipConfig {
+            refresh: 0,
+            ..config
+        },
+        SkipConfig {
+            threshold: f32::NAN,
+            ..config
+        },
+    ] {
+        assert!(StillSkipper::new(bad, all.clone()).is_err());
+    }
+    assert!(StillSkipper::new(config, Vec::new()).is_err());
+    // The render path: a still track through --poses with skipping on.
+    let poses = run.root.join("still.json");
+    let c2w: Vec<Vec<f32>> = (0..4)
+        .map(|r| (0..4).map(|c| pose.col(c)[r]).collect())
+        .collect();
+    let frames: Vec<serde_json::Value> = (0..n)
+        .map(|_| serde_json::json!({"img_id": 0, "transform_matrix": c2w, "aud_id": 0}))
+        .collect();
+    std::fs::write(
+        &poses,
+        serde_json::json!({"focal_len": info.spec.intrinsics.focal, "cx": info.spec.intrinsics.cx, "cy": info.spec.intrinsics.cy, "frames": frames}).to_string(),
+    )
+    .unwrap();
+    let parsed = nldf_infer::poses::poses_from_transforms(&poses).unwrap();
+    assert!(
+        parsed.iter().all(|p| *p == pose),
+        "{:?} vs {pose:?}",
+        parsed[0]
+    );
+    let out = run.root.join("skip_render");
+    let report = VideoJob {
+        poses: Some(poses),
+        skip: Some(SkipConfig {
+            probes: n,
+            ..config
+        }),
+        ..job(&path, &wav, &out)
+    }
+    .plan()
+    .unwrap()
+    .render(|_| {})
+    .unwrap();
+    assert_eq!(report.full_frames, n.div_ceil(config.refresh));
+    let mut skipper = StillSkipper::new(config, all).unwrap();
+    for f in 0..n {
+        let expected = skipper.render(&mut skipping, pose, &audio(f)).unwrap();
+        let written = ImageRgb::load(&out.join(frame_file_name(f))).unwrap();
+        assert_eq!(
+            written.to_rgb8(),
+            expected.frame.image.to_rgb8(),
+            "frame {f}"
+        );
+    }
 }

@@ -437,6 +437,7 @@ fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
         size: None,
         mp4: false,
         ffmpeg: None,
+        skip: None,
     };
     let err = job(Some(&wav), None, "from_wav")
         .plan()
