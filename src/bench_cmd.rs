@@ -96,6 +96,9 @@ pub struct StreamBenchArgs {
     /// Audio sent per write, in milliseconds (a microphone's buffer).
     #[arg(long, default_value_t = 20)]
     pub piece_ms: u64,
+    /// Frames that may wait behind the next one before the stream skips to the newest.
+    #[arg(long, default_value_t = nldf_infer::stream::DEFAULT_DROP_BEHIND)]
+    drop_behind: usize,
     /// Folder for stream.json and stream.md (the frames go to a temporary folder).
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
@@ -506,7 +509,7 @@ fn stream(args: StreamBenchArgs) -> Result<()> {
         backend: args.backend.into(),
         options: BackendOptions::default(),
         size: args.size,
-        drop_late: true,
+        drop_behind: Some(args.drop_behind),
     };
     let plan = job.plan()?;
     eprintln!(
@@ -523,16 +526,21 @@ fn stream(args: StreamBenchArgs) -> Result<()> {
     let l = report.latency;
     let render_ms: Vec<f64> = report.frames.iter().map(|f| 1e3 * f.render_s).collect();
     let mean_render = render_ms.iter().sum::<f64>() / render_ms.len().max(1) as f64;
+    let render = nldf_infer::stream::LatencyStats::of(
+        &report.frames.iter().map(|f| f.render_s).collect::<Vec<_>>(),
+    );
     let md = format!(
         "| stream, {} | value |\n|---|---|\n\
          | machine | {} |\n\
+         | model | {} |\n\
          | input | {:.1} s of {} at real-time speed, {} ms pieces, {}x{} frames |\n\
-         | frames | {} of {} rendered, {} skipped to keep up |\n\
-         | render time per frame | {:.1} ms mean |\n\
+         | frames | {} of {} rendered, {} skipped to keep up (skipping once more than {} wait) |\n\
+         | render time per frame, PNG written | {:.1} ms mean, median {:.1}, p95 {:.1}, max {:.1} |\n\
          | features' lookahead | {:.0} ms |\n\
          | latency, audio to PNG | mean {:.0} ms, median {:.0}, p95 {:.0}, max {:.0} |\n",
         report.backend,
         machine_cell(&machine),
+        args.model.display(),
         report.audio_seconds,
         args.audio.display(),
         args.piece_ms,
@@ -541,7 +549,11 @@ fn stream(args: StreamBenchArgs) -> Result<()> {
         report.rendered(),
         report.n_frames,
         report.dropped,
+        args.drop_behind,
         mean_render,
+        render.p50_ms,
+        render.p95_ms,
+        render.max_ms,
         1e3 * report.lookahead_s,
         l.mean_ms,
         l.p50_ms,
@@ -552,7 +564,7 @@ fn stream(args: StreamBenchArgs) -> Result<()> {
         "bench": "stream",
         "machine": machine,
         "model": args.model,
-        "settings": {"audio": args.audio, "seconds": args.seconds, "piece_ms": args.piece_ms, "size": args.size},
+        "settings": {"audio": args.audio, "seconds": args.seconds, "piece_ms": args.piece_ms, "size": args.size, "drop_behind": args.drop_behind},
         "result": report,
     });
     write_bench_files(&args.out, "stream", &json, &md)

@@ -332,6 +332,7 @@ fn open_point(e: &Export, kind: BackendKind, threads: usize, batch: usize) -> Re
         BackendOptions {
             batch_size: batch,
             threads,
+            spin: true,
         },
     )?;
     Ok(OnnxPoint {

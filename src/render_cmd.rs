@@ -77,8 +77,12 @@ pub struct RenderArgs {
     #[arg(long)]
     pub stream: bool,
     /// With --stream: render every frame, however far behind the audio that falls.
-    #[arg(long, requires = "stream")]
+    #[arg(long, requires = "stream", conflicts_with = "drop_behind")]
     pub no_drop: bool,
+    /// With --stream: frames that may wait behind the next one before the renderer skips
+    /// to the newest (each adds one frame time, 40 ms at 25 fps, to the worst latency).
+    #[arg(long, requires = "stream", default_value_t = nldf_infer::stream::DEFAULT_DROP_BEHIND)]
+    pub drop_behind: usize,
     /// While the pose holds still (a --poses track with repeated poses), re-render only the
     /// pixels the audio moves: those whose colour spreads over 8 probe frames of the clip,
     /// grown by 2 pixels; a full frame whenever the pose moves and once a second.
@@ -96,6 +100,7 @@ pub fn backend_options(batch: usize, threads: Option<usize>) -> Result<BackendOp
     let options = BackendOptions {
         batch_size: batch,
         threads: threads.unwrap_or_else(|| BackendOptions::default().threads),
+        spin: true,
     };
     let limits = BackendOptions::LIMITS;
     if !(1..=limits.batch_size).contains(&options.batch_size) {
@@ -197,7 +202,7 @@ fn run_stream(args: RenderArgs, options: BackendOptions) -> Result<()> {
         backend: args.backend.into(),
         options,
         size: args.size,
-        drop_late: !args.no_drop,
+        drop_behind: (!args.no_drop).then_some(args.drop_behind),
     };
     let audio = args
         .audio

@@ -43,6 +43,12 @@ pub struct BackendOptions {
     pub batch_size: usize,
     /// Threads for the matrix products (1 = the calling thread only).
     pub threads: usize,
+    /// Whether onnxruntime's worker threads spin (busy-wait) between calls instead of
+    /// sleeping. Spinning makes back-to-back calls about 20 % faster (2-core EPYC, the
+    /// real-time student), but a spinning pool takes a core from every other thread: a
+    /// second session, the stream's reader, the PNG writer. Streams and benchmarks that
+    /// alternate sessions turn it off. tract ignores it.
+    pub spin: bool,
 }
 
 impl Default for BackendOptions {
@@ -50,6 +56,7 @@ impl Default for BackendOptions {
         BackendOptions {
             batch_size: 4096,
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            spin: true,
         }
     }
 }
@@ -59,6 +66,7 @@ impl BackendOptions {
     pub const LIMITS: BackendOptions = BackendOptions {
         batch_size: 1 << 20,
         threads: 1024,
+        spin: true,
     };
 
     /// Checks the options.

@@ -172,22 +172,16 @@ pub fn bench_render(
     progress("ort: whole frames against bare onnxruntime");
     let rays = ort.rays(c2w);
     let n_rays = rays.pixels.len();
-    let (mut bare_times, mut frame_times) = (Vec::new(), Vec::new());
-    for rep in 0..cfg.warmup + cfg.reps {
-        let t = Instant::now();
-        bare.run_bare(&rays.rays.origins, &rays.rays.directions, &audio)?;
-        let b = t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        ort.render(c2w, &audio)?;
-        let f = t.elapsed().as_secs_f64();
-        if rep >= cfg.warmup {
-            bare_times.push(b);
-            frame_times.push(f);
-        }
-    }
-    let bare_ort = timing("bare onnxruntime", &ort, median(bare_times), n_rays);
-    let ort_frame = timing("ort frame", &ort, median(frame_times), n_rays);
+    // One block after the other, never alternating: a session that has just run keeps its
+    // pool spinning for a while, and two sessions taking turns fight over the cores (on
+    // 2 cores that made the bare session look 20-50 % slower than onnxruntime from Python).
+    let bare_s = median_seconds(cfg.warmup, cfg.reps, || {
+        bare.run_bare(&rays.rays.origins, &rays.rays.directions, &audio)
+    })?;
     drop(bare);
+    let frame_s = median_seconds(cfg.warmup, cfg.reps, || ort.render(c2w, &audio).map(|_| ()))?;
+    let bare_ort = timing("bare onnxruntime", &ort, bare_s, n_rays);
+    let ort_frame = timing("ort frame", &ort, frame_s, n_rays);
 
     progress("tract: whole frames");
     let tract_s = median_seconds(cfg.warmup, cfg.reps, || {

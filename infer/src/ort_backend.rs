@@ -76,6 +76,8 @@ impl OrtBackend {
             .map_err(|e| fail(e.to_string()))?
             .with_inter_threads(1)
             .map_err(|e| fail(e.to_string()))?
+            .with_intra_op_spinning(options.spin)
+            .map_err(|e| fail(e.to_string()))?
             .commit_from_memory(&model.bytes)
             .map_err(|e| fail(e.to_string()))?;
         Ok(OrtBackend {

@@ -4,10 +4,14 @@
 //! file path, bit for bit), and written as `frame_NNNNN.png` straight into the output folder
 //! (each file atomically), so that a consumer can show it at once.
 //!
-//! Latency is bounded: when rendering falls behind the audio, the renderer skips to the
-//! newest frame it can render (the skipped frames are counted, not written), so a frame is
-//! never older than the audio lookahead plus about two frame times. `drop_late = false`
-//! renders every frame instead, however far behind that puts it.
+//! Latency is bounded: when more than `drop_behind` frames wait behind the next one (the
+//! renderer has fallen that far behind the audio), it skips to the newest frame it can
+//! render (the skipped frames are counted, not written), so a frame is never older than the
+//! audio lookahead plus about `drop_behind + 2` frame times. The slack lets a renderer that
+//! keeps up on average absorb a slow frame (another process, a page fault) without dropping
+//! any. The frames still to render when the stream ends are all rendered (its end releases
+//! the last few at once). `drop_behind = None` renders every frame, however far behind that
+//! puts it.
 //!
 //! A frame's latency is measured from the moment the audio of its instant (sample
 //! `ceil(f / fps * rate)`) arrived to the moment its PNG is in place; it includes the
@@ -52,9 +56,14 @@ pub struct StreamJob {
     pub options: BackendOptions,
     /// The image's longer side in pixels; `None`: the model's own size.
     pub size: Option<u32>,
-    /// Skip to the newest renderable frame when behind (bounded latency).
-    pub drop_late: bool,
+    /// Skip to the newest renderable frame once more than this many frames wait behind the
+    /// next one (bounded latency); `None`: render every frame.
+    pub drop_behind: Option<usize>,
 }
+
+/// Frames that may wait behind the next one before a stream skips to the newest: two
+/// frames (80 ms at 25 fps) absorb a slow frame of a renderer that keeps up on average.
+pub const DEFAULT_DROP_BEHIND: usize = 2;
 
 /// A checked stream job: the model loaded, the poses read, the output folder made.
 #[derive(Debug)]
@@ -64,7 +73,7 @@ pub struct StreamPlan {
     features: FeatureConfig,
     poses: Option<Vec<Mat4>>,
     out: PathBuf,
-    drop_late: bool,
+    drop_behind: Option<usize>,
 }
 
 /// One rendered frame of a stream.
@@ -130,8 +139,9 @@ pub struct StreamReport {
     pub height: u32,
     /// The runtime.
     pub backend: BackendKind,
-    /// Whether late frames were skipped.
-    pub drop_late: bool,
+    /// Frames that could wait behind the next one before the stream skipped to the newest
+    /// (`None`: every frame rendered).
+    pub drop_behind: Option<usize>,
     /// Seconds of audio a frame waits for beyond its own instant (the features' lookahead),
     /// the floor under every latency.
     pub lookahead_s: f64,
@@ -162,8 +172,13 @@ impl StreamJob {
         };
         crate::frame::intrinsics_at(&model.info, self.size)?;
         check_out(&self.out)?;
-        let renderer =
-            FrameRenderer::new(backend_for(&model, self.backend, self.options)?, self.size)?;
+        // The renderer waits for audio between frames while the reader and the writer run:
+        // onnxruntime's pool must not spin beside them.
+        let options = BackendOptions {
+            spin: false,
+            ..self.options
+        };
+        let renderer = FrameRenderer::new(backend_for(&model, self.backend, options)?, self.size)?;
         std::fs::create_dir_all(&self.out)
             .map_err(|e| Error::output(&self.out, format!("cannot create the folder: {e}")))?;
         Ok(StreamPlan {
@@ -171,7 +186,7 @@ impl StreamJob {
             features,
             poses,
             out: self.out.clone(),
-            drop_late: self.drop_late,
+            drop_behind: self.drop_behind,
         })
     }
 }
@@ -240,12 +255,21 @@ fn read_stream(mut source: Box<dyn Read + Send>, shared: Shared) {
 }
 
 /// The next frame to render: `None` when none of `next..renderable` is; otherwise the frame
-/// and how many before it are skipped (the newest when `drop_late`, else `next`).
-pub fn next_frame(next: usize, renderable: usize, drop_late: bool) -> Option<(usize, usize)> {
+/// and how many before it are skipped: the newest when more than `drop_behind` frames wait
+/// behind `next`, else `next` itself.
+pub fn next_frame(
+    next: usize,
+    renderable: usize,
+    drop_behind: Option<usize>,
+) -> Option<(usize, usize)> {
     if next >= renderable {
         return None;
     }
-    let f = if drop_late { renderable - 1 } else { next };
+    let waiting = renderable - next - 1;
+    let f = match drop_behind {
+        Some(slack) if waiting > slack => renderable - 1,
+        _ => next,
+    };
     Some((f, f - next))
 }
 
@@ -329,7 +353,11 @@ impl StreamPlan {
                     )));
                 }
             }
-            if let Some((f, skipped)) = next_frame(next, renderable(m, ahead), self.drop_late) {
+            // The stream's end makes its last frames (those whose windows reach past it)
+            // renderable at once: waiting for the end is not falling behind, so the frames
+            // still to render then are all rendered.
+            let slack = self.drop_behind.filter(|_| !m.ended());
+            if let Some((f, skipped)) = next_frame(next, renderable(m, ahead), slack) {
                 let t0 = Instant::now();
                 let audio = neighbourhood_of(m.n_ready(), f, att, |g| m.window(g));
                 let pose = match &self.poses {
@@ -381,7 +409,7 @@ impl StreamPlan {
             width: k.width,
             height: k.height,
             backend: renderer.backend().kind(),
-            drop_late: self.drop_late,
+            drop_behind: self.drop_behind,
             lookahead_s,
             latency: LatencyStats::of(&latencies),
             wall_seconds: started.elapsed().as_secs_f64(),

@@ -69,6 +69,7 @@ fn every_runtime(
         let options = BackendOptions {
             batch_size,
             threads: 2,
+            spin: true,
         };
         let mut backend = backend_for(&model, kind, options).unwrap();
         let out = backend.run(&rays.origins, &rays.directions, audio).unwrap();

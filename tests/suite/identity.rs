@@ -40,6 +40,7 @@ fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {
         BackendOptions {
             batch_size: 256,
             threads: 1,
+            spin: true,
         },
     )
     .unwrap();

@@ -256,6 +256,7 @@ fn stress_exported_model_gives_finite_output_for_far_rays_and_extreme_audio() {
                 let options = BackendOptions {
                     batch_size: 512,
                     threads: 1,
+                    spin: true,
                 };
                 let mut b = backend_for(&model, kind, options).unwrap();
                 let out = b.run(&origins, &directions, &audio).unwrap();

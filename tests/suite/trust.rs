@@ -315,6 +315,7 @@ fn tract_binds_inputs_and_outputs_by_name() {
     let options = BackendOptions {
         batch_size: 1024,
         threads: 1,
+        spin: true,
     };
     let render = |p: &Path| {
         let model = read_model(p).unwrap();
@@ -433,6 +434,7 @@ fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
         options: BackendOptions {
             batch_size: 512,
             threads: 1,
+            spin: true,
         },
         size: None,
         mp4: false,
