@@ -23,6 +23,8 @@ def main() -> None:
     so.intra_op_num_threads = 2
     so.inter_op_num_threads = 1
     so.add_session_config_entry("session.intra_op.allow_spinning", spin)
+    if len(sys.argv) > 5:
+        so.add_session_config_entry("session.force_spinning_stop", sys.argv[5])
     session = ort.InferenceSession(model, so, providers=["CPUExecutionProvider"])
     rng = np.random.default_rng(0)
     audio_shape = [i.shape for i in session.get_inputs() if i.name == "audio"][0]

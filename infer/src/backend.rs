@@ -43,11 +43,12 @@ pub struct BackendOptions {
     pub batch_size: usize,
     /// Threads for the matrix products (1 = the calling thread only).
     pub threads: usize,
-    /// Whether onnxruntime's worker threads spin (busy-wait) between calls instead of
-    /// sleeping. Spinning makes back-to-back calls about 20 % faster (2-core EPYC, the
-    /// real-time student), but a spinning pool takes a core from every other thread: a
-    /// second session, the stream's reader, the PNG writer. Streams and benchmarks that
-    /// alternate sessions turn it off. tract ignores it.
+    /// Whether onnxruntime's worker threads keep spinning (busy-waiting) after a call
+    /// returns, ready for the next, instead of parking. They always spin within a call
+    /// (without it a 2-core EPYC frame of the real-time student takes 20-30 % longer); the
+    /// spinning after it helps only calls that follow at once, and takes a core (or its
+    /// SMT sibling) from every other thread: a second session, a stream's reader, the PNG
+    /// writer. Streams turn it off. tract ignores it.
     pub spin: bool,
 }
 

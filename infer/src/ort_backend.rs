@@ -76,7 +76,12 @@ impl OrtBackend {
             .map_err(|e| fail(e.to_string()))?
             .with_inter_threads(1)
             .map_err(|e| fail(e.to_string()))?
-            .with_intra_op_spinning(options.spin)
+            // Spinning inside a call (between its operators) always; between calls only when
+            // asked: `session.force_spinning_stop` parks the pool as each call ends.
+            .with_config_entry(
+                "session.force_spinning_stop",
+                if options.spin { "0" } else { "1" },
+            )
             .map_err(|e| fail(e.to_string()))?
             .commit_from_memory(&model.bytes)
             .map_err(|e| fail(e.to_string()))?;
