@@ -60,6 +60,12 @@ pub struct FrontierArgs {
     /// and every sample, seeded weights: its time, not its quality); 0 leaves it out.
     #[arg(long, default_value_t = 2)]
     pub adnerf_frames: usize,
+    /// The same scene at a higher resolution (`nldf synth --seed S --size 256`): the
+    /// teacher and every export in onnxruntime render its `val` frames at its size, with
+    /// rays at that size and, where it is a multiple of the model's, with rays at the
+    /// model's size upscaled bilinearly; scored, timed and tabled apart.
+    #[arg(long)]
+    pub hires_data: Option<PathBuf>,
 }
 
 /// Threads of the main timing.
@@ -86,10 +92,21 @@ struct OnnxPoint {
     macs_per_ray: f64,
     path: PathBuf,
     renderer: RefCell<FrameRenderer>,
+    /// Each frame is rendered this many times smaller and upscaled bilinearly (1: not).
+    upscale: u32,
     seconds: RefCell<Vec<f64>>,
 }
 
 impl OnnxPoint {
+    /// The student's description, with the upscaling if any.
+    fn model_name(&self) -> String {
+        if self.upscale > 1 {
+            format!("{}, upscaled {}x", self.describe, self.upscale)
+        } else {
+            self.describe.clone()
+        }
+    }
+
     fn audio(&self, data: &TrainData, frame: &Frame) -> Vec<f32> {
         let renderer = self.renderer.borrow();
         neighbourhood(
@@ -102,8 +119,13 @@ impl OnnxPoint {
 
 impl FrameModel for OnnxPoint {
     fn label(&self) -> String {
+        let up = if self.upscale > 1 {
+            format!(".up{}", self.upscale)
+        } else {
+            String::new()
+        };
         format!(
-            "{}.{}.{}",
+            "{}.{}.{}{up}",
             self.student,
             precision_name(self.precision),
             self.kind.name()
@@ -112,7 +134,7 @@ impl FrameModel for OnnxPoint {
     fn describe(&self) -> String {
         format!(
             "{} {} {}",
-            self.describe,
+            self.model_name(),
             precision_name(self.precision),
             self.kind.name()
         )
@@ -121,7 +143,8 @@ impl FrameModel for OnnxPoint {
         self.step
     }
     fn macs_per_ray(&self) -> f64 {
-        self.macs_per_ray
+        // Per ray of the frame it is scored at: an upscaled frame runs 1 / factor² of them.
+        self.macs_per_ray / (self.upscale * self.upscale) as f64
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<ImageRgb> {
         let audio = self.audio(data, frame);
@@ -133,10 +156,11 @@ impl FrameModel for OnnxPoint {
             .map_err(|e| {
                 nldf_train::error::Error::Config(format!("{}: {e}", self.path.display()))
             })?;
+        let image = out.image.upscaled(self.upscale);
         self.seconds
             .borrow_mut()
             .push(started.elapsed().as_secs_f64());
-        Ok(out.image)
+        Ok(image)
     }
 }
 
@@ -217,6 +241,8 @@ struct Point {
     file: Option<PathBuf>,
     file_bytes: Option<u64>,
     step: usize,
+    /// The frames' width and height in pixels.
+    size: u32,
     gmac_per_frame: f64,
     /// Median milliseconds per whole frame over the `val` frames, 2 threads.
     ms_2_threads: f64,
@@ -324,17 +350,29 @@ fn export_all(
     Ok(out)
 }
 
-fn open_point(e: &Export, kind: BackendKind, threads: usize, batch: usize) -> Result<OnnxPoint> {
+/// `e` in `kind`, rendering frames of `size` (`None`: the model's own), each `upscale` times
+/// smaller and then upscaled.
+fn open_point(
+    e: &Export,
+    kind: BackendKind,
+    threads: usize,
+    batch: usize,
+    size: Option<u32>,
+    upscale: u32,
+) -> Result<OnnxPoint> {
     let model = nldf_export::read_model(&e.path)?;
+    // The points take turns frame by frame: a pool left spinning after its call would run
+    // beside the next point's.
     let backend = backend_for(
         &model,
         kind,
         BackendOptions {
             batch_size: batch,
             threads,
-            spin: true,
+            spin: false,
         },
     )?;
+    let size = size.map(|s| s / upscale.max(1));
     Ok(OnnxPoint {
         student: e.student.clone(),
         describe: e.describe.clone(),
@@ -343,7 +381,8 @@ fn open_point(e: &Export, kind: BackendKind, threads: usize, batch: usize) -> Re
         step: e.step,
         macs_per_ray: e.macs_per_ray,
         path: e.path.clone(),
-        renderer: RefCell::new(FrameRenderer::new(backend, None)?),
+        renderer: RefCell::new(FrameRenderer::new(backend, size)?),
+        upscale: upscale.max(1),
         seconds: RefCell::new(Vec::new()),
     })
 }
@@ -383,7 +422,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     let mut points: Vec<OnnxPoint> = Vec::new();
     for e in &exports {
         for kind in [BackendKind::Ort, BackendKind::Tract] {
-            points.push(open_point(e, kind, THREADS, args.batch)?);
+            points.push(open_point(e, kind, THREADS, args.batch, None, 1)?);
         }
     }
     let teacher = Timed::new(&val.teacher, true, true);
@@ -452,7 +491,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     let mut one_thread = Vec::new();
     for e in &exports {
         for kind in [BackendKind::Ort, BackendKind::Tract] {
-            let p = open_point(e, kind, 1, args.batch)?;
+            let p = open_point(e, kind, 1, args.batch, None, 1)?;
             for f in &frames[..k] {
                 p.render_frame(&val.data, f)?;
             }
@@ -481,6 +520,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             file: None,
             file_bytes: None,
             step: report.step,
+            size: val.data.dataset.intrinsics.width,
             gmac_per_frame: hits(report),
             ms_2_threads: 1e3 * val_median(&t.seconds),
             ms_1_thread: None,
@@ -506,6 +546,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             file: Some(p.path.clone()),
             file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
             step: p.step,
+            size: p.renderer.borrow().intrinsics().width,
             gmac_per_frame: hits(report),
             ms_2_threads: 1e3 * val_median(&p.seconds),
             ms_1_thread: one_thread.get(i).map(|s| 1e3 * s),
@@ -515,8 +556,130 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     }
     mark_front(&mut table);
     let summary = speed_ups(&table);
-    write_outputs(&out, &machine, &args, &splits, &table, &summary, adnerf)?;
+    let hires = match &args.hires_data {
+        Some(dir) => Some(hires_points(&args, dir, &exports, &out, &mut show)?),
+        None => None,
+    };
+    write_outputs(
+        &out,
+        &machine,
+        &args,
+        &splits,
+        &table,
+        &summary,
+        adnerf,
+        hires.as_deref(),
+    )?;
     Ok(())
+}
+
+/// The `--hires-data` pass: the teacher and every export in onnxruntime on the higher
+/// resolution scene's `val` frames, with rays at its size and (where the size is a multiple
+/// of the model's) at the model's size upscaled; the Pareto front marked among them.
+fn hires_points(
+    args: &FrontierArgs,
+    dir: &Path,
+    exports: &[Export],
+    out: &Path,
+    show: &mut impl FnMut(&JobEvent),
+) -> Result<Vec<Point>> {
+    let plan = EvalJob {
+        run: args.run.clone(),
+        data: dir.to_path_buf(),
+        split: Split::Val,
+        frames: args.frames,
+        out: None,
+    }
+    .plan(show)?;
+    let size = plan.data.dataset.intrinsics.width;
+    let teacher = Timed::new(&plan.teacher, true, true);
+    let mut points = Vec::new();
+    for e in exports {
+        let own = nldf_export::read_model(&e.path)?.info.spec.intrinsics.width;
+        points.push(open_point(
+            e,
+            BackendKind::Ort,
+            THREADS,
+            args.batch,
+            Some(size),
+            1,
+        )?);
+        if own < size && size % own == 0 {
+            let factor = size / own;
+            points.push(open_point(
+                e,
+                BackendKind::Ort,
+                THREADS,
+                args.batch,
+                Some(size),
+                factor,
+            )?);
+        }
+    }
+    let mut models: Vec<&dyn FrameModel> = vec![&teacher];
+    models.extend(points.iter().map(|p| p as &dyn FrameModel));
+    let n = args
+        .frames
+        .unwrap_or(usize::MAX)
+        .min(plan.data.dataset.frames(Split::Val).len());
+    eprintln!(
+        "val at {size} x {size} ({}): {n} frames x {} ways of rendering",
+        dir.display(),
+        models.len()
+    );
+    let bar = crate::progress::progress_bar(n as u64, "val");
+    let evaluation = eval_models(
+        &models,
+        &plan.data,
+        Split::Val,
+        args.frames,
+        &out.join(format!("val_{size}")),
+        &mut || bar.inc(1),
+    )?;
+    bar.finish_and_clear();
+    evaluation.check_finite()?;
+    let report_of = |label: &str| {
+        evaluation
+            .models
+            .iter()
+            .find(|r| r.label == label)
+            .with_context(|| format!("{label} lacks its report at {size} pixels"))
+    };
+    let mut table = Vec::new();
+    let r = report_of(&teacher.label())?;
+    table.push(Point {
+        model: teacher.describe(),
+        precision: "candle".into(),
+        runtime: "candle".into(),
+        file: None,
+        file_bytes: None,
+        step: r.step,
+        size,
+        gmac_per_frame: r.macs_per_frame / 1e9,
+        ms_2_threads: 1e3 * median(teacher.seconds.borrow().clone()),
+        ms_1_thread: None,
+        scores: vec![score(r)],
+        on_front: false,
+    });
+    for p in &points {
+        let r = report_of(&p.label())?;
+        table.push(Point {
+            model: p.model_name(),
+            precision: precision_name(p.precision).into(),
+            runtime: p.kind.name().into(),
+            file: Some(p.path.clone()),
+            file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
+            step: p.step,
+            size,
+            gmac_per_frame: r.macs_per_frame / 1e9,
+            ms_2_threads: 1e3 * median(p.seconds.borrow().clone()),
+            ms_1_thread: None,
+            scores: vec![score(r)],
+            on_front: false,
+        });
+    }
+    mark_front(&mut table);
+    Ok(table)
 }
 
 /// AD-NeRF's setting timed as the paper compares against it: 8 x 256 with 64 coarse + 128
@@ -609,6 +772,7 @@ fn short_name(p: &Point) -> String {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn write_outputs(
     out: &Path,
     machine: &Machine,
@@ -617,16 +781,18 @@ fn write_outputs(
     table: &[Point],
     summary: &[SpeedUp],
     adnerf: Option<(f64, f64)>,
+    hires: Option<&[Point]>,
 ) -> Result<()> {
     let settings = serde_json::json!({
         "run": args.run, "data": args.data, "frames": args.frames,
         "threads": THREADS, "one_thread_frames": args.one_thread_frames,
         "calibration_frames": args.calibration_frames, "batch": args.batch,
+        "hires_data": args.hires_data,
     });
     let adnerf_json = adnerf.map(|(ms, macs)| serde_json::json!({"ms_2_threads": ms, "gmac_per_frame": macs / 1e9, "frames": args.adnerf_frames}));
     let json = serde_json::json!({
         "machine": machine, "settings": settings, "points": table, "speed_up": summary,
-        "adnerf_setting": adnerf_json,
+        "adnerf_setting": adnerf_json, "hires_points": hires,
     });
     let json_path = out.join("frontier.json");
     nldf_core::files::write_atomic(&json_path, serde_json::to_string_pretty(&json)?.as_bytes())?;
@@ -736,13 +902,81 @@ fn write_outputs(
             ));
         }
     }
+    let mut pngs = Vec::new();
+    if let Some(hires) = hires.filter(|h| !h.is_empty()) {
+        let size = hires[0].size;
+        md.push_str(&format!(
+            "\n## {size} x {size}\n\nThe same scene's `val` frames at {size} x {size} ({}): \
+             rays at that size, or at the model's size and upscaled bilinearly; medians over \
+             those frames, {THREADS} threads.\n\n| model | precision | runtime | GMAC / frame | \
+             ms / frame (2 threads) | frames/s | val PSNR | val mouth | val SSIM | front |\n\
+             |---|---|---|---|---|---|---|---|---|---|\n",
+            args.hires_data
+                .as_deref()
+                .map_or(String::new(), |d| d.display().to_string()),
+        ));
+        for p in hires {
+            let s = p.scores.first();
+            md.push_str(&format!(
+                "| {} | {} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {} | {:.4} | {} |\n",
+                p.model,
+                p.precision,
+                p.runtime,
+                p.gmac_per_frame,
+                p.ms_2_threads,
+                1e3 / p.ms_2_threads,
+                s.map_or(f64::NAN, |s| s.psnr),
+                s.and_then(|s| s.mouth_psnr)
+                    .map_or("".into(), |m| format!("{m:.2}")),
+                s.map_or(f64::NAN, |s| s.ssim),
+                if p.on_front { "yes" } else { "" }
+            ));
+        }
+        let path = out.join(format!("frontier_{size}.png"));
+        plot_frontier(
+            &path,
+            &format!(
+                "val PSNR at {size} x {size} against time per frame, {THREADS} threads, {}",
+                machine.cpu
+            ),
+            &dots_of(hires),
+        )?;
+        pngs.push(path);
+    }
     let md_path = out.join("frontier.md");
     nldf_core::files::write_atomic(&md_path, md.as_bytes())?;
-    let dots: Vec<FrontierDot> = table
+    let png_path = out.join("frontier.png");
+    plot_frontier(
+        &png_path,
+        &format!(
+            "val PSNR against time per frame, {} threads, {}",
+            THREADS, machine.cpu
+        ),
+        &dots_of(table),
+    )?;
+    println!("{md}");
+    println!(
+        "wrote {}, {} and {}",
+        json_path.display(),
+        md_path.display(),
+        std::iter::once(&png_path)
+            .chain(&pngs)
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+/// The plot's dots of `table`: one group per runtime and precision, the teacher apart.
+fn dots_of(table: &[Point]) -> Vec<FrontierDot> {
+    table
         .iter()
         .map(|p| FrontierDot {
             group: if p.runtime == "candle" {
                 "teacher (candle)".into()
+            } else if p.model.contains(", upscaled") {
+                format!("{} {}, upscaled", p.runtime, p.precision)
             } else {
                 format!("{} {}", p.runtime, p.precision)
             },
@@ -751,24 +985,7 @@ fn write_outputs(
             psnr: p.psnr("val").unwrap_or(f64::NAN),
             on_front: p.on_front,
         })
-        .collect();
-    let png_path = out.join("frontier.png");
-    plot_frontier(
-        &png_path,
-        &format!(
-            "val PSNR against time per frame, {} threads, {}",
-            THREADS, machine.cpu
-        ),
-        &dots,
-    )?;
-    println!("{md}");
-    println!(
-        "wrote {}, {} and {}",
-        json_path.display(),
-        md_path.display(),
-        png_path.display()
-    );
-    Ok(())
+        .collect()
 }
 
 #[cfg(test)]
@@ -783,6 +1000,7 @@ mod tests {
             file: None,
             file_bytes: None,
             step: 0,
+            size: 128,
             gmac_per_frame: 1.0,
             ms_2_threads: ms,
             ms_1_thread: None,

@@ -50,6 +50,45 @@ impl ImageRgb {
         self.width as usize * self.height as usize
     }
 
+    /// The image `factor` times larger on each side, bilinearly interpolated between pixel
+    /// centres (output pixel `x` samples the input at `(x + 0.5) / factor - 0.5`, clamped to
+    /// the edge pixels). `factor` 1 (or 0) is a copy.
+    pub fn upscaled(&self, factor: u32) -> ImageRgb {
+        if factor <= 1 {
+            return self.clone();
+        }
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (ow, oh) = (w * factor as usize, h * factor as usize);
+        // Per output coordinate: the two input indices and the second one's weight.
+        let taps = |n_in: usize, n_out: usize| -> Vec<(usize, usize, f32)> {
+            (0..n_out)
+                .map(|x| {
+                    let u = ((x as f32 + 0.5) / factor as f32 - 0.5).clamp(0.0, (n_in - 1) as f32);
+                    let i0 = u.floor() as usize;
+                    let i1 = (i0 + 1).min(n_in - 1);
+                    (i0, i1, u - i0 as f32)
+                })
+                .collect()
+        };
+        let (xs, ys) = (taps(w, ow), taps(h, oh));
+        let mut data = Vec::with_capacity(3 * ow * oh);
+        for &(j0, j1, ty) in &ys {
+            for &(i0, i1, tx) in &xs {
+                for c in 0..3 {
+                    let at = |i: usize, j: usize| self.data[3 * (j * w + i) + c];
+                    let top = at(i0, j0) + tx * (at(i1, j0) - at(i0, j0));
+                    let bottom = at(i0, j1) + tx * (at(i1, j1) - at(i0, j1));
+                    data.push(top + ty * (bottom - top));
+                }
+            }
+        }
+        ImageRgb {
+            width: ow as u32,
+            height: oh as u32,
+            data,
+        }
+    }
+
     /// 8-bit RGB bytes, rounded.
     pub fn to_rgb8(&self) -> Vec<u8> {
         self.data.iter().map(|&v| to_u8(v)).collect()
@@ -170,4 +209,30 @@ pub fn grid(rows: &[Vec<ImageRgb>], gap: u32, gap_color: [f32; 3]) -> ImageRgb {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn upscaling_keeps_flat_colours_and_ramps_and_edges() {
+        let flat = ImageRgb::filled(3, 2, [0.2, 0.5, 0.9]);
+        let up = flat.upscaled(4);
+        assert_eq!((up.width, up.height), (12, 8));
+        assert!(up.data.chunks(3).all(|p| p == [0.2, 0.5, 0.9]));
+        // A horizontal ramp 0, 1, 2, 3 (scaled): interior output pixels interpolate it
+        // exactly, those beyond the first and last centres hold the edge value.
+        let mut ramp = ImageRgb::filled(4, 1, [0.0; 3]);
+        for i in 0..4 {
+            ramp.set(i, 0, [i as f32 / 10.0; 3]);
+        }
+        let up = ramp.upscaled(2);
+        let row: Vec<f32> = (0..8).map(|x| up.get(x, 0)[0]).collect();
+        let want = [0.0, 0.025, 0.075, 0.125, 0.175, 0.225, 0.275, 0.3];
+        for (got, want) in row.iter().zip(want) {
+            assert!((got - want).abs() < 1e-6, "{row:?}");
+        }
+        assert_eq!(ramp.upscaled(1), ramp);
+    }
 }
