@@ -118,9 +118,10 @@ pub struct StillBenchArgs {
     /// Runtime for the network.
     #[arg(long, value_enum, default_value_t = crate::render_cmd::BackendArg::Ort)]
     pub backend: crate::render_cmd::BackendArg,
-    /// Colour spread (in 1/255 steps) above which a pixel is re-rendered.
-    #[arg(long, default_value_t = 2.0)]
-    pub threshold: f32,
+    /// Colour spreads (in 1/255 steps) above which a pixel is re-rendered, one measurement
+    /// each, comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [2.0, 6.0, 12.0, 24.0])]
+    pub thresholds: Vec<f32>,
     /// Rays per network call.
     #[arg(long, default_value_t = BackendOptions::default().batch_size)]
     pub batch: usize,
@@ -577,9 +578,14 @@ fn still(args: StillBenchArgs) -> Result<()> {
     use nldf_infer::poses::{default_pose, default_track};
     use nldf_infer::still::{SkipConfig, bench_track, probe_frames};
     let machine = Machine::here();
-    let options = crate::render_cmd::backend_options(args.batch, args.threads)?;
+    let mut options = crate::render_cmd::backend_options(args.batch, args.threads)?;
+    // The full and the skipping renderer take turns: neither pool may spin beside the other.
+    options.spin = false;
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
         anyhow::bail!("--seconds must be positive, got {}", args.seconds);
+    }
+    if args.thresholds.is_empty() {
+        anyhow::bail!("--thresholds needs at least one value");
     }
     let model = nldf_export::read_model(&args.model)?;
     let info = model.info.clone();
@@ -587,11 +593,18 @@ fn still(args: StillBenchArgs) -> Result<()> {
     let frames =
         ((args.seconds * info.spec.fps as f64).round() as usize).clamp(1, windows.n_frames.max(1));
     let att = info.audio.att_frames;
-    let config = SkipConfig {
-        threshold: args.threshold / 255.0,
-        ..SkipConfig::default()
-    };
-    config.validate()?;
+    let configs = args
+        .thresholds
+        .iter()
+        .map(|&t| {
+            let c = SkipConfig {
+                threshold: t / 255.0,
+                ..SkipConfig::default()
+            };
+            c.validate().map(|_| c)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let config = configs[0];
     let audio = |f: usize| neighbourhood(&windows, f, att);
     let probes: Vec<Vec<f32>> = probe_frames(frames, config.probes)
         .into_iter()
@@ -610,24 +623,34 @@ fn still(args: StillBenchArgs) -> Result<()> {
         ),
         ("moving pose (the default sway)", moving.clone()),
     ];
+    // Every threshold on the still and the held tracks; the moving track never skips, so
+    // it runs once.
     let mut rows = Vec::new();
-    for (label, poses) in &tracks {
-        eprintln!("{label}: {frames} frames in full and with skipping");
-        rows.push(bench_track(
-            &mut full,
-            &mut skipping,
-            label,
-            poses,
-            &audio,
-            config,
-            probes.clone(),
-        )?);
+    for (i, (label, poses)) in tracks.iter().enumerate() {
+        let moving = i == tracks.len() - 1;
+        for c in if moving { &configs[..1] } else { &configs[..] } {
+            eprintln!(
+                "{label}, threshold {}/255: {frames} frames in full and with skipping",
+                255.0 * c.threshold
+            );
+            let mut row = bench_track(
+                &mut full,
+                &mut skipping,
+                label,
+                poses,
+                &audio,
+                *c,
+                probes.clone(),
+            )?;
+            row.label = format!("{label}, threshold {:.0}/255", 255.0 * c.threshold);
+            rows.push(row);
+        }
     }
     let opt = |v: Option<f64>| v.map_or("identical".into(), |p| format!("{p:.2} dB"));
     let mut md = format!(
         "| skipping still pixels, {} x {} student, {} | value |\n|---|---|\n\
          | machine | {} |\n\
-         | settings | {:.1} s of {} ({} frames), {} with {} threads, batch {}; threshold {}/255, margin {} px, {} probes, a full frame every {} still frames |\n",
+         | settings | {:.1} s of {} ({} frames), {} with {} threads, batch {}; thresholds {:?}/255, margin {} px, {} probes, a full frame every {} still frames |\n",
         info.network.depth,
         info.network.width,
         kind,
@@ -638,7 +661,7 @@ fn still(args: StillBenchArgs) -> Result<()> {
         kind,
         options.threads,
         options.batch_size,
-        args.threshold,
+        args.thresholds,
         config.margin,
         config.probes,
         config.refresh,
@@ -665,7 +688,7 @@ fn still(args: StillBenchArgs) -> Result<()> {
         "bench": "still",
         "machine": machine,
         "model": args.model,
-        "settings": {"audio": args.audio, "seconds": args.seconds, "frames": frames, "backend": kind.to_string(), "threads": options.threads, "batch": options.batch_size, "skip": config},
+        "settings": {"audio": args.audio, "seconds": args.seconds, "frames": frames, "backend": kind.to_string(), "threads": options.threads, "batch": options.batch_size, "skip": config, "thresholds": args.thresholds},
         "tracks": rows,
     });
     write_bench_files(&args.out, "still", &json, &md)
