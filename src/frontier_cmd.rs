@@ -680,6 +680,8 @@ fn hires_points(
     };
     let mut table = Vec::new();
     let r = report_of(&teacher.label())?;
+    let taking_turns = median(teacher.seconds.borrow().clone());
+    let back_to_back = time_back_to_back(&teacher, &plan.data, timed)?;
     table.push(Point {
         model: teacher.describe(),
         precision: "candle".into(),
@@ -689,14 +691,16 @@ fn hires_points(
         step: r.step,
         size,
         gmac_per_frame: r.macs_per_frame / 1e9,
-        ms_2_threads: 1e3 * median(teacher.seconds.borrow().clone()),
-        ms_back_to_back: 1e3 * time_back_to_back(&teacher, &plan.data, timed)?,
+        ms_2_threads: 1e3 * taking_turns,
+        ms_back_to_back: 1e3 * back_to_back,
         ms_1_thread: None,
         scores: vec![score(r)],
         on_front: false,
     });
     for p in &points {
         let r = report_of(&p.label())?;
+        let taking_turns = median(p.seconds.borrow().clone());
+        let back_to_back = time_back_to_back(p, &plan.data, timed)?;
         table.push(Point {
             model: p.model_name(),
             precision: precision_name(p.precision).into(),
@@ -706,8 +710,8 @@ fn hires_points(
             step: p.step,
             size,
             gmac_per_frame: r.macs_per_frame / 1e9,
-            ms_2_threads: 1e3 * median(p.seconds.borrow().clone()),
-            ms_back_to_back: 1e3 * time_back_to_back(p, &plan.data, timed)?,
+            ms_2_threads: 1e3 * taking_turns,
+            ms_back_to_back: 1e3 * back_to_back,
             ms_1_thread: None,
             scores: vec![score(r)],
             on_front: false,

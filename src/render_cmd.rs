@@ -89,8 +89,9 @@ pub struct RenderArgs {
     #[arg(long, conflicts_with = "stream")]
     pub skip_still: bool,
     /// With --skip-still: the colour spread (in 1/255 steps) above which a pixel is
-    /// re-rendered.
-    #[arg(long, default_value_t = 2.0, requires = "skip_still")]
+    /// re-rendered (`nldf bench still` measures the trade: lower is closer to full frames,
+    /// higher is faster).
+    #[arg(long, default_value_t = 12.0, requires = "skip_still")]
     pub skip_threshold: f32,
 }
 

@@ -22,7 +22,9 @@ use crate::frame::{Frame, FrameRenderer};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SkipConfig {
     /// A pixel is re-rendered when its colour spread over the probes exceeds this, in
-    /// colour units of [0, 1] (default 2/255).
+    /// colour units of [0, 1] (default 12/255: on the real-time student in int8, 32 % of
+    /// the rays re-rendered, 50 dB against full frames, 2.8x faster; at 2/255 the int8
+    /// model's own rounding moves every pixel).
     pub threshold: f32,
     /// Pixels within this many pixels (a square) of one over the threshold are re-rendered
     /// too (default 2).
@@ -36,7 +38,7 @@ pub struct SkipConfig {
 impl Default for SkipConfig {
     fn default() -> Self {
         SkipConfig {
-            threshold: 2.0 / 255.0,
+            threshold: 12.0 / 255.0,
             margin: 2,
             refresh: 25,
             probes: 8,
