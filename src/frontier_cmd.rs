@@ -265,7 +265,65 @@ struct Point {
     on_front: bool,
 }
 
+/// A point's times, in seconds: the scoring pass's median, the back-to-back median and
+/// (exports only) the 1-thread median.
+struct Times {
+    taking_turns: f64,
+    back_to_back: f64,
+    one_thread: Option<f64>,
+}
+
 impl Point {
+    /// The teacher's row, rendering frames of `size` pixels.
+    fn of_teacher(
+        t: &Timed,
+        r: &EvalReport,
+        size: u32,
+        times: Times,
+        scores: Vec<SplitScore>,
+    ) -> Point {
+        Point {
+            model: t.describe(),
+            precision: "candle".into(),
+            runtime: "candle".into(),
+            file: None,
+            file_bytes: None,
+            step: r.step,
+            size,
+            gmac_per_frame: r.macs_per_frame / 1e9,
+            ms_2_threads: 1e3 * times.taking_turns,
+            ms_back_to_back: 1e3 * times.back_to_back,
+            ms_1_thread: times.one_thread.map(|s| 1e3 * s),
+            scores,
+            on_front: false,
+        }
+    }
+
+    /// An export's row, rendering frames of `size` pixels.
+    fn of_export(
+        p: &OnnxPoint,
+        r: &EvalReport,
+        size: u32,
+        times: Times,
+        scores: Vec<SplitScore>,
+    ) -> Point {
+        Point {
+            model: p.model_name(),
+            precision: precision_name(p.precision).into(),
+            runtime: p.kind.name().into(),
+            file: Some(p.path.clone()),
+            file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
+            step: p.step,
+            size,
+            gmac_per_frame: r.macs_per_frame / 1e9,
+            ms_2_threads: 1e3 * times.taking_turns,
+            ms_back_to_back: 1e3 * times.back_to_back,
+            ms_1_thread: times.one_thread.map(|s| 1e3 * s),
+            scores,
+            on_front: false,
+        }
+    }
+
     fn psnr(&self, split: &str) -> Option<f64> {
         self.scores
             .iter()
@@ -528,7 +586,6 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         }
     }
     let mut table: Vec<Point> = Vec::new();
-    let hits = |r: &EvalReport| r.macs_per_frame / 1e9;
     let scores_of = |label: &str| -> Vec<SplitScore> {
         reports
             .iter()
@@ -541,21 +598,19 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             .iter()
             .find(|r| r.label == t.label())
             .context("a teacher lacks its val report")?;
-        table.push(Point {
-            model: t.describe(),
-            precision: "candle".into(),
-            runtime: "candle".into(),
-            file: None,
-            file_bytes: None,
-            step: report.step,
-            size: val.data.dataset.intrinsics.width,
-            gmac_per_frame: hits(report),
-            ms_2_threads: 1e3 * val_median(&t.seconds),
-            ms_back_to_back: 1e3 * time_back_to_back(t, &val.data, timed)?,
-            ms_1_thread: None,
-            scores: scores_of(&t.label()),
-            on_front: false,
-        });
+        let times = Times {
+            taking_turns: val_median(&t.seconds),
+            back_to_back: time_back_to_back(t, &val.data, timed)?,
+            one_thread: None,
+        };
+        let size = val.data.dataset.intrinsics.width;
+        table.push(Point::of_teacher(
+            t,
+            report,
+            size,
+            times,
+            scores_of(&t.label()),
+        ));
     }
     let adnerf = if args.adnerf_frames > 0 {
         Some(time_adnerf_setting(&val.data, args.adnerf_frames)?)
@@ -569,21 +624,12 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             .iter()
             .find(|r| r.label == label)
             .context("a point lacks its val report")?;
-        table.push(Point {
-            model: p.describe.clone(),
-            precision: precision_name(p.precision).into(),
-            runtime: p.kind.name().into(),
-            file: Some(p.path.clone()),
-            file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
-            step: p.step,
-            size,
-            gmac_per_frame: hits(report),
-            ms_2_threads: 1e3 * val_median(&p.seconds),
-            ms_back_to_back: 1e3 * time_back_to_back(p, &val.data, timed)?,
-            ms_1_thread: one_thread.get(i).map(|s| 1e3 * s),
-            scores: scores_of(&label),
-            on_front: false,
-        });
+        let times = Times {
+            taking_turns: val_median(&p.seconds),
+            back_to_back: time_back_to_back(p, &val.data, timed)?,
+            one_thread: one_thread.get(i).copied(),
+        };
+        table.push(Point::of_export(p, report, size, times, scores_of(&label)));
     }
     mark_front(&mut table);
     let summary = speed_ups(&table);
@@ -680,42 +726,24 @@ fn hires_points(
     };
     let mut table = Vec::new();
     let r = report_of(&teacher.label())?;
+    // Each point's turn-taking times are read (and their borrow ended) before it renders
+    // again back to back.
     let taking_turns = median(teacher.seconds.borrow().clone());
-    let back_to_back = time_back_to_back(&teacher, &plan.data, timed)?;
-    table.push(Point {
-        model: teacher.describe(),
-        precision: "candle".into(),
-        runtime: "candle".into(),
-        file: None,
-        file_bytes: None,
-        step: r.step,
-        size,
-        gmac_per_frame: r.macs_per_frame / 1e9,
-        ms_2_threads: 1e3 * taking_turns,
-        ms_back_to_back: 1e3 * back_to_back,
-        ms_1_thread: None,
-        scores: vec![score(r)],
-        on_front: false,
-    });
+    let times = Times {
+        taking_turns,
+        back_to_back: time_back_to_back(&teacher, &plan.data, timed)?,
+        one_thread: None,
+    };
+    table.push(Point::of_teacher(&teacher, r, size, times, vec![score(r)]));
     for p in &points {
         let r = report_of(&p.label())?;
         let taking_turns = median(p.seconds.borrow().clone());
-        let back_to_back = time_back_to_back(p, &plan.data, timed)?;
-        table.push(Point {
-            model: p.model_name(),
-            precision: precision_name(p.precision).into(),
-            runtime: p.kind.name().into(),
-            file: Some(p.path.clone()),
-            file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
-            step: p.step,
-            size,
-            gmac_per_frame: r.macs_per_frame / 1e9,
-            ms_2_threads: 1e3 * taking_turns,
-            ms_back_to_back: 1e3 * back_to_back,
-            ms_1_thread: None,
-            scores: vec![score(r)],
-            on_front: false,
-        });
+        let times = Times {
+            taking_turns,
+            back_to_back: time_back_to_back(p, &plan.data, timed)?,
+            one_thread: None,
+        };
+        table.push(Point::of_export(p, r, size, times, vec![score(r)]));
     }
     mark_front(&mut table);
     Ok(table)

@@ -50,6 +50,14 @@ impl ImageRgb {
         self.width as usize * self.height as usize
     }
 
+    /// Writes colour `r` of `rgb` (`[pixels.len(), 3]` flat) into pixel `pixels[r]` (a
+    /// row-major index): rendered rays put back into their image.
+    pub fn paint(&mut self, pixels: &[usize], rgb: &[f32]) {
+        for (r, &p) in pixels.iter().enumerate() {
+            self.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * r..3 * r + 3]);
+        }
+    }
+
     /// The image `factor` times larger on each side, bilinearly interpolated between pixel
     /// centres (output pixel `x` samples the input at `(x + 0.5) / factor - 0.5`, clamped to
     /// the edge pixels). `factor` 1 (or 0) is a copy.

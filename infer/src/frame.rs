@@ -144,9 +144,7 @@ impl FrameRenderer {
         let rays = self.rays(c2w);
         let mut image = self.background.clone();
         let rgb = self.run_rays(&rays, audio)?;
-        for (r, &p) in rays.pixels.iter().enumerate() {
-            image.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * r..3 * r + 3]);
-        }
+        image.paint(&rays.pixels, &rgb);
         Ok(Frame {
             image,
             head_pixels: rays.pixels.len(),

@@ -158,27 +158,18 @@ impl StillSkipper {
                 });
             }
         };
-        let kind = if self.moving.is_none() {
-            self.moving = Some(self.find_moving(renderer, c2w, &base)?);
-            FrameKind::Probed
-        } else {
-            FrameKind::Partial
+        let (moving, kind) = match self.moving.take() {
+            Some(moving) => (moving, FrameKind::Partial),
+            None => (self.find_moving(renderer, c2w, &base)?, FrameKind::Probed),
         };
         self.since_full += 1;
-        let moving = self
-            .moving
-            .as_ref()
-            .ok_or_else(|| Error::Argument("skipping: the moving pixels were not found".into()))?;
         let mut image = base;
-        let rgb = renderer.run_rays(moving, audio)?;
-        for (r, &p) in moving.pixels.iter().enumerate() {
-            image.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * r..3 * r + 3]);
-        }
+        let rgb = renderer.run_rays(&moving, audio)?;
+        image.paint(&moving.pixels, &rgb);
+        let head_pixels = moving.pixels.len();
+        self.moving = Some(moving);
         Ok(SkippedFrame {
-            frame: Frame {
-                image,
-                head_pixels: moving.pixels.len(),
-            },
+            frame: Frame { image, head_pixels },
             kind,
         })
     }

@@ -352,9 +352,7 @@ pub(crate) fn candle_frame(
     let mut frame = background.clone();
     if !head.pixels.is_empty() {
         let (rgb, _) = candle_render(run, &head.rays, audio);
-        for (k, &p) in head.pixels.iter().enumerate() {
-            frame.data[3 * p..3 * p + 3].copy_from_slice(&rgb[3 * k..3 * k + 3]);
-        }
+        frame.paint(&head.pixels, &rgb);
     }
     frame
 }

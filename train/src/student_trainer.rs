@@ -631,9 +631,7 @@ impl StudentRun {
                 .contiguous()?;
             let (_, pixels) = self.student.mlp.forward_fused(&beams, &codes, false)?;
             let pixels: Vec<f32> = pixels.flatten_all()?.to_vec1()?;
-            for (k, &p) in chunk.iter().enumerate() {
-                image.data[3 * p..3 * p + 3].copy_from_slice(&pixels[3 * k..3 * k + 3]);
-            }
+            image.paint(chunk, &pixels);
         }
         Ok(image)
     }
