@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use nldf_train::config::StudentTrainConfig;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::posed::PosedJob;
@@ -47,6 +48,9 @@ pub struct AblateArgs {
     /// Their pose range, as a factor of the recorded yaw and pitch range.
     #[arg(long, default_value_t = 2.0)]
     pub pose_range: f32,
+    /// Hit pixels the teacher renders per pseudo view (0: all).
+    #[arg(long, default_value_t = StudentTrainConfig::default().pseudo_rays)]
+    pub pseudo_rays: usize,
     /// Frames scored per split in the posed ablation (default: all).
     #[arg(long)]
     pub frames: Option<usize>,
@@ -84,6 +88,7 @@ pub fn run(args: AblateArgs) -> Result<()> {
             minutes,
             pseudo_frames: args.pseudo_frames,
             pose_range: args.pose_range,
+            pseudo_rays: args.pseudo_rays,
             frames: args.frames,
         };
         let report = job.run(&stop, &mut show)?;

@@ -7,7 +7,7 @@ use anyhow::Result;
 use clap::Subcommand;
 
 use nldf_train::job::JobEvent;
-use nldf_train::job::student::{StudentJob, StudentSource};
+use nldf_train::job::student::{PseudoSettings, StudentJob, StudentSource};
 use nldf_train::job::teacher::{TeacherJob, TeacherSource};
 
 use crate::progress::{EventPrinter, stop_flag};
@@ -86,10 +86,13 @@ pub struct StudentArgs {
     /// recorded one (default 2: twice as wide).
     #[arg(long)]
     pub pose_range: Option<f32>,
+    /// Hit pixels the teacher renders per pseudo view, its mouth first (default 0: all);
+    /// fewer pixels per view buy more views for the same teacher time.
+    #[arg(long)]
+    pub pseudo_rays: Option<usize>,
     /// JSON run configuration ({"model": {...}, "train": {...}}; missing fields take the
-    /// defaults; --depth, --width, --no-distill, --no-pool, --pseudo-frames and --pose-range
-    /// are ignored
-    /// with it).
+    /// defaults; --depth, --width, --no-distill, --no-pool, --pseudo-frames, --pose-range and
+    /// --pseudo-rays are ignored with it).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Total training steps (overrides the configuration; with --resume, extends the run).
@@ -206,8 +209,11 @@ impl StudentArgs {
                     model,
                     distill: !self.no_distill,
                     pool: !self.no_pool,
-                    pseudo_frames: self.pseudo_frames,
-                    pose_range: self.pose_range,
+                    pseudo: PseudoSettings {
+                        frames: self.pseudo_frames,
+                        pose_range: self.pose_range,
+                        rays: self.pseudo_rays,
+                    },
                 }
             }
         };

@@ -168,6 +168,7 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
         minutes: 0.01,
         pseudo_frames: 4,
         pose_range: 2.0,
+        pseudo_rays: 16,
         frames: Some(2),
     }
     .run(&stop, &mut |_| {})

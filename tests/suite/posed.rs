@@ -7,7 +7,9 @@ use nldf_core::rays::head_rays;
 use nldf_core::synth::SceneFile;
 use nldf_train::config::StudentTrainConfig;
 use nldf_train::data::TrainData;
-use nldf_train::views::{recorded_range, training_views, view_angles};
+use nldf_train::views::{
+    frame_beams, recorded_range, thin_pseudo_beams, training_views, view_angles, views_fingerprint,
+};
 
 use crate::util::{files_under, tiny_scene};
 
@@ -213,4 +215,79 @@ fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
             "{p} {pitch:?}"
         );
     }
+}
+
+#[test]
+fn thinned_pseudo_views_keep_their_mouth_and_a_seeded_subset_and_recorded_frames_keep_all() {
+    let data = TrainData::open(tiny_scene(), true).unwrap();
+    let n_recorded = data.dataset.frames(Split::Train).len();
+    let cfg = StudentTrainConfig {
+        pseudo_frames: 40,
+        ..StudentTrainConfig::default()
+    };
+    let views = training_views(&data, &cfg);
+    let full = frame_beams(&data, &views);
+    let n = full[n_recorded..]
+        .iter()
+        .map(|fb| fb.pixels.len())
+        .min()
+        .unwrap()
+        / 3;
+    assert!(n >= 8, "the tiny scene's pseudo views hit {n} x 3 pixels");
+    let thin = |seed: u64| {
+        let mut beams = full.clone();
+        thin_pseudo_beams(&views, &mut beams, n, seed);
+        beams
+    };
+    let beams = thin(7);
+    assert_eq!(
+        beams[..n_recorded],
+        full[..n_recorded],
+        "recorded frames keep every pixel"
+    );
+    for (fb, whole) in beams[n_recorded..].iter().zip(&full[n_recorded..]) {
+        assert_eq!(fb.pixels.len(), n);
+        // A subset of the view's pixels, in the same row-major order.
+        let mut at = whole.pixels.iter();
+        assert!(
+            fb.pixels.iter().all(|p| at.any(|q| q == p)),
+            "not an ordered subset"
+        );
+        // Face and the rest split the kept pixels; each keeps its label.
+        let mut split: Vec<u32> = fb.face.iter().chain(&fb.other).copied().collect();
+        split.sort_unstable();
+        assert_eq!(split, (0..n as u32).collect::<Vec<_>>());
+        let label = |b: &nldf_train::views::FrameBeams, list: &[u32]| -> Vec<(u32, u32)> {
+            list.iter().map(|&k| b.pixels[k as usize]).collect()
+        };
+        let in_whole = |list: &[u32], whole_list: &[u32]| {
+            let set = label(whole, whole_list);
+            label(fb, list).iter().all(|p| set.contains(p))
+        };
+        assert!(in_whole(&fb.face, &whole.face) && in_whole(&fb.other, &whole.other));
+        assert!(in_whole(&fb.mouth, &whole.mouth));
+        // The mouth comes first, up to half of what is kept.
+        assert_eq!(fb.mouth.len(), whole.mouth.len().min(n / 2));
+    }
+    assert!(
+        beams[n_recorded..].iter().any(|fb| !fb.mouth.is_empty()),
+        "no pseudo view kept a mouth pixel"
+    );
+    // Seeded: the same seed keeps the same pixels, another seed others, and the cache's
+    // fingerprint tells them apart.
+    assert_eq!(beams, thin(7));
+    let other = thin(8);
+    assert_ne!(beams, other);
+    assert_ne!(
+        views_fingerprint(&views, &beams),
+        views_fingerprint(&views, &other)
+    );
+    assert_eq!(
+        views_fingerprint(&views, &beams),
+        views_fingerprint(&views, &thin(7))
+    );
+    // 0 keeps every pixel.
+    let mut all = full.clone();
+    thin_pseudo_beams(&views, &mut all, 0, 7);
+    assert_eq!(all, full);
 }

@@ -391,6 +391,10 @@ pub struct StudentTrainConfig {
     pub pose_range: f32,
     /// Largest change of a pseudo view's camera distance, as a fraction of it.
     pub pseudo_zoom: f32,
+    /// Hit pixels the teacher renders per pseudo view (its mouth first, the rest drawn at
+    /// random; 0: all of them). The student draws a few hundred rays from a view per
+    /// step, so fewer pixels per view buy more views for the same teacher time.
+    pub pseudo_rays: usize,
     /// Pseudo views the teacher renders before each training step until all are done, so
     /// the student starts at once.
     pub pseudo_per_step: usize,
@@ -471,6 +475,7 @@ impl Default for StudentTrainConfig {
             pseudo_fraction: 0.5,
             pose_range: 2.0,
             pseudo_zoom: 0.15,
+            pseudo_rays: 0,
             pseudo_per_step: 2,
             log_every: 10,
             val_every: 250,
@@ -501,6 +506,7 @@ impl RunConfig for StudentRunConfig {
         in_range("train.pseudo_fraction", t.pseudo_fraction, 0.0, 1.0)?;
         in_range("train.pose_range", t.pose_range, 0.0, 10.0)?;
         in_range("train.pseudo_zoom", t.pseudo_zoom, 0.0, 0.5)?;
+        in_range("train.pseudo_rays", t.pseudo_rays, 0, 1 << 24)?;
         in_range("train.pseudo_per_step", t.pseudo_per_step, 1, 1 << 10)?;
         Ok(())
     }

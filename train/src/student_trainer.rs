@@ -42,7 +42,9 @@ use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
 use crate::targets::{load_targets, save_targets, teacher_targets, view_targets};
 use crate::teacher_trainer::TeacherRun;
-use crate::views::{FrameBeams, View, frame_beams, training_views, views_fingerprint};
+use crate::views::{
+    FrameBeams, View, frame_beams, thin_pseudo_beams, training_views, views_fingerprint,
+};
 
 /// Rays per forward pass when rendering.
 const RENDER_CHUNK: usize = 8192;
@@ -246,6 +248,12 @@ impl StudentRun {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         self.views = training_views(data, &self.cfg.train);
         self.beams = frame_beams(data, &self.views);
+        thin_pseudo_beams(
+            &self.views,
+            &mut self.beams,
+            self.cfg.train.pseudo_rays,
+            self.cfg.train.seed,
+        );
         self.pending = None;
         let spec =
             RenderSpec::of_dataset(&data.dataset, data.bounds, self.cfg.model.audio.att_frames);
@@ -258,7 +266,7 @@ impl StudentRun {
         }
         let m = self.cfg.model.segments;
         let path = self.dir.join(TARGETS_FILE);
-        let fingerprint = views_fingerprint(&self.views);
+        let fingerprint = views_fingerprint(&self.views, &self.beams);
         // Without a teacher at hand, a cache made by any teacher step is used.
         if path.is_file()
             && let Some(cached) = load_targets(&path, &self.beams, m, teacher_step, &fingerprint)?
@@ -282,7 +290,7 @@ impl StudentRun {
             &self.targets,
             self.cfg.model.segments,
             teacher_step,
-            &views_fingerprint(&self.views),
+            &views_fingerprint(&self.views, &self.beams),
         )
     }
 

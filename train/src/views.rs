@@ -6,6 +6,7 @@ use glam::{Mat4, Vec3};
 use nldf_core::camera::{Camera, turn_about};
 use nldf_core::dataset::Split;
 use nldf_core::rays::head_rays;
+use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -175,9 +176,62 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
         .collect()
 }
 
-/// A fingerprint of the views (poses and audio), stored with the cached
-/// targets so that a cache made for other views is never used (FNV-1a over their bits).
-pub fn views_fingerprint(views: &[View]) -> String {
+/// Keeps at most `n` hit pixels of each pseudo view (0 keeps all): its mouth pixels (up to
+/// half of `n`), then pixels drawn without replacement, seeded by `seed` and the view. The
+/// student draws only a few hundred rays from a view per step, so the teacher's time is
+/// better spent on more poses than on every pixel of each (R2L renders whole images; here
+/// the same teacher time covers `pixels / n` times as many poses). Recorded frames keep
+/// every pixel: they carry the ground truth.
+pub fn thin_pseudo_beams(views: &[View], beams: &mut [FrameBeams], n: usize, seed: u64) {
+    if n == 0 {
+        return;
+    }
+    beams
+        .par_iter_mut()
+        .zip(views)
+        .enumerate()
+        .filter(|(_, (fb, view))| !view.recorded && fb.pixels.len() > n)
+        .for_each(|(vi, (fb, _))| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7417_0b5e);
+            rng.set_stream(vi as u64);
+            let total = fb.pixels.len();
+            let mut keep = vec![false; total];
+            let mut mouth = fb.mouth.clone();
+            mouth.shuffle(&mut rng);
+            mouth.truncate(n / 2);
+            mouth.iter().for_each(|&k| keep[k as usize] = true);
+            let mut rest: Vec<u32> = (0..total as u32).filter(|&k| !keep[k as usize]).collect();
+            rest.shuffle(&mut rng);
+            rest.truncate(n - mouth.len());
+            rest.iter().for_each(|&k| keep[k as usize] = true);
+            // Old index -> new index, in the old (row-major) order.
+            let mut new_index = vec![u32::MAX; total];
+            let mut pixels = Vec::with_capacity(n);
+            for (k, &p) in fb.pixels.iter().enumerate() {
+                if keep[k] {
+                    new_index[k] = pixels.len() as u32;
+                    pixels.push(p);
+                }
+            }
+            let remap = |list: &[u32]| -> Vec<u32> {
+                list.iter()
+                    .map(|&k| new_index[k as usize])
+                    .filter(|&k| k != u32::MAX)
+                    .collect()
+            };
+            *fb = FrameBeams {
+                face: remap(&fb.face),
+                other: remap(&fb.other),
+                mouth: remap(&fb.mouth),
+                pixels,
+            };
+        });
+}
+
+/// A fingerprint of the views (poses and audio) and of the pixels kept of each, stored
+/// with the cached targets so that a cache made for other views is never used (FNV-1a
+/// over their bits).
+pub fn views_fingerprint(views: &[View], beams: &[FrameBeams]) -> String {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     let mut eat = |v: u64| {
         for b in v.to_le_bytes() {
@@ -191,6 +245,12 @@ pub fn views_fingerprint(views: &[View]) -> String {
             .iter()
             .for_each(|x| eat(x.to_bits() as u64));
         eat(v.aud_id as u64);
+    }
+    for fb in beams {
+        eat(fb.pixels.len() as u64);
+        fb.pixels
+            .iter()
+            .for_each(|&(i, j)| eat(((i as u64) << 32) | j as u64));
     }
     format!("{h:016x}")
 }

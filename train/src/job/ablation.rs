@@ -15,7 +15,7 @@ use serde::Serialize;
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::eval::FrameModel;
-use crate::job::student::{StudentJob, StudentSource};
+use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::{JobEvent, OnEvent};
 use crate::student::StudentConfig;
 use crate::student_trainer::StudentRun;
@@ -109,8 +109,7 @@ impl AblationJob {
                 model: model.clone(),
                 distill,
                 pool,
-                pseudo_frames: None,
-                pose_range: None,
+                pseudo: PseudoSettings::default(),
             },
             iters: Some(self.iters),
             minutes: None,

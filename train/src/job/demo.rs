@@ -15,7 +15,7 @@ use crate::config::TeacherConfig;
 use crate::error::{Error, Result};
 use crate::eval::Evaluation;
 use crate::job::eval::EvalJob;
-use crate::job::student::{StudentJob, StudentSource};
+use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::teacher::{TeacherJob, TeacherSource};
 use crate::job::{JobEvent, OnEvent};
 use crate::student::StudentConfig;
@@ -164,8 +164,7 @@ impl DemoJob {
                     model: self.student.clone(),
                     distill: self.student_distill,
                     pool: true,
-                    pseudo_frames: None,
-                    pose_range: None,
+                    pseudo: PseudoSettings::default(),
                 },
                 iters: Some(self.student_iters),
                 minutes: Some(self.student_minutes),

@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::eval::{EvalReport, FrameModel, eval_models};
-use crate::job::student::{StudentJob, StudentSource};
+use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::{JobEvent, OnEvent};
 use crate::student::StudentConfig;
 use crate::student_trainer::StudentRun;
@@ -41,6 +41,8 @@ pub struct PosedJob {
     pub pseudo_frames: usize,
     /// Their pose range, a factor of the recorded range.
     pub pose_range: f32,
+    /// Hit pixels the teacher renders per pseudo view (0: all).
+    pub pseudo_rays: usize,
     /// At most this many frames per split are scored.
     pub frames: Option<usize>,
 }
@@ -111,8 +113,11 @@ impl PosedJob {
                 model: self.model.clone(),
                 distill,
                 pool: true,
-                pseudo_frames: Some(pseudo),
-                pose_range: Some(self.pose_range),
+                pseudo: PseudoSettings {
+                    frames: Some(pseudo),
+                    pose_range: Some(self.pose_range),
+                    rays: Some(self.pseudo_rays),
+                },
             },
             iters: Some(1_000_000),
             minutes: Some(minutes),

@@ -27,13 +27,39 @@ pub enum StudentSource {
         distill: bool,
         /// Train the active beam pool.
         pool: bool,
-        /// Pseudo views rendered by the teacher, replacing the default count.
-        pseudo_frames: Option<usize>,
-        /// Their pose range (a factor of the recorded range), replacing the default.
-        pose_range: Option<f32>,
+        /// The pseudo views, where they differ from the defaults.
+        pseudo: PseudoSettings,
     },
     /// A `{"model": ..., "train": ...}` file, read strictly.
     File(PathBuf),
+}
+
+/// Pseudo-view settings that replace [`StudentTrainConfig`]'s defaults where given.
+///
+/// [`StudentTrainConfig`]: crate::config::StudentTrainConfig
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PseudoSettings {
+    /// Pseudo views the teacher renders.
+    pub frames: Option<usize>,
+    /// Their pose range, a factor of the recorded yaw and pitch range.
+    pub pose_range: Option<f32>,
+    /// Hit pixels rendered per pseudo view (0: all).
+    pub rays: Option<usize>,
+}
+
+impl PseudoSettings {
+    /// Writes the given settings into `train`.
+    pub fn apply(&self, train: &mut crate::config::StudentTrainConfig) {
+        if let Some(n) = self.frames {
+            train.pseudo_frames = n;
+        }
+        if let Some(r) = self.pose_range {
+            train.pose_range = r;
+        }
+        if let Some(n) = self.rays {
+            train.pseudo_rays = n;
+        }
+    }
 }
 
 /// What `nldf train student` was asked to do.
@@ -124,8 +150,7 @@ impl StudentJob {
                 model,
                 distill,
                 pool,
-                pseudo_frames,
-                pose_range,
+                pseudo,
             } => {
                 let mut cfg = StudentRunConfig {
                     model: model.clone(),
@@ -133,12 +158,7 @@ impl StudentJob {
                 };
                 cfg.train.distill = *distill;
                 cfg.train.pool = *pool;
-                if let Some(n) = pseudo_frames {
-                    cfg.train.pseudo_frames = *n;
-                }
-                if let Some(r) = pose_range {
-                    cfg.train.pose_range = *r;
-                }
+                pseudo.apply(&mut cfg.train);
                 (cfg, None)
             }
         };
