@@ -43,7 +43,7 @@ pub struct AblateArgs {
     #[arg(long)]
     pub posed_minutes: Option<f64>,
     /// Pseudo views of the posed ablation's student that has them.
-    #[arg(long, default_value_t = 300)]
+    #[arg(long, default_value_t = 2000)]
     pub pseudo_frames: usize,
     /// Their pose range, as a factor of the recorded yaw and pitch range.
     #[arg(long, default_value_t = 2.0)]

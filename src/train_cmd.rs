@@ -86,8 +86,8 @@ pub struct StudentArgs {
     /// recorded one (default 2: twice as wide).
     #[arg(long)]
     pub pose_range: Option<f32>,
-    /// Hit pixels the teacher renders per pseudo view, its mouth first (default 0: all);
-    /// fewer pixels per view buy more views for the same teacher time.
+    /// Hit pixels the teacher renders per pseudo view, its mouth first (default 1024; 0:
+    /// all); fewer pixels per view buy more views for the same teacher time.
     #[arg(long)]
     pub pseudo_rays: Option<usize>,
     /// JSON run configuration ({"model": {...}, "train": {...}}; missing fields take the

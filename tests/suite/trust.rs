@@ -89,11 +89,13 @@ fn eval_counts_non_finite_frames_and_never_reports_inf() {
     assert!(r.frames.iter().all(|f| f.psnr.is_nan()));
 }
 
-/// A run whose loss turns NaN at `nan_at`, checkpointing every step into `dir`.
+/// A run whose loss turns NaN at `nan_at`, checkpointing every step into `dir`; each step
+/// takes a second of its clock, against a budget of `budget_s` (0: none).
 struct Diverging {
     dir: std::path::PathBuf,
     step: usize,
     nan_at: usize,
+    budget_s: f64,
 }
 
 impl TrainingRun for Diverging {
@@ -111,11 +113,11 @@ impl TrainingRun for Diverging {
             val_every: 0,
             val_frames: 1,
             checkpoint_every: 1,
-            time_budget_s: 0.0,
+            time_budget_s: self.budget_s,
         }
     }
     fn elapsed(&self) -> f64 {
-        0.0
+        self.step as f64
     }
     fn learning_rate(&self) -> f64 {
         1e-3
@@ -157,6 +159,7 @@ fn a_nan_loss_stops_training_and_keeps_the_last_good_checkpoint() {
         dir: dir.path().to_path_buf(),
         step: 0,
         nan_at: 4,
+        budget_s: 0.0,
     };
     let mut checkpoints = Vec::new();
     let err = train_loop(&mut run, &data, &AtomicBool::new(false), &mut |e| {
@@ -177,6 +180,32 @@ fn a_nan_loss_stops_training_and_keeps_the_last_good_checkpoint() {
         "{err}"
     );
     assert!(err.contains("checkpoint of step 3"), "{err}");
+}
+
+#[test]
+fn a_run_stops_when_its_budget_is_spent_and_a_resumed_spent_run_trains_no_step() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = Diverging {
+        dir: dir.path().to_path_buf(),
+        step: 0,
+        nan_at: usize::MAX,
+        budget_s: 3.0,
+    };
+    let steps = |run: &mut Diverging| {
+        let mut n = 0;
+        let scores = train_loop(run, &data, &AtomicBool::new(false), &mut |e| {
+            n += usize::from(matches!(e, Event::Step { .. }));
+        })
+        .unwrap();
+        (n, scores.is_some())
+    };
+    // The budget ends the run after its third step, validated.
+    assert_eq!(steps(&mut run), (3, true));
+    assert_eq!(run.step, 3);
+    // Resumed with the same budget: nothing more is trained.
+    assert_eq!(steps(&mut run), (0, false));
+    assert_eq!(run.step, 3);
 }
 
 #[test]

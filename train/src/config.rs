@@ -392,8 +392,11 @@ pub struct StudentTrainConfig {
     /// Largest change of a pseudo view's camera distance, as a fraction of it.
     pub pseudo_zoom: f32,
     /// Hit pixels the teacher renders per pseudo view (its mouth first, the rest drawn at
-    /// random; 0: all of them). The student draws a few hundred rays from a view per
-    /// step, so fewer pixels per view buy more views for the same teacher time.
+    /// random; 0: all of them, about 8000 for the synthetic head at 128 x 128). The student
+    /// draws a few hundred rays from a view per step, so fewer pixels per view buy more
+    /// views for the same teacher time: 2000 views of 1024 rays (a quarter of the teacher
+    /// time of 1000 whole views) took a real-time student 2.9 dB higher on `val` and 2.0
+    /// dB on `novel` than 1000 whole views, in the same 15 minutes.
     pub pseudo_rays: usize,
     /// Pseudo views the teacher renders before each training step until all are done, so
     /// the student starts at once.
@@ -475,7 +478,7 @@ impl Default for StudentTrainConfig {
             pseudo_fraction: 0.5,
             pose_range: 2.0,
             pseudo_zoom: 0.15,
-            pseudo_rays: 0,
+            pseudo_rays: 1024,
             pseudo_per_step: 2,
             log_every: 10,
             val_every: 250,

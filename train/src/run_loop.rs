@@ -148,7 +148,9 @@ pub fn train_loop(
              and train again"
         ))
     };
-    while run.step() < t.iters {
+    let spent = |run: &dyn TrainingRun| t.time_budget_s > 0.0 && run.elapsed() >= t.time_budget_s;
+    // A run resumed with its budget already spent trains no further step.
+    while run.step() < t.iters && !spent(&*run) {
         if stop.load(Ordering::Relaxed) {
             run.save()?;
             on_event(&Event::Checkpoint {
@@ -171,7 +173,7 @@ pub fn train_loop(
             psnr,
             rays_per_s,
         });
-        let out_of_time = t.time_budget_s > 0.0 && run.elapsed() >= t.time_budget_s;
+        let out_of_time = spent(&*run);
         let last = step == t.iters || out_of_time;
         let validate_now = (t.val_every > 0 && step.is_multiple_of(t.val_every)) || last;
         let scores = if validate_now {

@@ -127,10 +127,7 @@ impl PosedJob {
         // the teacher's minutes plus the longest distilled student's own.
         let variants = [
             (
-                format!(
-                    "student, distilled, {} pseudo views at {}x the recorded poses",
-                    self.pseudo_frames, self.pose_range
-                ),
+                "student, distilled, with pseudo views".to_string(),
                 student("pseudo", true, self.pseudo_frames, self.minutes),
                 true,
             ),
@@ -169,7 +166,22 @@ impl PosedJob {
                     "stopped; run the same command again to resume".into(),
                 ));
             }
-            students.push((label.clone(), StudentRun::open(&dir, false)?, *distilled));
+            let run = StudentRun::open(&dir, false)?;
+            // Labelled from what the run was trained with (a reused run keeps its own).
+            let t = &run.cfg.train;
+            let label = if t.pseudo_frames == 0 {
+                label.clone()
+            } else {
+                let pixels = match t.pseudo_rays {
+                    0 => String::new(),
+                    n => format!(" of {n} pixels"),
+                };
+                format!(
+                    "student, distilled, {} pseudo views{pixels} at {}x the recorded poses",
+                    t.pseudo_frames, t.pose_range
+                )
+            };
+            students.push((label, run, *distilled));
         }
         let mut models: Vec<&dyn FrameModel> = vec![&teacher];
         models.extend(students.iter().map(|(_, s, _)| s as &dyn FrameModel));
