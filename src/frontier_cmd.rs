@@ -237,7 +237,7 @@ struct SplitScore {
 }
 
 /// One way of rendering: its scores and times.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 struct Point {
     model: String,
     /// `candle`, `fp32`, `fp16` or `int8`.
@@ -274,6 +274,20 @@ struct Times {
 }
 
 impl Point {
+    /// What every row measures, rendering frames of `size` pixels; the rest is the row's
+    /// own ([`Point::of_teacher`], [`Point::of_export`]).
+    fn measured(r: &EvalReport, size: u32, times: Times, scores: Vec<SplitScore>) -> Point {
+        Point {
+            size,
+            gmac_per_frame: r.macs_per_frame / 1e9,
+            ms_2_threads: 1e3 * times.taking_turns,
+            ms_back_to_back: 1e3 * times.back_to_back,
+            ms_1_thread: times.one_thread.map(|s| 1e3 * s),
+            scores,
+            ..Point::default()
+        }
+    }
+
     /// The teacher's row, rendering frames of `size` pixels.
     fn of_teacher(
         t: &Timed,
@@ -286,16 +300,8 @@ impl Point {
             model: t.describe(),
             precision: "candle".into(),
             runtime: "candle".into(),
-            file: None,
-            file_bytes: None,
             step: r.step,
-            size,
-            gmac_per_frame: r.macs_per_frame / 1e9,
-            ms_2_threads: 1e3 * times.taking_turns,
-            ms_back_to_back: 1e3 * times.back_to_back,
-            ms_1_thread: times.one_thread.map(|s| 1e3 * s),
-            scores,
-            on_front: false,
+            ..Point::measured(r, size, times, scores)
         }
     }
 
@@ -314,13 +320,7 @@ impl Point {
             file: Some(p.path.clone()),
             file_bytes: std::fs::metadata(&p.path).ok().map(|m| m.len()),
             step: p.step,
-            size,
-            gmac_per_frame: r.macs_per_frame / 1e9,
-            ms_2_threads: 1e3 * times.taking_turns,
-            ms_back_to_back: 1e3 * times.back_to_back,
-            ms_1_thread: times.one_thread.map(|s| 1e3 * s),
-            scores,
-            on_front: false,
+            ..Point::measured(r, size, times, scores)
         }
     }
 
