@@ -1,5 +1,6 @@
 //! `nldf eval`: renders held-out frames with a trained model and reports PSNR, SSIM and
-//! mouth-region PSNR as a table and as JSON, with the renders and a comparison grid.
+//! mouth-region PSNR as a table and as JSON (on a synthetic scene's `novel` split also per
+//! kind of view: turned, closer, farther), with the renders and a comparison grid.
 
 use std::path::{Path, PathBuf};
 
@@ -94,6 +95,23 @@ pub fn print_evaluation(evaluation: &Evaluation, out: &Path, n_frames: usize) ->
             r.render_s_per_frame
         );
     }
+    if evaluation.models.iter().any(|r| r.by_view.len() > 1) {
+        println!();
+        println!("| model | view | frames | PSNR (dB) | mouth PSNR (dB) |");
+        println!("|---|---|---|---|---|");
+        for r in &evaluation.models {
+            for v in &r.by_view {
+                println!(
+                    "| {} | {} | {} | {:.2} | {} |",
+                    r.model,
+                    v.view,
+                    v.frames,
+                    v.psnr,
+                    opt(v.mouth_psnr)
+                );
+            }
+        }
+    }
     let rows: Vec<serde_json::Value> = evaluation
         .models
         .iter()
@@ -103,6 +121,7 @@ pub fn print_evaluation(evaluation: &Evaluation, out: &Path, n_frames: usize) ->
                 "psnr": r.psnr, "ssim": r.ssim, "face_psnr": r.face_psnr,
                 "mouth_psnr": r.mouth_psnr, "macs_per_frame": r.macs_per_frame,
                 "frames": r.frames.len(), "non_finite_frames": r.non_finite_frames,
+                "by_view": r.by_view,
             })
         })
         .collect();

@@ -157,6 +157,23 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
     for m in &evaluation.models {
         assert_eq!((m.split.as_str(), m.frames.len()), ("novel", 3));
         assert!(m.psnr.is_finite() && m.mouth_psnr.is_some(), "{}", m.model);
+        // Each frame knows its view, and the per-view means add back up to the split's.
+        let views: Vec<&str> = m.by_view.iter().map(|v| v.view.as_str()).collect();
+        assert!(
+            views.len() > 1
+                && views
+                    .iter()
+                    .all(|v| v.starts_with("turned ") || ["closer", "farther"].contains(v)),
+            "{views:?}"
+        );
+        assert_eq!(m.by_view.iter().map(|v| v.frames).sum::<usize>(), 3);
+        let pooled: f64 = m
+            .by_view
+            .iter()
+            .map(|v| v.psnr * v.frames as f64)
+            .sum::<f64>()
+            / 3.0;
+        assert!((pooled - m.psnr).abs() < 1e-9, "{pooled} {}", m.psnr);
     }
 
     // The posed ablation: three students at equal total wall time, scored on val, novel

@@ -131,6 +131,38 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
 }
 
 #[test]
+fn each_novel_frame_knows_its_view_and_a_broken_scene_file_is_refused_by_name() {
+    let root = tiny_scene();
+    let scene = SceneFile::load(&root.join("scene.json")).unwrap();
+    let views = nldf_core::synth::eval_views(root, "novel").unwrap();
+    let gt = truth(&scene, "novel");
+    assert_eq!(views.len(), gt.len());
+    for t in &gt {
+        assert_eq!(views[&t.img_id], t.view);
+    }
+    let mut kinds: Vec<&str> = views.values().map(String::as_str).collect();
+    kinds.sort();
+    kinds.dedup();
+    assert_eq!(kinds.len(), 3, "{kinds:?}");
+    assert!(
+        kinds[0] == "closer" && kinds[1] == "farther" && kinds[2].starts_with("turned "),
+        "{kinds:?}"
+    );
+    // A recorded dataset has no scene file, hence no views; a broken one is an error.
+    let dir = tempfile::tempdir().unwrap();
+    assert!(
+        nldf_core::synth::eval_views(dir.path(), "novel")
+            .unwrap()
+            .is_empty()
+    );
+    std::fs::write(dir.path().join("scene.json"), "{\"eval_frames\": [").unwrap();
+    let e = nldf_core::synth::eval_views(dir.path(), "novel")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("scene.json") && !e.contains('\n'), "{e}");
+}
+
+#[test]
 fn an_evaluation_split_the_scene_lacks_is_refused_naming_its_file() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("scene");

@@ -106,6 +106,20 @@ pub struct FrameScore {
     pub ssim: f64,
     pub face_psnr: Option<f64>,
     pub mouth_psnr: Option<f64>,
+    /// What the view is, for a synthetic scene's evaluation splits (`turned 1.5x`, `closer`,
+    /// `farther` on `novel`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub view: Option<String>,
+}
+
+/// Mean scores of the frames of one kind of view (a synthetic scene's `novel` split:
+/// `turned 1.5x`, `closer`, `farther`), which the whole split's mean hides.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ViewScore {
+    pub view: String,
+    pub frames: usize,
+    pub psnr: f64,
+    pub mouth_psnr: Option<f64>,
 }
 
 /// The result of evaluating one model on one split.
@@ -129,6 +143,8 @@ pub struct EvalReport {
     /// Frames whose render holds a NaN or infinite value. Their scores are NaN, so the
     /// means are too: an evaluation with any is a failure, not a score.
     pub non_finite_frames: usize,
+    /// The means per kind of view, in the split's order; empty when the frames carry none.
+    pub by_view: Vec<ViewScore>,
 }
 
 /// Everything one evaluation wrote.
@@ -171,6 +187,7 @@ pub fn eval_models(
     let mut non_finite = vec![0usize; models.len()];
     let mut rows: Vec<Vec<ImageRgb>> = Vec::new();
     let mut files = Vec::new();
+    let views = nldf_core::synth::eval_views(&data.dataset.root, split.name())?;
     for m in models {
         let dir = out.join(m.label());
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -197,6 +214,7 @@ pub fn eval_models(
                 ssim: ssim(&render, &truth)?,
                 face_psnr: face,
                 mouth_psnr: mouth,
+                view: views.get(&frame.img_id).cloned(),
             });
             let path = out
                 .join(model.label())
@@ -217,8 +235,6 @@ pub fn eval_models(
     let grid_path = out.join("grid.png");
     grid(&rows, 2, [1.0; 3]).save_png(&grid_path)?;
     files.push(grid_path);
-    // Plain means: a NaN frame makes its model's mean NaN instead of dropping out.
-    let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
     let reports: Vec<EvalReport> = models
         .iter()
         .zip(scores)
@@ -235,6 +251,7 @@ pub fn eval_models(
             render_s_per_frame: render_s[mi] / n as f64,
             macs_per_frame: macs[mi] / n as f64,
             non_finite_frames: non_finite[mi],
+            by_view: by_view(&scores),
             frames: scores,
         })
         .collect();
@@ -245,6 +262,40 @@ pub fn eval_models(
     };
     save_json(&out.join("metrics.json"), &evaluation)?;
     Ok(evaluation)
+}
+
+/// The plain mean, `None` of nothing: a NaN frame makes its model's mean NaN instead of
+/// dropping out.
+fn mean(v: Vec<f64>) -> Option<f64> {
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// [`ViewScore`]s of `scores`, one per kind of view in order of first appearance (plain
+/// means, like the whole split's).
+fn by_view(scores: &[FrameScore]) -> Vec<ViewScore> {
+    let mut kinds: Vec<&str> = Vec::new();
+    for v in scores.iter().filter_map(|s| s.view.as_deref()) {
+        if !kinds.contains(&v) {
+            kinds.push(v);
+        }
+    }
+    kinds
+        .into_iter()
+        .map(|kind| {
+            let of: Vec<&FrameScore> = scores
+                .iter()
+                .filter(|s| s.view.as_deref() == Some(kind))
+                .collect();
+            let psnrs: Vec<f64> = of.iter().map(|s| s.psnr).collect();
+            let mouths: Vec<f64> = of.iter().filter_map(|s| s.mouth_psnr).collect();
+            ViewScore {
+                view: kind.to_string(),
+                frames: of.len(),
+                psnr: mean(psnrs).unwrap_or(f64::NAN),
+                mouth_psnr: mean(mouths),
+            }
+        })
+        .collect()
 }
 
 impl Evaluation {

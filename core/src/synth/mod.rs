@@ -276,7 +276,8 @@ pub struct EvalFrame {
     pub img_id: i64,
     /// Row of the split's audio features (the recording's, or the `voice/` folder's).
     pub aud_id: i64,
-    /// What the view is: `turned`, `closer`, `farther`, `recorded pose`, `turn 1.5x`.
+    /// What the view is: `turned 1.5x` (the `novel_turn` factor), `closer`, `farther`,
+    /// `recorded pose`, `turn 1.5x`.
     pub view: String,
     pub mouth_open: f32,
     pub mouth_width: f32,
@@ -298,6 +299,34 @@ impl SceneFile {
     fn save(&self, path: &Path) -> Result<()> {
         write_json(path, self)
     }
+}
+
+/// What each frame of an evaluation split is (`novel`: `turned 1.5x`, `closer`, `farther`), by
+/// `img_id`, from the scene file of the dataset at `root`; empty when the dataset has no
+/// `scene.json` (a recorded dataset) or the split has no ground truth there.
+pub fn eval_views(root: &Path, split: &str) -> Result<std::collections::HashMap<i64, String>> {
+    #[derive(Deserialize)]
+    struct View {
+        split: String,
+        img_id: i64,
+        view: String,
+    }
+    #[derive(Deserialize)]
+    struct Views {
+        #[serde(default)]
+        eval_frames: Vec<View>,
+    }
+    let path = root.join("scene.json");
+    if !path.is_file() {
+        return Ok(Default::default());
+    }
+    let views: Views = read_json(&path)?;
+    Ok(views
+        .eval_frames
+        .into_iter()
+        .filter(|v| v.split == split)
+        .map(|v| (v.img_id, v.view))
+        .collect())
 }
 
 /// What [`generate`] wrote.
