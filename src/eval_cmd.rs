@@ -1,6 +1,7 @@
 //! `nldf eval`: renders held-out frames with a trained model and reports PSNR, SSIM and
-//! mouth-region PSNR as a table and as JSON (on a synthetic scene's `novel` split also per
-//! kind of view: turned, closer, farther), with the renders and a comparison grid.
+//! mouth-region PSNR as a table and as JSON (on a synthetic scene's `novel` and `sweep`
+//! splits also per kind of view: turned, closer, farther; each turn), with the renders and
+//! a comparison grid.
 
 use std::path::{Path, PathBuf};
 

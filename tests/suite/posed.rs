@@ -4,8 +4,9 @@
 
 use nldf_core::dataset::{AudioChoice, Dataset, Split, VOICE_DIR};
 use nldf_core::rays::head_rays;
+use nldf_core::student_shape::StudentConfig;
 use nldf_core::synth::SceneFile;
-use nldf_train::config::StudentTrainConfig;
+use nldf_train::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
 use nldf_train::data::TrainData;
 use nldf_train::views::{
     frame_beams, recorded_range, thin_pseudo_beams, training_views, view_angles, views_fingerprint,
@@ -128,6 +129,29 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
     assert_eq!(gt[0].pose.yaw_deg, 0.0);
     assert!((gt[6].pose.yaw_deg - 2.0 * yaw_max).abs() < 1e-4);
     assert!(gt.windows(2).all(|w| w[1].pose.yaw_deg > w[0].pose.yaw_deg));
+}
+
+/// The README's recipe for a student that holds up off the recorded poses
+/// (`configs/posed_student.json`) is the real-time preset's network and the very training
+/// config of the runs measured in `results/posed/epyc_realtime/seed*/budget_40/`, and it
+/// passes the checks (the audio encoder and its attention always follow the teacher).
+#[test]
+fn the_posed_student_recipe_is_the_config_of_its_measured_runs() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let recipe: StudentRunConfig = read_config(&root.join("configs/posed_student.json")).unwrap();
+    recipe.check().unwrap();
+    let shape = |m: &StudentConfig| (m.depth, m.width, m.segments, m.beam);
+    assert_eq!(shape(&recipe.model), shape(&StudentConfig::realtime()));
+    for seed in [0, 1] {
+        let measured: StudentRunConfig = read_config(&root.join(format!(
+            "results/posed/epyc_realtime/seed{seed}/budget_40/pseudo_config.json"
+        )))
+        .unwrap();
+        assert_eq!(recipe.train, measured.train, "seed {seed}");
+        assert_eq!(shape(&recipe.model), shape(&measured.model), "seed {seed}");
+    }
+    let t = &recipe.train;
+    assert!(t.distill && t.pseudo_frames > 0 && t.time_budget_s > 0.0);
 }
 
 #[test]

@@ -106,14 +106,15 @@ pub struct FrameScore {
     pub ssim: f64,
     pub face_psnr: Option<f64>,
     pub mouth_psnr: Option<f64>,
-    /// What the view is, for a synthetic scene's evaluation splits (`turned 1.5x`, `closer`,
-    /// `farther` on `novel`).
+    /// What the view is, for a synthetic scene's evaluation splits (see
+    /// [`nldf_core::synth::eval_views`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub view: Option<String>,
 }
 
-/// Mean scores of the frames of one kind of view (a synthetic scene's `novel` split:
-/// `turned 1.5x`, `closer`, `farther`), which the whole split's mean hides.
+/// Mean scores of the frames of one kind of view of a synthetic scene's evaluation split
+/// (`novel`: `turned 1.5x`, `closer`, `farther`; `sweep`: each turn), which the whole
+/// split's mean hides.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ViewScore {
     pub view: String,

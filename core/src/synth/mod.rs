@@ -276,8 +276,8 @@ pub struct EvalFrame {
     pub img_id: i64,
     /// Row of the split's audio features (the recording's, or the `voice/` folder's).
     pub aud_id: i64,
-    /// What the view is: `turned 1.5x` (the `novel_turn` factor), `closer`, `farther`,
-    /// `recorded pose`, `turn 1.5x`.
+    /// What the view is: on `novel`, `turned 1.5x` (the `novel_turn` factor), `closer` and
+    /// `farther`; on `voice`, `recorded pose`; on `sweep`, `turn 0x` to `turn 2x`.
     pub view: String,
     pub mouth_open: f32,
     pub mouth_width: f32,
@@ -286,6 +286,9 @@ pub struct EvalFrame {
     /// Distance of the camera from the world origin.
     pub camera_distance: f32,
 }
+
+/// The synthetic scene's ground truth file in a dataset folder.
+pub const SCENE_FILE: &str = "scene.json";
 
 /// The `generator` value of `scene.json`.
 pub const GENERATOR: &str = "nldf synth 1";
@@ -301,31 +304,20 @@ impl SceneFile {
     }
 }
 
-/// What each frame of an evaluation split is (`novel`: `turned 1.5x`, `closer`, `farther`), by
-/// `img_id`, from the scene file of the dataset at `root`; empty when the dataset has no
-/// `scene.json` (a recorded dataset) or the split has no ground truth there.
+/// What each frame of an evaluation split is, by `img_id` (`novel`: `turned 1.5x`, `closer`,
+/// `farther`; `voice`: `recorded pose`; `sweep`: `turn 0x` to `turn 2x`), from the scene
+/// file of the dataset at `root`; empty when the dataset has no [`SCENE_FILE`] (a recorded
+/// dataset).
 pub fn eval_views(root: &Path, split: &str) -> Result<std::collections::HashMap<i64, String>> {
-    #[derive(Deserialize)]
-    struct View {
-        split: String,
-        img_id: i64,
-        view: String,
-    }
-    #[derive(Deserialize)]
-    struct Views {
-        #[serde(default)]
-        eval_frames: Vec<View>,
-    }
-    let path = root.join("scene.json");
+    let path = root.join(SCENE_FILE);
     if !path.is_file() {
         return Ok(Default::default());
     }
-    let views: Views = read_json(&path)?;
-    Ok(views
+    Ok(SceneFile::load(&path)?
         .eval_frames
         .into_iter()
-        .filter(|v| v.split == split)
-        .map(|v| (v.img_id, v.view))
+        .filter(|f| f.split == split)
+        .map(|f| (f.img_id, f.view))
         .collect())
 }
 
@@ -366,7 +358,7 @@ fn check_output(out: &Path, force: bool) -> Result<()> {
         .map_err(|e| Error::io(out, e))?
         .next()
         .is_none();
-    let earlier_scene = SceneFile::load(&out.join("scene.json"))
+    let earlier_scene = SceneFile::load(&out.join(SCENE_FILE))
         .map(|s| s.generator == GENERATOR)
         .unwrap_or(false);
     if empty || earlier_scene || force {
@@ -486,7 +478,7 @@ fn write_scene(
     scene.recorded_range_deg = extra.recorded_range_deg;
     scene.eval_frames = extra.frames.clone();
     scene.eval_voice = Some(extra.voice.clone());
-    scene.save(&dir.join("scene.json"))?;
+    scene.save(&dir.join(SCENE_FILE))?;
     Ok(Summary {
         out: dir.to_path_buf(),
         n_frames,
@@ -773,7 +765,7 @@ fn scene_files(n_frames: usize) -> Vec<(PathBuf, usize)> {
         ("head_imgs", n_frames),
         ("parsing", n_frames),
         ("depth", n_frames),
-        ("scene.json", 1),
+        (SCENE_FILE, 1),
     ]
     .into_iter()
     .map(|(p, n)| (PathBuf::from(p), n))

@@ -83,7 +83,7 @@ impl DemoJob {
     pub fn run(&self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<DemoReport>> {
         self.check()?;
         let data = self.out.join("data");
-        if data.join("scene.json").is_file() {
+        if data.join(nldf_core::synth::SCENE_FILE).is_file() {
             on_event(&JobEvent::Stage(format!(
                 "synthetic scene: reusing {}",
                 data.display()
