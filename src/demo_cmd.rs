@@ -175,10 +175,12 @@ fn render_new_voice(out: &Path, model: &Path) -> Result<VideoReport> {
 /// the paths of what the demo made.
 fn print_summary(out: &Path, report: &DemoReport, video: Option<&VideoReport>) {
     println!("\n== nldf demo: done");
-    println!("| model | PSNR (dB) | SSIM | mouth PSNR (dB) | frames/s |");
-    println!("|---|---|---|---|---|");
+    println!(
+        "| model | step | head PSNR (dB) | head SSIM | mouth PSNR (dB) | whole-frame PSNR (dB) | frames/s |"
+    );
+    println!("|---|---|---|---|---|---|---|");
     for r in &report.evaluation.models {
-        let mouth = r.mouth_psnr.map_or("-".into(), |m| format!("{m:.2}"));
+        let opt = |v: Option<f64>, digits: usize| v.map_or("-".into(), |m| format!("{m:.digits$}"));
         let candle_fps = 1.0 / r.render_s_per_frame.max(1e-9);
         let fps = match video {
             Some(v) if r.label != "teacher" => format!(
@@ -188,8 +190,13 @@ fn print_summary(out: &Path, report: &DemoReport, video: Option<&VideoReport>) {
             _ => format!("{candle_fps:.1} (candle)"),
         };
         println!(
-            "| {} | {:.2} | {:.4} | {mouth} | {fps} |",
-            r.model, r.psnr, r.ssim
+            "| {} | {} | {} | {} | {} | {:.2} | {fps} |",
+            r.model,
+            r.step,
+            opt(r.head_psnr, 2),
+            opt(r.head_ssim, 4),
+            opt(r.mouth_psnr, 2),
+            r.psnr
         );
     }
     println!(

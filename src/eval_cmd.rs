@@ -78,54 +78,56 @@ pub fn run(args: EvalArgs) -> Result<()> {
 pub fn print_evaluation(evaluation: &Evaluation, out: &Path, n_frames: usize) -> Result<()> {
     let opt = |v: Option<f64>| v.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into());
     println!(
-        "| model | split | step | frames | PSNR (dB) | SSIM | face PSNR (dB) | mouth PSNR (dB) | GMAC / frame | s / frame |"
+        "| model | split | step | frames | head PSNR (dB) | head SSIM | mouth PSNR (dB) | whole-frame PSNR (dB) | whole-frame SSIM | GMAC / frame | s / frame |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let opt4 = |v: Option<f64>| v.map(|m| format!("{m:.4}")).unwrap_or_else(|| "-".into());
     for r in &evaluation.models {
         println!(
-            "| {} | {} | {} | {} | {:.2} | {:.4} | {} | {} | {:.2} | {:.2} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.4} | {:.2} | {:.2} |",
             r.model,
             r.split,
             r.step,
             r.frames.len(),
+            opt(r.head_psnr),
+            opt4(r.head_ssim),
+            opt(r.mouth_psnr),
             r.psnr,
             r.ssim,
-            opt(r.face_psnr),
-            opt(r.mouth_psnr),
             r.macs_per_frame / 1e9,
             r.render_s_per_frame
         );
     }
     if evaluation.models.iter().any(|r| r.by_view.len() > 1) {
         println!();
-        println!("| model | view | frames | PSNR (dB) | mouth PSNR (dB) |");
-        println!("|---|---|---|---|---|");
+        println!("| model | view | frames | head PSNR (dB) | mouth PSNR (dB) | whole-frame PSNR (dB) |");
+        println!("|---|---|---|---|---|---|");
         for r in &evaluation.models {
             for v in &r.by_view {
                 println!(
-                    "| {} | {} | {} | {:.2} | {} |",
+                    "| {} | {} | {} | {} | {} | {:.2} |",
                     r.model,
                     v.view,
                     v.frames,
+                    opt(v.head_psnr),
+                    opt(v.mouth_psnr),
                     v.psnr,
-                    opt(v.mouth_psnr)
                 );
             }
         }
     }
-    let rows: Vec<serde_json::Value> = evaluation
+    let rows = evaluation
         .models
         .iter()
         .map(|r| {
-            serde_json::json!({
-                "model": r.model, "split": r.split, "step": r.step,
-                "psnr": r.psnr, "ssim": r.ssim, "face_psnr": r.face_psnr,
-                "mouth_psnr": r.mouth_psnr, "macs_per_frame": r.macs_per_frame,
-                "frames": r.frames.len(), "non_finite_frames": r.non_finite_frames,
-                "by_view": r.by_view,
-            })
+            // The report as it serialises, with its frame count instead of every frame.
+            let mut row = serde_json::to_value(r)?;
+            if let Some(fields) = row.as_object_mut() {
+                fields.insert("frames".into(), r.frames.len().into());
+            }
+            Ok(row)
         })
-        .collect();
+        .collect::<Result<Vec<serde_json::Value>>>()?;
     println!("{}", serde_json::to_string(&rows)?);
     println!("wrote to {}:", out.display());
     for r in &evaluation.models {

@@ -20,6 +20,7 @@ use anyhow::{Context, Result, bail};
 use nldf_core::audio::neighbourhood;
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
+use nldf_core::stats::median;
 use nldf_export::WeightType;
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
 use nldf_train::bench::Machine;
@@ -332,18 +333,6 @@ impl Point {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
 
 /// Median seconds per frame of `model` rendering `frames` back to back after one untimed.
 fn time_back_to_back(model: &dyn FrameModel, data: &TrainData, frames: &[Frame]) -> Result<f64> {
@@ -355,7 +344,7 @@ fn time_back_to_back(model: &dyn FrameModel, data: &TrainData, frames: &[Frame])
             times.push(started.elapsed().as_secs_f64());
         }
     }
-    Ok(median(times))
+    Ok(median(&times))
 }
 
 fn score(r: &EvalReport) -> SplitScore {
@@ -567,7 +556,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     // Medians over the `val` pass: the first frames each point rendered.
     let n_val = reports[0].first().map_or(0, |r| r.frames.len());
     let val_median =
-        |s: &RefCell<Vec<f64>>| median(s.borrow().iter().take(n_val).copied().collect());
+        |s: &RefCell<Vec<f64>>| median(&s.borrow()[..n_val.min(s.borrow().len())]);
     // Back-to-back times: one untimed frame, then `--timed-frames`.
     let val_frames = val.data.dataset.frames(Split::Val);
     let timed = &val_frames[..(args.timed_frames + 1).min(val_frames.len())];
@@ -582,7 +571,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
                 p.render_frame(&val.data, f)?;
             }
             // The first frame pays for plans and caches.
-            one_thread.push(median(p.seconds.borrow().iter().skip(1).copied().collect()));
+            one_thread.push(median(p.seconds.borrow().get(1..).unwrap_or(&[])));
         }
     }
     let mut table: Vec<Point> = Vec::new();
@@ -728,7 +717,7 @@ fn hires_points(
     let r = report_of(&teacher.label())?;
     // Each point's turn-taking times are read (and their borrow ended) before it renders
     // again back to back.
-    let taking_turns = median(teacher.seconds.borrow().clone());
+    let taking_turns = median(&teacher.seconds.borrow());
     let times = Times {
         taking_turns,
         back_to_back: time_back_to_back(&teacher, &plan.data, timed)?,
@@ -737,7 +726,7 @@ fn hires_points(
     table.push(Point::of_teacher(&teacher, r, size, times, vec![score(r)]));
     for p in &points {
         let r = report_of(&p.label())?;
-        let taking_turns = median(p.seconds.borrow().clone());
+        let taking_turns = median(&p.seconds.borrow());
         let times = Times {
             taking_turns,
             back_to_back: time_back_to_back(p, &plan.data, timed)?,
@@ -770,7 +759,7 @@ fn time_adnerf_setting(data: &TrainData, n: usize) -> Result<(f64, f64)> {
     }
     let pixels = (data.dataset.intrinsics.width * data.dataset.intrinsics.height) as f64;
     Ok((
-        1e3 * median(timed.seconds.borrow().clone()),
+        1e3 * median(&timed.seconds.borrow()),
         pixels * run.macs_per_ray(),
     ))
 }
@@ -1119,6 +1108,5 @@ mod tests {
         let s = &speed_ups(&table)[0];
         assert_eq!(s.point.as_deref(), Some("fast fp32 ort"));
         assert_eq!(s.speed_up, Some(5.0));
-        assert_eq!(median(vec![3.0, 1.0, 2.0, 10.0]), 2.5);
     }
 }

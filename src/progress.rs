@@ -54,15 +54,17 @@ impl EventPrinter {
                         ));
                     }
                     Event::Validation { step, scores } => {
-                        self.last_val = format!(" | val {:.2} dB", scores.psnr);
+                        let head = scores.head_psnr.map_or(String::new(), |h| {
+                            format!("head {h:.2} dB, ")
+                        });
+                        self.last_val = format!(" | val {head}{:.2} dB", scores.psnr);
                         bar.println(format!(
-                            "step {step}: validation PSNR {:.2} dB, SSIM {:.4}{}",
+                            "step {step}: validation {head}whole frame {:.2} dB, SSIM {:.4}{}",
                             scores.psnr,
                             scores.ssim,
-                            match (scores.face_psnr, scores.mouth_psnr) {
-                                (Some(f), Some(m)) => format!(", face {f:.2} dB, mouth {m:.2} dB"),
-                                _ => String::new(),
-                            }
+                            scores
+                                .mouth_psnr
+                                .map_or(String::new(), |m| format!(", mouth {m:.2} dB"))
                         ));
                     }
                     Event::Checkpoint { .. } => {}

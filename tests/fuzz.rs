@@ -101,6 +101,22 @@ pub fn config(bytes: &[u8]) -> Verdict {
     }
 }
 
+/// A landmarks file (`<id>.lms`): parsed, then its mouth region drawn on a small image.
+pub fn landmarks(bytes: &[u8]) -> Verdict {
+    let path = Path::new("0.lms");
+    let text = String::from_utf8_lossy(bytes);
+    match nldf_core::landmarks::Landmarks::parse(path, &text) {
+        Ok(lms) => {
+            if lms.points.iter().flatten().any(|v| !v.is_finite()) {
+                return Err("accepted a non-finite landmark".into());
+            }
+            lms.mouth_mask(24, 16);
+            Ok(())
+        }
+        Err(e) => one_line_naming(&e.to_string(), "0.lms"),
+    }
+}
+
 /// An `.onnx` file as every loader checks it first (protobuf, metadata, graph, checksum).
 pub fn onnx(bytes: &[u8]) -> Verdict {
     match nldf_export::load::check_model(Path::new("model.onnx"), bytes) {

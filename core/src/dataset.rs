@@ -1,8 +1,9 @@
 //! Datasets in AD-NeRF's layout: `transforms_{train,val}.json` with
 //! AD-NeRF's field names, frames under `head_imgs/` (or `ori_imgs/`, `gt_imgs/`), the static
-//! background `bc.png|jpg`, audio windows `aud.npy` `[N, 16, F]` and optional `parsing/`
-//! region masks. Loading validates everything it can without decoding every frame, and every
-//! problem is one line naming the file.
+//! background `bc.png|jpg`, audio windows `aud.npy` `[N, 16, F]`, optional `parsing/`
+//! masks in AD-NeRF's convention, nldf's own `regions/` labels and AD-NeRF's `<id>.lms`
+//! landmarks (see [`crate::region`]). Loading validates everything it can without decoding
+//! every frame, and every problem is one line naming the file.
 
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
@@ -18,7 +19,8 @@ use crate::error::{Error, Result};
 use crate::files::{read_json, write_atomic, write_json};
 use crate::image::{ImageRgb, save_png_bytes};
 use crate::rays::Rect;
-use crate::region::Region;
+use crate::landmarks::{LANDMARKS_EXT, Landmarks};
+use crate::region::{MouthSource, Region};
 
 /// The audio feature windows, `[N, 16, F]` (AD-NeRF's name).
 pub const AUDIO_NPY: &str = "aud.npy";
@@ -47,6 +49,13 @@ pub enum AudioChoice {
 pub const IMAGE_DIRS: [&str; 3] = ["head_imgs", "ori_imgs", "gt_imgs"];
 /// Image extensions accepted, in order.
 pub const IMAGE_EXTS: [&str; 3] = ["png", "jpg", "jpeg"];
+/// AD-NeRF's face parsing (head, neck, torso; [`Region::parsing_color`]).
+pub const PARSING_DIR: &str = "parsing";
+/// nldf's own region labels (face, mouth, eyes; [`Region::label_color`]).
+pub const LABELS_DIR: &str = "regions";
+/// Where AD-NeRF keeps its landmark files (`<img_id>.lms`); the frames' own folder is
+/// searched after it.
+pub const LANDMARKS_DIR: &str = "ori_imgs";
 /// Tolerance of the rigidity check of camera matrices.
 pub const RIGID_TOL: f32 = 1e-3;
 
@@ -181,8 +190,12 @@ pub struct Frame {
     pub eye: Option<f32>,
     /// The frame's image file (exists).
     pub image_path: PathBuf,
-    /// The frame's parsing mask, when the dataset has one.
+    /// The frame's AD-NeRF parsing mask, when the dataset has one.
     pub parsing_path: Option<PathBuf>,
+    /// The frame's nldf region labels, when the dataset has them.
+    pub labels_path: Option<PathBuf>,
+    /// The frame's 68 landmarks, when the dataset has them.
+    pub landmarks_path: Option<PathBuf>,
 }
 
 /// A loaded, validated dataset. Frames are decoded on demand ([`Dataset::load_image`]).
@@ -381,20 +394,50 @@ impl Dataset {
         Ok(img)
     }
 
-    /// Decodes a frame's parsing mask (`None` when the dataset has none).
+    /// A frame's regions (`None` when the dataset has neither `regions/` nor `parsing/`):
+    /// nldf's labels when present; otherwise AD-NeRF's parsing (head, neck, torso) with the
+    /// mouth where the head lies inside the landmarks' outer lip contour when the frame has
+    /// landmarks.
     pub fn load_regions(&self, frame: &Frame) -> Result<Option<Vec<Region>>> {
+        let decode = |path: &Path, read: fn([u8; 3]) -> Region| -> Result<Vec<Region>> {
+            let img = ImageRgb::load(path)?;
+            self.check_size(path, img.width, img.height)?;
+            Ok(img
+                .to_rgb8()
+                .chunks_exact(3)
+                .map(|c| read([c[0], c[1], c[2]]))
+                .collect())
+        };
+        if let Some(path) = &frame.labels_path {
+            return Ok(Some(decode(path, Region::from_label_color)?));
+        }
         let Some(path) = &frame.parsing_path else {
             return Ok(None);
         };
-        let img = ImageRgb::load(path)?;
-        self.check_size(path, img.width, img.height)?;
-        let bytes = img.to_rgb8();
-        Ok(Some(
-            bytes
-                .chunks_exact(3)
-                .map(|c| Region::from_color([c[0], c[1], c[2]]))
-                .collect(),
-        ))
+        let mut regions = decode(path, Region::from_parsing_color)?;
+        if let Some(lms) = &frame.landmarks_path {
+            let k = &self.intrinsics;
+            let mouth = Landmarks::load(lms)?.mouth_mask(k.width, k.height);
+            for (r, m) in regions.iter_mut().zip(mouth) {
+                if m && *r == Region::Face {
+                    *r = Region::Mouth;
+                }
+            }
+        }
+        Ok(Some(regions))
+    }
+
+    /// Where the frames' mouth region comes from: nldf's labels, AD-NeRF's landmarks (with
+    /// its parsing), or nowhere.
+    pub fn mouth_source(&self) -> MouthSource {
+        let first = self.train.first().or(self.val.first());
+        match first {
+            Some(f) if f.labels_path.is_some() => MouthSource::Labels,
+            Some(f) if f.parsing_path.is_some() && f.landmarks_path.is_some() => {
+                MouthSource::Landmarks
+            }
+            _ => MouthSource::Unknown,
+        }
     }
 
     fn check_size(&self, path: &Path, w: u32, h: u32) -> Result<()> {
@@ -412,12 +455,16 @@ impl Dataset {
     }
 }
 
-/// Where a dataset's frame images and parsing masks are.
+/// Where a dataset's frame images, masks and landmarks are.
 struct FrameDirs {
     /// The first of [`IMAGE_DIRS`] that exists.
     image: PathBuf,
-    /// `parsing/`, when the dataset has one.
+    /// [`PARSING_DIR`], when the dataset has one.
     parsing: Option<PathBuf>,
+    /// [`LABELS_DIR`], when the dataset has one.
+    labels: Option<PathBuf>,
+    /// The first of [`LANDMARKS_DIR`] and the image folder that holds a `.lms` file.
+    landmarks: Option<PathBuf>,
 }
 
 impl FrameDirs {
@@ -432,10 +479,22 @@ impl FrameDirs {
                     "no image folder (head_imgs/, ori_imgs/ or gt_imgs/)",
                 )
             })?;
-        let parsing = root.join("parsing");
+        let dir = |name: &str| Some(root.join(name)).filter(|d| d.is_dir());
+        let holds_landmarks = |d: &PathBuf| {
+            std::fs::read_dir(d).is_ok_and(|entries| {
+                entries.flatten().any(|e| {
+                    e.path().extension().and_then(|x| x.to_str()) == Some(LANDMARKS_EXT)
+                })
+            })
+        };
+        let landmarks = [root.join(LANDMARKS_DIR), image.clone()]
+            .into_iter()
+            .find(holds_landmarks);
         Ok(FrameDirs {
+            parsing: dir(PARSING_DIR),
+            labels: dir(LABELS_DIR),
+            landmarks,
             image,
-            parsing: parsing.is_dir().then_some(parsing),
         })
     }
 }
@@ -459,7 +518,7 @@ fn validate_frames(
     t.frames
         .iter()
         .enumerate()
-        .map(|(n, e)| validate_frame(path, n, e, k, audio, &dirs.image, dirs.parsing.as_deref()))
+        .map(|(n, e)| validate_frame(path, n, e, k, audio, dirs))
         .collect()
 }
 
@@ -504,8 +563,7 @@ fn validate_frame(
     e: &FrameEntry,
     k: &Intrinsics,
     audio: &AudioWindows,
-    image_dir: &Path,
-    parsing_dir: Option<&Path>,
+    dirs: &FrameDirs,
 ) -> Result<Frame> {
     let at = |problem: String| {
         Error::invalid(path, format!("frame {n} (img_id {}): {problem}", e.img_id))
@@ -536,20 +594,33 @@ fn validate_frame(
         })?,
     };
     let stem = e.img_id.to_string();
+    let image_dir = &dirs.image;
     let image_path = find_with_ext(image_dir, &stem).ok_or_else(|| {
         at(format!(
             "image {}/{stem}.png|jpg is missing",
             image_dir.display()
         ))
     })?;
-    let parsing_path = match parsing_dir {
+    let mask = |dir: &Option<PathBuf>, what: &str| -> Result<Option<PathBuf>> {
+        match dir {
+            None => Ok(None),
+            Some(d) => Some(find_with_ext(d, &stem).ok_or_else(|| {
+                at(format!("{what} {}/{stem}.png is missing", d.display()))
+            }))
+            .transpose(),
+        }
+    };
+    let parsing_path = mask(&dirs.parsing, "parsing mask")?;
+    let labels_path = mask(&dirs.labels, "region labels")?;
+    let landmarks_path = match &dirs.landmarks {
         None => None,
-        Some(d) => Some(find_with_ext(d, &stem).ok_or_else(|| {
-            at(format!(
-                "parsing mask {}/{stem}.png is missing",
-                d.display()
-            ))
-        })?),
+        Some(d) => {
+            let p = d.join(format!("{stem}.{LANDMARKS_EXT}"));
+            if !p.is_file() {
+                return Err(at(format!("landmarks {} are missing", p.display())));
+            }
+            Some(p)
+        }
     };
     if let Some(eye) = e.eye
         && !eye.is_finite()
@@ -564,6 +635,8 @@ fn validate_frame(
         eye: e.eye,
         image_path,
         parsing_path,
+        labels_path,
+        landmarks_path,
     })
 }
 
@@ -858,8 +931,15 @@ pub fn save_audio_npy(path: &Path, audio: &AudioWindows) -> Result<()> {
     write_atomic(path, &buf)
 }
 
-/// Writes a parsing mask (`regions` row-major) as a PNG of region colours, atomically.
-pub fn save_regions_png(path: &Path, width: u32, height: u32, regions: &[Region]) -> Result<()> {
-    let bytes: Vec<u8> = regions.iter().flat_map(|r| r.color()).collect();
+/// Writes `regions` (row-major) as a PNG of `color`s ([`Region::parsing_color`] for
+/// AD-NeRF's `parsing/`, [`Region::label_color`] for nldf's `regions/`), atomically.
+pub fn save_regions_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    regions: &[Region],
+    color: fn(Region) -> [u8; 3],
+) -> Result<()> {
+    let bytes: Vec<u8> = regions.iter().flat_map(|r| color(*r)).collect();
     save_png_bytes(path, width, height, image::ExtendedColorType::Rgb8, &bytes)
 }

@@ -23,11 +23,13 @@ pub mod error;
 pub mod files;
 pub mod host;
 pub mod image;
+pub mod landmarks;
 pub mod metrics;
 pub mod rays;
 pub mod region;
 pub mod render_spec;
 pub mod run_files;
+pub mod stats;
 pub mod student_shape;
 pub mod synth;
 

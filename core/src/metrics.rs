@@ -109,6 +109,44 @@ fn filter_valid(plane: &[f64], w: usize, h: usize, k: &[f64]) -> (Vec<f64>, usiz
 /// and odd for images under 11 pixels), valid filtering, averaged over channels. 1 for
 /// identical images.
 pub fn ssim(a: &ImageRgb, b: &ImageRgb) -> Result<f64> {
+    let map = ssim_map(a, b)?;
+    Ok(map.values.iter().sum::<f64>() / map.values.len() as f64)
+}
+
+/// [`ssim`] over the windows whose centre pixel `mask` selects (`[height * width]`,
+/// row-major); `None` when it selects none (a mask only along the border, say).
+pub fn ssim_masked(a: &ImageRgb, b: &ImageRgb, mask: &[bool]) -> Result<Option<f64>> {
+    if mask.len() != a.n_pixels() {
+        return Err(Error::Argument(format!(
+            "mask has {} entries for an image of {} pixels",
+            mask.len(),
+            a.n_pixels()
+        )));
+    }
+    let map = ssim_map(a, b)?;
+    let w = a.width as usize;
+    let (mut sum, mut n) = (0.0, 0usize);
+    for y in 0..map.height {
+        for x in 0..map.width {
+            if mask[(y + map.half) * w + x + map.half] {
+                sum += map.values[y * map.width + x];
+                n += 1;
+            }
+        }
+    }
+    Ok((n > 0).then(|| sum / n as f64))
+}
+
+/// SSIM per window position (valid filtering), averaged over channels.
+struct SsimMap {
+    values: Vec<f64>,
+    width: usize,
+    height: usize,
+    /// Offset of a window's centre from its corner.
+    half: usize,
+}
+
+fn ssim_map(a: &ImageRgb, b: &ImageRgb) -> Result<SsimMap> {
     check_same_size(a, b)?;
     let (w, h) = (a.width as usize, a.height as usize);
     if w == 0 || h == 0 {
@@ -120,28 +158,33 @@ pub fn ssim(a: &ImageRgb, b: &ImageRgb) -> Result<f64> {
     }
     let k = gaussian_kernel(size, 1.5);
     let (c1, c2) = (0.01f64.powi(2), 0.03f64.powi(2));
-    let mut total = 0.0;
+    let (ow, oh) = (w + 1 - size, h + 1 - size);
+    let mut values = vec![0.0; ow * oh];
     for c in 0..3 {
         let x: Vec<f64> = (0..w * h).map(|p| a.data[3 * p + c] as f64).collect();
         let y: Vec<f64> = (0..w * h).map(|p| b.data[3 * p + c] as f64).collect();
         let xx: Vec<f64> = x.iter().map(|v| v * v).collect();
         let yy: Vec<f64> = y.iter().map(|v| v * v).collect();
         let xy: Vec<f64> = x.iter().zip(&y).map(|(u, v)| u * v).collect();
-        let (mx, ow, oh) = filter_valid(&x, w, h, &k);
+        let (mx, _, _) = filter_valid(&x, w, h, &k);
         let (my, _, _) = filter_valid(&y, w, h, &k);
         let (sxx, _, _) = filter_valid(&xx, w, h, &k);
         let (syy, _, _) = filter_valid(&yy, w, h, &k);
         let (sxy, _, _) = filter_valid(&xy, w, h, &k);
-        let mut sum = 0.0;
-        for p in 0..ow * oh {
+        for (p, v) in values.iter_mut().enumerate() {
             let (mx, my) = (mx[p], my[p]);
             let vx = sxx[p] - mx * mx;
             let vy = syy[p] - my * my;
             let cov = sxy[p] - mx * my;
-            sum += ((2.0 * mx * my + c1) * (2.0 * cov + c2))
-                / ((mx * mx + my * my + c1) * (vx + vy + c2));
+            *v += ((2.0 * mx * my + c1) * (2.0 * cov + c2))
+                / ((mx * mx + my * my + c1) * (vx + vy + c2))
+                / 3.0;
         }
-        total += sum / (ow * oh) as f64;
     }
-    Ok(total / 3.0)
+    Ok(SsimMap {
+        values,
+        width: ow,
+        height: oh,
+        half: size / 2,
+    })
 }

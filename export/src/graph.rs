@@ -147,22 +147,37 @@ pub fn tensor_i8(name: &str, dims: &[usize], data: &[i8]) -> TensorProto {
     }
 }
 
-/// Symmetric int8 quantization of a weight matrix `w` `[out, in]`, one scale per output
-/// channel: `s_o = max_i |w_oi| / 127`, `q_oi = round(w_oi / s_o)` in `[-127, 127]`
-/// (a row of zeros gets scale 1). Returns `q` transposed to `[in, out]`, the layout of
-/// `MatMulInteger`'s second input, and the `out` scales.
+/// The largest magnitude of a quantized weight: 7 bits, not 8. `MatMulInteger` multiplies
+/// uint8 activations (up to 255) by these weights. On x86 CPUs without VNNI, onnxruntime's
+/// u8 x s8 kernel (AVX2 `vpmaddubsw`) adds each pair of neighbouring products in a
+/// saturating 16-bit lane: with 8-bit weights a pair reaches 2 x 255 x 127 = 64770 and
+/// clips at 32767. With 7-bit weights it reaches at most 2 x 255 x [`INT8_WEIGHT_MAX`] =
+/// 32130 < 32767, so no pair can saturate on any CPU (onnxruntime's `reduce_range`).
+pub const INT8_WEIGHT_MAX: i8 = 63;
+
+/// The largest sum of two neighbouring u8 x s8 products that an int8 graph's weights allow.
+pub const fn int8_pair_sum_max() -> i32 {
+    2 * 255 * INT8_WEIGHT_MAX as i32
+}
+
+/// Symmetric quantization of a weight matrix `w` `[out, in]` to integers in
+/// `[-INT8_WEIGHT_MAX, INT8_WEIGHT_MAX]`, one scale per output channel:
+/// `s_o = max_i |w_oi| / INT8_WEIGHT_MAX`, `q_oi = round(w_oi / s_o)` (a row of zeros gets
+/// scale 1). Returns `q` transposed to `[in, out]`, the layout of `MatMulInteger`'s second
+/// input, and the `out` scales.
 pub fn quantize_per_channel(w: &[f32], out_dim: usize, in_dim: usize) -> (Vec<i8>, Vec<f32>) {
+    let q_max = INT8_WEIGHT_MAX as f32;
     let scales: Vec<f32> = w
         .chunks_exact(in_dim)
         .map(|row| {
             let largest = row.iter().fold(0f32, |m, v| m.max(v.abs()));
-            if largest > 0.0 { largest / 127.0 } else { 1.0 }
+            if largest > 0.0 { largest / q_max } else { 1.0 }
         })
         .collect();
     let mut q = vec![0i8; in_dim * out_dim];
     for (o, (row, &s)) in w.chunks_exact(in_dim).zip(&scales).enumerate() {
         for (i, &v) in row.iter().enumerate() {
-            q[i * out_dim + o] = (v / s).round().clamp(-127.0, 127.0) as i8;
+            q[i * out_dim + o] = (v / s).round().clamp(-q_max, q_max) as i8;
         }
     }
     (q, scales)
@@ -426,17 +441,29 @@ mod tests {
     use super::*;
 
     #[test]
+    fn no_pair_of_u8_by_s8_products_can_saturate_16_bits() {
+        assert!(int8_pair_sum_max() <= i16::MAX as i32);
+        // Whatever the weights, each quantized one is within 7 bits, so any two products
+        // with uint8 activations sum within 16 bits.
+        let w: Vec<f32> = (0..64).map(|k| (k as f32 - 31.5) * 1e3).collect();
+        let (q, _) = quantize_per_channel(&w, 2, 32);
+        let largest = q.iter().map(|v| v.unsigned_abs()).max().unwrap();
+        assert_eq!(largest, INT8_WEIGHT_MAX as u8);
+        assert!(2 * 255 * largest as i32 <= i16::MAX as i32);
+    }
+
+    #[test]
     fn per_channel_quantization_rounds_each_row_within_half_its_step() {
         // Rows of very different magnitudes, one of zeros; [out = 3, in = 4].
         let w = [
             0.5, -1.0, 0.25, 0.0, 1e-3, 2e-3, -4e-3, 0.0, 0.0, 0.0, 0.0, 0.0,
         ];
         let (q, scales) = quantize_per_channel(&w, 3, 4);
-        assert_eq!(scales, [1.0 / 127.0, 4e-3 / 127.0, 1.0]);
+        assert_eq!(scales, [1.0 / 63.0, 4e-3 / 63.0, 1.0]);
         for o in 0..3 {
             let row_max = (0..4).map(|i| q[i * 3 + o].unsigned_abs()).max().unwrap();
-            // Each non-zero row uses the full int8 range.
-            assert_eq!(row_max, if o == 2 { 0 } else { 127 });
+            // Each non-zero row uses the whole 7-bit range.
+            assert_eq!(row_max, if o == 2 { 0 } else { 63 });
             for i in 0..4 {
                 let back = q[i * 3 + o] as f32 * scales[o];
                 assert!((back - w[o * 4 + i]).abs() <= 0.5 * scales[o] * (1.0 + 1e-6));

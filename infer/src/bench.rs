@@ -95,12 +95,6 @@ pub struct RenderBench {
     pub at_30_percent: Option<(f64, f64)>,
 }
 
-/// The median of non-empty `v`.
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Median seconds of `reps` calls of `f` after `warmup` untimed ones.
 fn median_seconds(warmup: usize, reps: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     for _ in 0..warmup {
@@ -112,7 +106,7 @@ fn median_seconds(warmup: usize, reps: usize, mut f: impl FnMut() -> Result<()>)
         f()?;
         times.push(t.elapsed().as_secs_f64());
     }
-    Ok(median(times))
+    Ok(nldf_core::stats::median(&times))
 }
 
 /// Sets and returns the focal length at which the head covers about `target` of the pixels

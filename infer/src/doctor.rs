@@ -29,6 +29,10 @@ pub fn findings() -> Vec<Finding> {
             found: cpu_features(),
         },
         Finding {
+            what: "int8 path",
+            found: int8_path(),
+        },
+        Finding {
             what: "threads",
             found: std::thread::available_parallelism()
                 .map_or_else(|_| "unknown".into(), |n| n.get().to_string()),
@@ -81,6 +85,33 @@ fn first_line(program: &Path, flag: &str) -> Option<String> {
         .lines()
         .next()
         .map(|l| l.trim().to_string())
+}
+
+/// Which kernel family onnxruntime's u8 x s8 products take on this CPU.
+fn int8_path() -> String {
+    let bound = format!(
+        "nldf's int8 weights are 7-bit, so a pair of products stays within {} of the 32767 \
+         a 16-bit sum holds",
+        nldf_export::graph::int8_pair_sum_max()
+    );
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512vnni")
+            || std::arch::is_x86_feature_detected!("avxvnni")
+        {
+            return format!("VNNI: products summed in 32 bits, no saturation ({bound})");
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            return format!(
+                "AVX2 without VNNI: pairs of products summed in saturating 16 bits ({bound})"
+            );
+        }
+        format!("no AVX2: portable int8 kernels ({bound})")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        format!("not x86-64: the runtime's own int8 kernels ({bound})")
+    }
 }
 
 /// The vector features the kernels and runtimes use, present or absent.

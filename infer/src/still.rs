@@ -322,11 +322,7 @@ pub fn bench_track(
     }
     let frames = poses.len();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let median = |v: &[f64]| {
-        let mut v = v.to_vec();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(0.0)
-    };
+    let median = nldf_core::stats::median;
     Ok(StillTrack {
         label: label.to_string(),
         frames,

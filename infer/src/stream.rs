@@ -114,7 +114,7 @@ impl LatencyStats {
         let at = |q: f64| s[((q * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)];
         LatencyStats {
             mean_ms: s.iter().sum::<f64>() / s.len() as f64,
-            p50_ms: at(0.5),
+            p50_ms: nldf_core::stats::median(&s),
             p95_ms: at(0.95),
             max_ms: s[s.len() - 1],
         }

@@ -417,6 +417,33 @@ fn bad_images_and_audio_files_are_refused() {
             }),
             "parsing",
         ),
+        (
+            "landmarks for one frame only",
+            Box::new(|d: &Path| {
+                std::fs::create_dir_all(d.join("ori_imgs")).unwrap();
+                std::fs::write(d.join("ori_imgs/0.lms"), "1 1\n".repeat(68)).unwrap();
+            }),
+            "1.lms are missing",
+        ),
+        (
+            "a damaged landmarks file (the mouth read from landmarks)",
+            Box::new(|d: &Path| {
+                use nldf_core::region::Region;
+                std::fs::create_dir_all(d.join("ori_imgs")).unwrap();
+                std::fs::create_dir_all(d.join("parsing")).unwrap();
+                for entry in std::fs::read_dir(d.join("head_imgs")).unwrap() {
+                    let stem = entry.unwrap().path().file_stem().unwrap().to_owned();
+                    let lms = d.join("ori_imgs").join(&stem).with_extension("lms");
+                    std::fs::write(lms, "1 1\n".repeat(68)).unwrap();
+                    let parsing = d.join("parsing").join(&stem).with_extension("png");
+                    let head = vec![Region::Face; 16 * 12];
+                    nldf_core::dataset::save_regions_png(&parsing, 16, 12, &head, Region::parsing_color)
+                        .unwrap();
+                }
+                std::fs::write(d.join("ori_imgs/2.lms"), "1 1\n".repeat(67) + "1 x\n").unwrap();
+            }),
+            "2.lms",
+        ),
     ];
     refuse_damaged_datasets(cases);
 }

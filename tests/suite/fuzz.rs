@@ -146,6 +146,17 @@ fn fuzz_config_reader() {
 }
 
 #[test]
+fn fuzz_landmarks_reader() {
+    let good: String = (0..68).map(|k| format!("{}.25 {}.5\n", 10 + k % 7, 20 + k / 7)).collect();
+    let seeds = vec![
+        good.clone().into_bytes(),
+        good.replace(' ', ",").into_bytes(),
+        b"1 2\n3 4\n".to_vec(),
+    ];
+    fuzz_reader("landmarks", seeds, 6, fuzz::landmarks);
+}
+
+#[test]
 fn fuzz_onnx_reader() {
     let cfg = nldf_train::student::StudentConfig::tiny();
     let run = write_run(&cfg, 3);

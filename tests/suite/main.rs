@@ -1,9 +1,11 @@
 //! The workspace test suite: one binary, a module per topic.
 
+mod adnerf;
 mod audio;
 mod dataset;
 mod export;
 mod export_ort;
+mod figures;
 mod fuzz;
 mod identity;
 mod infer;

@@ -43,7 +43,7 @@ fn a_nan_render_scores_nan_not_a_perfect_frame() {
     let s: Scores = score_frames(&pairs).unwrap();
     assert!(s.psnr.is_nan(), "a NaN frame scored {} dB", s.psnr);
     assert!(s.ssim.is_nan());
-    assert!(s.mouth_psnr.unwrap().is_nan() && s.face_psnr.unwrap().is_nan());
+    assert!(s.mouth_psnr.unwrap().is_nan() && s.head_psnr.unwrap().is_nan());
     assert_eq!((s.non_finite, s.frames), (1, 2));
     // Identical frames are capped at 100 dB, not infinity.
     let s = score_frames(&[(truth.clone(), truth, None)]).unwrap();
@@ -140,7 +140,7 @@ impl TrainingRun for Diverging {
         Ok(Scores {
             psnr: 30.0,
             ssim: 0.9,
-            face_psnr: None,
+            head_psnr: None,
             mouth_psnr: None,
             frames: n,
             non_finite: 0,
@@ -533,6 +533,8 @@ fn ad_nerf_bounds_use_the_depth_along_the_view_axis() {
         eye: None,
         image_path: "0.png".into(),
         parsing_path: None,
+        labels_path: None,
+        landmarks_path: None,
     };
     // Looking along -z from (0.5, 0, 1.0) and from (0, 0, 1.2).
     let a = frame(Mat4::from_translation(Vec3::new(0.5, 0.0, 1.0)));

@@ -12,9 +12,10 @@ use nldf_core::metrics::{cap_psnr, psnr, ssim};
 use serde::Serialize;
 
 use crate::checkpoint::save_json;
+use crate::config::{StudentRunConfig, StudentTrainConfig};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::scores::region_psnrs;
+use crate::scores::{RegionScores, region_scores};
 use crate::student_trainer::StudentRun;
 use crate::teacher_trainer::TeacherRun;
 use nldf_core::dataset::Frame;
@@ -30,6 +31,46 @@ pub trait FrameModel {
     /// Multiply-adds per ray that meets the head's bounds (the others cost none).
     fn macs_per_ray(&self) -> f64;
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb>;
+}
+
+/// A student's name from its config: the network's shape, then its recipe where it is not
+/// the default one (pixels only, pseudo views and their share, mouth rays, no pool), so
+/// that students trained differently never print alike.
+pub fn student_name(cfg: &StudentRunConfig) -> String {
+    let (m, t) = (&cfg.model, &cfg.train);
+    let defaults = StudentTrainConfig::default();
+    let mut name = format!("student {}x{}", m.depth, m.width);
+    if m.beam.n_points != BeamSpec::default().n_points {
+        name.push_str(&format!(" (K = {})", m.beam.n_points));
+    }
+    let mut recipe = Vec::new();
+    if !t.distill {
+        recipe.push("pixels only".to_string());
+    } else if t.pseudo_frames > 0 {
+        let rays = if t.pseudo_rays > 0 {
+            format!(" of {} px", t.pseudo_rays)
+        } else {
+            String::new()
+        };
+        recipe.push(format!(
+            "{} pseudo views{rays} at {}x",
+            t.pseudo_frames, t.pose_range
+        ));
+        if t.pseudo_fraction != defaults.pseudo_fraction {
+            recipe.push(format!("mix {}", t.pseudo_fraction));
+        }
+    }
+    if t.mouth_fraction != defaults.mouth_fraction {
+        recipe.push(format!("mouth {}", t.mouth_fraction));
+    }
+    if !t.pool {
+        recipe.push("no pool".into());
+    }
+    for r in recipe {
+        name.push_str(", ");
+        name.push_str(&r);
+    }
+    name
 }
 
 /// Rays of a frame that hit the head's bounds.
@@ -72,20 +113,7 @@ impl FrameModel for StudentRun {
             .unwrap_or_else(|| "student".into())
     }
     fn describe(&self) -> String {
-        let m = &self.cfg.model;
-        let t = &self.cfg.train;
-        format!(
-            "student {}x{}{}{}{}",
-            m.depth,
-            m.width,
-            if m.beam.n_points == BeamSpec::default().n_points {
-                String::new()
-            } else {
-                format!(" (K = {})", m.beam.n_points)
-            },
-            if t.distill { "" } else { ", pixels only" },
-            if t.pool { "" } else { ", no pool" }
-        )
+        student_name(&self.cfg)
     }
     fn step(&self) -> usize {
         self.step
@@ -104,7 +132,8 @@ pub struct FrameScore {
     pub img_id: i64,
     pub psnr: f64,
     pub ssim: f64,
-    pub face_psnr: Option<f64>,
+    pub head_psnr: Option<f64>,
+    pub head_ssim: Option<f64>,
     pub mouth_psnr: Option<f64>,
     /// What the view is, for a synthetic scene's evaluation splits (see
     /// [`nldf_core::synth::eval_views`]).
@@ -120,6 +149,7 @@ pub struct ViewScore {
     pub view: String,
     pub frames: usize,
     pub psnr: f64,
+    pub head_psnr: Option<f64>,
     pub mouth_psnr: Option<f64>,
 }
 
@@ -135,7 +165,9 @@ pub struct EvalReport {
     pub frames: Vec<FrameScore>,
     pub psnr: f64,
     pub ssim: f64,
-    pub face_psnr: Option<f64>,
+    /// PSNR inside the head: the headline (the whole frame counts copied background).
+    pub head_psnr: Option<f64>,
+    pub head_ssim: Option<f64>,
     pub mouth_psnr: Option<f64>,
     /// Seconds spent rendering, per frame.
     pub render_s_per_frame: f64,
@@ -204,17 +236,18 @@ pub fn eval_models(
             let render = model.render_frame(data, frame)?;
             render_s[mi] += started.elapsed().as_secs_f64();
             macs[mi] += hits * model.macs_per_ray();
-            let (face, mouth) = match &regions {
-                Some(r) => region_psnrs(&render, &truth, r)?,
-                None => (None, None),
+            let region = match &regions {
+                Some(r) => region_scores(&render, &truth, r)?,
+                None => RegionScores::default(),
             };
             non_finite[mi] += usize::from(render.non_finite_values() > 0);
             scores[mi].push(FrameScore {
                 img_id: frame.img_id,
                 psnr: cap_psnr(psnr(&render, &truth)?),
                 ssim: ssim(&render, &truth)?,
-                face_psnr: face,
-                mouth_psnr: mouth,
+                head_psnr: region.head_psnr,
+                head_ssim: region.head_ssim,
+                mouth_psnr: region.mouth_psnr,
                 view: views.get(&frame.img_id).cloned(),
             });
             let path = out
@@ -247,7 +280,8 @@ pub fn eval_models(
             step: model.step(),
             psnr: mean(scores.iter().map(|s| s.psnr).collect()).unwrap_or(f64::NAN),
             ssim: mean(scores.iter().map(|s| s.ssim).collect()).unwrap_or(f64::NAN),
-            face_psnr: mean(scores.iter().filter_map(|s| s.face_psnr).collect()),
+            head_psnr: mean(scores.iter().filter_map(|s| s.head_psnr).collect()),
+            head_ssim: mean(scores.iter().filter_map(|s| s.head_ssim).collect()),
             mouth_psnr: mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
             render_s_per_frame: render_s[mi] / n as f64,
             macs_per_frame: macs[mi] / n as f64,
@@ -288,11 +322,13 @@ fn by_view(scores: &[FrameScore]) -> Vec<ViewScore> {
                 .filter(|s| s.view.as_deref() == Some(kind))
                 .collect();
             let psnrs: Vec<f64> = of.iter().map(|s| s.psnr).collect();
+            let heads: Vec<f64> = of.iter().filter_map(|s| s.head_psnr).collect();
             let mouths: Vec<f64> = of.iter().filter_map(|s| s.mouth_psnr).collect();
             ViewScore {
                 view: kind.to_string(),
                 frames: of.len(),
                 psnr: mean(psnrs).unwrap_or(f64::NAN),
+                head_psnr: mean(heads),
                 mouth_psnr: mean(mouths),
             }
         })
@@ -323,5 +359,35 @@ impl Evaluation {
                 broken.join("; ")
             )))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn students_trained_differently_are_named_differently() {
+        let base = StudentRunConfig::default();
+        let mut pixels = base.clone();
+        pixels.train.distill = false;
+        let mut pseudo = base.clone();
+        pseudo.train.pseudo_frames = 2000;
+        let mut thin = pseudo.clone();
+        thin.train.pseudo_rays = 0;
+        let mut mix = pseudo.clone();
+        mix.train.pseudo_fraction = 0.75;
+        mix.train.mouth_fraction = 0.2;
+        let names: Vec<String> = [&base, &pixels, &pseudo, &thin, &mix]
+            .into_iter()
+            .map(student_name)
+            .collect();
+        for (a, name) in names.iter().enumerate() {
+            for other in &names[a + 1..] {
+                assert_ne!(name, other);
+            }
+        }
+        assert!(names[1].ends_with(", pixels only"), "{}", names[1]);
+        assert!(names[4].contains("2000 pseudo views of 1024 px at 2x, mix 0.75, mouth 0.2"), "{}", names[4]);
     }
 }

@@ -61,7 +61,7 @@ impl CsvLog {
             Some(s) => (
                 format!("{:.4}", s.psnr),
                 format!("{:.5}", s.ssim),
-                opt(s.face_psnr),
+                opt(s.head_psnr),
                 opt(s.mouth_psnr),
             ),
             None => Default::default(),

@@ -1,10 +1,11 @@
-//! Image scores of rendered frames against their ground truth: PSNR, SSIM and PSNR inside
-//! the head and the mouth, with NaN renders counted instead of hidden. Training scores its
+//! Image scores of rendered frames against their ground truth: PSNR and SSIM over the whole
+//! frame and inside the head (the headline: about half of a frame is background copied from
+//! `bc`), PSNR inside the mouth, with NaN renders counted instead of hidden. Training scores its
 //! validation frames with them, evaluation its whole splits.
 
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
-use nldf_core::metrics::{cap_psnr, psnr, psnr_masked, ssim};
+use nldf_core::metrics::{cap_psnr, psnr, psnr_masked, ssim, ssim_masked};
 use nldf_core::region::Region;
 
 use crate::data::TrainData;
@@ -15,8 +16,12 @@ use crate::error::Result;
 pub struct Scores {
     pub psnr: f64,
     pub ssim: f64,
-    /// PSNR inside the head (face, eyes, mouth; when the dataset has parsing masks).
-    pub face_psnr: Option<f64>,
+    /// PSNR inside the head (face, eyes, mouth; when the dataset has region masks).
+    #[serde(alias = "face_psnr")]
+    pub head_psnr: Option<f64>,
+    /// SSIM over the windows centred inside the head.
+    #[serde(default)]
+    pub head_ssim: Option<f64>,
     /// PSNR inside the mouth region (when the dataset has parsing masks).
     pub mouth_psnr: Option<f64>,
     pub frames: usize,
@@ -26,19 +31,30 @@ pub struct Scores {
     pub non_finite: usize,
 }
 
-/// PSNR inside the head and inside the mouth (each `None` where the region is empty),
-/// capped at [`nldf_core::metrics::PSNR_CAP`] dB (a NaN stays NaN).
-pub fn region_psnrs(
+/// Scores of one frame inside its regions; each `None` where the region is empty.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RegionScores {
+    /// PSNR inside the head, capped at [`nldf_core::metrics::PSNR_CAP`] dB (NaN stays NaN).
+    pub head_psnr: Option<f64>,
+    /// SSIM over the windows centred inside the head.
+    pub head_ssim: Option<f64>,
+    /// PSNR inside the mouth, capped likewise.
+    pub mouth_psnr: Option<f64>,
+}
+
+/// PSNR and SSIM inside the head and PSNR inside the mouth of `render` against `truth`.
+pub fn region_scores(
     render: &ImageRgb,
     truth: &ImageRgb,
     regions: &[Region],
-) -> Result<(Option<f64>, Option<f64>)> {
+) -> Result<RegionScores> {
     let head: Vec<bool> = regions.iter().map(|r| r.is_head()).collect();
     let mouth: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
-    Ok((
-        psnr_masked(render, truth, &head)?.map(cap_psnr),
-        psnr_masked(render, truth, &mouth)?.map(cap_psnr),
-    ))
+    Ok(RegionScores {
+        head_psnr: psnr_masked(render, truth, &head)?.map(cap_psnr),
+        head_ssim: ssim_masked(render, truth, &head)?,
+        mouth_psnr: psnr_masked(render, truth, &mouth)?.map(cap_psnr),
+    })
 }
 
 /// Renders `n` validation frames spread evenly over the validation split (the training
@@ -70,16 +86,17 @@ pub fn score_validation_frames(
 /// [`Scores::non_finite`]: it never scores as a good frame.
 pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Result<Scores> {
     let (mut p, mut s) = (0.0, 0.0);
-    let (mut face, mut mouth) = (Vec::new(), Vec::new());
+    let (mut head, mut head_ssim, mut mouth) = (Vec::new(), Vec::new(), Vec::new());
     let mut non_finite = 0;
     for (render, truth, regions) in pairs {
         non_finite += usize::from(render.non_finite_values() > 0);
         p += cap_psnr(psnr(render, truth)?);
         s += ssim(render, truth)?;
         if let Some(regions) = regions {
-            let (f, m) = region_psnrs(render, truth, regions)?;
-            face.extend(f);
-            mouth.extend(m);
+            let r = region_scores(render, truth, regions)?;
+            head.extend(r.head_psnr);
+            head_ssim.extend(r.head_ssim);
+            mouth.extend(r.mouth_psnr);
         }
     }
     let n = pairs.len().max(1) as f64;
@@ -87,7 +104,8 @@ pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Resu
     Ok(Scores {
         psnr: p / n,
         ssim: s / n,
-        face_psnr: mean(face),
+        head_psnr: mean(head),
+        head_ssim: mean(head_ssim),
         mouth_psnr: mean(mouth),
         frames: pairs.len(),
         non_finite,

@@ -50,6 +50,22 @@ pub struct TeacherRun {
     clock: Clock,
 }
 
+/// One step's rays with their targets.
+#[derive(Default)]
+struct StepBatch {
+    rays: Rays,
+    /// Ground-truth colour per ray, `[n, 3]` flat.
+    gt: Vec<f32>,
+    /// Background colour per ray, `[n, 3]` flat.
+    bg: Vec<f32>,
+    /// Which of `picked` each ray belongs to.
+    frame_of_ray: Vec<u32>,
+    /// The training frames of the batch.
+    picked: Vec<usize>,
+    /// `(training frame index, i, j)` per ray.
+    pixels: Vec<(usize, u32, u32)>,
+}
+
 impl TeacherRun {
     /// A new run in `dir` with seeded weights. The audio features' width and source are
     /// taken from the data.
@@ -120,17 +136,26 @@ impl TeacherRun {
         Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
     }
 
-    /// One training step; returns the batch's loss (MSE over all its rays) and PSNR.
-    pub fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
-        let t = self.cfg.train.clone();
-        let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
+    /// The random stream of the current step's batch.
+    fn step_rng(&self) -> ChaCha8Rng {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.cfg.train.seed);
         rng.set_stream(self.step as u64 + 1);
+        rng
+    }
+
+    /// The rays of the current step's batch: `frames_per_batch` training frames, each with
+    /// its share of rays, `mouth_fraction` of them from the frame's mouth region (when the
+    /// dataset knows one), the rest [`sample_batch`]'s face-biased draw.
+    fn sample_step_batch(&self, data: &TrainData, rng: &mut ChaCha8Rng) -> StepBatch {
+        let t = &self.cfg.train;
         let frames = data.dataset.frames(Split::Train);
         let n_frames = t.frames_per_batch.min(frames.len()).max(1);
-        let picked = sample_indices(&mut rng, frames.len(), n_frames).into_vec();
+        let picked = sample_indices(rng, frames.len(), n_frames).into_vec();
         let per_frame = t.batch_rays.div_ceil(n_frames);
-        let mut rays = Rays::with_capacity(per_frame * n_frames);
-        let (mut gt, mut bg, mut frame_of_ray) = (Vec::new(), Vec::new(), Vec::new());
+        let mut b = StepBatch {
+            rays: Rays::with_capacity(per_frame * n_frames),
+            ..StepBatch::default()
+        };
         for (slot, &fi) in picked.iter().enumerate() {
             let frame = &frames[fi];
             let mouth = data.mouth_pixels.get(fi).map(Vec::as_slice).unwrap_or(&[]);
@@ -146,7 +171,7 @@ impl TeacherRun {
                 frame.face_rect,
                 per_frame - n_mouth,
                 t.face_fraction,
-                &mut rng,
+                rng,
             );
             for _ in 0..n_mouth {
                 let (i, j) = mouth[rng.random_range(0..mouth.len())];
@@ -155,12 +180,34 @@ impl TeacherRun {
                 batch.rays.push(o, d);
             }
             for (r, &(i, j)) in batch.pixels.iter().enumerate() {
-                rays.push(batch.rays.origin(r), batch.rays.direction(r));
-                gt.extend_from_slice(&data.images[fi].get(i, j));
-                bg.extend_from_slice(&data.dataset.background.get(i, j));
-                frame_of_ray.push(slot as u32);
+                b.rays.push(batch.rays.origin(r), batch.rays.direction(r));
+                b.gt.extend_from_slice(&data.images[fi].get(i, j));
+                b.bg.extend_from_slice(&data.dataset.background.get(i, j));
+                b.frame_of_ray.push(slot as u32);
+                b.pixels.push((fi, i, j));
             }
         }
+        b.picked = picked;
+        b
+    }
+
+    /// The pixels the current step trains on, as `(training frame index, i, j)`.
+    pub fn step_pixels(&self, data: &TrainData) -> Vec<(usize, u32, u32)> {
+        self.sample_step_batch(data, &mut self.step_rng()).pixels
+    }
+
+    /// One training step; returns the batch's loss (MSE over all its rays) and PSNR.
+    pub fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
+        let mut rng = self.step_rng();
+        let frames = data.dataset.frames(Split::Train);
+        let StepBatch {
+            rays,
+            gt,
+            bg,
+            frame_of_ray,
+            picked,
+            ..
+        } = self.sample_step_batch(data, &mut rng);
         let aud_ids: Vec<usize> = picked.iter().map(|&fi| frames[fi].aud_id).collect();
         let codes = self.audio_codes(data, &aud_ids)?;
         let out = self.teacher.render(

@@ -26,7 +26,10 @@ use crate::audio::{
     AudioWindows, FeatureConfig, FeatureSource, Waveform, audio_windows, resample, write_wav,
 };
 use crate::camera::{Camera, Intrinsics, look_at};
-use crate::dataset::{FrameEntry, Split, TransformsFile, save_audio_features, save_regions_png};
+use crate::dataset::{
+    FrameEntry, LABELS_DIR, PARSING_DIR, Split, TransformsFile, save_audio_features,
+    save_regions_png,
+};
 use crate::error::{Error, Result};
 use crate::files::{read_json, write_json};
 use crate::image::{ImageRgb, save_png_bytes};
@@ -608,7 +611,7 @@ fn write_inputs(
     wave: &Waveform,
     windows: &AudioWindows,
 ) -> Result<()> {
-    for sub in ["head_imgs", "parsing", "depth"] {
+    for sub in ["head_imgs", PARSING_DIR, LABELS_DIR, "depth"] {
         let d = dir.join(sub);
         std::fs::create_dir(&d).map_err(|e| Error::io(&d, e))?;
     }
@@ -639,16 +642,25 @@ fn render_frames(
         .collect()
 }
 
-/// Writes frame `i`'s image, face parsing and depth (`t * DEPTH_SCALE` as 16 bits).
+/// Writes frame `i`'s image, its face parsing in AD-NeRF's convention (head, no mouth),
+/// nldf's exact labels of the head's parts and depth (`t * DEPTH_SCALE` as 16 bits).
 fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, size: u32) -> Result<()> {
     frame
         .rgb
         .save_png(&dir.join(format!("head_imgs/{i}.png")))?;
     save_regions_png(
-        &dir.join(format!("parsing/{i}.png")),
+        &dir.join(format!("{PARSING_DIR}/{i}.png")),
         size,
         size,
         &frame.regions,
+        Region::parsing_color,
+    )?;
+    save_regions_png(
+        &dir.join(format!("{LABELS_DIR}/{i}.png")),
+        size,
+        size,
+        &frame.regions,
+        Region::label_color,
     )?;
     let depth: Vec<u8> = frame
         .depth
@@ -763,7 +775,8 @@ fn scene_files(n_frames: usize) -> Vec<(PathBuf, usize)> {
         ("aud.npy", 1),
         ("aud.json", 1),
         ("head_imgs", n_frames),
-        ("parsing", n_frames),
+        (PARSING_DIR, n_frames),
+        (LABELS_DIR, n_frames),
         ("depth", n_frames),
         (SCENE_FILE, 1),
     ]

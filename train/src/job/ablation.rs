@@ -56,7 +56,7 @@ pub struct AblationRow {
     /// Scores over every validation frame.
     pub psnr: f64,
     pub ssim: f64,
-    pub face_psnr: Option<f64>,
+    pub head_psnr: Option<f64>,
     pub mouth_psnr: Option<f64>,
 }
 
@@ -187,7 +187,7 @@ impl AblationPlan {
                 minutes: run.elapsed() / 60.0,
                 psnr: s.psnr,
                 ssim: s.ssim,
-                face_psnr: s.face_psnr,
+                head_psnr: s.head_psnr,
                 mouth_psnr: s.mouth_psnr,
             })
         };
@@ -248,7 +248,7 @@ fn write_reports(
             r.minutes,
             r.psnr,
             r.ssim,
-            opt(r.face_psnr),
+            opt(r.head_psnr),
             opt(r.mouth_psnr)
         ));
     }

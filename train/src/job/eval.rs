@@ -9,7 +9,7 @@ use nldf_core::run_files::{RENDER_SPEC_FILE, has_checkpoint, teacher_dir};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::eval::{Evaluation, FrameModel, eval_models};
-use crate::job::{JobEvent, OnEvent, audio_note};
+use crate::job::{JobEvent, OnEvent, audio_note, mouth_note};
 use crate::student_trainer::StudentRun;
 use crate::teacher_trainer::TeacherRun;
 
@@ -71,6 +71,7 @@ impl EvalJob {
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
         let data = TrainData::open_held_out(&self.data, false, &audio, self.split)?;
         on_event(&audio_note(&data));
+        on_event(&mouth_note(&data));
         Ok(EvalPlan {
             teacher,
             students,

@@ -65,6 +65,7 @@ pub(crate) fn load_data(root: &Path, audio: &AudioChoice, on_event: OnEvent) -> 
     on_event(&JobEvent::Note(format!("loading {}", root.display())));
     let data = TrainData::open_with(root, true, audio)?;
     on_event(&audio_note(&data));
+    on_event(&mouth_note(&data));
     Ok(data)
 }
 
@@ -74,6 +75,15 @@ pub(crate) fn audio_note(data: &TrainData) -> JobEvent {
         "audio features: {} from {}",
         data.dataset.audio_source.describe(),
         data.dataset.audio_file.display()
+    ))
+}
+
+/// The note saying where the mouth region (mouth rays, mouth PSNR) comes from, or that it
+/// is unknown.
+pub(crate) fn mouth_note(data: &TrainData) -> JobEvent {
+    JobEvent::Note(format!(
+        "mouth region: {}",
+        data.dataset.mouth_source().describe()
     ))
 }
 

@@ -53,7 +53,7 @@ pub struct PosedScore {
     pub split: String,
     pub psnr: f64,
     pub ssim: f64,
-    pub face_psnr: Option<f64>,
+    pub head_psnr: Option<f64>,
     pub mouth_psnr: Option<f64>,
 }
 
@@ -245,7 +245,7 @@ fn scores_of(reports: &[EvalReport]) -> Vec<PosedScore> {
             split: r.split.clone(),
             psnr: r.psnr,
             ssim: r.ssim,
-            face_psnr: r.face_psnr,
+            head_psnr: r.head_psnr,
             mouth_psnr: r.mouth_psnr,
         })
         .collect()
