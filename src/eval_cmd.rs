@@ -100,7 +100,9 @@ pub fn print_evaluation(evaluation: &Evaluation, out: &Path, n_frames: usize) ->
     }
     if evaluation.models.iter().any(|r| r.by_view.len() > 1) {
         println!();
-        println!("| model | view | frames | head PSNR (dB) | mouth PSNR (dB) | whole-frame PSNR (dB) |");
+        println!(
+            "| model | view | frames | head PSNR (dB) | mouth PSNR (dB) | whole-frame PSNR (dB) |"
+        );
         println!("|---|---|---|---|---|---|");
         for r in &evaluation.models {
             for v in &r.by_view {

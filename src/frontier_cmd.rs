@@ -333,7 +333,6 @@ impl Point {
     }
 }
 
-
 /// Median seconds per frame of `model` rendering `frames` back to back after one untimed.
 fn time_back_to_back(model: &dyn FrameModel, data: &TrainData, frames: &[Frame]) -> Result<f64> {
     let mut times = Vec::with_capacity(frames.len());
@@ -555,8 +554,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     }
     // Medians over the `val` pass: the first frames each point rendered.
     let n_val = reports[0].first().map_or(0, |r| r.frames.len());
-    let val_median =
-        |s: &RefCell<Vec<f64>>| median(&s.borrow()[..n_val.min(s.borrow().len())]);
+    let val_median = |s: &RefCell<Vec<f64>>| median(&s.borrow()[..n_val.min(s.borrow().len())]);
     // Back-to-back times: one untimed frame, then `--timed-frames`.
     let val_frames = val.data.dataset.frames(Split::Val);
     let timed = &val_frames[..(args.timed_frames + 1).min(val_frames.len())];

@@ -54,9 +54,9 @@ impl EventPrinter {
                         ));
                     }
                     Event::Validation { step, scores } => {
-                        let head = scores.head_psnr.map_or(String::new(), |h| {
-                            format!("head {h:.2} dB, ")
-                        });
+                        let head = scores
+                            .head_psnr
+                            .map_or(String::new(), |h| format!("head {h:.2} dB, "));
                         self.last_val = format!(" | val {head}{:.2} dB", scores.psnr);
                         bar.println(format!(
                             "step {step}: validation {head}whole frame {:.2} dB, SSIM {:.4}{}",

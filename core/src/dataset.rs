@@ -18,8 +18,8 @@ use crate::camera::{Camera, Intrinsics, rigid_problem};
 use crate::error::{Error, Result};
 use crate::files::{read_json, write_atomic, write_json};
 use crate::image::{ImageRgb, save_png_bytes};
-use crate::rays::Rect;
 use crate::landmarks::{LANDMARKS_EXT, Landmarks};
+use crate::rays::Rect;
 use crate::region::{MouthSource, Region};
 
 /// The audio feature windows, `[N, 16, F]` (AD-NeRF's name).
@@ -482,9 +482,9 @@ impl FrameDirs {
         let dir = |name: &str| Some(root.join(name)).filter(|d| d.is_dir());
         let holds_landmarks = |d: &PathBuf| {
             std::fs::read_dir(d).is_ok_and(|entries| {
-                entries.flatten().any(|e| {
-                    e.path().extension().and_then(|x| x.to_str()) == Some(LANDMARKS_EXT)
-                })
+                entries
+                    .flatten()
+                    .any(|e| e.path().extension().and_then(|x| x.to_str()) == Some(LANDMARKS_EXT))
             })
         };
         let landmarks = [root.join(LANDMARKS_DIR), image.clone()]
@@ -604,9 +604,10 @@ fn validate_frame(
     let mask = |dir: &Option<PathBuf>, what: &str| -> Result<Option<PathBuf>> {
         match dir {
             None => Ok(None),
-            Some(d) => Some(find_with_ext(d, &stem).ok_or_else(|| {
-                at(format!("{what} {}/{stem}.png is missing", d.display()))
-            }))
+            Some(d) => Some(
+                find_with_ext(d, &stem)
+                    .ok_or_else(|| at(format!("{what} {}/{stem}.png is missing", d.display()))),
+            )
             .transpose(),
         }
     };

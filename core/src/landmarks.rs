@@ -35,14 +35,20 @@ impl Landmarks {
             if line.is_empty() {
                 continue;
             }
-            let values: Vec<&str> = line.split(|c: char| c.is_whitespace() || c == ',').filter(|s| !s.is_empty()).collect();
+            let values: Vec<&str> = line
+                .split(|c: char| c.is_whitespace() || c == ',')
+                .filter(|s| !s.is_empty())
+                .collect();
             let parsed: Option<Vec<f32>> = values.iter().map(|v| v.parse::<f32>().ok()).collect();
             match parsed.as_deref() {
                 Some([x, y]) if x.is_finite() && y.is_finite() => points.push([*x, *y]),
                 _ => {
                     return Err(Error::invalid(
                         path,
-                        format!("line {}: expected two finite numbers `x y`, got {line:?}", n + 1),
+                        format!(
+                            "line {}: expected two finite numbers `x y`, got {line:?}",
+                            n + 1
+                        ),
                     ));
                 }
             }
@@ -50,7 +56,10 @@ impl Landmarks {
         if points.len() != N_LANDMARKS {
             return Err(Error::invalid(
                 path,
-                format!("holds {} points, expected AD-NeRF's {N_LANDMARKS}", points.len()),
+                format!(
+                    "holds {} points, expected AD-NeRF's {N_LANDMARKS}",
+                    points.len()
+                ),
             ));
         }
         Ok(Landmarks { points })
@@ -82,7 +91,8 @@ pub fn polygon_mask(polygon: &[[f32; 2]], width: u32, height: u32) -> Vec<bool> 
         y_lo = y_lo.min(p[1]);
         y_hi = y_hi.max(p[1]);
     }
-    let rows = (y_lo.ceil().max(0.0) as u32)..((y_hi.floor() + 1.0).clamp(0.0, height as f32) as u32);
+    let rows =
+        (y_lo.ceil().max(0.0) as u32)..((y_hi.floor() + 1.0).clamp(0.0, height as f32) as u32);
     for j in rows {
         let y = j as f32;
         for i in 0..width {
@@ -136,6 +146,11 @@ mod tests {
         let err = Landmarks::parse(p, &short).unwrap_err().to_string();
         assert!(err.contains("67 points") && err.contains("0.lms"), "{err}");
         let nan = good.replacen("0.5 0.25", "nan 1", 1);
-        assert!(Landmarks::parse(p, &nan).unwrap_err().to_string().contains("line 1"));
+        assert!(
+            Landmarks::parse(p, &nan)
+                .unwrap_err()
+                .to_string()
+                .contains("line 1")
+        );
     }
 }

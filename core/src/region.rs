@@ -135,9 +135,18 @@ mod tests {
         // AD-NeRF's label image is BGR: head [255, 0, 0], neck [0, 255, 0], cloth [0, 0, 255].
         // On disk, read as RGB, the channels are reversed.
         let bgr_to_rgb = |c: [u8; 3]| [c[2], c[1], c[0]];
-        assert_eq!(Region::from_parsing_color(bgr_to_rgb([255, 0, 0])), Region::Face);
-        assert_eq!(Region::from_parsing_color(bgr_to_rgb([0, 255, 0])), Region::Neck);
-        assert_eq!(Region::from_parsing_color(bgr_to_rgb([0, 0, 255])), Region::Torso);
+        assert_eq!(
+            Region::from_parsing_color(bgr_to_rgb([255, 0, 0])),
+            Region::Face
+        );
+        assert_eq!(
+            Region::from_parsing_color(bgr_to_rgb([0, 255, 0])),
+            Region::Neck
+        );
+        assert_eq!(
+            Region::from_parsing_color(bgr_to_rgb([0, 0, 255])),
+            Region::Torso
+        );
         assert_eq!(Region::from_parsing_color([255; 3]), Region::Background);
         assert_eq!(Region::from_parsing_color([20, 30, 230]), Region::Face);
     }
@@ -148,7 +157,12 @@ mod tests {
             assert_eq!(Region::from_label_color(r.label_color()), r);
             assert_ne!(r.label_color(), r.parsing_color(), "{r:?}");
         }
-        for r in [Region::Background, Region::Face, Region::Neck, Region::Torso] {
+        for r in [
+            Region::Background,
+            Region::Face,
+            Region::Neck,
+            Region::Torso,
+        ] {
             assert_eq!(Region::from_parsing_color(r.parsing_color()), r);
         }
     }

@@ -437,8 +437,14 @@ fn bad_images_and_audio_files_are_refused() {
                     std::fs::write(lms, "1 1\n".repeat(68)).unwrap();
                     let parsing = d.join("parsing").join(&stem).with_extension("png");
                     let head = vec![Region::Face; 16 * 12];
-                    nldf_core::dataset::save_regions_png(&parsing, 16, 12, &head, Region::parsing_color)
-                        .unwrap();
+                    nldf_core::dataset::save_regions_png(
+                        &parsing,
+                        16,
+                        12,
+                        &head,
+                        Region::parsing_color,
+                    )
+                    .unwrap();
                 }
                 std::fs::write(d.join("ori_imgs/2.lms"), "1 1\n".repeat(67) + "1 x\n").unwrap();
             }),

@@ -42,12 +42,25 @@ fn adnerf_scene(dir: &Path) -> (PathBuf, Vec<Truth>) {
         let head: Vec<bool> = exact.iter().map(|r| r.is_head()).collect();
         let mouth: Vec<bool> = exact.iter().map(|r| *r == Region::Mouth).collect();
         let at = |p: usize| ((p % w as usize) as u32, (p / w as usize) as u32);
-        let lowest = (0..head.len()).filter(|&p| head[p]).map(|p| at(p).1).max().unwrap();
-        let cols: Vec<u32> = (0..head.len()).filter(|&p| head[p]).map(|p| at(p).0).collect();
+        let lowest = (0..head.len())
+            .filter(|&p| head[p])
+            .map(|p| at(p).1)
+            .max()
+            .unwrap();
+        let cols: Vec<u32> = (0..head.len())
+            .filter(|&p| head[p])
+            .map(|p| at(p).0)
+            .collect();
         let (c0, c1) = (*cols.iter().min().unwrap(), *cols.iter().max().unwrap());
         let mut labels: Vec<Region> = exact
             .iter()
-            .map(|r| if r.is_head() { Region::Face } else { Region::Background })
+            .map(|r| {
+                if r.is_head() {
+                    Region::Face
+                } else {
+                    Region::Background
+                }
+            })
             .collect();
         let mut neck = vec![false; head.len()];
         for p in 0..head.len() {
@@ -73,8 +86,14 @@ fn adnerf_scene(dir: &Path) -> (PathBuf, Vec<Truth>) {
         .unwrap();
         let m: Vec<(u32, u32)> = (0..mouth.len()).filter(|&p| mouth[p]).map(at).collect();
         assert!(!m.is_empty(), "frame {k}: no mouth");
-        let (x0, x1) = (m.iter().map(|p| p.0).min().unwrap(), m.iter().map(|p| p.0).max().unwrap());
-        let (y0, y1) = (m.iter().map(|p| p.1).min().unwrap(), m.iter().map(|p| p.1).max().unwrap());
+        let (x0, x1) = (
+            m.iter().map(|p| p.0).min().unwrap(),
+            m.iter().map(|p| p.0).max().unwrap(),
+        );
+        let (y0, y1) = (
+            m.iter().map(|p| p.1).min().unwrap(),
+            m.iter().map(|p| p.1).max().unwrap(),
+        );
         let (cx, cy) = ((x0 + x1) as f32 / 2.0, (y0 + y1) as f32 / 2.0);
         let (rx, ry) = ((x1 - x0) as f32 / 2.0 + 0.7, (y1 - y0) as f32 / 2.0 + 0.7);
         let mut points = vec![[cx, cy - 3.0 * ry]; N_LANDMARKS];
@@ -98,7 +117,9 @@ fn adnerf_parsing_and_landmarks_put_the_mouth_on_the_mouth() {
     let dir = tempfile::tempdir().unwrap();
     let (root, truths) = adnerf_scene(dir.path());
     // AD-NeRF's colours on disk: blue head, green neck, red cloth, white background.
-    let parsing = image::open(root.join(format!("{PARSING_DIR}/0.png"))).unwrap().into_rgb8();
+    let parsing = image::open(root.join(format!("{PARSING_DIR}/0.png")))
+        .unwrap()
+        .into_rgb8();
     let colours: std::collections::BTreeSet<[u8; 3]> = parsing.pixels().map(|p| p.0).collect();
     assert_eq!(
         colours.into_iter().collect::<Vec<_>>(),
@@ -115,10 +136,14 @@ fn adnerf_parsing_and_landmarks_put_the_mouth_on_the_mouth() {
         let truth = &truths[f.img_id as usize];
         let regions = ds.load_regions(f).unwrap().unwrap();
         let head: Vec<bool> = regions.iter().map(|r| r.is_head()).collect();
-        assert_eq!(head, truth.head, "frame {}: the head is not the parsing's blue", f.img_id);
-        for p in 0..head.len() {
-            if truth.neck[p] {
-                assert_eq!(regions[p], Region::Neck, "frame {}: pixel {p}", f.img_id);
+        assert_eq!(
+            head, truth.head,
+            "frame {}: the head is not the parsing's blue",
+            f.img_id
+        );
+        for (p, (r, neck)) in regions.iter().zip(&truth.neck).enumerate() {
+            if *neck {
+                assert_eq!(*r, Region::Neck, "frame {}: pixel {p}", f.img_id);
             }
         }
         // The trainer's mouth pixels: inside the landmarks' lips, on the exact mouth, never
@@ -127,14 +152,26 @@ fn adnerf_parsing_and_landmarks_put_the_mouth_on_the_mouth() {
         assert!(!mouth.is_empty(), "frame {}: no mouth pixels", f.img_id);
         for &(i, j) in mouth {
             let p = j as usize * w + i as usize;
-            assert!(!truth.neck[p], "frame {}: a mouth pixel on the neck", f.img_id);
-            assert!(truth.head[p], "frame {}: a mouth pixel off the head", f.img_id);
+            assert!(
+                !truth.neck[p],
+                "frame {}: a mouth pixel on the neck",
+                f.img_id
+            );
+            assert!(
+                truth.head[p],
+                "frame {}: a mouth pixel off the head",
+                f.img_id
+            );
             on_mouth += usize::from(truth.mouth[p]);
             all += 1;
         }
     }
     let share = on_mouth as f64 / all as f64;
-    assert!(share > 0.5, "only {:.0} % of the mouth pixels are on the mouth", 100.0 * share);
+    assert!(
+        share > 0.5,
+        "only {:.0} % of the mouth pixels are on the mouth",
+        100.0 * share
+    );
 
     // A teacher trains on it, its mouth rays on the mouth.
     let cfg = tiny_run_config(2);
@@ -181,7 +218,10 @@ fn adnerf_mouth_psnr_scores_the_mouth_and_not_the_neck() {
     // A wrong mouth shows in the mouth's score, far below the head's.
     let s = region_scores(&spoil(&exact.mouth), &truth, &regions).unwrap();
     let (head, mouth) = (s.head_psnr.unwrap(), s.mouth_psnr.unwrap());
-    assert!(mouth < 15.0 && mouth + 3.0 < head, "mouth {mouth} dB, head {head} dB");
+    assert!(
+        mouth < 15.0 && mouth + 3.0 < head,
+        "mouth {mouth} dB, head {head} dB"
+    );
     assert!(s.head_ssim.unwrap() < 1.0);
 }
 
@@ -195,7 +235,11 @@ fn a_dataset_without_labels_or_landmarks_says_its_mouth_is_unknown() {
     assert!(MouthSource::Unknown.describe().contains("no mouth PSNR"));
     assert!(data.mouth_pixels.iter().all(Vec::is_empty));
     // The head is still known: the parsing's blue.
-    let regions = data.dataset.load_regions(&data.dataset.val[0]).unwrap().unwrap();
+    let regions = data
+        .dataset
+        .load_regions(&data.dataset.val[0])
+        .unwrap()
+        .unwrap();
     assert!(regions.iter().any(|r| r.is_head()));
     assert!(!regions.contains(&Region::Mouth));
 }
@@ -209,7 +253,12 @@ fn a_frame_without_its_landmarks_is_refused_by_name() {
     assert!(err.contains("3.lms") && err.contains("missing"), "{err}");
     std::fs::write(root.join("ori_imgs/3.lms"), "1 2\n").unwrap();
     let ds = Dataset::load(&root).unwrap();
-    let frame = ds.train.iter().chain(&ds.val).find(|f| f.img_id == 3).unwrap();
+    let frame = ds
+        .train
+        .iter()
+        .chain(&ds.val)
+        .find(|f| f.img_id == 3)
+        .unwrap();
     let err = ds.load_regions(frame).unwrap_err().to_string();
     assert!(err.contains("3.lms") && err.contains("68"), "{err}");
 }

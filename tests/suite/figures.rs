@@ -89,9 +89,8 @@ fn decimal_figures(cell: &str) -> Vec<String> {
             k += 1;
             continue;
         }
-        let signed = k > 0
-            && bytes[k - 1] == b'-'
-            && (k == 1 || !bytes[k - 2].is_ascii_alphanumeric());
+        let signed =
+            k > 0 && bytes[k - 1] == b'-' && (k == 1 || !bytes[k - 2].is_ascii_alphanumeric());
         let start = if signed { k - 1 } else { k };
         let mut end = k;
         while end < bytes.len() && bytes[end].is_ascii_digit() {
@@ -198,8 +197,15 @@ fn every_sourced_figure_is_in_its_results_file() {
         sourced += sourced_rows(&text, f.parent().unwrap()).0.len();
         problems.extend(check_file(f));
     }
-    assert!(sourced >= 2, "only {sourced} sourced rows: the headline names no source");
-    assert!(problems.is_empty(), "figures without a source:\n{}", problems.join("\n"));
+    assert!(
+        sourced >= 2,
+        "only {sourced} sourced rows: the headline names no source"
+    );
+    assert!(
+        problems.is_empty(),
+        "figures without a source:\n{}",
+        problems.join("\n")
+    );
 }
 
 #[test]
@@ -232,8 +238,14 @@ fn the_figures_check_catches_a_wrong_digit() {
     )
     .unwrap();
     let problems = check_file(&bad);
-    assert!(problems[0].contains(":3: the row names no source"), "{problems:?}");
-    assert!(problems[1].contains("missing.json is not a committed file"), "{problems:?}");
+    assert!(
+        problems[0].contains(":3: the row names no source"),
+        "{problems:?}"
+    );
+    assert!(
+        problems[1].contains("missing.json is not a committed file"),
+        "{problems:?}"
+    );
 }
 
 #[test]

@@ -147,7 +147,9 @@ fn fuzz_config_reader() {
 
 #[test]
 fn fuzz_landmarks_reader() {
-    let good: String = (0..68).map(|k| format!("{}.25 {}.5\n", 10 + k % 7, 20 + k / 7)).collect();
+    let good: String = (0..68)
+        .map(|k| format!("{}.25 {}.5\n", 10 + k % 7, 20 + k / 7))
+        .collect();
     let seeds = vec![
         good.clone().into_bytes(),
         good.replace(' ', ",").into_bytes(),

@@ -141,6 +141,7 @@ impl TrainingRun for Diverging {
             psnr: 30.0,
             ssim: 0.9,
             head_psnr: None,
+            head_ssim: None,
             mouth_psnr: None,
             frames: n,
             non_finite: 0,

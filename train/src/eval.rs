@@ -388,6 +388,10 @@ mod tests {
             }
         }
         assert!(names[1].ends_with(", pixels only"), "{}", names[1]);
-        assert!(names[4].contains("2000 pseudo views of 1024 px at 2x, mix 0.75, mouth 0.2"), "{}", names[4]);
+        assert!(
+            names[4].contains("2000 pseudo views of 1024 px at 2x, mix 0.75, mouth 0.2"),
+            "{}",
+            names[4]
+        );
     }
 }
