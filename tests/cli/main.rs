@@ -976,3 +976,97 @@ fn the_fixture_renders_and_the_suite_counts_its_cases() {
     ]);
     assert!(out.join("frame_00000.png").is_file());
 }
+
+/// `nldf bench frontier` end to end on the fixture's tiny run: every point of its JSON has
+/// its fields and finite times, the front is exactly the points nothing beats on both time
+/// and `val` PSNR, and the speed-up names an export, never a variant of the teacher.
+#[test]
+fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
+    if let Err(e) = nldf_infer::ort_library::find_ort_library() {
+        nldf_tests::tool_missing::<()>(format!("bench frontier needs onnxruntime: {e}"));
+        return;
+    }
+    let f = fixture();
+    let dir = scratch();
+    let run = dir.path().join("run");
+    nldf_tests::copy_dir(&f.run, &run);
+    let out = dir.path().join("frontier");
+    let a = args(&[
+        "bench",
+        "frontier",
+        "--run",
+        &s(&run),
+        "--data",
+        &s(&f.data),
+        "--out",
+        &s(&out),
+        "--frames",
+        "2",
+        "--one-thread-frames",
+        "1",
+        "--calibration-frames",
+        "1",
+        "--adnerf-frames",
+        "0",
+        "--timed-frames",
+        "1",
+    ]);
+    let o = Command::new(env!("CARGO_BIN_EXE_nldf"))
+        .args(&a)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "nldf bench frontier failed:\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for file in ["frontier.json", "frontier.md", "frontier.png"] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("frontier.json")).unwrap()).unwrap();
+    assert!(json["machine"]["commit"].is_string(), "{}", json["machine"]);
+    let points = json["points"].as_array().unwrap();
+    // The teacher, its two variants, then every export in ort and tract.
+    let exports = points.iter().filter(|p| p["file"].is_string()).count();
+    assert!(
+        points.len() >= 3 + 4 && exports >= 4,
+        "{} points",
+        points.len()
+    );
+    assert_eq!(points[0]["runtime"], "candle");
+    let key = |p: &serde_json::Value| {
+        let val = p["scores"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["split"] == "val")
+            .unwrap();
+        (
+            p["ms_2_threads"].as_f64().unwrap(),
+            val["psnr"].as_f64().unwrap(),
+        )
+    };
+    for p in points {
+        for field in ["model", "precision", "runtime"] {
+            assert!(p[field].as_str().is_some_and(|v| !v.is_empty()), "{p}");
+        }
+        let (ms, psnr) = key(p);
+        assert!(ms.is_finite() && ms > 0.0 && psnr.is_finite(), "{p}");
+        assert!(p["ms_back_to_back"].as_f64().unwrap() > 0.0, "{p}");
+        assert!(!p["model"].as_str().unwrap().contains("candle"), "{p}");
+    }
+    for (i, p) in points.iter().enumerate() {
+        let (t, q) = key(p);
+        let beaten = points.iter().enumerate().any(|(j, o)| {
+            let (t2, q2) = key(o);
+            j != i && t2 <= t && q2 >= q && (t2 < t || q2 > q)
+        });
+        assert_eq!(p["on_front"].as_bool(), Some(!beaten), "{p}");
+    }
+    for s in json["speed_up"].as_array().unwrap() {
+        if let Some(name) = s["point"].as_str() {
+            assert!(name.ends_with(" ort") || name.ends_with(" tract"), "{name}");
+        }
+    }
+}
