@@ -21,10 +21,10 @@ use crate::frame::{Frame, FrameRenderer};
 /// Settings of [`StillSkipper`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SkipConfig {
-    /// A pixel is re-rendered when its colour spread over the probes exceeds this, in
-    /// colour units of [0, 1] (default 12/255: on the real-time student in int8, 32 % of
-    /// the rays re-rendered, 50 dB against full frames, 2.8x faster; at 2/255 the int8
-    /// model's own rounding moves every pixel).
+    /// A pixel is re-rendered when its colour spread over the probes (and the last full
+    /// frame) exceeds this, in colour units of [0, 1] (default 12/255). It bounds a kept
+    /// pixel's error for the probes' audio only: a sound between the probes can move a kept
+    /// pixel further (`nldf bench still` measures by how much).
     pub threshold: f32,
     /// Pixels within this many pixels (a square) of one over the threshold are re-rendered
     /// too (default 2).

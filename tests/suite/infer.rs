@@ -577,9 +577,10 @@ fn infer_render_muxes_an_mp4_with_the_audio_when_ffmpeg_is_there() {
     assert!(!run.root.join("video2").exists());
 }
 
-/// Skipping still pixels: on a still pose, with every frame's audio among the probes, no
-/// pixel that is kept from the full frame differs from the full render by more than the
-/// threshold (the pixels over it are re-rendered, exactly as in full); a full frame comes
+/// Skipping still pixels with the default 8 probes: on a still pose, on every frame whose
+/// audio is a probe's, no pixel kept from the full frame differs from the full render by
+/// more than the threshold (the pixels over it are re-rendered, exactly as in full); on the
+/// other frames the threshold is no bound (the README gives the measured one); a full frame comes
 /// every `refresh` frames; on a moving pose every frame is full and identical; and
 /// `nldf render --skip-still` writes the same frames as the skipper.
 #[test]
@@ -618,12 +619,15 @@ fn infer_skipping_still_pixels_stays_within_its_threshold() {
     widths.sort_by(f32::total_cmp);
     let config = SkipConfig {
         threshold: widths[head / 2],
-        margin: 1,
         refresh: 6,
-        probes: n,
+        ..SkipConfig::default()
     };
-    let all: Vec<Vec<f32>> = probe_frames(n, n).into_iter().map(audio).collect();
-    assert_eq!(all.len(), n);
+    let probed = probe_frames(n, config.probes);
+    assert!(
+        probed.len() < n,
+        "every frame is a probe: the test would hold by construction"
+    );
+    let all: Vec<Vec<f32>> = probed.iter().map(|&f| audio(f)).collect();
     let mut skipper = StillSkipper::new(config, all.clone()).unwrap();
     let mut kinds = Vec::new();
     for f in 0..n {
@@ -637,7 +641,11 @@ fn infer_skipping_still_pixels_stays_within_its_threshold() {
             .zip(&reference.image.data)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0f32, f32::max);
-        assert!(worst <= config.threshold + 1e-6, "frame {f}: {worst}");
+        if probed.contains(&f) {
+            assert!(worst <= config.threshold + 1e-6, "probe frame {f}: {worst}");
+        } else {
+            println!("frame {f} (no probe's audio): largest error {worst}");
+        }
         if out.kind == FrameKind::Full {
             assert_eq!(out.frame, reference);
         } else {
@@ -705,10 +713,7 @@ fn infer_skipping_still_pixels_stays_within_its_threshold() {
     let out = run.root.join("skip_render");
     let report = VideoJob {
         poses: Some(poses),
-        skip: Some(SkipConfig {
-            probes: n,
-            ..config
-        }),
+        skip: Some(config),
         ..job(&path, &wav, &out)
     }
     .plan()
