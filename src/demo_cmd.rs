@@ -15,17 +15,11 @@ use nldf_core::synth::SynthConfig;
 use nldf_infer::backend::{BackendKind, BackendOptions};
 use nldf_infer::video::{VideoJob, VideoReport};
 use nldf_train::job::JobEvent;
-use nldf_train::job::demo::{DemoJob, DemoReport};
+use nldf_train::job::demo::{
+    DEMO_STUDENT_ITERS, DEMO_STUDENT_MINUTES, DEMO_TEACHER_MINUTES, DemoJob, DemoReport,
+};
 
 use crate::progress::{EventPrinter, progress_bar, stop_flag};
-use crate::train_cmd::TeacherPreset;
-
-/// The demo's teacher budget in minutes.
-const DEMO_TEACHER_MINUTES: f64 = 5.0;
-
-/// The demo's student budget in minutes: with the teacher's, the scene, the export, the
-/// video and the evaluation, the demo ends within 15 minutes on 2 cores.
-const DEMO_STUDENT_MINUTES: f64 = 8.5;
 
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
@@ -87,33 +81,31 @@ pub fn run(args: DemoArgs) -> Result<()> {
             "runs/demo"
         })
     });
+    let defaults = DemoJob::defaults(out);
     let scene = if quick {
         SynthConfig {
             seed: args.seed,
             seconds: 4.0,
             size: 64,
             supersample: 1,
-            ..SynthConfig::default()
+            ..defaults.scene.clone()
         }
     } else {
         SynthConfig {
             seed: args.seed,
-            size: 128,
-            supersample: 3,
-            ..SynthConfig::default()
+            ..defaults.scene.clone()
         }
     };
     let job = DemoJob {
-        out,
         scene,
-        teacher: TeacherPreset::Small.config(),
         teacher_minutes: minutes,
         student: args.student_depth.config(),
         student_minutes,
         student_iters: args
             .student_iters
-            .unwrap_or(if quick { 400 } else { 100_000 }),
-        student_distill: args.distill,
+            .unwrap_or(if quick { 400 } else { DEMO_STUDENT_ITERS }),
+        student_distill: args.distill || defaults.student_distill,
+        ..defaults
     };
     let stop = stop_flag();
     let mut printer = EventPrinter::default();
