@@ -69,8 +69,9 @@ pub struct FrontierArgs {
     /// model's size upscaled bilinearly; scored, timed and tabled apart.
     #[arg(long)]
     pub hires_data: Option<PathBuf>,
-    /// Frames each point also renders back to back (after one untimed), as a video renders
-    /// them, for a second 2-thread median beside the scoring pass's.
+    /// Frames each point also renders back to back, as a video renders them, for a second
+    /// 2-thread median beside the scoring pass's: in three rounds where every point takes
+    /// its turn, each turn one untimed frame and then its share of these.
     #[arg(long, default_value_t = 8)]
     pub timed_frames: usize,
 }
@@ -337,16 +338,36 @@ impl Point {
 }
 
 /// Median seconds per frame of `model` rendering `frames` back to back after one untimed.
-fn time_back_to_back(model: &dyn FrameModel, data: &TrainData, frames: &[Frame]) -> Result<f64> {
-    let mut times = Vec::with_capacity(frames.len());
-    for (i, f) in frames.iter().enumerate() {
-        let started = Instant::now();
-        model.render_frame(data, f)?;
-        if i > 0 {
-            times.push(started.elapsed().as_secs_f64());
+/// Rounds of [`time_back_to_back`].
+const BACK_TO_BACK_ROUNDS: usize = 3;
+
+/// Each model's median time per whole frame rendered back to back, interleaved: in each of
+/// [`BACK_TO_BACK_ROUNDS`] rounds every model renders one untimed frame, then its share of
+/// `frames` back to back. Each frame follows the model's own previous one (warm caches, as
+/// a video renders them), and each model's times span the whole timing period, so a drift
+/// of the machine's speed over minutes touches every model alike.
+fn time_back_to_back(
+    models: &[&dyn FrameModel],
+    data: &TrainData,
+    frames: &[Frame],
+) -> Result<Vec<f64>> {
+    let rounds = BACK_TO_BACK_ROUNDS.min(frames.len()).max(1);
+    let mut times = vec![Vec::with_capacity(frames.len()); models.len()];
+    for r in 0..rounds {
+        let chunk = &frames[r * frames.len() / rounds..(r + 1) * frames.len() / rounds];
+        let Some(first) = chunk.first() else {
+            continue;
+        };
+        for (model, times) in models.iter().zip(times.iter_mut()) {
+            model.render_frame(data, first)?;
+            for f in chunk {
+                let started = Instant::now();
+                model.render_frame(data, f)?;
+                times.push(started.elapsed().as_secs_f64());
+            }
         }
     }
-    Ok(median(&times))
+    Ok(times.iter().map(|t| median(t)).collect())
 }
 
 fn score(r: &EvalReport) -> SplitScore {
@@ -564,9 +585,17 @@ pub fn run(args: FrontierArgs) -> Result<()> {
     // Medians over the `val` pass: the first frames each point rendered.
     let n_val = reports[0].first().map_or(0, |r| r.frames.len());
     let val_median = |s: &RefCell<Vec<f64>>| median(&s.borrow()[..n_val.min(s.borrow().len())]);
-    // Back-to-back times: one untimed frame, then `--timed-frames`.
+    // Back-to-back times over `--timed-frames`, every way of rendering in turn.
     let val_frames = val.data.dataset.frames(Split::Val);
-    let timed = &val_frames[..(args.timed_frames + 1).min(val_frames.len())];
+    let timed = &val_frames[..args.timed_frames.min(val_frames.len())];
+    let back_to_back = {
+        let models: Vec<&dyn FrameModel> = std::iter::once(&teacher)
+            .chain(&plain)
+            .map(|t| t as &dyn FrameModel)
+            .chain(points.iter().map(|p| p as &dyn FrameModel))
+            .collect();
+        time_back_to_back(&models, &val.data, timed)?
+    };
     // 1-thread times: each export in each runtime on the first frames of `val`.
     let frames = val.data.dataset.frames(Split::Val);
     let k = args.one_thread_frames.min(frames.len());
@@ -589,14 +618,14 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             .collect()
     };
     // The teacher first: `speed_ups` compares every point with the first row.
-    for t in std::iter::once(&teacher).chain(&plain) {
+    for (k, t) in std::iter::once(&teacher).chain(&plain).enumerate() {
         let report = reports[0]
             .iter()
             .find(|r| r.label == t.label())
             .context("a teacher lacks its val report")?;
         let times = Times {
             taking_turns: val_median(&t.seconds),
-            back_to_back: time_back_to_back(t, &val.data, timed)?,
+            back_to_back: back_to_back[k],
             one_thread: None,
         };
         let size = val.data.dataset.intrinsics.width;
@@ -622,7 +651,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
             .context("a point lacks its val report")?;
         let times = Times {
             taking_turns: val_median(&p.seconds),
-            back_to_back: time_back_to_back(p, &val.data, timed)?,
+            back_to_back: back_to_back[1 + plain.len() + i],
             one_thread: one_thread.get(i).copied(),
         };
         table.push(Point::of_export(p, report, size, times, scores_of(&label)));
@@ -712,7 +741,7 @@ fn hires_points(
     bar.finish_and_clear();
     evaluation.check_finite()?;
     let hires_frames = plan.data.dataset.frames(Split::Val);
-    let timed = &hires_frames[..(args.timed_frames + 1).min(hires_frames.len())];
+    let timed = &hires_frames[..args.timed_frames.min(hires_frames.len())];
     let report_of = |label: &str| {
         evaluation
             .models
@@ -720,23 +749,26 @@ fn hires_points(
             .find(|r| r.label == label)
             .with_context(|| format!("{label} lacks its report at {size} pixels"))
     };
+    // Each point's turn-taking times are read before it renders again back to back.
+    let teacher_turns = median(&teacher.seconds.borrow());
+    let point_turns: Vec<f64> = points.iter().map(|p| median(&p.seconds.borrow())).collect();
+    let models: Vec<&dyn FrameModel> = std::iter::once(&teacher as &dyn FrameModel)
+        .chain(points.iter().map(|p| p as &dyn FrameModel))
+        .collect();
+    let back_to_back = time_back_to_back(&models, &plan.data, timed)?;
     let mut table = Vec::new();
     let r = report_of(&teacher.label())?;
-    // Each point's turn-taking times are read (and their borrow ended) before it renders
-    // again back to back.
-    let taking_turns = median(&teacher.seconds.borrow());
     let times = Times {
-        taking_turns,
-        back_to_back: time_back_to_back(&teacher, &plan.data, timed)?,
+        taking_turns: teacher_turns,
+        back_to_back: back_to_back[0],
         one_thread: None,
     };
     table.push(Point::of_teacher(&teacher, r, size, times, vec![score(r)]));
-    for p in &points {
+    for (i, p) in points.iter().enumerate() {
         let r = report_of(&p.label())?;
-        let taking_turns = median(&p.seconds.borrow());
         let times = Times {
-            taking_turns,
-            back_to_back: time_back_to_back(p, &plan.data, timed)?,
+            taking_turns: point_turns[i],
+            back_to_back: back_to_back[1 + i],
             one_thread: None,
         };
         table.push(Point::of_export(p, r, size, times, vec![score(r)]));
@@ -760,13 +792,13 @@ fn time_adnerf_setting(data: &TrainData, n: usize) -> Result<(f64, f64)> {
     let run = TeacherRun::create(scratch.path(), cfg, data)?;
     let timed = Timed::new(&run, false, false);
     let frames = data.dataset.frames(Split::Val);
-    eprintln!("timing AD-NeRF's setting on {n} frames (seeded weights)");
-    for f in frames.iter().take(n) {
+    eprintln!("timing AD-NeRF's setting on {n} frames after an untimed one (seeded weights)");
+    for f in frames.iter().cycle().take(n + 1) {
         timed.render_frame(data, f)?;
     }
     let pixels = (data.dataset.intrinsics.width * data.dataset.intrinsics.height) as f64;
     Ok((
-        1e3 * median(&timed.seconds.borrow()),
+        1e3 * median(timed.seconds.borrow().get(1..).unwrap_or(&[])),
         pixels * run.macs_per_ray(),
     ))
 }

@@ -1009,7 +1009,7 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
         "--adnerf-frames",
         "0",
         "--timed-frames",
-        "1",
+        "2",
     ]);
     let o = Command::new(env!("CARGO_BIN_EXE_nldf"))
         .args(&a)
