@@ -90,8 +90,8 @@ fn first_line(program: &Path, flag: &str) -> Option<String> {
 /// Which kernel family onnxruntime's u8 x s8 products take on this CPU.
 fn int8_path() -> String {
     let bound = format!(
-        "nldf's int8 weights are 7-bit, so a pair of products stays within {} of the 32767 \
-         a 16-bit sum holds",
+        "nldf's int8 weights are 7-bit: a pair of products reaches at most {}, within the \
+         32767 of a 16-bit sum",
         nldf_export::graph::int8_pair_sum_max()
     );
     #[cfg(target_arch = "x86_64")]

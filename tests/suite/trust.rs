@@ -96,6 +96,8 @@ struct Diverging {
     step: usize,
     nan_at: usize,
     budget_s: f64,
+    /// Seconds spent before the first step (a student's teacher targets, say).
+    spent_before: f64,
 }
 
 impl TrainingRun for Diverging {
@@ -117,7 +119,7 @@ impl TrainingRun for Diverging {
         }
     }
     fn elapsed(&self) -> f64 {
-        self.step as f64
+        self.spent_before + self.step as f64
     }
     fn learning_rate(&self) -> f64 {
         1e-3
@@ -161,6 +163,7 @@ fn a_nan_loss_stops_training_and_keeps_the_last_good_checkpoint() {
         step: 0,
         nan_at: 4,
         budget_s: 0.0,
+        spent_before: 0.0,
     };
     let mut checkpoints = Vec::new();
     let err = train_loop(&mut run, &data, &AtomicBool::new(false), &mut |e| {
@@ -192,6 +195,7 @@ fn a_run_stops_when_its_budget_is_spent_and_a_resumed_spent_run_trains_no_step()
         step: 0,
         nan_at: usize::MAX,
         budget_s: 3.0,
+        spent_before: 0.0,
     };
     let steps = |run: &mut Diverging| {
         let mut n = 0;
@@ -207,6 +211,35 @@ fn a_run_stops_when_its_budget_is_spent_and_a_resumed_spent_run_trains_no_step()
     // Resumed with the same budget: nothing more is trained.
     assert_eq!(steps(&mut run), (0, false));
     assert_eq!(run.step, 3);
+}
+
+/// A new run whose budget is spent before its first step is still written, at step 0, so
+/// that a job can open and score it.
+#[test]
+fn a_new_run_whose_budget_is_spent_before_its_first_step_is_still_saved() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = Diverging {
+        dir: dir.path().to_path_buf(),
+        step: 0,
+        nan_at: usize::MAX,
+        budget_s: 3.0,
+        spent_before: 5.0,
+    };
+    let mut events = Vec::new();
+    train_loop(&mut run, &data, &AtomicBool::new(false), &mut |e| {
+        events.push(e.clone())
+    })
+    .unwrap();
+    let checkpoints: Vec<usize> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Checkpoint { step, .. } => Some(*step),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(checkpoints, vec![0]);
+    assert!(!events.iter().any(|e| matches!(e, Event::Step { .. })));
 }
 
 #[test]

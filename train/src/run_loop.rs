@@ -214,5 +214,14 @@ pub fn train_loop(
             break;
         }
     }
+    // A new run whose budget was spent before its first step (on its teacher's targets,
+    // say) is still written, at step 0, so that it can be opened, resumed and scored.
+    if saved.is_none() && !stop.load(Ordering::Relaxed) {
+        run.save()?;
+        on_event(&Event::Checkpoint {
+            step: run.step(),
+            dir: dir.clone(),
+        });
+    }
     Ok(last_val)
 }
