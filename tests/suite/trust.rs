@@ -100,6 +100,20 @@ struct Diverging {
     spent_before: f64,
 }
 
+impl Diverging {
+    /// A run that never diverges, with a time budget of `budget_s` of which `spent_before`
+    /// is gone before its first step.
+    fn budgeted(dir: &Path, budget_s: f64, spent_before: f64) -> Diverging {
+        Diverging {
+            dir: dir.to_path_buf(),
+            step: 0,
+            nan_at: usize::MAX,
+            budget_s,
+            spent_before,
+        }
+    }
+}
+
 impl TrainingRun for Diverging {
     fn dir(&self) -> &Path {
         &self.dir
@@ -190,13 +204,7 @@ fn a_nan_loss_stops_training_and_keeps_the_last_good_checkpoint() {
 fn a_run_stops_when_its_budget_is_spent_and_a_resumed_spent_run_trains_no_step() {
     let data = TrainData::open(tiny_scene(), false).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut run = Diverging {
-        dir: dir.path().to_path_buf(),
-        step: 0,
-        nan_at: usize::MAX,
-        budget_s: 3.0,
-        spent_before: 0.0,
-    };
+    let mut run = Diverging::budgeted(dir.path(), 3.0, 0.0);
     let steps = |run: &mut Diverging| {
         let mut n = 0;
         let scores = train_loop(run, &data, &AtomicBool::new(false), &mut |e| {
@@ -219,13 +227,7 @@ fn a_run_stops_when_its_budget_is_spent_and_a_resumed_spent_run_trains_no_step()
 fn a_new_run_whose_budget_is_spent_before_its_first_step_is_still_saved() {
     let data = TrainData::open(tiny_scene(), false).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut run = Diverging {
-        dir: dir.path().to_path_buf(),
-        step: 0,
-        nan_at: usize::MAX,
-        budget_s: 3.0,
-        spent_before: 5.0,
-    };
+    let mut run = Diverging::budgeted(dir.path(), 3.0, 5.0);
     let mut events = Vec::new();
     train_loop(&mut run, &data, &AtomicBool::new(false), &mut |e| {
         events.push(e.clone())
