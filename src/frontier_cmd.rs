@@ -25,7 +25,7 @@ use nldf_export::WeightType;
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
 use nldf_train::bench::Machine;
 use nldf_train::data::TrainData;
-use nldf_train::eval::{EvalReport, FrameModel, eval_models};
+use nldf_train::eval::{EvalReport, FrameModel, eval_models, student_short_name};
 use nldf_train::job::JobEvent;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::plot::{FrontierDot, plot_frontier};
@@ -94,6 +94,7 @@ fn precision_name(w: WeightType) -> &'static str {
 struct OnnxPoint {
     student: String,
     describe: String,
+    short: String,
     precision: WeightType,
     kind: BackendKind,
     step: usize,
@@ -245,6 +246,10 @@ struct SplitScore {
 #[derive(Debug, Clone, Default, Serialize)]
 struct Point {
     model: String,
+    /// Its name in plots: the network's shape and recipe, and the precision.
+    short: String,
+    /// Frames rendered this many times smaller, then upscaled (1: at their own size).
+    upscale: u32,
     /// `fp32`, `fp16` or `int8`.
     precision: String,
     runtime: String,
@@ -303,6 +308,8 @@ impl Point {
     ) -> Point {
         Point {
             model: t.describe(),
+            short: format!("teacher{}", t.savings().0),
+            upscale: 1,
             precision: "fp32".into(),
             runtime: "candle".into(),
             step: r.step,
@@ -320,6 +327,8 @@ impl Point {
     ) -> Point {
         Point {
             model: p.model_name(),
+            short: format!("{} {}", p.short, precision_name(p.precision)),
+            upscale: p.upscale,
             precision: precision_name(p.precision).into(),
             runtime: p.kind.name().into(),
             file: Some(p.path.clone()),
@@ -398,6 +407,8 @@ struct Export {
     /// The student's folder name.
     student: String,
     describe: String,
+    /// The student's name in plots ([`student_short_name`]).
+    short: String,
     step: usize,
     macs_per_ray: f64,
     precision: WeightType,
@@ -430,6 +441,7 @@ fn export_all(
                     out.push(Export {
                         student: name.clone(),
                         describe: s.describe(),
+                        short: student_short_name(&s.cfg),
                         step: s.step,
                         macs_per_ray: s.macs_per_ray(),
                         precision: w,
@@ -473,6 +485,7 @@ fn open_point(
     Ok(OnnxPoint {
         student: e.student.clone(),
         describe: e.describe.clone(),
+        short: e.short.clone(),
         precision: e.precision,
         kind,
         step: e.step,
@@ -854,20 +867,6 @@ fn speed_ups(table: &[Point]) -> Vec<SpeedUp> {
         .collect()
 }
 
-/// A point's name in the plot: the network's shape and kind, and the precision.
-fn short_name(p: &Point) -> String {
-    let model = p
-        .model
-        .replace("student ", "")
-        .replace(", pixels only", " pixels")
-        .replace(" (32 samples/ray)", "");
-    if p.runtime == "candle" {
-        model
-    } else {
-        format!("{model} {}", p.precision)
-    }
-}
-
 #[allow(clippy::too_many_arguments)]
 fn write_outputs(
     out: &Path,
@@ -1081,12 +1080,12 @@ fn dots_of(table: &[Point]) -> Vec<FrontierDot> {
         .map(|p| FrontierDot {
             group: if p.runtime == "candle" {
                 "teacher (candle)".into()
-            } else if p.model.contains(", upscaled") {
+            } else if p.upscale > 1 {
                 format!("{} {}, upscaled", p.runtime, p.precision)
             } else {
                 format!("{} {}", p.runtime, p.precision)
             },
-            name: short_name(p),
+            name: p.short.clone(),
             ms: p.ms_2_threads,
             psnr: p.psnr("val").unwrap_or(f64::NAN),
             on_front: p.on_front,
@@ -1101,6 +1100,8 @@ mod tests {
     fn point(model: &str, ms: f64, val: f64) -> Point {
         Point {
             model: model.into(),
+            short: model.into(),
+            upscale: 1,
             precision: "fp32".into(),
             runtime: "ort".into(),
             file: Some(PathBuf::from(format!("{model}.onnx"))),

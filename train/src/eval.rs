@@ -73,6 +73,26 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     name
 }
 
+/// A student's short name for plots, from its config: shape, then `pixels`, `distilled`
+/// or `N pseudo` (and `no pool`).
+pub fn student_short_name(cfg: &StudentRunConfig) -> String {
+    let (m, t) = (&cfg.model, &cfg.train);
+    let mut name = format!("{}x{}", m.depth, m.width);
+    if m.beam.n_points != BeamSpec::default().n_points {
+        name.push_str(&format!(" K{}", m.beam.n_points));
+    }
+    name.push(' ');
+    name.push_str(&match (t.distill, t.pseudo_frames) {
+        (false, _) => "pixels".to_string(),
+        (true, 0) => "distilled".to_string(),
+        (true, n) => format!("{n} pseudo"),
+    });
+    if !t.pool {
+        name.push_str(", no pool");
+    }
+    name
+}
+
 /// Rays of a frame that hit the head's bounds.
 fn hit_rays(data: &TrainData, frame: &Frame) -> usize {
     let ds = &data.dataset;
@@ -388,6 +408,15 @@ mod tests {
             }
         }
         assert!(names[1].ends_with(", pixels only"), "{}", names[1]);
+        let short: Vec<String> = [&base, &pixels, &pseudo]
+            .into_iter()
+            .map(student_short_name)
+            .collect();
+        assert_eq!(
+            short[1],
+            format!("{}x{} pixels", base.model.depth, base.model.width)
+        );
+        assert!(short[0].ends_with(" distilled") && short[2].ends_with(" 2000 pseudo"));
         assert!(
             names[4].contains("2000 pseudo views of 1024 px at 2x, mix 0.75, mouth 0.2"),
             "{}",
