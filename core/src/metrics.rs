@@ -15,6 +15,18 @@ fn check_same_size(a: &ImageRgb, b: &ImageRgb) -> Result<()> {
     Ok(())
 }
 
+/// A region mask `[height * width]` of `image`'s pixels.
+fn check_mask(image: &ImageRgb, mask: &[bool]) -> Result<()> {
+    if mask.len() != image.n_pixels() {
+        return Err(Error::Argument(format!(
+            "mask has {} entries for an image of {} pixels",
+            mask.len(),
+            image.n_pixels()
+        )));
+    }
+    Ok(())
+}
+
 /// PSNRs are reported up to this many dB: identical images would otherwise score infinity.
 pub const PSNR_CAP: f64 = 100.0;
 
@@ -59,13 +71,7 @@ pub fn psnr(a: &ImageRgb, b: &ImageRgb) -> Result<f64> {
 /// when the mask selects no pixel.
 pub fn psnr_masked(a: &ImageRgb, b: &ImageRgb, mask: &[bool]) -> Result<Option<f64>> {
     check_same_size(a, b)?;
-    if mask.len() != a.n_pixels() {
-        return Err(Error::Argument(format!(
-            "mask has {} entries for an image of {} pixels",
-            mask.len(),
-            a.n_pixels()
-        )));
-    }
+    check_mask(a, mask)?;
     let (mut sum, mut n) = (0.0f64, 0usize);
     for (p, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
         for c in 0..3 {
@@ -109,20 +115,14 @@ fn filter_valid(plane: &[f64], w: usize, h: usize, k: &[f64]) -> (Vec<f64>, usiz
 /// and odd for images under 11 pixels), valid filtering, averaged over channels. 1 for
 /// identical images.
 pub fn ssim(a: &ImageRgb, b: &ImageRgb) -> Result<f64> {
-    let map = ssim_map(a, b)?;
-    Ok(map.values.iter().sum::<f64>() / map.values.len() as f64)
+    Ok(ssim_map(a, b)?.mean())
 }
 
-/// [`ssim`] over the windows whose centre pixel `mask` selects (`[height * width]`,
-/// row-major); `None` when it selects none (a mask only along the border, say).
-pub fn ssim_masked(a: &ImageRgb, b: &ImageRgb, mask: &[bool]) -> Result<Option<f64>> {
-    if mask.len() != a.n_pixels() {
-        return Err(Error::Argument(format!(
-            "mask has {} entries for an image of {} pixels",
-            mask.len(),
-            a.n_pixels()
-        )));
-    }
+/// [`ssim`] of the whole images and over the windows whose centre pixel `mask` selects
+/// (`[height * width]`, row-major; `None` when it selects none, a mask only along the
+/// border, say), from one SSIM map.
+pub fn ssim_with_mask(a: &ImageRgb, b: &ImageRgb, mask: &[bool]) -> Result<(f64, Option<f64>)> {
+    check_mask(a, mask)?;
     let map = ssim_map(a, b)?;
     let w = a.width as usize;
     let (mut sum, mut n) = (0.0, 0usize);
@@ -134,7 +134,7 @@ pub fn ssim_masked(a: &ImageRgb, b: &ImageRgb, mask: &[bool]) -> Result<Option<f
             }
         }
     }
-    Ok((n > 0).then(|| sum / n as f64))
+    Ok((map.mean(), (n > 0).then(|| sum / n as f64)))
 }
 
 /// SSIM per window position (valid filtering), averaged over channels.
@@ -144,6 +144,13 @@ struct SsimMap {
     height: usize,
     /// Offset of a window's centre from its corner.
     half: usize,
+}
+
+impl SsimMap {
+    /// The mean over every window: the image's SSIM.
+    fn mean(&self) -> f64 {
+        self.values.iter().sum::<f64>() / self.values.len() as f64
+    }
 }
 
 fn ssim_map(a: &ImageRgb, b: &ImageRgb) -> Result<SsimMap> {

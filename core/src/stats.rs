@@ -1,5 +1,5 @@
-//! Summary statistics of measured samples (timings, latencies), with one meaning each
-//! across every benchmark.
+//! The median of measured samples (timings, latencies), with one meaning across every
+//! benchmark.
 
 /// The median of `values`: the middle value of an odd count, the mean of the two middle
 /// values of an even count, NaN for none. NaNs sort last ([`f64::total_cmp`]).
@@ -14,14 +14,6 @@ pub fn median(values: &[f64]) -> f64 {
     }
 }
 
-/// The mean of `values`, NaN for none.
-pub fn mean(values: &[f64]) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.iter().sum::<f64>() / values.len() as f64
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -32,7 +24,5 @@ mod tests {
         assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
         assert_eq!(median(&[7.0]), 7.0);
         assert!(median(&[]).is_nan());
-        assert!(mean(&[]).is_nan());
-        assert_eq!(mean(&[1.0, 2.0, 6.0]), 3.0);
     }
 }

@@ -10,7 +10,7 @@ use nldf_core::image::ImageRgb;
 use nldf_core::landmarks::{Landmarks, N_LANDMARKS, OUTER_LIPS};
 use nldf_core::region::{MouthSource, Region};
 use nldf_train::data::TrainData;
-use nldf_train::scores::region_scores;
+use nldf_train::scores::frame_scores;
 use nldf_train::teacher_trainer::TeacherRun;
 
 use crate::util::{tiny_run_config, tiny_scene};
@@ -213,10 +213,10 @@ fn adnerf_mouth_psnr_scores_the_mouth_and_not_the_neck() {
     };
     let cap = nldf_core::metrics::PSNR_CAP;
     // A wrong neck leaves the head and the mouth perfect.
-    let s = region_scores(&spoil(&exact.neck), &truth, &regions).unwrap();
+    let s = frame_scores(&spoil(&exact.neck), &truth, Some(&regions)).unwrap();
     assert_eq!((s.head_psnr, s.mouth_psnr), (Some(cap), Some(cap)), "{s:?}");
     // A wrong mouth shows in the mouth's score, far below the head's.
-    let s = region_scores(&spoil(&exact.mouth), &truth, &regions).unwrap();
+    let s = frame_scores(&spoil(&exact.mouth), &truth, Some(&regions)).unwrap();
     let (head, mouth) = (s.head_psnr.unwrap(), s.mouth_psnr.unwrap());
     assert!(
         mouth < 15.0 && mouth + 3.0 < head,

@@ -8,14 +8,13 @@ use std::path::{Path, PathBuf};
 use nldf_core::beam::BeamSpec;
 use nldf_core::dataset::Split;
 use nldf_core::image::{ImageRgb, error_map, grid};
-use nldf_core::metrics::{cap_psnr, psnr, ssim};
 use serde::Serialize;
 
 use crate::checkpoint::save_json;
 use crate::config::{StudentRunConfig, StudentTrainConfig};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::scores::{RegionScores, region_scores};
+use crate::scores::frame_scores;
 use crate::student_trainer::StudentRun;
 use crate::teacher_trainer::TeacherRun;
 use nldf_core::dataset::Frame;
@@ -256,18 +255,15 @@ pub fn eval_models(
             let render = model.render_frame(data, frame)?;
             render_s[mi] += started.elapsed().as_secs_f64();
             macs[mi] += hits * model.macs_per_ray();
-            let region = match &regions {
-                Some(r) => region_scores(&render, &truth, r)?,
-                None => RegionScores::default(),
-            };
+            let f = frame_scores(&render, &truth, regions.as_deref())?;
             non_finite[mi] += usize::from(render.non_finite_values() > 0);
             scores[mi].push(FrameScore {
                 img_id: frame.img_id,
-                psnr: cap_psnr(psnr(&render, &truth)?),
-                ssim: ssim(&render, &truth)?,
-                head_psnr: region.head_psnr,
-                head_ssim: region.head_ssim,
-                mouth_psnr: region.mouth_psnr,
+                psnr: f.psnr,
+                ssim: f.ssim,
+                head_psnr: f.head_psnr,
+                head_ssim: f.head_ssim,
+                mouth_psnr: f.mouth_psnr,
                 view: views.get(&frame.img_id).cloned(),
             });
             let path = out

@@ -5,7 +5,7 @@
 
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
-use nldf_core::metrics::{cap_psnr, psnr, psnr_masked, ssim, ssim_masked};
+use nldf_core::metrics::{cap_psnr, psnr, psnr_masked, ssim, ssim_with_mask};
 use nldf_core::region::Region;
 
 use crate::data::TrainData;
@@ -31,10 +31,14 @@ pub struct Scores {
     pub non_finite: usize,
 }
 
-/// Scores of one frame inside its regions; each `None` where the region is empty.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct RegionScores {
-    /// PSNR inside the head, capped at [`nldf_core::metrics::PSNR_CAP`] dB (NaN stays NaN).
+/// Scores of one frame: over the whole frame and, where the dataset has region masks,
+/// inside the head and the mouth (each `None` where the region is empty or unknown).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameScores {
+    /// PSNR, capped at [`nldf_core::metrics::PSNR_CAP`] dB (NaN stays NaN).
+    pub psnr: f64,
+    pub ssim: f64,
+    /// PSNR inside the head, capped likewise.
     pub head_psnr: Option<f64>,
     /// SSIM over the windows centred inside the head.
     pub head_ssim: Option<f64>,
@@ -42,17 +46,31 @@ pub struct RegionScores {
     pub mouth_psnr: Option<f64>,
 }
 
-/// PSNR and SSIM inside the head and PSNR inside the mouth of `render` against `truth`.
-pub fn region_scores(
+/// The scores of `render` against `truth` (the SSIM map computed once for the whole frame
+/// and the head), inside `regions` where given.
+pub fn frame_scores(
     render: &ImageRgb,
     truth: &ImageRgb,
-    regions: &[Region],
-) -> Result<RegionScores> {
+    regions: Option<&[Region]>,
+) -> Result<FrameScores> {
+    let psnr = cap_psnr(psnr(render, truth)?);
+    let Some(regions) = regions else {
+        return Ok(FrameScores {
+            psnr,
+            ssim: ssim(render, truth)?,
+            head_psnr: None,
+            head_ssim: None,
+            mouth_psnr: None,
+        });
+    };
     let head: Vec<bool> = regions.iter().map(|r| r.is_head()).collect();
     let mouth: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
-    Ok(RegionScores {
+    let (ssim, head_ssim) = ssim_with_mask(render, truth, &head)?;
+    Ok(FrameScores {
+        psnr,
+        ssim,
         head_psnr: psnr_masked(render, truth, &head)?.map(cap_psnr),
-        head_ssim: ssim_masked(render, truth, &head)?,
+        head_ssim,
         mouth_psnr: psnr_masked(render, truth, &mouth)?.map(cap_psnr),
     })
 }
@@ -90,14 +108,12 @@ pub fn score_frames(pairs: &[(ImageRgb, ImageRgb, Option<Vec<Region>>)]) -> Resu
     let mut non_finite = 0;
     for (render, truth, regions) in pairs {
         non_finite += usize::from(render.non_finite_values() > 0);
-        p += cap_psnr(psnr(render, truth)?);
-        s += ssim(render, truth)?;
-        if let Some(regions) = regions {
-            let r = region_scores(render, truth, regions)?;
-            head.extend(r.head_psnr);
-            head_ssim.extend(r.head_ssim);
-            mouth.extend(r.mouth_psnr);
-        }
+        let f = frame_scores(render, truth, regions.as_deref())?;
+        p += f.psnr;
+        s += f.ssim;
+        head.extend(f.head_psnr);
+        head_ssim.extend(f.head_ssim);
+        mouth.extend(f.mouth_psnr);
     }
     let n = pairs.len().max(1) as f64;
     let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
