@@ -78,13 +78,13 @@ pub fn run(args: EvalArgs) -> Result<()> {
 pub fn print_evaluation(evaluation: &Evaluation, out: &Path, n_frames: usize) -> Result<()> {
     let opt = |v: Option<f64>| v.map(|m| format!("{m:.2}")).unwrap_or_else(|| "-".into());
     println!(
-        "| model | split | step | frames | head PSNR (dB) | head SSIM | mouth PSNR (dB) | whole-frame PSNR (dB) | whole-frame SSIM | GMAC / frame | s / frame |"
+        "| model | split | step | frames | head PSNR (dB) | head SSIM | mouth PSNR (dB) | whole-frame PSNR (dB) | whole-frame SSIM | repainted background (%) | GMAC / frame | s / frame |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let opt4 = |v: Option<f64>| v.map(|m| format!("{m:.4}")).unwrap_or_else(|| "-".into());
     for r in &evaluation.models {
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.4} | {:.2} | {:.2} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.4} | {} | {:.2} | {:.2} |",
             r.model,
             r.split,
             r.step,
@@ -94,6 +94,8 @@ pub fn print_evaluation(evaluation: &Evaluation, out: &Path, n_frames: usize) ->
             opt(r.mouth_psnr),
             r.psnr,
             r.ssim,
+            r.repainted
+                .map_or("-".into(), |v| format!("{:.1}", 100.0 * v)),
             r.macs_per_frame / 1e9,
             r.render_s_per_frame
         );

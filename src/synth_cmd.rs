@@ -35,9 +35,31 @@ pub struct SynthArgs {
     /// Seed of the `voice` evaluation split's speaker (default: --seed + 1).
     #[arg(long)]
     pub voice_seed: Option<u64>,
+    /// Which head: `standard` (the one the recipes were tuned on, with nldf's exact region
+    /// labels) or `second` (another shape and colouring, labelled as AD-NeRF labels a real
+    /// recording: parsing without a mouth label, and 68 landmarks per frame).
+    #[arg(long, value_enum, default_value_t = HeadArg::Standard)]
+    pub head: HeadArg,
     /// Replace the output folder even if it holds something other than an earlier scene.
     #[arg(long)]
     pub force: bool,
+}
+
+/// `--head`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HeadArg {
+    Standard,
+    Second,
+}
+
+impl HeadArg {
+    /// The scene's head.
+    pub fn style(self) -> synth::HeadStyle {
+        match self {
+            HeadArg::Standard => synth::HeadStyle::Standard,
+            HeadArg::Second => synth::HeadStyle::Second,
+        }
+    }
 }
 
 pub fn run(args: SynthArgs) -> Result<()> {
@@ -58,6 +80,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
         supersample: args.supersample,
         novel_turn: args.novel_turn,
         voice_seed: args.voice_seed,
+        head: args.head.style(),
         ..default
     };
     synth::validate(&cfg)?;

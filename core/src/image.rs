@@ -50,6 +50,16 @@ impl ImageRgb {
         self.width as usize * self.height as usize
     }
 
+    /// The colours of `pixels` (row-major indices), `[pixels.len(), 3]` flat: what a
+    /// renderer composites behind the rays it sends through a network.
+    pub fn gather(&self, pixels: &[usize]) -> Vec<f32> {
+        let mut out = Vec::with_capacity(3 * pixels.len());
+        for &p in pixels {
+            out.extend_from_slice(&self.data[3 * p..3 * p + 3]);
+        }
+        out
+    }
+
     /// Writes colour `r` of `rgb` (`[pixels.len(), 3]` flat) into pixel `pixels[r]` (a
     /// row-major index): rendered rays put back into their image.
     pub fn paint(&mut self, pixels: &[usize], rgb: &[f32]) {

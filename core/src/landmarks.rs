@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::region::Region;
 
 /// Points of a landmarks file.
 pub const N_LANDMARKS: usize = 68;
@@ -80,6 +81,101 @@ impl Landmarks {
     }
 }
 
+/// The 68 landmarks a face tracker would place on a frame whose exact regions (row-major,
+/// `width` wide) are known: the outer lips (48-59) on an ellipse around the mouth region
+/// (half a pixel outside its outermost pixel centres), the inner lips (60-67) inside it,
+/// the eyes (36-47) around the eye regions, the brows (17-26) above them, the nose
+/// (27-35) between the eyes and the mouth and the jaw (0-16) along the head's lower
+/// outline. A synthetic scene writes them for datasets in AD-NeRF's layout, which carry
+/// no mouth label. `None` when the frame shows no mouth or no head.
+pub fn landmarks_from_regions(regions: &[Region], width: u32) -> Option<Landmarks> {
+    let w = width.max(1) as usize;
+    let bbox = |keep: &dyn Fn(Region) -> bool| -> Option<[f32; 4]> {
+        let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+        for (p, &r) in regions.iter().enumerate() {
+            if keep(r) {
+                let (x, y) = (p % w, p / w);
+                x0 = x0.min(x);
+                x1 = x1.max(x);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            }
+        }
+        (x0 != usize::MAX).then(|| [x0 as f32, x1 as f32, y0 as f32, y1 as f32])
+    };
+    let mouth = bbox(&|r| r == Region::Mouth)?;
+    let head = bbox(&|r| r.is_head())?;
+    let eyes = bbox(&|r| r == Region::Eyes);
+    let ellipse = |b: [f32; 4], pad: f32, n: usize, from: f32, to: f32| -> Vec<[f32; 2]> {
+        let (cx, cy) = ((b[0] + b[1]) / 2.0, (b[2] + b[3]) / 2.0);
+        let (rx, ry) = ((b[1] - b[0]) / 2.0 + pad, (b[3] - b[2]) / 2.0 + pad);
+        (0..n)
+            .map(|k| {
+                let t = if n > 1 {
+                    k as f32 / (n - 1) as f32
+                } else {
+                    0.0
+                };
+                let a = from + (to - from) * t;
+                [cx + rx * a.cos(), cy + ry * a.sin()]
+            })
+            .collect()
+    };
+    use std::f32::consts::PI;
+    let (hx, hy) = ((head[0] + head[1]) / 2.0, (head[2] + head[3]) / 2.0);
+    let eye_line = eyes.map_or(hy - 0.1 * (head[3] - head[2]), |e| (e[2] + e[3]) / 2.0);
+    let eye_half = eyes.map_or(0.25 * (head[1] - head[0]), |e| (e[1] - e[0]) / 4.0);
+    let mut points = Vec::with_capacity(N_LANDMARKS);
+    // Jaw: the lower half of the head's outline, ear to ear.
+    points.extend(
+        ellipse(head, 0.0, 17, PI, 0.0)
+            .into_iter()
+            .map(|[x, y]| [x, 2.0 * hy - y]),
+    );
+    // Brows: five points above each eye.
+    for side in [-1.0f32, 1.0] {
+        let cx = hx + side * eye_half * 1.2;
+        for k in 0..5 {
+            let x = cx + (k as f32 - 2.0) * eye_half * 0.3;
+            points.push([x, eye_line - eye_half * 0.8]);
+        }
+    }
+    // Nose: bridge (27-30) and base (31-35).
+    let mouth_top = mouth[2];
+    for k in 0..4 {
+        let t = (k + 1) as f32 / 5.0;
+        points.push([hx, eye_line + (mouth_top - eye_line) * t * 0.8]);
+    }
+    for k in 0..5 {
+        points.push([
+            hx + (k as f32 - 2.0) * eye_half * 0.25,
+            eye_line + (mouth_top - eye_line) * 0.8,
+        ]);
+    }
+    // Eyes: six points around each.
+    for side in [-1.0f32, 1.0] {
+        let cx = hx + side * eye_half * 1.2;
+        let b = [
+            cx - eye_half * 0.5,
+            cx + eye_half * 0.5,
+            eye_line - 1.0,
+            eye_line + 1.0,
+        ];
+        points.extend(ellipse(b, 0.0, 6, PI, PI + 2.0 * PI * 5.0 / 6.0));
+    }
+    // Outer lips, around the mouth region in image order; inner lips inside them.
+    points.extend(ellipse(mouth, 0.5, 12, PI, PI + 2.0 * PI * 11.0 / 12.0));
+    let inner = [
+        mouth[0] + 1.0,
+        mouth[1] - 1.0,
+        mouth[2] + 1.0,
+        mouth[3] - 1.0,
+    ];
+    points.extend(ellipse(inner, 0.0, 8, PI, PI + 2.0 * PI * 7.0 / 8.0));
+    debug_assert_eq!(points.len(), N_LANDMARKS);
+    Some(Landmarks { points })
+}
+
 /// Pixels (row-major) whose centre `(i, j)` lies inside `polygon` (even-odd rule).
 pub fn polygon_mask(polygon: &[[f32; 2]], width: u32, height: u32) -> Vec<bool> {
     let mut mask = vec![false; width as usize * height as usize];
@@ -115,6 +211,46 @@ pub fn polygon_mask(polygon: &[[f32; 2]], width: u32, height: u32) -> Vec<bool> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Landmarks placed from exact regions put their lip polygon on the mouth: it covers
+    /// most of the mouth's pixels and little else.
+    #[test]
+    fn landmarks_from_regions_outline_the_mouth() {
+        let (w, h) = (40u32, 40u32);
+        let mut regions = vec![Region::Background; (w * h) as usize];
+        for j in 0..h {
+            for i in 0..w {
+                let p = (j * w + i) as usize;
+                let (x, y) = (i as f32 - 20.0, j as f32 - 20.0);
+                if (x / 12.0).powi(2) + (y / 16.0).powi(2) <= 1.0 {
+                    regions[p] = Region::Face;
+                }
+                if ((x - 0.0) / 5.0).powi(2) + ((y - 9.0) / 2.5).powi(2) <= 1.0 {
+                    regions[p] = Region::Mouth;
+                }
+            }
+        }
+        let lms = landmarks_from_regions(&regions, w).unwrap();
+        assert_eq!(lms.points.len(), N_LANDMARKS);
+        let mask = lms.mouth_mask(w, h);
+        let exact: Vec<bool> = regions.iter().map(|r| *r == Region::Mouth).collect();
+        let both = mask.iter().zip(&exact).filter(|(a, b)| **a && **b).count();
+        let (m, e) = (
+            mask.iter().filter(|&&v| v).count(),
+            exact.iter().filter(|&&v| v).count(),
+        );
+        assert!(both as f64 >= 0.85 * e as f64, "covers {both} of {e}");
+        assert!(
+            both as f64 >= 0.75 * m as f64,
+            "{both} of its {m} on the mouth"
+        );
+        // No mouth, no landmarks.
+        let no_mouth: Vec<Region> = regions
+            .iter()
+            .map(|&r| if r == Region::Mouth { Region::Face } else { r })
+            .collect();
+        assert!(landmarks_from_regions(&no_mouth, w).is_none());
+    }
 
     #[test]
     fn a_square_covers_its_inner_pixel_centres() {

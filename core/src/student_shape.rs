@@ -89,6 +89,13 @@ pub struct StudentConfig {
     /// Fuse the codes of `audio.att_frames` neighbouring frames with AudioAttNet (AD-NeRF's
     /// smoothing); without, only the frame's own window is encoded.
     pub attention: bool,
+    /// Predict the ray's opacity beside its segment colours: how much of the ray the head
+    /// covers, distilled from the teacher's accumulated weight. The pixel is then
+    /// `sum_i c_i + (1 - opacity) * background[pixel]` (the teacher's compositing in
+    /// screen space), so the student never has to paint the background itself. Off in
+    /// checkpoints made before it existed (their last segment holds the background).
+    #[serde(default)]
+    pub opacity: bool,
 }
 
 impl Default for StudentConfig {
@@ -106,6 +113,7 @@ impl StudentConfig {
             width: 256,
             segments: 4,
             attention: true,
+            opacity: true,
         }
     }
 
@@ -153,6 +161,7 @@ impl StudentConfig {
             width: 32,
             segments: 4,
             attention: true,
+            opacity: true,
         }
     }
 
@@ -166,10 +175,16 @@ impl StudentConfig {
         self.beam.encoded_len() + self.audio.dim
     }
 
+    /// Width of the network's output: `3 M` segment colours, then the opacity's logit
+    /// when it has one.
+    pub fn output_dim(&self) -> usize {
+        3 * self.segments + usize::from(self.opacity)
+    }
+
     /// Multiply-adds per ray of the network.
     pub fn macs_per_ray(&self) -> usize {
         let w = self.width;
-        self.input_dim() * w + self.n_blocks() * 2 * w * w + w * 3 * self.segments
+        self.input_dim() * w + self.n_blocks() * 2 * w * w + w * self.output_dim()
     }
 
     /// Checks the shape (at least one block, even depth, sizes in range); the error names

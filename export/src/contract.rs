@@ -15,6 +15,15 @@
 //! - output [`OUTPUT_SEGMENTS`] `segments`: f32 `[n_rays, M, 3]`, the M segment colours whose
 //!   sum is `rgb`
 //!
+//! A model with opacity ([`keys::OPACITY`] `true`, contract 3) also has:
+//! - input [`INPUT_BACKGROUND`] `background`: f32 `[n_rays, 3]`, the background image's
+//!   colour at each ray's pixel
+//! - output [`OUTPUT_OPACITY`] `opacity`: f32 `[n_rays, 1]`, how much of the ray the head
+//!   covers, in (0, 1)
+//!
+//! and its `rgb` is `sum_i segments_i + (1 - opacity) * background`, composited in the
+//! graph as the teacher composites; its segments then hold the head's colour alone.
+//!
 //! # Numerics
 //! The graph encodes each beam point as `nldf_core::encoding` does: the sine and cosine of
 //! the lowest octave in double precision, the higher octaves by the double-angle identities
@@ -62,12 +71,37 @@ pub const INPUT_AUDIO: &str = "audio";
 pub const OUTPUT_RGB: &str = "rgb";
 /// Segment colours, f32 `[n_rays, M, 3]`.
 pub const OUTPUT_SEGMENTS: &str = "segments";
+/// The background colour behind each ray, f32 `[n_rays, 3]` (models with opacity).
+pub const INPUT_BACKGROUND: &str = "background";
+/// How much of each ray the head covers, f32 `[n_rays, 1]` (models with opacity).
+pub const OUTPUT_OPACITY: &str = "opacity";
+
+/// The graph's input names in the order the exporter writes them: the background last,
+/// for a model with opacity.
+pub fn input_names(opacity: bool) -> Vec<&'static str> {
+    let mut names = vec![INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO];
+    if opacity {
+        names.push(INPUT_BACKGROUND);
+    }
+    names
+}
+
+/// The graph's output names in the order the exporter writes them.
+pub fn output_names(opacity: bool) -> Vec<&'static str> {
+    let mut names = vec![OUTPUT_RGB, OUTPUT_SEGMENTS];
+    if opacity {
+        names.push(OUTPUT_OPACITY);
+    }
+    names
+}
 
 /// Value of [`keys::FORMAT`] that marks a model as an nldf student.
 pub const FORMAT: &str = "nldf-student";
 /// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change
-/// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]).
-pub const CONTRACT_VERSION: u32 = 2;
+/// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]; 3: [`keys::OPACITY`],
+/// with the background input and opacity output of a model that has one). Contract 2
+/// models are still read: they have no opacity.
+pub const CONTRACT_VERSION: u32 = 3;
 
 /// `metadata_props` keys.
 pub mod keys {
@@ -121,6 +155,9 @@ pub mod keys {
     /// FNV-1a 64 of the initializers' names and bytes, 16 hex digits (plain string): see
     /// [`super::weights_checksum`].
     pub const WEIGHTS_CHECKSUM: &str = "nldf.weights_checksum";
+    /// Whether the graph predicts opacity and composites over its `background` input
+    /// (JSON `true` / `false`; contract 3).
+    pub const OPACITY: &str = "nldf.opacity";
     /// The background as base64 of an 8-bit RGB PNG (plain string). Written last.
     pub const BACKGROUND_PNG: &str = "nldf.background_png";
 }
@@ -175,6 +212,8 @@ pub struct ModelInfo {
     pub beam: BeamSpec,
     /// Segments per ray, M.
     pub segments: usize,
+    /// The graph predicts opacity and composites over its background input.
+    pub opacity: bool,
     /// The audio input.
     pub audio: AudioInput,
     /// The network's sizes.
@@ -213,6 +252,7 @@ impl ModelInfo {
             (keys::BEAM_FREQS, json(&self.beam.n_freqs)),
             (keys::MAX_COORD, json(&MAX_COORD)),
             (keys::SEGMENTS, json(&self.segments)),
+            (keys::OPACITY, json(&self.opacity)),
             (keys::AUDIO_ATT_FRAMES, json(&self.audio.att_frames)),
             (keys::AUDIO_WINDOW, json(&self.audio.window)),
             (keys::AUDIO_FEATURES, json(&self.audio.n_features)),
@@ -280,10 +320,10 @@ impl ModelInfo {
         }
         let value = |key: &str| -> Result<usize, MetadataError> { parse(key, get(key)?) };
         let contract: u32 = parse(keys::CONTRACT, get(keys::CONTRACT)?)?;
-        if contract != CONTRACT_VERSION {
+        if !(2..=CONTRACT_VERSION).contains(&contract) {
             return Err(MetadataError::Malformed(
                 keys::CONTRACT.to_string(),
-                format!("contract version {contract}, this build reads {CONTRACT_VERSION}"),
+                format!("contract version {contract}, this build reads 2 to {CONTRACT_VERSION}"),
             ));
         }
         let spec: RenderSpec = parse(keys::RENDER_SPEC, get(keys::RENDER_SPEC)?)?;
@@ -305,6 +345,8 @@ impl ModelInfo {
                 n_freqs: value(keys::BEAM_FREQS)?,
             },
             segments: value(keys::SEGMENTS)?,
+            // Contract 2 predates opacity.
+            opacity: contract >= 3 && parse(keys::OPACITY, get(keys::OPACITY)?)?,
             audio: AudioInput {
                 att_frames: value(keys::AUDIO_ATT_FRAMES)?,
                 window: value(keys::AUDIO_WINDOW)?,

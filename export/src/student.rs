@@ -8,8 +8,8 @@ use nldf_core::encoding::MAX_COORD;
 
 use crate::checkpoint::StudentCheckpoint;
 use crate::contract::{
-    self, AudioInput, GRAPH_NAME, INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo,
-    NetworkShape, OUTPUT_RGB, OUTPUT_SEGMENTS, RAY_AXIS,
+    self, AudioInput, GRAPH_NAME, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_DIRECTIONS, INPUT_ORIGINS,
+    ModelInfo, NetworkShape, OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS, RAY_AXIS,
 };
 use crate::error::{Error, Result};
 use crate::graph::{
@@ -115,6 +115,7 @@ pub fn model_info(ckpt: &StudentCheckpoint, graph: &GraphProto) -> ModelInfo {
         spec: ckpt.spec.clone(),
         beam: s.beam,
         segments: s.segments,
+        opacity: s.opacity,
         audio: AudioInput {
             att_frames: s.audio.att_frames,
             window: s.audio.window,
@@ -176,21 +177,31 @@ fn build(
             Dim::Fixed(s.audio.n_features),
         ],
     );
+    let background = s.opacity.then(|| {
+        g.input(
+            INPUT_BACKGROUND,
+            DataType::Float,
+            &[rays.clone(), Dim::Fixed(3)],
+        )
+    });
     let beams = encode_beams(&mut g, ckpt, &origins, &directions);
     let code = audio_code(&mut g, ckpt, &audio)?;
-    residual_mlp(&mut g, ckpt, &beams, &code)?;
+    residual_mlp(&mut g, ckpt, &beams, &code, background.as_deref())?;
     g.output(OUTPUT_RGB, DataType::Float, &[rays.clone(), Dim::Fixed(3)]);
     g.output(
         OUTPUT_SEGMENTS,
         DataType::Float,
-        &[rays, Dim::Fixed(s.segments), Dim::Fixed(3)],
+        &[rays.clone(), Dim::Fixed(s.segments), Dim::Fixed(3)],
     );
+    if s.opacity {
+        g.output(OUTPUT_OPACITY, DataType::Float, &[rays, Dim::Fixed(1)]);
+    }
     let n_values = g.n_initializer_values();
     let doc = format!(
         "NLDF student: {} x {} residual MLP over beams of K = {} points with L = {} \
          frequencies and a {}-d audio code, M = {} segments. Inputs {INPUT_ORIGINS} and \
          {INPUT_DIRECTIONS} [{RAY_AXIS}, 3], {INPUT_AUDIO} [{}, {}, {}]; outputs {OUTPUT_RGB} \
-         [{RAY_AXIS}, 3] and {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3].",
+         [{RAY_AXIS}, 3] and {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3].{}",
         s.depth,
         s.width,
         s.beam.n_points,
@@ -201,6 +212,15 @@ fn build(
         s.audio.window,
         s.audio.n_features,
         s.segments,
+        if s.opacity {
+            format!(
+                " With opacity: input {INPUT_BACKGROUND} [{RAY_AXIS}, 3], output \
+                 {OUTPUT_OPACITY} [{RAY_AXIS}, 1], and {OUTPUT_RGB} = sum of the segments \
+                 + (1 - {OUTPUT_OPACITY}) {INPUT_BACKGROUND}."
+            )
+        } else {
+            String::new()
+        },
     );
     let taps = g.taps().to_vec();
     let graph = g.finish(GRAPH_NAME, &doc);
@@ -455,13 +475,16 @@ fn audio_code(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, audio: &str) -> Re
 /// to every beam. Produces the graph outputs.
 ///
 /// # Shapes
-/// - `beams`: `[n_rays, 3 K (1 + 2 L)]`; `code`: `[1, dim]`
-/// - outputs `segments` `[n_rays, M, 3]` and `rgb` `[n_rays, 3]`
+/// - `beams`: `[n_rays, 3 K (1 + 2 L)]`; `code`: `[1, dim]`; `background` `[n_rays, 3]`
+///   (models with opacity)
+/// - outputs `segments` `[n_rays, M, 3]`, `rgb` `[n_rays, 3]` and, with `background`,
+///   `opacity` `[n_rays, 1]`
 fn residual_mlp(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
     beams: &str,
     code: &str,
+    background: Option<&str>,
 ) -> Result<()> {
     let s = &ckpt.shape;
     let w = s.width;
@@ -511,15 +534,41 @@ fn residual_mlp(
     }
     // The output layer stays in f32 under int8: its 3 M outputs are the colours
     // themselves, and it costs a twentieth of a hidden layer.
-    let out = linear(g, ckpt, "mlp.output", &h, w, 3 * s.segments)?;
+    let out = linear(g, ckpt, "mlp.output", &h, w, s.output_dim())?;
+    let colours = if s.opacity {
+        let axis = g.constant_i64("mlp.output_axis", &[1], &[1]);
+        let slice = |g: &mut GraphBuilder, name: &str, lo: usize, hi: usize| {
+            let lo = g.constant_i64(&format!("{name}.start"), &[1], &[lo as i64]);
+            let hi = g.constant_i64(&format!("{name}.end"), &[1], &[hi as i64]);
+            g.node("Slice", name, &[&out, &lo, &hi, &axis], vec![])
+        };
+        let m3 = 3 * s.segments;
+        let logit = slice(g, "mlp.opacity_logit", m3, m3 + 1);
+        g.node("Sigmoid", OUTPUT_OPACITY, &[&logit], vec![]);
+        slice(g, "mlp.colours", 0, m3)
+    } else {
+        out
+    };
     let shape = g.constant_i64("mlp.segment_shape", &[3], &[0, s.segments as i64, 3]);
-    let segments = g.node("Reshape", OUTPUT_SEGMENTS, &[&out, &shape], vec![]);
+    let segments = g.node("Reshape", OUTPUT_SEGMENTS, &[&colours, &shape], vec![]);
     let axis1 = g.constant_i64("mlp.segment_axis", &[1], &[1]);
-    g.node(
+    let rgb_name = if background.is_some() {
+        "mlp.colour"
+    } else {
+        OUTPUT_RGB
+    };
+    let colour = g.node(
         "ReduceSum",
-        OUTPUT_RGB,
+        rgb_name,
         &[&segments, &axis1],
         vec![attr_int("keepdims", 0)],
     );
+    if let Some(background) = background {
+        // rgb = colour + (1 - opacity) background: the teacher's compositing.
+        let one = g.constant_f32("mlp.one", &[1], &[1.0]);
+        let clear = g.node("Sub", "mlp.clear", &[&one, OUTPUT_OPACITY], vec![]);
+        let behind = g.node("Mul", "mlp.behind", &[&clear, background], vec![]);
+        g.node("Add", OUTPUT_RGB, &[&colour, &behind], vec![]);
+    }
     Ok(())
 }

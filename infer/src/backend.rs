@@ -94,8 +94,12 @@ impl BackendOptions {
 pub struct RayOutputs {
     /// Pixel colours, `[n_rays, 3]` (paper Eq. 7).
     pub rgb: Vec<f32>,
-    /// Segment colours, `[n_rays, M, 3]`, summing to `rgb`.
+    /// Segment colours, `[n_rays, M, 3]`, summing to `rgb` (to `rgb` less the background's
+    /// share for a model with opacity).
     pub segments: Vec<f32>,
+    /// How much of each ray the head covers, `[n_rays]`; empty for a model without
+    /// opacity.
+    pub opacity: Vec<f32>,
 }
 
 /// A runtime holding one exported model.
@@ -114,12 +118,14 @@ pub trait Backend {
     ///
     /// # Shapes
     /// - `origins`, `directions`: `[n_rays, 3]` flat, `1 <= n_rays <= batch_size`
+    /// - `background`: `[n_rays, 3]` flat for a model with opacity, else ignored
     /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_export::contract`)
-    /// - returns `rgb` `[n_rays, 3]` and `segments` `[n_rays, M, 3]`
+    /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
     fn run_batch(
         &mut self,
         origins: &[f32],
         directions: &[f32],
+        background: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs>;
 
@@ -127,15 +133,25 @@ pub trait Backend {
     ///
     /// # Shapes
     /// - `origins`, `directions`: `[n_rays, 3]` flat
+    /// - `background`: `[n_rays, 3]` flat, the background behind each ray, for a model
+    ///   with opacity (see [`ModelInfo::opacity`]); ignored (may be empty) otherwise
     /// - `audio`: `[att_frames, window, n_features]` flat
-    /// - returns `rgb` `[n_rays, 3]` and `segments` `[n_rays, M, 3]`
-    fn run(&mut self, origins: &[f32], directions: &[f32], audio: &[f32]) -> Result<RayOutputs> {
-        check_inputs(self.info(), origins, directions, audio)?;
+    /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
+    fn run(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        background: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs> {
+        check_inputs(self.info(), origins, directions, background, audio)?;
         let n = origins.len() / 3;
         let m = self.info().segments;
+        let opacity = self.info().opacity;
         let mut out = RayOutputs {
             rgb: Vec::with_capacity(3 * n),
             segments: Vec::with_capacity(3 * m * n),
+            opacity: Vec::with_capacity(if opacity { n } else { 0 }),
         };
         let batch = self.batch_size();
         for start in (0..n).step_by(batch) {
@@ -143,10 +159,16 @@ pub trait Backend {
             let part = self.run_batch(
                 &origins[3 * start..3 * end],
                 &directions[3 * start..3 * end],
+                if opacity {
+                    &background[3 * start..3 * end]
+                } else {
+                    &[]
+                },
                 audio,
             )?;
             out.rgb.extend_from_slice(&part.rgb);
             out.segments.extend_from_slice(&part.segments);
+            out.opacity.extend_from_slice(&part.opacity);
         }
         Ok(out)
     }
@@ -157,6 +179,7 @@ pub fn check_inputs(
     info: &ModelInfo,
     origins: &[f32],
     directions: &[f32],
+    background: &[f32],
     audio: &[f32],
 ) -> Result<()> {
     if !origins.len().is_multiple_of(3) || origins.len() != directions.len() {
@@ -164,6 +187,14 @@ pub fn check_inputs(
             "rays: origins hold {} values and directions {}, expected equal multiples of 3",
             origins.len(),
             directions.len()
+        )));
+    }
+    if info.opacity && background.len() != origins.len() {
+        return Err(Error::Argument(format!(
+            "rays: the model composites over the background, which holds {} values for {} \
+             rays (expected 3 per ray)",
+            background.len(),
+            origins.len() / 3
         )));
     }
     if audio.len() != info.audio.len() {

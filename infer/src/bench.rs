@@ -166,11 +166,22 @@ pub fn bench_render(
     progress("ort: whole frames against bare onnxruntime");
     let rays = ort.rays(c2w);
     let n_rays = rays.pixels.len();
+    let background = if ort.info().opacity {
+        crate::frame::background_at(ort.info(), ort.intrinsics().width, ort.intrinsics().height)?
+            .gather(&rays.pixels)
+    } else {
+        Vec::new()
+    };
     // One block after the other, never alternating: a session that has just run keeps its
     // pool spinning for a while, and two sessions taking turns fight over the cores (on
     // 2 cores that made the bare session look 20-50 % slower than onnxruntime from Python).
     let bare_s = median_seconds(cfg.warmup, cfg.reps, || {
-        bare.run_bare(&rays.rays.origins, &rays.rays.directions, &audio)
+        bare.run_bare(
+            &rays.rays.origins,
+            &rays.rays.directions,
+            &background,
+            &audio,
+        )
     })?;
     drop(bare);
     let frame_s = median_seconds(cfg.warmup, cfg.reps, || ort.render(c2w, &audio).map(|_| ()))?;

@@ -13,7 +13,7 @@ use nldf_core::audio::neighbourhood;
 use nldf_core::camera::Camera;
 use nldf_core::dataset::Dataset;
 use nldf_core::rays::head_rays;
-use nldf_export::contract::{INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo};
+use nldf_export::contract::{ModelInfo, input_names};
 use nldf_export::{ActivationRanges, ExportReport, Tap, calibration_model, export_student_int8};
 use tract_onnx::prelude::*;
 
@@ -100,7 +100,7 @@ fn ranges_of(
         .model_for_read(&mut &bytes[..])
         .map_err(|e| Error::backend(NAME, e))?;
     parsed
-        .set_input_names([INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO])
+        .set_input_names(input_names(info.opacity))
         .and_then(|()| parsed.select_outputs_by_name(taps.iter().map(|t| t.tensor.as_str())))
         .map_err(|e| Error::backend(NAME, e))?;
     let mut plans: HashMap<usize, std::sync::Arc<TypedRunnableModel>> = HashMap::new();
@@ -122,17 +122,29 @@ fn ranges_of(
                         .with_input_fact(0, f32::fact([rays, 3]).into())
                         .and_then(|m| m.with_input_fact(1, f32::fact([rays, 3]).into()))
                         .and_then(|m| m.with_input_fact(2, f32::fact(audio_shape).into()))
+                        .and_then(|m| {
+                            if info.opacity {
+                                m.with_input_fact(3, f32::fact([rays, 3]).into())
+                            } else {
+                                Ok(m)
+                            }
+                        })
                         .and_then(|m| m.into_optimized())
                         .and_then(|m| m.into_runnable())
                         .map_err(|e| Error::backend(NAME, e))?,
                 ),
             };
             let inputs = (|| -> TractResult<TVec<TValue>> {
-                Ok(tvec!(
+                let mut inputs: TVec<TValue> = tvec!(
                     Tensor::from_shape(&[rays, 3], &frame.origins[3 * start..3 * end])?.into(),
                     Tensor::from_shape(&[rays, 3], &frame.directions[3 * start..3 * end])?.into(),
                     Tensor::from_shape(&audio_shape, &frame.audio)?.into(),
-                ))
+                );
+                if info.opacity {
+                    // The taps all lie before the compositing: any background will do.
+                    inputs.push(Tensor::from_shape(&[rays, 3], &vec![0.0f32; 3 * rays])?.into());
+                }
+                Ok(inputs)
             })()
             .map_err(|e| Error::backend(NAME, e))?;
             let outputs =

@@ -9,7 +9,7 @@ use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
 use nldf_export::contract::ModelInfo;
 
-use crate::backend::Backend;
+use crate::backend::{Backend, RayOutputs};
 use crate::error::{Error, Result};
 
 /// Largest image side `nldf render` accepts.
@@ -143,7 +143,7 @@ impl FrameRenderer {
     pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
         let rays = self.rays(c2w);
         let mut image = self.background.clone();
-        let rgb = self.run_rays(&rays, audio)?;
+        let rgb = self.run_rays(&rays, audio)?.rgb;
         image.paint(&rays.pixels, &rgb);
         Ok(Frame {
             image,
@@ -151,18 +151,26 @@ impl FrameRenderer {
         })
     }
 
-    /// The colours of `rays` with the audio neighbourhood `audio` (none for no rays).
+    /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),
+    /// composited over the renderer's background for a model with opacity.
     ///
     /// # Shapes
     /// - `audio`: `[att_frames, window, n_features]` flat
-    /// - returns `[rays.pixels.len(), 3]` flat
-    pub fn run_rays(&mut self, rays: &PixelRays, audio: &[f32]) -> Result<Vec<f32>> {
+    /// - returns `rgb` `[rays.pixels.len(), 3]` flat (and the segments and opacity)
+    pub fn run_rays(&mut self, rays: &PixelRays, audio: &[f32]) -> Result<RayOutputs> {
         if rays.pixels.is_empty() {
-            return Ok(Vec::new());
+            return Ok(RayOutputs::default());
         }
-        Ok(self
-            .backend
-            .run(&rays.rays.origins, &rays.rays.directions, audio)?
-            .rgb)
+        let background = if self.backend.info().opacity {
+            self.background.gather(&rays.pixels)
+        } else {
+            Vec::new()
+        };
+        self.backend.run(
+            &rays.rays.origins,
+            &rays.rays.directions,
+            &background,
+            audio,
+        )
     }
 }

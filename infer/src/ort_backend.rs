@@ -7,7 +7,8 @@ use std::sync::OnceLock;
 
 use nldf_export::ExportedModel;
 use nldf_export::contract::{
-    INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
+    INPUT_AUDIO, INPUT_BACKGROUND, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_OPACITY,
+    OUTPUT_RGB, OUTPUT_SEGMENTS,
 };
 use ort::environment::Environment;
 use ort::session::{Session, SessionOutputs};
@@ -99,17 +100,26 @@ impl OrtBackend {
         &mut self,
         origins: &[f32],
         directions: &[f32],
+        background: &[f32],
         audio: &[f32],
         take: impl FnOnce(&SessionOutputs<'_>) -> Result<R>,
     ) -> Result<R> {
         let n = origins.len() / 3;
         let fail = |e: ort::Error| Error::backend(NAME, e);
-        let inputs = ort::inputs![
+        let mut inputs = ort::inputs![
             INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
             INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
             INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
                 .map_err(fail)?,
         ];
+        if self.info.opacity {
+            inputs.push((
+                INPUT_BACKGROUND.into(),
+                TensorRef::from_array_view(([n, 3], background))
+                    .map_err(fail)?
+                    .into(),
+            ));
+        }
         let outputs = self.session.run(inputs).map_err(fail)?;
         take(&outputs)
     }
@@ -117,16 +127,28 @@ impl OrtBackend {
     /// Runs the session on `origins`/`directions` in batches of [`Backend::batch_size`]
     /// rays, as [`Backend::run`] does, but keeps no output: the bare runtime's cost on
     /// ready-made inputs, which `bench` compares whole frames against.
-    pub fn run_bare(&mut self, origins: &[f32], directions: &[f32], audio: &[f32]) -> Result<()> {
-        crate::backend::check_inputs(&self.info, origins, directions, audio)?;
+    pub fn run_bare(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        background: &[f32],
+        audio: &[f32],
+    ) -> Result<()> {
+        crate::backend::check_inputs(&self.info, origins, directions, background, audio)?;
         let n = origins.len() / 3;
+        let opacity = self.info.opacity;
         for start in (0..n).step_by(self.batch_size) {
             let end = (start + self.batch_size).min(n);
             let (o, d) = (
                 &origins[3 * start..3 * end],
                 &directions[3 * start..3 * end],
             );
-            self.run_session(o, d, audio, |_| Ok(()))?;
+            let b = if opacity {
+                &background[3 * start..3 * end]
+            } else {
+                &[]
+            };
+            self.run_session(o, d, b, audio, |_| Ok(()))?;
         }
         Ok(())
     }
@@ -145,10 +167,17 @@ impl Backend for OrtBackend {
         self.batch_size
     }
 
-    fn run_batch(&mut self, rays_o: &[f32], rays_d: &[f32], audio: &[f32]) -> Result<RayOutputs> {
+    fn run_batch(
+        &mut self,
+        rays_o: &[f32],
+        rays_d: &[f32],
+        background: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs> {
         let n = rays_o.len() / 3;
         let m = self.info.segments;
-        self.run_session(rays_o, rays_d, audio, |outputs| {
+        let opacity = self.info.opacity;
+        self.run_session(rays_o, rays_d, background, audio, |outputs| {
             let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {
                 let value = outputs
                     .get(name)
@@ -171,6 +200,11 @@ impl Backend for OrtBackend {
             Ok(RayOutputs {
                 rgb: take(OUTPUT_RGB, 3)?,
                 segments: take(OUTPUT_SEGMENTS, 3 * m)?,
+                opacity: if opacity {
+                    take(OUTPUT_OPACITY, 1)?
+                } else {
+                    Vec::new()
+                },
             })
         })
     }

@@ -164,7 +164,7 @@ impl StillSkipper {
         };
         self.since_full += 1;
         let mut image = base;
-        let rgb = renderer.run_rays(&moving, audio)?;
+        let rgb = renderer.run_rays(&moving, audio)?.rgb;
         image.paint(&moving.pixels, &rgb);
         let head_pixels = moving.pixels.len();
         self.moving = Some(moving);
@@ -199,7 +199,7 @@ impl StillSkipper {
             .collect();
         widen(&first);
         for probe in &self.probes {
-            widen(&renderer.run_rays(&rays, probe)?);
+            widen(&renderer.run_rays(&rays, probe)?.rgb);
         }
         let k = renderer.intrinsics();
         let hot: Vec<(u32, u32)> = (0..n)

@@ -9,9 +9,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use nldf_export::ExportedModel;
-use nldf_export::contract::{
-    INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
-};
+use nldf_export::contract::{ModelInfo, input_names, output_names};
 use tract_onnx::prelude::*;
 
 use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
@@ -51,9 +49,10 @@ impl TractBackend {
             .map_err(|e| Error::backend(NAME, format!("{}: {e}", model.path.display())))?;
         // tract numbers inputs and outputs by position; onnxruntime binds them by name. Bind
         // by name here too, so that a graph listing them in another order renders the same.
+        let opacity = model.info.opacity;
         parsed
-            .set_input_names([INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO])
-            .and_then(|()| parsed.select_outputs_by_name([OUTPUT_RGB, OUTPUT_SEGMENTS]))
+            .set_input_names(input_names(opacity))
+            .and_then(|()| parsed.select_outputs_by_name(output_names(opacity)))
             .map_err(|e| {
                 Error::backend(
                     NAME,
@@ -88,14 +87,18 @@ impl TractBackend {
             return Ok(plan.clone());
         }
         let audio = self.info.audio.shape();
+        let opacity = self.info.opacity;
         let compile = || -> TractResult<Arc<TypedRunnableModel>> {
-            self.model
+            let mut model = self
+                .model
                 .clone()
                 .with_input_fact(0, f32::fact([n_rays, 3]).into())?
                 .with_input_fact(1, f32::fact([n_rays, 3]).into())?
-                .with_input_fact(2, f32::fact(audio).into())?
-                .into_optimized()?
-                .into_runnable()
+                .with_input_fact(2, f32::fact(audio).into())?;
+            if opacity {
+                model = model.with_input_fact(3, f32::fact([n_rays, 3]).into())?;
+            }
+            model.into_optimized()?.into_runnable()
         };
         let plan = compile().map_err(|e| Error::backend(NAME, format!("compiling: {e}")))?;
         self.plans.insert(n_rays, plan.clone());
@@ -129,6 +132,7 @@ impl Backend for TractBackend {
         &mut self,
         origins: &[f32],
         directions: &[f32],
+        background: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs> {
         let n = origins.len() / 3;
@@ -143,11 +147,14 @@ impl Backend for TractBackend {
         let tensor = |shape: &[usize], data: &[f32]| {
             Tensor::from_shape(shape, data).map_err(|e| Error::backend(NAME, e))
         };
-        let inputs = tvec!(
+        let mut inputs: TVec<TValue> = tvec!(
             tensor(&[padded, 3], &pad(origins))?.into(),
             tensor(&[padded, 3], &pad(directions))?.into(),
             tensor(&self.info.audio.shape(), audio)?.into(),
         );
+        if self.info.opacity {
+            inputs.push(tensor(&[padded, 3], &pad(background))?.into());
+        }
         let outputs =
             tract_linalg::multithread::multithread_tract_scope(self.executor.clone(), || {
                 plan.run(inputs)
@@ -170,15 +177,23 @@ impl Backend for TractBackend {
             }
             Ok(view.iter().take(per_ray * n).copied().collect())
         };
-        let [rgb, segments] = outputs.as_slice() else {
+        let expected = output_names(self.info.opacity).len();
+        if outputs.len() != expected {
             return Err(Error::backend(
                 NAME,
-                format!("the graph gave {} outputs, expected 2", outputs.len()),
+                format!(
+                    "the graph gave {} outputs, expected {expected}",
+                    outputs.len()
+                ),
             ));
-        };
+        }
         Ok(RayOutputs {
-            rgb: take(rgb, 3)?,
-            segments: take(segments, 3 * m)?,
+            rgb: take(&outputs[0], 3)?,
+            segments: take(&outputs[1], 3 * m)?,
+            opacity: match outputs.get(2) {
+                Some(alpha) => take(alpha, 1)?,
+                None => Vec::new(),
+            },
         })
     }
 }

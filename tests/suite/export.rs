@@ -8,7 +8,7 @@ use std::process::Command;
 
 use crate::util::{
     PYTHON_PARITY, Run, TOL, candle_frame, candle_render, configs, foreign_model, max_diff, python,
-    random_audio, random_rays, read_npy, run_python, write_npy, write_run,
+    random_audio, random_rays, ray_background, read_npy, run_python, write_npy, write_run,
 };
 use glam::Mat4;
 use nldf_core::audio::neighbourhood;
@@ -24,7 +24,8 @@ use nldf_train::student::StudentConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// The model at `path` run by tract with a concrete ray count: pixels and segments, flat.
+/// The model at `path` run by tract with a concrete ray count: pixels and segments, flat
+/// (a model with opacity composited over [`ray_background`]).
 fn tract_render(
     path: &Path,
     rays: &Rays,
@@ -33,23 +34,30 @@ fn tract_render(
 ) -> (Vec<f32>, Vec<f32>) {
     use tract_onnx::prelude::*;
     let n = rays.len();
-    let model = tract_onnx::onnx()
+    let opacity = read_model(path).unwrap().info.opacity;
+    let mut model = tract_onnx::onnx()
         .model_for_path(path)
         .unwrap()
         .with_input_fact(0, f32::fact([n, 3]).into())
         .unwrap()
         .with_input_fact(1, f32::fact([n, 3]).into())
-        .unwrap()
-        .into_optimized()
-        .unwrap()
-        .into_runnable()
         .unwrap();
+    if opacity {
+        model = model.with_input_fact(3, f32::fact([n, 3]).into()).unwrap();
+    }
+    let model = model.into_optimized().unwrap().into_runnable().unwrap();
     let origins = Tensor::from_shape(&[n, 3], &rays.origins).unwrap();
     let directions = Tensor::from_shape(&[n, 3], &rays.directions).unwrap();
     let audio = Tensor::from_shape(&shape, audio).unwrap();
-    let out = model
-        .run(tvec!(origins.into(), directions.into(), audio.into()))
-        .unwrap();
+    let mut inputs: TVec<TValue> = tvec!(origins.into(), directions.into(), audio.into());
+    if opacity {
+        inputs.push(
+            Tensor::from_shape(&[n, 3], &ray_background(n))
+                .unwrap()
+                .into(),
+        );
+    }
+    let out = model.run(inputs).unwrap();
     let flat = |t: &TValue| -> Vec<f32> {
         t.to_plain_array_view::<f32>()
             .unwrap()
@@ -278,6 +286,11 @@ fn export_passes_onnx_checker_and_python_onnxruntime_matches_candle() {
             let n = rays.len() as u64;
             write_npy(&folder.join("rays_o.npy"), &[n, 3], &rays.origins);
             write_npy(&folder.join("rays_d.npy"), &[n, 3], &rays.directions);
+            write_npy(
+                &folder.join("background.npy"),
+                &[n, 3],
+                &ray_background(rays.len()),
+            );
             let a = &cfg.audio;
             let shape = [a.att_frames as u64, a.window as u64, a.n_features as u64];
             write_npy(&folder.join("audio.npy"), &shape, &audio);

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use crate::util::{
     PYTHON_PARITY, Run, TOL, candle_render, configs, max_diff, ort_available, python, random_audio,
-    random_rays, read_npy, run_python, write_npy, write_run,
+    random_rays, ray_background, read_npy, run_python, write_npy, write_run,
 };
 use nldf_core::audio::neighbourhood;
 use nldf_core::rays::Rays;
@@ -31,6 +31,11 @@ fn python_render(
     let n = rays.len() as u64;
     write_npy(&folder.join("rays_o.npy"), &[n, 3], &rays.origins);
     write_npy(&folder.join("rays_d.npy"), &[n, 3], &rays.directions);
+    write_npy(
+        &folder.join("background.npy"),
+        &[n, 3],
+        &ray_background(rays.len()),
+    );
     let shape = shape.map(|d| d as u64);
     write_npy(&folder.join("audio.npy"), &shape, audio);
     run_python(
@@ -72,7 +77,10 @@ fn every_runtime(
             spin: true,
         };
         let mut backend = backend_for(&model, kind, options).unwrap();
-        let out = backend.run(&rays.origins, &rays.directions, audio).unwrap();
+        let bg = ray_background(rays.len());
+        let out = backend
+            .run(&rays.origins, &rays.directions, &bg, audio)
+            .unwrap();
         outputs.push((kind.name().into(), (out.rgb, out.segments)));
     }
     if let Some(python) = python {

@@ -607,7 +607,7 @@ fn infer_skipping_still_pixels_stays_within_its_threshold() {
     let head = full.rays(pose).pixels.len();
     let mut spread = vec![(f32::INFINITY, f32::NEG_INFINITY); 3 * head];
     for f in 0..n {
-        let rgb = full.run_rays(&full.rays(pose), &audio(f)).unwrap();
+        let rgb = full.run_rays(&full.rays(pose), &audio(f)).unwrap().rgb;
         for (s, v) in spread.iter_mut().zip(rgb) {
             *s = (s.0.min(v), s.1.max(v));
         }

@@ -27,10 +27,14 @@ fn tiny_demo(out: &std::path::Path) -> DemoJob {
             ..defaults.scene.clone()
         },
         teacher: TeacherConfig::tiny(),
-        teacher_minutes: 0.04,
+        teacher_iters: 12,
         student: StudentConfig::tiny(),
-        student_minutes: 0.04,
         student_iters: 30,
+        pseudo: nldf_train::job::student::PseudoSettings {
+            frames: Some(6),
+            rays: Some(64),
+            ..defaults.pseudo
+        },
         ..defaults
     }
 }
@@ -52,9 +56,30 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
             _ => None,
         })
         .collect();
-    assert_eq!(stages.len(), 5, "{stages:?}");
+    // Scene, teacher, student, export, then `val`, `novel` and `voice`.
+    assert_eq!(stages.len(), 7, "{stages:?}");
     assert!(stages[0].starts_with("synthetic scene ->"), "{stages:?}");
+    assert!(stages[2].starts_with("student, distilled"), "{stages:?}");
     assert!(stages[3].starts_with("ONNX export"), "{stages:?}");
+    let splits: Vec<Split> = report.splits.iter().map(|(s, _)| *s).collect();
+    assert_eq!(splits, [Split::Val, Split::Novel, Split::Voice]);
+    // The pinned steps are what ran, and the time breakdown names every part.
+    let teacher =
+        nldf_train::teacher_trainer::TeacherRun::open(&out.join("teacher"), false).unwrap();
+    assert_eq!(teacher.step, 12);
+    let timing = nldf_train::timing::Timing::open(&out).unwrap();
+    let parts: Vec<&str> = timing.parts.iter().map(|p| p.what.as_str()).collect();
+    for part in [
+        "synthetic scene",
+        "teacher: training steps",
+        "student: teacher targets: recorded frames",
+        "student: teacher targets: pseudo views",
+        "student: training steps",
+        "ONNX export",
+        "evaluation: novel",
+    ] {
+        assert!(parts.contains(&part), "{part} not in {parts:?}");
+    }
     for f in TEACHER_FILES {
         assert!(out.join("teacher").join(f).is_file(), "teacher/{f}");
     }

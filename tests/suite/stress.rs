@@ -259,9 +259,14 @@ fn stress_exported_model_gives_finite_output_for_far_rays_and_extreme_audio() {
                     spin: true,
                 };
                 let mut b = backend_for(&model, kind, options).unwrap();
-                let out = b.run(&origins, &directions, &audio).unwrap();
+                let bg = vec![0.5f32; origins.len()];
+                let out = b.run(&origins, &directions, &bg, &audio).unwrap();
                 assert!(
-                    out.rgb.iter().chain(&out.segments).all(|v| v.is_finite()),
+                    out.rgb
+                        .iter()
+                        .chain(&out.segments)
+                        .chain(&out.opacity)
+                        .all(|v| v.is_finite()),
                     "{kind} with {wav}: non-finite output"
                 );
                 checked += 1;

@@ -35,7 +35,8 @@ fn the_student_presets_have_the_papers_depths_and_cost() {
     let net = residual_mlp(&cfg, vb).unwrap();
     let n_params: usize = varmap.all_vars().iter().map(|v| v.elem_count()).sum();
     let w = cfg.width;
-    let expected = cfg.input_dim() * w + w + cfg.n_blocks() * 2 * (w * w + w) + w * 12 + 12;
+    // The output layer: 12 segment values and the opacity's logit.
+    let expected = cfg.input_dim() * w + w + cfg.n_blocks() * 2 * (w * w + w) + w * 13 + 13;
     assert_eq!(n_params, expected);
     let mut rng = ChaCha8Rng::seed_from_u64(9);
     let beams: Vec<f32> = (0..5 * cfg.beam.encoded_len())
@@ -46,16 +47,43 @@ fn the_student_presets_have_the_papers_depths_and_cost() {
         .collect();
     let beams = Tensor::from_vec(beams, (5, cfg.beam.encoded_len()), &Device::Cpu).unwrap();
     let codes = Tensor::from_vec(codes, (5, cfg.audio.dim), &Device::Cpu).unwrap();
-    let (segments, pixels) = net.forward(&beams, &codes).unwrap();
-    assert_eq!(segments.dims(), &[5, 4, 3]);
-    let seg: Vec<Vec<Vec<f32>>> = segments.to_vec3().unwrap();
-    let pix: Vec<Vec<f32>> = pixels.to_vec2().unwrap();
+    let out = net.forward(&beams, &codes).unwrap();
+    assert_eq!(out.segments.dims(), &[5, 4, 3]);
+    let seg: Vec<Vec<Vec<f32>>> = out.segments.to_vec3().unwrap();
+    let colour: Vec<Vec<f32>> = out.colour.to_vec2().unwrap();
+    let alpha: Vec<Vec<f32>> = out.opacity.as_ref().unwrap().to_vec2().unwrap();
+    let bg = Tensor::from_vec(vec![0.25f32; 15], (5, 3), &Device::Cpu).unwrap();
+    let pix: Vec<Vec<f32>> = out.pixels(&bg).unwrap().to_vec2().unwrap();
     for r in 0..5 {
+        let a = alpha[r][0];
+        assert!(a > 0.0 && a < 1.0, "opacity {a}");
         for c in 0..3 {
             let sum: f32 = (0..4).map(|i| seg[r][i][c]).sum();
-            assert!((sum - pix[r][c]).abs() < 1e-6);
+            assert!((sum - colour[r][c]).abs() < 1e-6);
+            // Eq. 7 over the background: colour + (1 - opacity) background.
+            assert!((sum + (1.0 - a) * 0.25 - pix[r][c]).abs() < 1e-6);
         }
     }
+    // Without opacity (checkpoints made before it), the pixel is the segments' sum.
+    let old = StudentConfig {
+        opacity: false,
+        ..cfg.clone()
+    };
+    let (_, vb) = new_varmap();
+    let out = residual_mlp(&old, vb)
+        .unwrap()
+        .forward(&beams, &codes)
+        .unwrap();
+    assert!(out.opacity.is_none());
+    let same = (out.pixels(&bg).unwrap() - &out.colour)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap();
+    assert_eq!(same, 0.0);
 }
 
 /// The fused student op computes what the plain candle ops compute: outputs, every weight's
@@ -85,13 +113,16 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
             .unwrap();
     let probe = Tensor::from_vec(random(n * 12), (n, 4, 3), &Device::Cpu).unwrap();
     let probe_px = Tensor::from_vec(random(n * 3), (n, 3), &Device::Cpu).unwrap();
+    let probe_bg = Tensor::from_vec(random(n * 3), (n, 3), &Device::Cpu).unwrap();
     let run = |fused: bool| {
-        let (seg, px) = if fused {
+        let out = if fused {
             net.forward_fused(&beams, codes.as_tensor(), true).unwrap()
         } else {
             net.forward(&beams, codes.as_tensor()).unwrap()
         };
-        let loss = ((&seg * &probe).unwrap().sum_all().unwrap()
+        // The composited pixel reaches the opacity's output too.
+        let px = out.pixels(&probe_bg).unwrap();
+        let loss = ((&out.segments * &probe).unwrap().sum_all().unwrap()
             + (&px * &probe_px).unwrap().sqr().unwrap().sum_all().unwrap())
         .unwrap();
         let grads = loss.backward().unwrap();
@@ -124,7 +155,14 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
                 .to_vec1()
                 .unwrap(),
         ));
-        (seg.flatten_all().unwrap().to_vec1::<f32>().unwrap(), named)
+        (
+            out.segments
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap(),
+            named,
+        )
     };
     let (out_f, grads_f) = run(true);
     let (out_r, grads_r) = run(false);

@@ -215,3 +215,75 @@ fn a_loud_frame_and_a_silent_frame_differ_at_the_mouth() {
         "the open mouth is not darker: {luma_quiet} -> {luma_loud}"
     );
 }
+
+/// The second head is another head, labelled as AD-NeRF labels a real recording: parsing
+/// without a mouth label, 68 landmarks per frame and no `regions/`; its mouth, read from
+/// the landmarks, lies on the exact mouth it was rendered with; its bounds leave more
+/// background in the box.
+#[test]
+fn the_second_head_is_another_head_labelled_as_adnerf_labels_one() {
+    use nldf_core::region::MouthSource;
+    use nldf_core::synth::HeadStyle;
+    let dir = tempfile::tempdir().unwrap();
+    let (std_dir, second_dir) = (dir.path().join("standard"), dir.path().join("second"));
+    let second = SynthConfig {
+        head: HeadStyle::Second,
+        ..small(3, 2.0, 64)
+    };
+    generate(&small(3, 2.0, 64), None, &std_dir, false, &|| {}).unwrap();
+    generate(&second, None, &second_dir, false, &|| {}).unwrap();
+    assert!(!second_dir.join("regions").exists());
+    assert!(second_dir.join("ori_imgs/0.lms").is_file());
+    let (a, b) = (
+        Dataset::load(&std_dir).unwrap(),
+        Dataset::load(&second_dir).unwrap(),
+    );
+    assert_eq!(a.mouth_source(), MouthSource::Labels);
+    assert_eq!(b.mouth_source(), MouthSource::Landmarks);
+    let read = |p: &Path| -> SceneFile {
+        serde_json::from_str(&std::fs::read_to_string(p.join("scene.json")).unwrap()).unwrap()
+    };
+    let (sa, sb) = (read(&std_dir), read(&second_dir));
+    assert_ne!(sa.head, sb.head, "the same head twice");
+    assert!(
+        sb.head.head_height / sb.head.head_width > 1.2 * sa.head.head_height / sa.head.head_width
+    );
+    let size = |s: &SceneFile| {
+        (0..3)
+            .map(|k| s.head_bounds[1][k] - s.head_bounds[0][k])
+            .product::<f32>()
+    };
+    assert!(
+        size(&sb) > 1.5 * size(&sa),
+        "{} vs {}",
+        size(&sb),
+        size(&sa)
+    );
+    // Its mouth, read from the landmarks, lies in the lower half of the head and opens
+    // and closes with the speech: its area follows the scene's mouth opening.
+    let (mut areas, mut opening) = (Vec::new(), Vec::new());
+    for f in b.frames(Split::Train) {
+        let regions = b.load_regions(f).unwrap().unwrap();
+        let w = 64usize;
+        let head_rows: Vec<usize> = (0..regions.len())
+            .filter(|&p| regions[p].is_head())
+            .map(|p| p / w)
+            .collect();
+        let mid = (head_rows.iter().min().unwrap() + head_rows.iter().max().unwrap()) / 2;
+        let mouth: Vec<usize> = (0..regions.len())
+            .filter(|&p| regions[p] == Region::Mouth)
+            .collect();
+        assert!(
+            mouth.iter().all(|&p| p / w > mid),
+            "frame {}: mouth above the head's middle",
+            f.img_id
+        );
+        areas.push(mouth.len() as f64);
+        opening.push(sb.frames[f.img_id as usize].mouth_open as f64);
+    }
+    let corr = pearson(&areas, &opening);
+    assert!(
+        corr > 0.6,
+        "the landmark mouth's area follows the opening by {corr}"
+    );
+}

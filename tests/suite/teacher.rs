@@ -473,7 +473,7 @@ fn segment_targets_sum_to_the_teachers_pixel() {
         .unwrap();
     for m in [1usize, 4, 5] {
         let seg = t
-            .segment_targets(&rays, bg, &code, &data.head_range(), m)
+            .segment_targets(&rays, bg, &code, &data.head_range(), m, false)
             .unwrap();
         assert_eq!(seg.len(), rays.len() * m * 3);
         let mut worst = 0.0f32;
@@ -490,6 +490,33 @@ fn segment_targets_sum_to_the_teachers_pixel() {
                 .any(|r| (0..m - 1).any(|i| (0..3).any(|c| seg[(r * m + i) * 3 + c] > 0.05)));
             assert!(spread, "M = {m}: every colour sits in the last segment");
         }
+        // With opacity the background stays out of the segments: the segments plus
+        // (1 - opacity) times the background are the same pixel, the opacity lies in
+        // [0, 1], and a ray that misses the bounds is all zeros.
+        let w = 3 * m + 1;
+        let alpha_seg = t
+            .segment_targets(&rays, bg, &code, &data.head_range(), m, true)
+            .unwrap();
+        assert_eq!(alpha_seg.len(), rays.len() * w);
+        let (mut worst, mut covered, mut missed) = (0.0f32, 0, 0);
+        for r in 0..rays.len() {
+            let t = &alpha_seg[r * w..(r + 1) * w];
+            let alpha = t[3 * m];
+            assert!((0.0..=1.0).contains(&alpha), "ray {r}: opacity {alpha}");
+            covered += usize::from(alpha > 0.5);
+            missed += usize::from(t.iter().all(|&v| v == 0.0));
+            for c in 0..3 {
+                let sum: f32 = (0..m).map(|i| t[i * 3 + c]).sum();
+                let pixel = sum + (1.0 - alpha) * bg[3 * r + c];
+                worst = worst.max((pixel - pixels[3 * r + c]).abs());
+            }
+        }
+        assert!(
+            worst < 1e-5,
+            "M = {m}: opacity targets miss the pixel by {worst}"
+        );
+        assert!(covered > 0, "M = {m}: no ray is covered by the head");
+        assert!(missed > 0, "M = {m}: every ray met the head's bounds");
     }
 }
 
@@ -515,7 +542,7 @@ fn importance_sampled_segment_targets_follow_t_intervals() {
     let t = &run.teacher;
     let m = 4;
     let seg = t
-        .segment_targets(&rays, bg, &code, &data.head_range(), m)
+        .segment_targets(&rays, bg, &code, &data.head_range(), m, false)
         .unwrap();
     // The reference: the same samples and field outputs, composited and split in f64.
     let codes_of = |hit: &[usize]| code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous();

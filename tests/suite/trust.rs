@@ -130,6 +130,7 @@ impl TrainingRun for Diverging {
             val_frames: 1,
             checkpoint_every: 1,
             time_budget_s: self.budget_s,
+            time_cap_s: 0.0,
         }
     }
     fn elapsed(&self) -> f64 {
@@ -385,7 +386,8 @@ fn tract_binds_inputs_and_outputs_by_name() {
     let render = |p: &Path| {
         let model = read_model(p).unwrap();
         let mut b = backend_for(&model, BackendKind::Tract, options).unwrap();
-        b.run(&rays.origins, &rays.directions, &audio).unwrap()
+        let bg = crate::util::ray_background(rays.len());
+        b.run(&rays.origins, &rays.directions, &bg, &audio).unwrap()
     };
     let want = render(&path);
     let mut proto = ModelProto::decode(&std::fs::read(&path).unwrap()[..]).unwrap();
@@ -397,6 +399,12 @@ fn tract_binds_inputs_and_outputs_by_name() {
     let got = render(&swapped);
     assert_eq!(max_diff(&got.rgb, &want.rgb), 0.0);
     assert_eq!(max_diff(&got.segments, &want.segments), 0.0);
+    assert_eq!(max_diff(&got.opacity, &want.opacity), 0.0);
+    assert_eq!(
+        want.opacity.len(),
+        rays.len(),
+        "the tiny student has opacity"
+    );
 }
 
 /// The tiny synthetic scene with its `aud.npy` replaced by 29-wide windows of another

@@ -202,8 +202,28 @@ pub(crate) fn random_audio(cfg: &StudentConfig, n_frames: usize, seed: u64) -> A
     }
 }
 
-/// The candle reference: pixels `[n, 3]` and segments `[n, m, 3]`, flat.
+/// A background colour behind each of `n` rays, `[n, 3]` flat in [0, 1], varied from ray
+/// to ray: what the parity tests composite a model with opacity over.
+pub(crate) fn ray_background(n: usize) -> Vec<f32> {
+    (0..3 * n)
+        .map(|k| ((k as f32 * 0.618_034).fract() * 0.9 + 0.05).min(1.0))
+        .collect()
+}
+
+/// The candle reference: pixels `[n, 3]` and segments `[n, m, 3]`, flat; a student with
+/// opacity composites over [`ray_background`].
 pub(crate) fn candle_render(run: &Run, rays: &Rays, audio: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    let bg = ray_background(rays.len());
+    candle_render_over(run, rays, audio, &bg)
+}
+
+/// [`candle_render`] over the background `bg` (`[n, 3]` flat).
+pub(crate) fn candle_render_over(
+    run: &Run,
+    rays: &Rays,
+    audio: &[f32],
+    bg: &[f32],
+) -> (Vec<f32>, Vec<f32>) {
     let a = &run.student.cfg.audio;
     let nb = Tensor::from_vec(
         audio.to_vec(),
@@ -211,12 +231,14 @@ pub(crate) fn candle_render(run: &Run, rays: &Rays, audio: &[f32]) -> (Vec<f32>,
         &Device::Cpu,
     )
     .unwrap();
-    let (segments, pixels) = run
+    let out = run
         .student
         .render_rays(rays, &nb, run.spec.near, run.spec.far)
         .unwrap();
+    let bg = Tensor::from_vec(bg.to_vec(), (rays.len(), 3), &Device::Cpu).unwrap();
+    let pixels = out.pixels(&bg).unwrap();
     let flat = |t: Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-    (flat(pixels), flat(segments))
+    (flat(pixels), flat(out.segments))
 }
 
 pub(crate) fn max_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -327,7 +349,8 @@ path, folder = sys.argv[1], sys.argv[2]
 model = onnx.load(path)
 onnx.checker.check_model(model, full_check=True)
 session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
-feeds = {name: np.load(f"{folder}/{name}.npy") for name in ("rays_o", "rays_d", "audio")}
+names = [i.name for i in session.get_inputs()]
+feeds = {name: np.load(f"{folder}/{name}.npy") for name in names}
 rgb, segments = session.run(["rgb", "segments"], feeds)
 np.save(f"{folder}/rgb.npy", rgb)
 np.save(f"{folder}/segments.npy", segments)
@@ -351,7 +374,8 @@ pub(crate) fn candle_frame(
     let head = head_rays(&camera, &spec.head_range());
     let mut frame = background.clone();
     if !head.pixels.is_empty() {
-        let (rgb, _) = candle_render(run, &head.rays, audio);
+        let bg = background.gather(&head.pixels);
+        let (rgb, _) = candle_render_over(run, &head.rays, audio, &bg);
         frame.paint(&head.pixels, &rgb);
     }
     frame

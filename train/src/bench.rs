@@ -437,7 +437,7 @@ pub fn student_layers(cfg: &crate::student::StudentConfig) -> Vec<(usize, usize)
     let w = cfg.width;
     let mut layers = vec![(cfg.input_dim(), w)];
     layers.extend(std::iter::repeat_n((w, w), 2 * cfg.n_blocks()));
-    layers.push((w, 3 * cfg.segments));
+    layers.push((w, cfg.output_dim()));
     layers
 }
 

@@ -88,6 +88,7 @@ macro_rules! check_shared_train {
         at_least("train.log_every", t.log_every, 1)?;
         in_range("train.val_frames", t.val_frames, 1, 4096)?;
         in_range("train.time_budget_s", t.time_budget_s, 0.0, 1e9)?;
+        in_range("train.time_cap_s", t.time_cap_s, 0.0, 1e9)?;
     };
 }
 
@@ -266,8 +267,13 @@ pub struct TeacherTrainConfig {
     /// Steps between checkpoints (also written at the end and on Ctrl-C).
     pub checkpoint_every: usize,
     /// Training seconds after which the run ends early, validated and checkpointed
-    /// (0: no limit; counts across resumes).
+    /// (0: no limit; counts across resumes). The learning rate follows it too (held, then
+    /// decayed over its last 40 %), so a budgeted run's result depends on the machine.
     pub time_budget_s: f64,
+    /// A wall-clock cap in seconds that only stops the run (0: none): the learning rate
+    /// follows the steps alone, so a recipe pinned in steps trains the same on any
+    /// machine, and the cap says when a slow one cut it short.
+    pub time_cap_s: f64,
 }
 
 impl Default for TeacherTrainConfig {
@@ -291,6 +297,7 @@ impl Default for TeacherTrainConfig {
             val_frames: 4,
             checkpoint_every: 500,
             time_budget_s: 0.0,
+            time_cap_s: 0.0,
         }
     }
 }
@@ -409,8 +416,12 @@ pub struct StudentTrainConfig {
     pub val_frames: usize,
     /// Steps between checkpoints (also at the end and on Ctrl-C).
     pub checkpoint_every: usize,
-    /// Training seconds after which the run ends early (0: no limit).
+    /// Training seconds after which the run ends early (0: no limit). The learning rate
+    /// follows it too (see [`decayed_learning_rate`]).
     pub time_budget_s: f64,
+    /// A wall-clock cap in seconds that only stops the run (0: none); the learning rate
+    /// follows the steps alone.
+    pub time_cap_s: f64,
 }
 
 impl StudentTrainConfig {
@@ -485,6 +496,7 @@ impl Default for StudentTrainConfig {
             val_frames: 4,
             checkpoint_every: 250,
             time_budget_s: 0.0,
+            time_cap_s: 0.0,
         }
     }
 }

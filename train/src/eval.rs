@@ -18,6 +18,7 @@ use crate::scores::frame_scores;
 use crate::student_trainer::StudentRun;
 use crate::teacher_trainer::TeacherRun;
 use nldf_core::dataset::Frame;
+use nldf_core::region::Region;
 
 /// A trained model that renders whole frames.
 pub trait FrameModel {
@@ -154,6 +155,10 @@ pub struct FrameScore {
     pub head_psnr: Option<f64>,
     pub head_ssim: Option<f64>,
     pub mouth_psnr: Option<f64>,
+    /// Share of the pixels outside the head whose colour differs from the background
+    /// ([`repainted_share`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub repainted: Option<f64>,
     /// What the view is, for a synthetic scene's evaluation splits (see
     /// [`nldf_core::synth::eval_views`]).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -188,6 +193,9 @@ pub struct EvalReport {
     pub head_psnr: Option<f64>,
     pub head_ssim: Option<f64>,
     pub mouth_psnr: Option<f64>,
+    /// Mean share of the pixels outside the head that differ from the background
+    /// ([`repainted_share`]).
+    pub repainted: Option<f64>,
     /// Seconds spent rendering, per frame.
     pub render_s_per_frame: f64,
     /// Network multiply-adds per frame, on average (rays that miss the head cost none).
@@ -257,6 +265,9 @@ pub fn eval_models(
             macs[mi] += hits * model.macs_per_ray();
             let f = frame_scores(&render, &truth, regions.as_deref())?;
             non_finite[mi] += usize::from(render.non_finite_values() > 0);
+            let repainted = regions
+                .as_deref()
+                .and_then(|r| repainted_share(&render, &data.dataset.background, r));
             scores[mi].push(FrameScore {
                 img_id: frame.img_id,
                 psnr: f.psnr,
@@ -264,6 +275,7 @@ pub fn eval_models(
                 head_psnr: f.head_psnr,
                 head_ssim: f.head_ssim,
                 mouth_psnr: f.mouth_psnr,
+                repainted,
                 view: views.get(&frame.img_id).cloned(),
             });
             let path = out
@@ -299,6 +311,7 @@ pub fn eval_models(
             head_psnr: mean(scores.iter().filter_map(|s| s.head_psnr).collect()),
             head_ssim: mean(scores.iter().filter_map(|s| s.head_ssim).collect()),
             mouth_psnr: mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
+            repainted: mean(scores.iter().filter_map(|s| s.repainted).collect()),
             render_s_per_frame: render_s[mi] / n as f64,
             macs_per_frame: macs[mi] / n as f64,
             non_finite_frames: non_finite[mi],
@@ -313,6 +326,43 @@ pub fn eval_models(
     };
     save_json(&out.join("metrics.json"), &evaluation)?;
     Ok(evaluation)
+}
+
+/// A colour change from the background above this (in [0, 1] units, 1.5/255) counts
+/// as repainting it.
+pub const REPAINT_THRESHOLD: f32 = 1.5 / 255.0;
+
+/// The share of the pixels outside the head (by `regions`) whose colour in `render`
+/// differs from `background` by more than [`REPAINT_THRESHOLD`] in any channel: how much
+/// of the background a model painted over instead of keeping. `None` when the frame has no
+/// pixel outside the head or the sizes differ.
+pub fn repainted_share(
+    render: &ImageRgb,
+    background: &ImageRgb,
+    regions: &[Region],
+) -> Option<f64> {
+    if render.data.len() != background.data.len() || 3 * regions.len() != render.data.len() {
+        return None;
+    }
+    let (mut outside, mut changed) = (0usize, 0usize);
+    for (p, region) in regions.iter().enumerate() {
+        if region.is_head() {
+            continue;
+        }
+        outside += 1;
+        let (a, b) = (
+            &render.data[3 * p..3 * p + 3],
+            &background.data[3 * p..3 * p + 3],
+        );
+        // A NaN counts as changed.
+        if a.iter()
+            .zip(b)
+            .any(|(x, y)| !((x - y).abs() <= REPAINT_THRESHOLD))
+        {
+            changed += 1;
+        }
+    }
+    (outside > 0).then(|| changed as f64 / outside as f64)
 }
 
 /// The plain mean, `None` of nothing: a NaN frame makes its model's mean NaN instead of

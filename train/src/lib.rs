@@ -35,6 +35,7 @@ pub mod student_trainer;
 pub mod targets;
 pub mod teacher;
 pub mod teacher_trainer;
+pub mod timing;
 pub mod views;
 
 pub use error::{Error, Result};

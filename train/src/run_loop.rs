@@ -11,6 +11,7 @@ use candle_core::{DType, Tensor};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::scores::Scores;
+use crate::timing::Timing;
 use nldf_core::run_files::LOG_FILE;
 
 /// What the trainer reports as it goes.
@@ -39,6 +40,8 @@ pub struct Schedule {
     pub val_frames: usize,
     pub checkpoint_every: usize,
     pub time_budget_s: f64,
+    /// A cap that only stops the run (0: none).
+    pub time_cap_s: f64,
 }
 
 /// A model being trained, as [`train_loop`] sees it (the teacher and the student).
@@ -57,6 +60,12 @@ pub trait TrainingRun {
     fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores>;
     /// Writes the checkpoint.
     fn save(&self) -> Result<()>;
+    /// Seconds of the last step that went to work other than the step itself (the
+    /// teacher rendering pseudo views' targets between student steps), per named part,
+    /// with how many items each did; taken, so each is reported once.
+    fn take_side_times(&mut self) -> Vec<(&'static str, f64, usize)> {
+        Vec::new()
+    }
 }
 
 /// Implements the [`TrainingRun`] methods that every run answers from the same fields (its
@@ -82,6 +91,7 @@ macro_rules! run_fields {
                 val_frames: t.val_frames,
                 checkpoint_every: t.checkpoint_every,
                 time_budget_s: t.time_budget_s,
+                time_cap_s: t.time_cap_s,
             }
         }
 
@@ -132,6 +142,25 @@ pub fn train_loop(
     stop: &AtomicBool,
     on_event: &mut dyn FnMut(&Event),
 ) -> Result<Option<Scores>> {
+    train_loop_timed(run, data, stop, &mut Timing::default(), on_event)
+}
+
+/// The step part of a [`Timing`]: the training steps themselves.
+pub const STEPS_PART: &str = "training steps";
+/// The validation part of a [`Timing`].
+pub const VALIDATION_PART: &str = "validation renders";
+/// The checkpoint part of a [`Timing`].
+pub const CHECKPOINT_PART: &str = "checkpoints";
+
+/// [`train_loop`], adding the seconds of its steps, validations and checkpoints (and the
+/// run's side work, [`TrainingRun::take_side_times`]) to `timing`.
+pub fn train_loop_timed(
+    run: &mut dyn TrainingRun,
+    data: &TrainData,
+    stop: &AtomicBool,
+    timing: &mut Timing,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<Option<Scores>> {
     let dir = run.dir().to_path_buf();
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let mut log = crate::log::CsvLog::open(&dir.join(LOG_FILE), run.step())?;
@@ -148,11 +177,16 @@ pub fn train_loop(
              and train again"
         ))
     };
-    let spent = |run: &dyn TrainingRun| t.time_budget_s > 0.0 && run.elapsed() >= t.time_budget_s;
+    let spent = |run: &dyn TrainingRun| {
+        let e = run.elapsed();
+        (t.time_budget_s > 0.0 && e >= t.time_budget_s) || (t.time_cap_s > 0.0 && e >= t.time_cap_s)
+    };
     // A run resumed with its budget already spent trains no further step.
     while run.step() < t.iters && !spent(&*run) {
         if stop.load(Ordering::Relaxed) {
+            let started = Instant::now();
             run.save()?;
+            timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
             on_event(&Event::Checkpoint {
                 step: run.step(),
                 dir: dir.clone(),
@@ -165,7 +199,15 @@ pub fn train_loop(
             Err(Error::NonFinite(what)) => return Err(diverged(run.step() + 1, what, saved)),
             Err(e) => return Err(e),
         };
-        let rays_per_s = t.batch_rays as f64 / started.elapsed().as_secs_f64().max(1e-9);
+        let step_s = started.elapsed().as_secs_f64();
+        let mut side_s = 0.0;
+        for (what, seconds, count) in run.take_side_times() {
+            timing.add(what, seconds, count);
+            side_s += seconds;
+        }
+        timing.add(STEPS_PART, step_s - side_s, 1);
+        // The step's own rate, without the side work.
+        let rays_per_s = t.batch_rays as f64 / (step_s - side_s).max(1e-9);
         let step = run.step();
         on_event(&Event::Step {
             step,
@@ -177,7 +219,9 @@ pub fn train_loop(
         let last = step == t.iters || out_of_time;
         let validate_now = (t.val_every > 0 && step.is_multiple_of(t.val_every)) || last;
         let scores = if validate_now {
+            let started = Instant::now();
             let s = run.validation_scores(data, t.val_frames)?;
+            timing.add(VALIDATION_PART, started.elapsed().as_secs_f64(), 1);
             if s.non_finite > 0 {
                 let what = format!(
                     "{} of {} validation renders hold NaN or infinite values",
@@ -203,7 +247,9 @@ pub fn train_loop(
             )?;
         }
         if (t.checkpoint_every > 0 && step.is_multiple_of(t.checkpoint_every)) || last {
+            let started = Instant::now();
             run.save()?;
+            timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
             saved = Some(step);
             on_event(&Event::Checkpoint {
                 step,
@@ -217,7 +263,9 @@ pub fn train_loop(
     // A new run whose budget was spent before its first step (on its teacher's targets,
     // say) is still written, at step 0, so that it can be opened, resumed and scored.
     if saved.is_none() && !stop.load(Ordering::Relaxed) {
+        let started = Instant::now();
         run.save()?;
+        timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
         on_event(&Event::Checkpoint {
             step: run.step(),
             dir: dir.clone(),

@@ -12,6 +12,54 @@ use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::student_op::{StudentOp, StudentPlan};
 pub use nldf_core::student_shape::StudentConfig;
 
+/// What the light field gives for a batch of rays.
+#[derive(Debug, Clone)]
+pub struct LightOut {
+    /// The M segment colours, `[n_rays, m, 3]`: each a weighted sum of sample colours,
+    /// not bounded by a squashing function of its own.
+    pub segments: Tensor,
+    /// Their sum, `[n_rays, 3]` (Eq. 7): the pixel itself for a student without opacity,
+    /// the head's colour (premultiplied by its opacity) for one with.
+    pub colour: Tensor,
+    /// How much of each ray the head covers, `sigmoid` of the network's last output,
+    /// `[n_rays, 1]`; `None` for a student without opacity.
+    pub opacity: Option<Tensor>,
+}
+
+impl LightOut {
+    /// The pixels over `background` (`[n_rays, 3]`): `colour + (1 - opacity) *
+    /// background`, as the teacher composites; `colour` for a student without opacity.
+    ///
+    /// # Shapes
+    /// - returns `[n_rays, 3]`
+    pub fn pixels(&self, background: &Tensor) -> Result<Tensor> {
+        match &self.opacity {
+            Some(alpha) => {
+                let clear = alpha.affine(-1.0, 1.0)?;
+                &self.colour + clear.broadcast_mul(background)?
+            }
+            None => Ok(self.colour.clone()),
+        }
+    }
+
+    /// Splits the network's raw output `[n_rays, 3 m (+ 1)]`.
+    fn from_raw(raw: &Tensor, m: usize, opacity: bool) -> Result<LightOut> {
+        let n_rays = raw.dim(0)?;
+        let segments = raw.narrow(1, 0, 3 * m)?.reshape((n_rays, m, 3))?;
+        let colour = segments.sum(1)?;
+        let opacity = if opacity {
+            Some(candle_nn::ops::sigmoid(&raw.narrow(1, 3 * m, 1)?)?)
+        } else {
+            None
+        };
+        Ok(LightOut {
+            segments,
+            colour,
+            opacity,
+        })
+    }
+}
+
 /// One residual block: `relu(x + fc2(relu(fc1(x))))`.
 #[derive(Debug, Clone)]
 struct ResidualBlock {
@@ -26,6 +74,7 @@ pub struct ResidualMlp {
     body: Vec<ResidualBlock>,
     output: Linear,
     segments: usize,
+    opacity: bool,
 }
 
 /// Builds a [`ResidualMlp`] for `cfg` under `vb`.
@@ -43,8 +92,9 @@ pub fn residual_mlp(cfg: &StudentConfig, vb: VarBuilder) -> Result<ResidualMlp> 
     Ok(ResidualMlp {
         input: linear(cfg.input_dim(), w, vb.pp("input"))?,
         body,
-        output: linear(w, 3 * cfg.segments, vb.pp("output"))?,
+        output: linear(w, cfg.output_dim(), vb.pp("output"))?,
         segments: cfg.segments,
+        opacity: cfg.opacity,
     })
 }
 
@@ -55,14 +105,7 @@ impl ResidualMlp {
     ///
     /// # Shapes
     /// - `beams`: `[n_rays, beam_dim]`; `codes`: `[n_rays, audio_dim]`
-    /// - returns segments `[n_rays, m, 3]` and pixels `[n_rays, 3]`
-    pub fn forward_fused(
-        &self,
-        beams: &Tensor,
-        codes: &Tensor,
-        train: bool,
-    ) -> Result<(Tensor, Tensor)> {
-        let n_rays = beams.dim(0)?;
+    pub fn forward_fused(&self, beams: &Tensor, codes: &Tensor, train: bool) -> Result<LightOut> {
         let beam_dim = beams.dim(1)?;
         let layer = |l: &Linear| -> Result<(Tensor, Tensor)> {
             let b = l
@@ -94,32 +137,21 @@ impl ResidualMlp {
         } else {
             beams.apply_op3_no_bwd(&codes, &params, &op)?
         };
-        let segments = raw.reshape((n_rays, self.segments, 3))?;
-        let pixels = segments.sum(1)?;
-        Ok((segments, pixels))
+        LightOut::from_raw(&raw, self.segments, self.opacity)
     }
 
-    /// Segment colours and their sum, the pixel (Eq. 7). The segments are the network's raw
-    /// outputs: a segment's colour is a weighted sum of sample colours, not bounded by a
-    /// squashing function of its own.
+    /// Segment colours, their sum (Eq. 7) and the opacity, with plain candle ops.
     ///
     /// # Shapes
     /// - `beams`: `[n_rays, beam_dim]` encoded beams; `codes`: `[n_rays, audio_dim]`
-    /// - returns segments `[n_rays, m, 3]` and pixels `[n_rays, 3]`
-    pub fn forward(&self, beams: &Tensor, codes: &Tensor) -> Result<(Tensor, Tensor)> {
-        let n_rays = beams.dim(0)?;
+    pub fn forward(&self, beams: &Tensor, codes: &Tensor) -> Result<LightOut> {
         let x = Tensor::cat(&[beams, codes], D::Minus1)?;
         let mut h = self.input.forward(&x)?.relu()?;
         for block in &self.body {
             let y = block.fc2.forward(&block.fc1.forward(&h)?.relu()?)?;
             h = (h + y)?.relu()?;
         }
-        let segments = self
-            .output
-            .forward(&h)?
-            .reshape((n_rays, self.segments, 3))?;
-        let pixels = segments.sum(1)?;
-        Ok((segments, pixels))
+        LightOut::from_raw(&self.output.forward(&h)?, self.segments, self.opacity)
     }
 }
 
@@ -162,20 +194,19 @@ impl Student {
         Tensor::from_vec(out, (rays.len(), width), &Device::Cpu)
     }
 
-    /// Segment colours and pixels of `rays` seen by one frame whose audio neighbourhood is
-    /// `neighbourhood`, with plain candle ops (the reference every exported runtime must
-    /// match).
+    /// Segment colours, colour and opacity of `rays` seen by one frame whose audio
+    /// neighbourhood is `neighbourhood`, with plain candle ops (the reference every
+    /// exported runtime must match; [`LightOut::pixels`] composites them).
     ///
     /// # Shapes
     /// - `neighbourhood`: `[1, att_frames, window, n_features]`
-    /// - returns segments `[n, m, 3]` and pixels `[n, 3]`
     pub fn render_rays(
         &self,
         rays: &Rays,
         neighbourhood: &Tensor,
         near: f32,
         far: f32,
-    ) -> Result<(Tensor, Tensor)> {
+    ) -> Result<LightOut> {
         let code = self.audio_codes(neighbourhood)?;
         let beams = self.encode(rays, near, far)?;
         let codes = code

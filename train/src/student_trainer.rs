@@ -33,14 +33,14 @@ use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint
 use crate::config::{RunConfig, StudentRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::loss::{RayLosses, distillation_loss};
+use crate::loss::{RayLosses, TeacherTargets, distillation_loss};
 use crate::nn::{init_seeded, new_varmap, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
 use crate::pool::{load_pool, save_pool};
 use crate::run_loop::{TrainingRun, finite_loss, run_fields};
 use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
-use crate::targets::{load_targets, save_targets, teacher_targets, view_targets};
+use crate::targets::{TargetLayout, load_targets, save_targets, teacher_targets, view_targets};
 use crate::teacher_trainer::TeacherRun;
 use crate::views::{
     FrameBeams, View, frame_beams, thin_pseudo_beams, training_views, views_fingerprint,
@@ -90,7 +90,14 @@ pub struct StudentRun {
     /// The teacher that renders the pseudo views' targets between steps, and the next
     /// view to render ([`StudentRun::prepare_deferred`]).
     pending: Option<(TeacherRun, usize)>,
+    /// Seconds the last step spent rendering pseudo views' targets, and how many.
+    pseudo_time: (f64, usize),
 }
+
+/// The timing part of the teacher rendering recorded frames' targets.
+pub const RECORDED_TARGETS_PART: &str = "teacher targets: recorded frames";
+/// The timing part of the teacher rendering pseudo views' targets.
+pub const PSEUDO_TARGETS_PART: &str = "teacher targets: pseudo views";
 
 impl StudentRun {
     /// A new run in `dir` with seeded weights. The audio feature width comes from the data;
@@ -177,6 +184,7 @@ impl StudentRun {
             beams: Vec::new(),
             targets: Vec::new(),
             pending: None,
+            pseudo_time: (0.0, 0),
         })
     }
 
@@ -190,9 +198,10 @@ impl StudentRun {
         teacher: Option<&TeacherRun>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
-        if let Some(n) = self.prepare_cached(data, teacher.map(|t| t.step))? {
+        if let Some(layout) = self.prepare_cached(data, teacher.map(|t| t.step))? {
             let teacher = teacher.ok_or_else(|| self.no_teacher())?;
-            self.targets = teacher_targets(teacher, data, &self.views, &self.beams, n, progress)?;
+            self.targets =
+                teacher_targets(teacher, data, &self.views, &self.beams, layout, progress)?;
             self.save_targets(teacher.step)?;
         }
         Ok(())
@@ -209,7 +218,7 @@ impl StudentRun {
         teacher: Option<TeacherRun>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
-        let Some(m) = self.prepare_cached(data, teacher.as_ref().map(|t| t.step))? else {
+        let Some(layout) = self.prepare_cached(data, teacher.as_ref().map(|t| t.step))? else {
             return Ok(());
         };
         let teacher = teacher.ok_or_else(|| self.no_teacher())?;
@@ -219,7 +228,7 @@ impl StudentRun {
             data,
             &self.views[..n_recorded],
             &self.beams[..n_recorded],
-            m,
+            layout,
             progress,
         )?;
         self.targets.resize(self.views.len(), Vec::new());
@@ -238,13 +247,21 @@ impl StudentRun {
             .map_or(0, |(_, next)| self.views.len() - next)
     }
 
+    /// What the teacher renders per ray for this student.
+    fn target_layout(&self) -> TargetLayout {
+        TargetLayout {
+            segments: self.cfg.model.segments,
+            opacity: self.cfg.model.opacity,
+        }
+    }
+
     /// The views, their hit pixels, the render spec and background files, and the cached
-    /// targets when they fit; `Some(segments)` when targets must be rendered.
+    /// targets when they fit; `Some(layout)` when targets must be rendered.
     fn prepare_cached(
         &mut self,
         data: &TrainData,
         teacher_step: Option<usize>,
-    ) -> Result<Option<usize>> {
+    ) -> Result<Option<TargetLayout>> {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         self.views = training_views(data, &self.cfg.train);
         self.beams = frame_beams(data, &self.views);
@@ -264,17 +281,18 @@ impl StudentRun {
         if !self.cfg.train.distill {
             return Ok(None);
         }
-        let m = self.cfg.model.segments;
+        let layout = self.target_layout();
         let path = self.dir.join(TARGETS_FILE);
         let fingerprint = views_fingerprint(&self.views, &self.beams);
         // Without a teacher at hand, a cache made by any teacher step is used.
         if path.is_file()
-            && let Some(cached) = load_targets(&path, &self.beams, m, teacher_step, &fingerprint)?
+            && let Some(cached) =
+                load_targets(&path, &self.beams, layout, teacher_step, &fingerprint)?
         {
             self.targets = cached;
             return Ok(None);
         }
-        Ok(Some(m))
+        Ok(Some(layout))
     }
 
     fn no_teacher(&self) -> Error {
@@ -288,7 +306,7 @@ impl StudentRun {
         save_targets(
             &self.dir.join(TARGETS_FILE),
             &self.targets,
-            self.cfg.model.segments,
+            self.target_layout(),
             teacher_step,
             &views_fingerprint(&self.views, &self.beams),
         )
@@ -300,11 +318,14 @@ impl StudentRun {
         let Some((teacher, next)) = self.pending.take() else {
             return Ok(());
         };
-        let m = self.cfg.model.segments;
+        let layout = self.target_layout();
         let end = (next + self.cfg.train.pseudo_per_step).min(self.views.len());
+        let started = std::time::Instant::now();
         for v in next..end {
-            self.targets[v] = view_targets(&teacher, data, &self.views[v], &self.beams[v], m)?;
+            self.targets[v] = view_targets(&teacher, data, &self.views[v], &self.beams[v], layout)?;
         }
+        self.pseudo_time.0 += started.elapsed().as_secs_f64();
+        self.pseudo_time.1 += end - next;
         if end == self.views.len() {
             self.save_targets(teacher.step)
         } else {
@@ -536,9 +557,14 @@ impl StudentRun {
         }
         let table = Tensor::cat(&tables, 0)?;
         let n = all.len();
+        let layout = self.target_layout();
+        let width = layout.width();
+        let opacity = layout.opacity;
         let mut rays = Rays::with_capacity(n);
         let mut gt = Vec::with_capacity(3 * n);
+        let mut bg = Vec::with_capacity(if opacity { 3 * n } else { 0 });
         let mut tgt = Vec::with_capacity(if distill { 3 * m * n } else { 0 });
+        let mut tgt_alpha = Vec::with_capacity(if distill && opacity { n } else { 0 });
         let mut row_of_ray = Vec::with_capacity(n);
         for (b, detached) in &all {
             let fi = b.frame as usize;
@@ -546,22 +572,37 @@ impl StudentRun {
             let (i, j) = self.beams[fi].pixels[b.pixel as usize];
             let (o, d) = view.camera.ray(i as f32, j as f32);
             rays.push(o, d);
-            let segs = if distill {
+            // The background is in screen space: a pseudo view's pixel sees the same one.
+            let back = ds.background.get(i, j);
+            if opacity {
+                bg.extend_from_slice(&back);
+            }
+            let target = if distill {
                 let p = b.pixel as usize;
-                let segs = &self.targets[fi][3 * m * p..3 * m * (p + 1)];
-                tgt.extend_from_slice(segs);
-                segs
+                let target = &self.targets[fi][width * p..width * (p + 1)];
+                tgt.extend_from_slice(&target[..3 * m]);
+                if opacity {
+                    tgt_alpha.push(target[3 * m]);
+                }
+                target
             } else {
                 &[]
             };
             if view.recorded {
                 gt.extend_from_slice(&data.images[fi].get(i, j));
             } else {
-                // A pseudo view has no image: its pixel is the teacher's (Eq. 7).
+                // A pseudo view has no image: its pixel is the teacher's (Eq. 7), over the
+                // background where it has opacity.
                 let mut pixel = [0.0f32; 3];
-                for seg in segs.chunks_exact(3) {
+                for seg in target[..3 * m].chunks_exact(3) {
                     for (p, v) in pixel.iter_mut().zip(seg) {
                         *p += v;
+                    }
+                }
+                if opacity {
+                    let clear = 1.0 - target[3 * m];
+                    for (p, b) in pixel.iter_mut().zip(back) {
+                        *p += clear * b;
                     }
                 }
                 gt.extend_from_slice(&pixel);
@@ -578,15 +619,34 @@ impl StudentRun {
         let spec = &self.cfg.model.beam;
         let beams = encode_beams_parallel(&rays, ds.near, ds.far, spec, jitter_seed);
         let beams = Tensor::from_vec(beams, (n, spec.encoded_len()), &dev)?;
-        let (segments, pixels) = self.student.mlp.forward_fused(&beams, &codes, update)?;
+        let out = self.student.mlp.forward_fused(&beams, &codes, update)?;
+        let pixels = if opacity {
+            out.pixels(&Tensor::from_vec(bg, (n, 3), &dev)?)?
+        } else {
+            out.colour.clone()
+        };
         let gt = Tensor::from_vec(gt, (n, 3), &dev)?;
         let tgt = if distill {
             Some(Tensor::from_vec(tgt, (n, m, 3), &dev)?)
         } else {
             None
         };
-        let RayLosses { per_ray, pixel_sq } =
-            distillation_loss(&pixels, &gt, &segments, tgt.as_ref(), t.lambda)?;
+        let tgt_alpha = if distill && opacity {
+            Some(Tensor::from_vec(tgt_alpha, (n, 1), &dev)?)
+        } else {
+            None
+        };
+        let RayLosses { per_ray, pixel_sq } = distillation_loss(
+            &pixels,
+            &gt,
+            &out.segments,
+            out.opacity.as_ref(),
+            tgt.as_ref().map(|segments| TeacherTargets {
+                segments,
+                opacity: tgt_alpha.as_ref(),
+            }),
+            t.lambda,
+        )?;
         let loss = per_ray.mean_all()?;
         let loss_value = finite_loss(&loss)?;
         if update {
@@ -637,7 +697,13 @@ impl StudentRun {
             let codes = code
                 .broadcast_as((chunk.len(), code.dim(1)?))?
                 .contiguous()?;
-            let (_, pixels) = self.student.mlp.forward_fused(&beams, &codes, false)?;
+            let out = self.student.mlp.forward_fused(&beams, &codes, false)?;
+            let pixels = if self.cfg.model.opacity {
+                let bg = background.gather(chunk);
+                out.pixels(&Tensor::from_vec(bg, (chunk.len(), 3), &Device::Cpu)?)?
+            } else {
+                out.colour
+            };
             let pixels: Vec<f32> = pixels.flatten_all()?.to_vec1()?;
             image.paint(chunk, &pixels);
         }
@@ -694,5 +760,14 @@ impl TrainingRun for StudentRun {
     fn train_step(&mut self, data: &TrainData) -> Result<(f64, f64)> {
         let s = StudentRun::train_step(self, data)?;
         Ok((s.loss, s.psnr))
+    }
+
+    fn take_side_times(&mut self) -> Vec<(&'static str, f64, usize)> {
+        let (seconds, views) = std::mem::take(&mut self.pseudo_time);
+        if views == 0 {
+            Vec::new()
+        } else {
+            vec![(PSEUDO_TARGETS_PART, seconds, views)]
+        }
     }
 }

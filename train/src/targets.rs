@@ -15,32 +15,47 @@ use crate::error::Result;
 use crate::teacher_trainer::TeacherRun;
 use crate::views::{FrameBeams, View};
 
-/// The teacher's Eq. 5 segment colours of every hit pixel of every view (`[n_pixels, m,
-/// 3]` flat per view). `progress(done, total)` is called per view.
+/// What the teacher renders per ray for the student: `segments` Eq. 5 colours and, with
+/// `opacity`, the accumulated weight after them (see `Teacher::segment_targets`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TargetLayout {
+    pub segments: usize,
+    pub opacity: bool,
+}
+
+impl TargetLayout {
+    /// Values per ray: `3 m`, plus one with opacity.
+    pub fn width(&self) -> usize {
+        3 * self.segments + usize::from(self.opacity)
+    }
+}
+
+/// The teacher's targets of every hit pixel of every view (`[n_pixels, layout.width()]`
+/// flat per view). `progress(done, total)` is called per view.
 pub fn teacher_targets(
     teacher: &TeacherRun,
     data: &TrainData,
     views: &[View],
     beams: &[FrameBeams],
-    m: usize,
+    layout: TargetLayout,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<Vec<f32>>> {
     let mut out = Vec::with_capacity(views.len());
     for (vi, (view, fb)) in views.iter().zip(beams).enumerate() {
-        out.push(view_targets(teacher, data, view, fb, m)?);
+        out.push(view_targets(teacher, data, view, fb, layout)?);
         progress(vi + 1, views.len());
     }
     Ok(out)
 }
 
-/// The teacher's Eq. 5 segment colours of one view's hit pixels, with the view's recorded
-/// audio code (`[fb.pixels.len(), m, 3]` flat).
+/// The teacher's targets of one view's hit pixels, with the view's recorded audio code
+/// (`[fb.pixels.len(), layout.width()]` flat).
 pub fn view_targets(
     teacher: &TeacherRun,
     data: &TrainData,
     view: &View,
     fb: &FrameBeams,
-    m: usize,
+    layout: TargetLayout,
 ) -> Result<Vec<f32>> {
     let ds = &data.dataset;
     let mut rays = Rays::with_capacity(fb.pixels.len());
@@ -54,30 +69,37 @@ pub fn view_targets(
         return Ok(Vec::new());
     }
     let code = teacher.audio_codes(data, &[view.aud_id])?;
-    Ok(teacher
-        .teacher
-        .segment_targets(&rays, &bg, &code, &data.head_range(), m)?)
+    Ok(teacher.teacher.segment_targets(
+        &rays,
+        &bg,
+        &code,
+        &data.head_range(),
+        layout.segments,
+        layout.opacity,
+    )?)
 }
 
 /// Writes the targets with the teacher's step and the views' fingerprint.
 pub fn save_targets(
     path: &Path,
     targets: &[Vec<f32>],
-    m: usize,
+    layout: TargetLayout,
     teacher_step: usize,
     views: &str,
 ) -> Result<()> {
     let mut tensors = HashMap::new();
+    let width = layout.width();
     for (f, t) in targets.iter().enumerate() {
-        let rows = t.len() / (3 * m);
+        let rows = t.len() / width;
         tensors.insert(
             format!("frame.{f}"),
-            Tensor::from_slice(t, (rows, m, 3), &Device::Cpu)?,
+            Tensor::from_slice(t, (rows, width), &Device::Cpu)?,
         );
     }
     let meta = [
         ("teacher_step".to_string(), teacher_step.to_string()),
-        ("segments".to_string(), m.to_string()),
+        ("segments".to_string(), layout.segments.to_string()),
+        ("opacity".to_string(), layout.opacity.to_string()),
         ("frames".to_string(), targets.len().to_string()),
         ("views".to_string(), views.to_string()),
     ]
@@ -90,13 +112,15 @@ pub fn save_targets(
 pub fn load_targets(
     path: &Path,
     beams: &[FrameBeams],
-    m: usize,
+    layout: TargetLayout,
     teacher_step: Option<usize>,
     views: &str,
 ) -> Result<Option<Vec<Vec<f32>>>> {
     let (tensors, meta) = load_tensors(path)?;
     let get = |k: &str| meta.get(k).and_then(|v| v.parse::<usize>().ok());
-    let fits = get("segments") == Some(m)
+    let opacity = meta.get("opacity").map(String::as_str) == Some("true");
+    let fits = get("segments") == Some(layout.segments)
+        && opacity == layout.opacity
         && get("frames") == Some(beams.len())
         && meta.get("views").map(String::as_str) == Some(views)
         && teacher_step.is_none_or(|s| get("teacher_step") == Some(s));
@@ -108,7 +132,7 @@ pub fn load_targets(
         let Some(t) = tensors.get(&format!("frame.{f}")) else {
             return Ok(None);
         };
-        if t.dims() != [fb.pixels.len(), m, 3] {
+        if t.dims() != [fb.pixels.len(), layout.width()] {
             return Ok(None);
         }
         out.push(t.flatten_all()?.to_vec1()?);

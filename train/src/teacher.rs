@@ -332,9 +332,14 @@ impl Teacher {
     /// segment, so that the segments sum to the pixel. Rays that miss the bounds are their
     /// background, all in the last segment. No early termination, no jitter.
     ///
+    /// With `opacity`, the background stays out of the segments, and each ray's `3 m`
+    /// colours are followed by its accumulated weight `sum_k w_k` (how much of the ray the
+    /// head covers): the pixel is then `sum_i c_i + (1 - sum_k w_k) background`. Rays that
+    /// miss the bounds are all zeros.
+    ///
     /// # Shapes
     /// - `background`: `[n_rays, 3]` flat; `code`: `[1, audio_dim]`
-    /// - returns `[n_rays, m, 3]` flat
+    /// - returns `[n_rays, 3 m]` flat, or `[n_rays, 3 m + 1]` with `opacity`
     pub fn segment_targets(
         &self,
         rays: &Rays,
@@ -342,14 +347,18 @@ impl Teacher {
         code: &Tensor,
         range: &HeadRange,
         m: usize,
+        opacity: bool,
     ) -> Result<Vec<f32>> {
         let m = m.max(1);
+        let width = 3 * m + usize::from(opacity);
         let samples = self.sample_with_code(rays, range, code)?;
         let s = samples.n_samples;
-        let mut out = vec![0.0f32; rays.len() * m * 3];
-        for r in 0..rays.len() {
-            out[(r * m + m - 1) * 3..(r * m + m) * 3]
-                .copy_from_slice(&background[3 * r..3 * r + 3]);
+        let mut out = vec![0.0f32; rays.len() * width];
+        if !opacity {
+            for r in 0..rays.len() {
+                out[(r * m + m - 1) * 3..(r * m + m) * 3]
+                    .copy_from_slice(&background[3 * r..3 * r + 3]);
+            }
         }
         let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
             code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
@@ -378,10 +387,15 @@ impl Teacher {
                     .sum();
                 let left = (-optical_depth).exp();
                 let r = samples.hit[h];
-                let dst = &mut out[r * m * 3..(r + 1) * m * 3];
-                dst.copy_from_slice(&segments);
-                for c in 0..3 {
-                    dst[(m - 1) * 3 + c] += left * background[3 * r + c];
+                let dst = &mut out[r * width..(r + 1) * width];
+                dst[..3 * m].copy_from_slice(&segments);
+                if opacity {
+                    // 1 - exp(-x) without cancellation for thin rays.
+                    dst[3 * m] = -(-optical_depth).exp_m1();
+                } else {
+                    for c in 0..3 {
+                        dst[(m - 1) * 3 + c] += left * background[3 * r + c];
+                    }
                 }
             }
             Ok(())

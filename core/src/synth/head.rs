@@ -211,6 +211,33 @@ impl HeadParams {
     }
 }
 
+impl HeadParams {
+    /// The second head ([`super::HeadStyle::Second`]): a random head made longer and
+    /// narrower, with a long jaw, a fuller cap of light hair, a darker skin tone and larger
+    /// ears, so that a recipe tuned on the standard head meets other shapes and colours.
+    pub fn second(rng: &mut impl Rng) -> HeadParams {
+        let h = HeadParams::random(rng);
+        let tone = rng.random_range(0.0..0.35f32);
+        let light = Vec3::new(0.96, 0.80, 0.69);
+        let dark = Vec3::new(0.42, 0.27, 0.19);
+        let skin = dark.lerp(light, tone).to_array();
+        let lips = (Vec3::from(skin) * Vec3::new(0.8, 0.5, 0.52)).to_array();
+        HeadParams {
+            skin,
+            lips,
+            hair: [0.80, 0.70, 0.48],
+            head_width: h.head_width * 0.88,
+            head_height: h.head_height * 1.1,
+            jaw_width: h.jaw_width * 0.86,
+            jaw_height: h.jaw_height * 1.2,
+            hairline: h.hairline * 0.5,
+            hair_thickness: h.hair_thickness * 1.6,
+            ear_size: h.ear_size * 1.2,
+            ..h
+        }
+    }
+}
+
 fn jitter_color(rng: &mut impl Rng, c: Vec3, amount: f32) -> [f32; 3] {
     let j = Vec3::new(
         rng.random_range(-amount..=amount),

@@ -27,12 +27,13 @@ use crate::audio::{
 };
 use crate::camera::{Camera, Intrinsics, look_at};
 use crate::dataset::{
-    FrameEntry, LABELS_DIR, PARSING_DIR, Split, TransformsFile, save_audio_features,
+    FrameEntry, LABELS_DIR, LANDMARKS_DIR, PARSING_DIR, Split, TransformsFile, save_audio_features,
     save_regions_png,
 };
 use crate::error::{Error, Result};
 use crate::files::{read_json, write_json};
 use crate::image::{ImageRgb, save_png_bytes};
+use crate::landmarks::{LANDMARKS_EXT, Landmarks, landmarks_from_regions};
 use crate::rays::Rect;
 use crate::region::Region;
 use head::{FaceState, HeadFrame, HeadParams, head_bounds, render_background, render_head};
@@ -71,7 +72,28 @@ pub struct SynthConfig {
     pub novel_turn: f32,
     /// Seed of the `voice` split's speaker; `seed + 1` when absent.
     pub voice_seed: Option<u64>,
+    /// Which head: the standard one the recipes were tuned on, or a second one to prove
+    /// them on (see [`HeadStyle`]).
+    pub head: HeadStyle,
 }
+
+/// Which synthetic head a scene shows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum HeadStyle {
+    /// The head every recipe was tuned on, with nldf's exact region labels (`regions/`).
+    #[default]
+    Standard,
+    /// Another head: longer and narrower, with a fuller head of light hair, another skin
+    /// tone, larger ears, and head bounds padded by [`SECOND_HEAD_PAD`] of their size on
+    /// each side, so the box holds more background. Labelled as AD-NeRF labels a real
+    /// recording: its parsing (head, no mouth) and 68 landmarks per frame
+    /// (`ori_imgs/<id>.lms`), without `regions/`.
+    Second,
+}
+
+/// How much the second head's bounds are padded on each side, as a share of their size.
+pub const SECOND_HEAD_PAD: f32 = 0.15;
 
 impl Default for SynthConfig {
     fn default() -> Self {
@@ -88,6 +110,7 @@ impl Default for SynthConfig {
             features: FeatureConfig::default(),
             novel_turn: 1.5,
             voice_seed: None,
+            head: HeadStyle::Standard,
         }
     }
 }
@@ -447,7 +470,10 @@ fn write_scene(
     tick: &(dyn Fn() + Sync),
 ) -> Result<Summary> {
     let n_frames = (cfg.seconds * cfg.fps).floor() as usize;
-    let head = HeadParams::random(&mut stream(cfg.seed, 1));
+    let head = match cfg.head {
+        HeadStyle::Standard => HeadParams::random(&mut stream(cfg.seed, 1)),
+        HeadStyle::Second => HeadParams::second(&mut stream(cfg.seed, 1)),
+    };
     let background = render_background(&mut stream(cfg.seed, 2), cfg.size, cfg.size);
     let (voice, audio_source, wave) = scene_audio(cfg, audio, n_frames)?;
     let tracks = Tracks::new(cfg, &wave, n_frames);
@@ -487,7 +513,7 @@ fn write_scene(
         n_frames,
         n_train,
         n_eval: extra.frames.len(),
-        files: scene_files(n_frames + extra.frames.len()),
+        files: scene_files(cfg, n_frames + extra.frames.len()),
     })
 }
 
@@ -611,7 +637,11 @@ fn write_inputs(
     wave: &Waveform,
     windows: &AudioWindows,
 ) -> Result<()> {
-    for sub in ["head_imgs", PARSING_DIR, LABELS_DIR, "depth"] {
+    let labels = match cfg.head {
+        HeadStyle::Standard => LABELS_DIR,
+        HeadStyle::Second => LANDMARKS_DIR,
+    };
+    for sub in ["head_imgs", PARSING_DIR, labels, "depth"] {
         let d = dir.join(sub);
         std::fs::create_dir(&d).map_err(|e| Error::io(&d, e))?;
     }
@@ -635,7 +665,7 @@ fn render_frames(
         .map(|i| {
             let (face, camera) = &views[i];
             let frame = render_head(head, face, camera, background, cfg.supersample);
-            write_frame(dir, i, &frame, cfg.size)?;
+            write_frame(dir, i, &frame, cfg)?;
             tick();
             Ok(face_rect(&frame.regions, cfg.size))
         })
@@ -644,7 +674,8 @@ fn render_frames(
 
 /// Writes frame `i`'s image, its face parsing in AD-NeRF's convention (head, no mouth),
 /// nldf's exact labels of the head's parts and depth (`t * DEPTH_SCALE` as 16 bits).
-fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, size: u32) -> Result<()> {
+fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, cfg: &SynthConfig) -> Result<()> {
+    let size = cfg.size;
     frame
         .rgb
         .save_png(&dir.join(format!("head_imgs/{i}.png")))?;
@@ -655,13 +686,26 @@ fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, size: u32) -> Result<()>
         &frame.regions,
         Region::parsing_color,
     )?;
-    save_regions_png(
-        &dir.join(format!("{LABELS_DIR}/{i}.png")),
-        size,
-        size,
-        &frame.regions,
-        Region::label_color,
-    )?;
+    match cfg.head {
+        HeadStyle::Standard => save_regions_png(
+            &dir.join(format!("{LABELS_DIR}/{i}.png")),
+            size,
+            size,
+            &frame.regions,
+            Region::label_color,
+        )?,
+        HeadStyle::Second => {
+            // A frame without a visible mouth gets its head's centre as every point: a
+            // tracker's guess, whose lip polygon covers no pixel.
+            let lms = landmarks_from_regions(&frame.regions, size).unwrap_or_else(|| Landmarks {
+                points: vec![[size as f32 / 2.0; 2]; crate::landmarks::N_LANDMARKS],
+            });
+            crate::files::write_atomic(
+                &dir.join(format!("{LANDMARKS_DIR}/{i}.{LANDMARKS_EXT}")),
+                lms.to_text().as_bytes(),
+            )?;
+        }
+    }
     let depth: Vec<u8> = frame
         .depth
         .iter()
@@ -733,7 +777,11 @@ fn scene_file(
     intrinsics: Intrinsics,
     tracks: &Tracks,
 ) -> SceneFile {
-    let (lo, hi) = head_bounds(&head);
+    let (mut lo, mut hi) = head_bounds(&head);
+    if cfg.head == HeadStyle::Second {
+        let pad = (hi - lo) * SECOND_HEAD_PAD;
+        (lo, hi) = (lo - pad, hi + pad);
+    }
     SceneFile {
         generator: GENERATOR.to_string(),
         config: cfg.clone(),
@@ -762,7 +810,11 @@ fn scene_file(
 
 /// The files and folders of a scene of `n_frames` frames (evaluation splits included), as
 /// [`Summary::files`] lists them.
-fn scene_files(n_frames: usize) -> Vec<(PathBuf, usize)> {
+fn scene_files(cfg: &SynthConfig, n_frames: usize) -> Vec<(PathBuf, usize)> {
+    let labels = match cfg.head {
+        HeadStyle::Standard => LABELS_DIR,
+        HeadStyle::Second => LANDMARKS_DIR,
+    };
     [
         ("transforms_train.json", 1),
         ("transforms_val.json", 1),
@@ -776,7 +828,7 @@ fn scene_files(n_frames: usize) -> Vec<(PathBuf, usize)> {
         ("aud.json", 1),
         ("head_imgs", n_frames),
         (PARSING_DIR, n_frames),
-        (LABELS_DIR, n_frames),
+        (labels, n_frames),
         ("depth", n_frames),
         (SCENE_FILE, 1),
     ]

@@ -6,6 +6,7 @@
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{ONNX_FILE, STUDENT_DIR, TEACHER_DIR, has_checkpoint};
@@ -19,32 +20,41 @@ use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::teacher::{TeacherJob, TeacherSource};
 use crate::job::{JobEvent, OnEvent};
 use crate::student::StudentConfig;
+use crate::timing::{TIMING_FILE, Timing};
+
+/// Where the demo keeps its own parts of the breakdown (scene, export, evaluation).
+const DEMO_TIMING_DIR: &str = "eval";
 
 /// What `nldf demo` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DemoJob {
     /// The run folder: the dataset goes to `OUT/data`, the teacher to `OUT/teacher`, the
-    /// student to `OUT/student`, the model to `OUT/model.onnx`, the evaluation to
-    /// `OUT/eval/val`.
+    /// student to `OUT/student`, the model to `OUT/model.onnx`, the evaluations to
+    /// `OUT/eval/<split>`.
     pub out: PathBuf,
     /// The synthetic scene (seed, length, size).
     pub scene: SynthConfig,
     /// The teacher's network.
     pub teacher: TeacherConfig,
-    /// Teacher training budget in minutes.
-    pub teacher_minutes: f64,
+    /// Teacher training steps: the recipe is pinned in steps, so that its scores do not
+    /// move with the machine.
+    pub teacher_iters: usize,
+    /// A wall-clock cap on the teacher in minutes, which only stops it (and says so).
+    pub teacher_cap_minutes: f64,
     /// The student's network.
     pub student: StudentConfig,
-    /// Student training budget in minutes (teacher targets included); 0 skips the student
-    /// and the export.
-    pub student_minutes: f64,
-    /// Distil the student from the teacher's segment colours (Eq. 9), or train it on the
-    /// recorded pixels alone (which reaches more on the recorded poses within a short
-    /// budget: the teacher's targets cost minutes to render).
-    pub student_distill: bool,
-    /// Student training steps (the learning rate decays over them; the budget may end the
-    /// run first).
+    /// Student training steps (0 skips the student and the export).
     pub student_iters: usize,
+    /// A wall-clock cap on the student in minutes (teacher targets included).
+    pub student_cap_minutes: f64,
+    /// Distil the student from the teacher (Eq. 9), with pseudo views at poses beyond the
+    /// recorded ones, or train it on the recorded pixels alone (`--pixels-only`, the
+    /// comparison).
+    pub student_distill: bool,
+    /// The distilled student's pseudo views, where they differ from the demo's.
+    pub pseudo: PseudoSettings,
+    /// Held-out splits evaluated (those the scene has).
+    pub splits: Vec<Split>,
 }
 
 /// What the demo made.
@@ -52,29 +62,48 @@ pub struct DemoJob {
 pub struct DemoReport {
     /// The exported student, when one was trained.
     pub model: Option<PathBuf>,
-    /// The evaluation of the teacher and the student on the held-out frames.
+    /// The evaluation of the teacher and the student on the validation frames.
     pub evaluation: Evaluation,
-    /// Where the evaluation was written.
+    /// Where that evaluation was written.
     pub eval_dir: PathBuf,
+    /// Every split's evaluation, `val` first.
+    pub splits: Vec<(Split, Evaluation)>,
 }
 
-/// The demo's teacher budget in minutes.
-pub const DEMO_TEACHER_MINUTES: f64 = 5.0;
+/// The demo's teacher steps.
+pub const DEMO_TEACHER_ITERS: usize = 1300;
 
-/// The demo's student budget in minutes: with the teacher's, the scene, the export, the
-/// video and the evaluation, the demo ends within 15 minutes on 2 cores.
-pub const DEMO_STUDENT_MINUTES: f64 = 8.5;
+/// The demo's cap on the teacher in minutes.
+pub const DEMO_TEACHER_CAP_MINUTES: f64 = 7.0;
 
-/// The demo's student steps: the learning rate is held for 60 % of the budget, then decays
-/// tenfold (the budget ends the run first).
-pub const DEMO_STUDENT_ITERS: usize = 100_000;
+/// The demo's student steps.
+pub const DEMO_STUDENT_ITERS: usize = 2500;
+
+/// The demo's cap on the student in minutes.
+pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
+
+/// The demo's pseudo views: how many, how far (a factor of the recorded yaw and pitch
+/// range), how many hit pixels the teacher renders in each.
+pub const DEMO_PSEUDO: PseudoSettings = PseudoSettings {
+    frames: Some(600),
+    pose_range: Some(2.0),
+    rays: Some(1024),
+};
+
+/// Share of a distilled demo student's batch frames drawn from the pseudo views.
+pub const DEMO_PSEUDO_FRACTION: f32 = 0.5;
+
+/// Share of the demo student's steps at the full learning rate before it decays tenfold
+/// over the rest.
+pub const DEMO_STUDENT_HOLD: f64 = 0.6;
 
 impl DemoJob {
     /// The demo as `nldf demo` runs it by default, into `out`: the synthetic scene of seed
     /// 0 at 128 x 128 (supersampled 3x), the small teacher (6 x 128) for
-    /// [`DEMO_TEACHER_MINUTES`], then the real-time student (16 x 128, K = 8) on the
-    /// recorded pixels for [`DEMO_STUDENT_MINUTES`]. The command line changes only what
-    /// its flags say; the tests shrink the sizes and budgets and keep the recipe.
+    /// [`DEMO_TEACHER_ITERS`] steps, then the real-time student (16 x 128, K = 8) with
+    /// opacity, distilled from the teacher with pseudo views, for [`DEMO_STUDENT_ITERS`]
+    /// steps, evaluated on `val`, `novel` and `voice`. The command line changes only what
+    /// its flags say; the tests shrink the sizes and steps and keep the recipe.
     pub fn defaults(out: PathBuf) -> DemoJob {
         DemoJob {
             out,
@@ -84,29 +113,82 @@ impl DemoJob {
                 ..SynthConfig::default()
             },
             teacher: TeacherConfig::small(),
-            teacher_minutes: DEMO_TEACHER_MINUTES,
+            teacher_iters: DEMO_TEACHER_ITERS,
+            teacher_cap_minutes: DEMO_TEACHER_CAP_MINUTES,
             student: StudentConfig::realtime(),
-            student_minutes: DEMO_STUDENT_MINUTES,
             student_iters: DEMO_STUDENT_ITERS,
-            student_distill: false,
+            student_cap_minutes: DEMO_STUDENT_CAP_MINUTES,
+            student_distill: true,
+            pseudo: DEMO_PSEUDO,
+            splits: vec![Split::Val, Split::Novel, Split::Voice],
         }
     }
 
-    /// Checks the budgets and the scene's settings; nothing is made yet.
+    /// Checks the steps, caps and the scene's settings; nothing is made yet.
     pub fn check(&self) -> Result<()> {
-        if !(self.teacher_minutes.is_finite() && self.teacher_minutes > 0.0) {
-            return Err(Error::Config(format!(
-                "the teacher's budget must be positive, got {} minutes",
-                self.teacher_minutes
-            )));
+        if self.teacher_iters == 0 {
+            return Err(Error::Config("the teacher needs at least one step".into()));
         }
-        if !(self.student_minutes.is_finite() && self.student_minutes >= 0.0) {
-            return Err(Error::Config(format!(
-                "the student's budget must be zero or positive, got {} minutes",
-                self.student_minutes
-            )));
+        for (what, minutes) in [
+            ("teacher", self.teacher_cap_minutes),
+            ("student", self.student_cap_minutes),
+        ] {
+            if !(minutes.is_finite() && minutes > 0.0) {
+                return Err(Error::Config(format!(
+                    "the {what}'s wall-clock cap must be positive, got {minutes} minutes"
+                )));
+            }
+        }
+        if self.splits.first() != Some(&Split::Val) {
+            return Err(Error::Config(
+                "the demo evaluates `val` first; other splits follow it".into(),
+            ));
         }
         synth::validate(&self.scene)?;
+        Ok(())
+    }
+
+    /// Writes the whole run's time breakdown, `OUT/timing.json`: the scene, each stage's
+    /// parts (from its own `timing.json`), the export and the evaluation.
+    fn save_timing(&self, own: &Timing, on_event: OnEvent) -> Result<()> {
+        let mut all = Timing::default();
+        all.absorb(
+            "",
+            &Timing {
+                parts: own
+                    .parts
+                    .iter()
+                    .filter(|p| p.what == "synthetic scene")
+                    .cloned()
+                    .collect(),
+            },
+        );
+        for stage in [TEACHER_DIR, STUDENT_DIR] {
+            all.absorb(&format!("{stage}: "), &Timing::open(&self.out.join(stage))?);
+        }
+        all.absorb(
+            "",
+            &Timing {
+                parts: own
+                    .parts
+                    .iter()
+                    .filter(|p| p.what != "synthetic scene")
+                    .cloned()
+                    .collect(),
+            },
+        );
+        // The demo's own parts are kept apart, so that a rerun adds to them only.
+        let own_dir = self.out.join(DEMO_TIMING_DIR);
+        std::fs::create_dir_all(&own_dir).map_err(|e| Error::io(&own_dir, e))?;
+        own.save(&own_dir)?;
+        all.save(&self.out)?;
+        on_event(&JobEvent::Note(format!(
+            "time of the whole demo ({}):",
+            self.out.join(TIMING_FILE).display()
+        )));
+        for line in all.lines() {
+            on_event(&JobEvent::Note(format!("  {line}")));
+        }
         Ok(())
     }
 
@@ -115,7 +197,9 @@ impl DemoJob {
     /// infinite pixels: see [`Evaluation::check_finite`].
     pub fn run(&self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<DemoReport>> {
         self.check()?;
+        let mut own = Timing::open(&self.out.join(DEMO_TIMING_DIR))?;
         let data = self.out.join("data");
+        let started = Instant::now();
         if data.join(nldf_core::synth::SCENE_FILE).is_file() {
             on_event(&JobEvent::Stage(format!(
                 "synthetic scene: reusing {}",
@@ -156,40 +240,52 @@ impl DemoJob {
                 dir: data.clone(),
                 files: summary.files.iter().map(|(f, _)| data.join(f)).collect(),
             });
+            own.add("synthetic scene", started.elapsed().as_secs_f64(), 1);
         }
         let teacher_dir = self.out.join(TEACHER_DIR);
         let resume = has_checkpoint(&teacher_dir);
         on_event(&JobEvent::Stage(format!(
-            "teacher ({} min budget{}) -> {}",
-            self.teacher_minutes,
+            "teacher ({} steps, capped at {} min{}) -> {}",
+            self.teacher_iters,
+            self.teacher_cap_minutes,
             if resume { ", resuming" } else { "" },
             teacher_dir.display()
         )));
-        TeacherJob {
+        let mut plan = TeacherJob {
             data: data.clone(),
             run: self.out.clone(),
             source: TeacherSource::Preset(self.teacher.clone()),
-            iters: None,
+            iters: Some(self.teacher_iters),
             resume,
             audio: AudioChoice::Auto,
-            budget_s: Some(self.teacher_minutes * 60.0),
+            budget_s: None,
         }
-        .plan(on_event)?
-        .run(stop, on_event)?;
+        .plan(on_event)?;
+        // The learning rate decays tenfold over the pinned steps; the cap only stops.
+        plan.run.cfg.train.lr_decay_steps = self.teacher_iters;
+        plan.run.cfg.train.time_budget_s = 0.0;
+        plan.run.cfg.train.time_cap_s = self.teacher_cap_minutes * 60.0;
+        plan.run(stop, on_event)?;
         if stop.load(Ordering::Relaxed) {
             return Ok(None);
         }
         let mut model = None;
-        if self.student_minutes > 0.0 {
+        if self.student_iters > 0 {
             let student_dir = self.out.join(STUDENT_DIR);
             let resume = has_checkpoint(&student_dir);
             on_event(&JobEvent::Stage(format!(
-                "student ({} min budget{}) -> {}",
-                self.student_minutes,
+                "student, {} ({} steps, capped at {} min{}) -> {}",
+                if self.student_distill {
+                    "distilled with pseudo views"
+                } else {
+                    "pixels only"
+                },
+                self.student_iters,
+                self.student_cap_minutes,
                 if resume { ", resuming" } else { "" },
                 student_dir.display()
             )));
-            StudentJob {
+            let mut plan = StudentJob {
                 data: data.clone(),
                 run: self.out.clone(),
                 name: STUDENT_DIR.into(),
@@ -197,18 +293,29 @@ impl DemoJob {
                     model: self.student.clone(),
                     distill: self.student_distill,
                     pool: true,
-                    pseudo: PseudoSettings::default(),
+                    pseudo: self.pseudo,
                 },
                 iters: Some(self.student_iters),
-                minutes: Some(self.student_minutes),
+                minutes: None,
                 resume,
             }
-            .plan(on_event)?
-            .run(stop, on_event)?;
+            .plan(on_event)?;
+            let t = &mut plan.run.cfg.train;
+            if !resume {
+                // Held, then tenfold down over the last 40 % of the pinned steps.
+                let hold = (DEMO_STUDENT_HOLD * self.student_iters as f64).round() as usize;
+                t.lr_hold_steps = hold;
+                t.lr_decay_steps = (self.student_iters - hold).max(1);
+                t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
+            }
+            t.time_budget_s = 0.0;
+            t.time_cap_s = self.student_cap_minutes * 60.0;
+            plan.run(stop, on_event)?;
             if stop.load(Ordering::Relaxed) {
                 return Ok(None);
             }
             on_event(&JobEvent::Stage("ONNX export".into()));
+            let started = Instant::now();
             let onnx = self.out.join(ONNX_FILE);
             let report =
                 nldf_export::export_student(&student_dir, &onnx, nldf_export::WeightType::F32)?;
@@ -223,21 +330,48 @@ impl DemoJob {
                 files: vec![onnx.clone()],
             });
             model = Some(onnx);
+            own.add("ONNX export", started.elapsed().as_secs_f64(), 1);
         }
-        on_event(&JobEvent::Stage("evaluation on the held-out frames".into()));
-        let plan = EvalJob {
-            run: self.out.clone(),
-            data,
-            split: Split::Val,
-            frames: None,
-            out: None,
+        let mut splits = Vec::new();
+        let mut eval_dir = self.out.join("eval").join(Split::Val.name());
+        for &split in &self.splits {
+            if split != Split::Val && !data.join(split.file_name()).is_file() {
+                continue;
+            }
+            on_event(&JobEvent::Stage(format!(
+                "evaluation on the `{}` frames",
+                split.name()
+            )));
+            let plan = EvalJob {
+                run: self.out.clone(),
+                data: data.clone(),
+                split,
+                frames: None,
+                out: None,
+            }
+            .plan(on_event)?;
+            let started = Instant::now();
+            let evaluation = plan.run(on_event)?;
+            own.add(
+                &format!("evaluation: {}", split.name()),
+                started.elapsed().as_secs_f64(),
+                1,
+            );
+            if split == Split::Val {
+                eval_dir = plan.out.clone();
+            }
+            splits.push((split, evaluation));
         }
-        .plan(on_event)?;
-        let evaluation = plan.run(on_event)?;
+        self.save_timing(&own, on_event)?;
+        let evaluation = splits
+            .first()
+            .map(|(_, e)| e.clone())
+            .ok_or_else(|| Error::Config("the demo evaluated no split".into()))?;
         Ok(Some(DemoReport {
             model,
             evaluation,
-            eval_dir: plan.out,
+            eval_dir,
+            splits,
         }))
     }
 }

@@ -22,6 +22,7 @@ use crate::error::{Error, Result};
 use crate::run_loop::Event;
 use crate::run_loop::TrainingRun;
 use crate::scores::Scores;
+use crate::timing::{TIMING_FILE, Timing};
 
 /// What a job reports as it goes.
 #[derive(Debug, Clone, PartialEq)]
@@ -114,8 +115,11 @@ pub(crate) fn check_resume(dir: &std::path::Path, what: &str, resume: bool) -> R
 }
 
 /// Runs the training loop of `run` as stage `stage`, forwarding its events.
+/// The seconds of the stage's loop, with `before` (the work that preceded it, such as the
+/// teacher's targets), are added to `timing.json` in the run's folder and printed.
 pub(crate) fn train_stage(
     stage: &str,
+    before: &Timing,
     run: &mut dyn TrainingRun,
     data: &TrainData,
     stop: &AtomicBool,
@@ -126,12 +130,35 @@ pub(crate) fn train_stage(
         step: run.step(),
         iters: run.schedule().iters,
     });
-    let scores = crate::run_loop::train_loop(run, data, stop, &mut |event| {
+    let dir = run.dir().to_path_buf();
+    let mut timing = Timing::open(&dir)?;
+    timing.absorb("", before);
+    let result = crate::run_loop::train_loop_timed(run, data, stop, &mut timing, &mut |event| {
         on_event(&JobEvent::Training {
             stage: stage.to_string(),
             event: event.clone(),
         })
-    })?;
+    });
+    // Kept whatever ended the loop: an interrupted or failed stage's time was spent too.
+    timing.save(&dir)?;
+    on_event(&JobEvent::Note(format!(
+        "{stage} time, all sessions of this run ({}):",
+        dir.join(TIMING_FILE).display()
+    )));
+    for line in timing.lines() {
+        on_event(&JobEvent::Note(format!("  {line}")));
+    }
+    let scores = result?;
+    let t = run.schedule();
+    if t.time_cap_s > 0.0 && run.step() < t.iters && run.elapsed() >= t.time_cap_s {
+        on_event(&JobEvent::Note(format!(
+            "the {stage}'s wall-clock cap of {:.1} min cut it short at step {} of {}: this \
+             machine is slower than the recipe was sized for, and its scores will be lower",
+            t.time_cap_s / 60.0,
+            run.step(),
+            t.iters
+        )));
+    }
     on_event(&JobEvent::TrainingEnds {
         stage: stage.to_string(),
         step: run.step(),

@@ -14,8 +14,9 @@ use crate::error::{Error, Result};
 use crate::job::{JobEvent, OnEvent, check_resume, load_data, train_stage, wrote};
 use crate::scores::Scores;
 use crate::student::StudentConfig;
-use crate::student_trainer::StudentRun;
+use crate::student_trainer::{RECORDED_TARGETS_PART, StudentRun};
 use crate::teacher_trainer::TeacherRun;
+use crate::timing::Timing;
 
 /// Where a new student's configuration comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -175,6 +176,7 @@ impl StudentPlan {
     /// Makes the views and the teacher's targets, then trains until the schedule, the
     /// budget or `stop` ends it; lists the files written.
     pub fn run(mut self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<Scores>> {
+        let started = std::time::Instant::now();
         self.run
             .prepare_deferred(&self.data, self.teacher.take(), &mut |done, total| {
                 on_event(&JobEvent::Progress {
@@ -183,6 +185,11 @@ impl StudentPlan {
                     total,
                 })
             })?;
+        let mut before = Timing::default();
+        if self.run.cfg.train.distill {
+            let n = self.run.views.iter().filter(|v| v.recorded).count();
+            before.add(RECORDED_TARGETS_PART, started.elapsed().as_secs_f64(), n);
+        }
         let pending = self.run.pending_pseudo_views();
         if pending > 0 {
             on_event(&JobEvent::Note(format!(
@@ -191,7 +198,14 @@ impl StudentPlan {
                 self.run.cfg.train.pseudo_per_step
             )));
         }
-        let scores = train_stage("student", &mut self.run, &self.data, stop, on_event)?;
+        let scores = train_stage(
+            "student",
+            &before,
+            &mut self.run,
+            &self.data,
+            stop,
+            on_event,
+        )?;
         on_event(&wrote(&self.run.dir, STUDENT_FILES));
         Ok(scores)
     }

@@ -100,7 +100,14 @@ impl TeacherJob {
 impl TeacherPlan {
     /// Trains until the schedule, the budget or `stop` ends it; lists the files written.
     pub fn run(mut self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<Scores>> {
-        let scores = train_stage("teacher", &mut self.run, &self.data, stop, on_event)?;
+        let scores = train_stage(
+            "teacher",
+            &crate::timing::Timing::default(),
+            &mut self.run,
+            &self.data,
+            stop,
+            on_event,
+        )?;
         on_event(&wrote(&self.run.dir, TEACHER_FILES));
         Ok(scores)
     }
