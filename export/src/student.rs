@@ -544,8 +544,10 @@ fn residual_mlp(
         };
         let m3 = 3 * s.segments;
         let logit = slice(g, "mlp.opacity_logit", m3, m3 + 1);
-        g.node("Sigmoid", OUTPUT_OPACITY, &[&logit], vec![]);
-        slice(g, "mlp.colours", 0, m3)
+        let alpha = g.node("Sigmoid", OUTPUT_OPACITY, &[&logit], vec![]);
+        // Premultiplied: a ray the head does not cover adds no colour.
+        let raw = slice(g, "mlp.colours", 0, m3);
+        g.node("Mul", "mlp.premultiplied", &[&raw, &alpha], vec![])
     } else {
         out
     };

@@ -47,7 +47,7 @@ fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {
     let renderer = FrameRenderer::new(backend, None).unwrap();
 
     let views = training_views(&data, &run.cfg.train);
-    let beams = frame_beams(&data, &views);
+    let beams = frame_beams(&data, &views, None);
     let frames = data.dataset.frames(Split::Train);
     let width = data.dataset.intrinsics.width as usize;
     let wav_windows = windows_from_wav(&info, &model, &scene.join("aud.wav")).unwrap();

@@ -63,3 +63,29 @@ fn ssim_drops_with_noise_and_sizes_must_match() {
     assert!(ssim(&a, &pattern_image(16, 32, 1)).is_err());
     assert!(psnr(&a, &pattern_image(16, 32, 1)).is_err());
 }
+
+/// The repainted share counts the pixels outside the head that differ from the background
+/// by more than 1.5/255 in any channel (a NaN counts), and never a head pixel.
+#[test]
+fn the_repainted_share_counts_changed_background_pixels_outside_the_head() {
+    use nldf_core::region::Region;
+    use nldf_train::eval::{REPAINT_THRESHOLD, repainted_share};
+    let bg = ImageRgb::filled(4, 4, [0.5, 0.25, 0.75]);
+    let mut regions = vec![Region::Background; 16];
+    for p in [5, 6, 9, 10] {
+        regions[p] = Region::Face;
+    }
+    let mut render = bg.clone();
+    assert_eq!(repainted_share(&render, &bg, &regions), Some(0.0));
+    // Head pixels may change freely.
+    render.data[3 * 5] = 0.0;
+    assert_eq!(repainted_share(&render, &bg, &regions), Some(0.0));
+    // Just under the threshold is kept; just over is repainted.
+    render.data[0] += 0.9 * REPAINT_THRESHOLD;
+    assert_eq!(repainted_share(&render, &bg, &regions), Some(0.0));
+    render.data[3 + 1] += 1.1 * REPAINT_THRESHOLD;
+    render.data[3 * 15 + 2] = f32::NAN;
+    assert_eq!(repainted_share(&render, &bg, &regions), Some(2.0 / 12.0));
+    // A frame that is all head has no background to repaint.
+    assert_eq!(repainted_share(&render, &bg, &[Region::Face; 16]), None);
+}

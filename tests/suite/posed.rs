@@ -282,7 +282,7 @@ fn thinned_pseudo_views_keep_their_mouth_and_a_seeded_subset_and_recorded_frames
         ..StudentTrainConfig::default()
     };
     let views = training_views(&data, &cfg);
-    let full = frame_beams(&data, &views);
+    let full = frame_beams(&data, &views, None);
     let n = full[n_recorded..]
         .iter()
         .map(|fb| fb.pixels.len())

@@ -288,7 +288,8 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     assert!(run.views[..n_train].iter().all(|v| v.recorded));
     assert!(run.views[n_train..].iter().all(|v| !v.recorded));
     for (fb, t) in run.beams.iter().zip(&run.targets) {
-        assert_eq!(t.len(), 3 * run.cfg.model.segments * fb.pixels.len());
+        // 3 M colours and the opacity per pixel.
+        assert_eq!(t.len(), (3 * run.cfg.model.segments + 1) * fb.pixels.len());
     }
     assert!(run.beams[n_train..].iter().all(|fb| !fb.pixels.is_empty()));
 
@@ -388,4 +389,52 @@ fn a_student_resumes_bit_exactly_with_its_pool() {
         .map(|_| resumed.train_step(&data).unwrap().loss)
         .collect();
     assert_eq!(next, again);
+}
+
+/// Eq. 9 with opacity, on numbers worked by hand: the pixel term, lambda times the
+/// segment term and lambda times the opacity's divergence, KL(0.5 | 0.9) =
+/// 0.5 ln(0.5 / 0.9) + 0.5 ln(0.5 / 0.1), each per ray; and the divergence is 0 where
+/// the opacity is the teacher's, even at 0 and 1.
+#[test]
+fn the_distillation_loss_adds_the_opacity_term_inside_lambda() {
+    use nldf_train::loss::{TeacherTargets, distillation_loss};
+    let t = |v: Vec<f32>, shape: &[usize]| Tensor::from_vec(v, shape, &Device::Cpu).unwrap();
+    // One ray, M = 1.
+    let pixels = t(vec![0.5, 0.5, 0.5], &[1, 3]);
+    let truth = t(vec![0.2, 0.5, 0.5], &[1, 3]);
+    let segments = t(vec![0.4, 0.4, 0.4], &[1, 1, 3]);
+    let target_segments = t(vec![0.4, 0.1, 0.4], &[1, 1, 3]);
+    let logit = t(vec![(0.9f32 / 0.1).ln()], &[1, 1]);
+    let target_alpha = t(vec![0.5], &[1, 1]);
+    let lambda = 0.2;
+    let loss = |opacity: bool| -> f32 {
+        distillation_loss(
+            &pixels,
+            &truth,
+            &segments,
+            opacity.then_some(&logit),
+            Some(TeacherTargets {
+                segments: &target_segments,
+                opacity: Some(&target_alpha),
+            }),
+            lambda,
+        )
+        .unwrap()
+        .per_ray
+        .to_vec1::<f32>()
+        .unwrap()[0]
+    };
+    let pixel = 0.09 / 3.0;
+    let segment = lambda as f32 * 0.09 / 3.0;
+    let kl = 0.5 * (0.5f32 / 0.9).ln() + 0.5 * (0.5f32 / 0.1).ln();
+    let opacity = lambda as f32 * kl;
+    assert!((loss(false) - (pixel + segment)).abs() < 1e-6, "{}", loss(false));
+    assert!((loss(true) - (pixel + segment + opacity)).abs() < 1e-5, "{}", loss(true));
+    let z = t(vec![-30.0, 0.0, 30.0, 2.0], &[4, 1]);
+    let a = t(vec![0.0, 0.5, 1.0, 1.0 / (1.0 + (-2.0f32).exp())], &[4, 1]);
+    let d: Vec<f32> = nldf_train::loss::opacity_divergence(&z, &a)
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    assert!(d.iter().all(|v| v.abs() < 1e-5), "{d:?}");
 }

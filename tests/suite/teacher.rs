@@ -503,7 +503,7 @@ fn segment_targets_sum_to_the_teachers_pixel() {
             let t = &alpha_seg[r * w..(r + 1) * w];
             let alpha = t[3 * m];
             assert!((0.0..=1.0).contains(&alpha), "ray {r}: opacity {alpha}");
-            covered += usize::from(alpha > 0.5);
+            covered += usize::from(alpha > 0.01);
             missed += usize::from(t.iter().all(|&v| v == 0.0));
             for c in 0..3 {
                 let sum: f32 = (0..m).map(|i| t[i * 3 + c]).sum();

@@ -96,6 +96,8 @@ struct Diverging {
     step: usize,
     nan_at: usize,
     budget_s: f64,
+    /// A wall-clock cap that only stops the run.
+    cap_s: f64,
     /// Seconds spent before the first step (a student's teacher targets, say).
     spent_before: f64,
 }
@@ -109,6 +111,7 @@ impl Diverging {
             step: 0,
             nan_at: usize::MAX,
             budget_s,
+            cap_s: 0.0,
             spent_before,
         }
     }
@@ -130,7 +133,7 @@ impl TrainingRun for Diverging {
             val_frames: 1,
             checkpoint_every: 1,
             time_budget_s: self.budget_s,
-            time_cap_s: 0.0,
+            time_cap_s: self.cap_s,
         }
     }
     fn elapsed(&self) -> f64 {
@@ -178,6 +181,7 @@ fn a_nan_loss_stops_training_and_keeps_the_last_good_checkpoint() {
         step: 0,
         nan_at: 4,
         budget_s: 0.0,
+        cap_s: 0.0,
         spent_before: 0.0,
     };
     let mut checkpoints = Vec::new();
@@ -220,6 +224,35 @@ fn a_run_stops_when_its_budget_is_spent_and_a_resumed_spent_run_trains_no_step()
     // Resumed with the same budget: nothing more is trained.
     assert_eq!(steps(&mut run), (0, false));
     assert_eq!(run.step, 3);
+}
+
+/// A wall-clock cap stops a run as a budget does, but leaves the learning rate to the
+/// steps: a recipe pinned in steps trains the same schedule on any machine.
+#[test]
+fn a_time_cap_stops_the_run_and_leaves_the_learning_rate_to_the_steps() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = Diverging::budgeted(dir.path(), 0.0, 0.0);
+    run.cap_s = 4.0;
+    let mut n = 0;
+    train_loop(&mut run, &data, &AtomicBool::new(false), &mut |e| {
+        n += usize::from(matches!(e, Event::Step { .. }));
+    })
+    .unwrap();
+    assert_eq!((n, run.step), (4, 4));
+    let capped = nldf_train::config::StudentTrainConfig {
+        lr_decay_steps: 100,
+        time_cap_s: 10.0,
+        ..Default::default()
+    };
+    let budgeted = nldf_train::config::StudentTrainConfig {
+        time_budget_s: 10.0,
+        time_cap_s: 0.0,
+        ..capped.clone()
+    };
+    // Near its end the budget has decayed the rate; the cap has not touched it.
+    assert_eq!(capped.learning_rate(0, 9.9), capped.lr);
+    assert!(budgeted.learning_rate(0, 9.9) < 0.2 * capped.lr);
 }
 
 /// A new run whose budget is spent before its first step is still written, at step 0, so

@@ -248,6 +248,9 @@ pub struct TeacherTrainConfig {
     /// Steps over which the learning rate decays by 10x (AD-NeRF: 500k; here the length of
     /// the default run).
     pub lr_decay_steps: usize,
+    /// Steps the learning rate is held at `lr` before it starts to decay (0: decays from
+    /// the first step).
+    pub lr_hold_steps: usize,
     /// Step from which AudioAttNet fuses neighbouring frames (AD-NeRF: 200k of ~400k).
     pub att_start: usize,
     /// AudioAttNet's learning rate as a multiple of `lr` (AD-NeRF: 5).
@@ -287,6 +290,7 @@ impl Default for TeacherTrainConfig {
             mouth_fraction: 0.1,
             lr: 1e-3,
             lr_decay_steps: 6000,
+            lr_hold_steps: 0,
             att_start: 3000,
             att_lr_scale: 5.0,
             beta1: 0.9,
@@ -359,6 +363,13 @@ pub struct StudentTrainConfig {
     /// Fraction of rays drawn from the mouth region when the dataset has parsing masks
     /// (counted inside the face fraction; the teacher's setting).
     pub mouth_fraction: f32,
+    /// Weight of a mouth ray's loss against another ray's (1: none): the mouth is a few
+    /// percent of the head but carries the audio's effect.
+    pub mouth_weight: f32,
+    /// Find a pseudo view's mouth by projecting its source frame's mouth pixels through
+    /// the teacher's depth (off: the source frame's mouth pixels as they are, which miss
+    /// the mouth once the head turns).
+    pub project_mouth: bool,
     /// Adam learning rate at step 0 (R2L: 5e-4).
     pub lr: f64,
     /// Steps over which the learning rate decays by 10x.
@@ -473,6 +484,8 @@ impl Default for StudentTrainConfig {
             frames_per_batch: 8,
             face_fraction: 0.9,
             mouth_fraction: 0.1,
+            mouth_weight: 1.0,
+            project_mouth: true,
             lr: 5e-4,
             lr_decay_steps: 3000,
             lr_hold_steps: 0,
@@ -515,6 +528,7 @@ impl RunConfig for StudentRunConfig {
         let t = &self.train;
         check_shared_train!(t);
         in_range("train.lambda", t.lambda, 0.0, 1e6)?;
+        in_range("train.mouth_weight", t.mouth_weight, 0.0, 1e3)?;
         in_range("train.hard_ratio", t.hard_ratio, 0.0, 1.0)?;
         in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;

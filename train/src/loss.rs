@@ -8,7 +8,7 @@ use candle_core::{D, Result, Tensor};
 /// Per-ray losses of a batch.
 #[derive(Debug, Clone)]
 pub struct RayLosses {
-    /// Eq. 9 per ray: `|c - c_gt|^2 / 3 + lambda (sum_i |c_i - c~_i|^2 / 3 + (a - a~)^2)`,
+    /// Eq. 9 per ray: `|c - c_gt|^2 / 3 + lambda (sum_i |c_i - c~_i|^2 / 3 + KL(a~ | a))`,
     /// `[n]` (the opacity term only for a student with opacity).
     pub per_ray: Tensor,
     /// Eq. 8's squared pixel error per ray, summed over the channels, `[n]`.
@@ -27,27 +27,54 @@ pub struct TeacherTargets<'a> {
 
 /// Eq. 9 per ray: the pixel loss (Eq. 8) of `pixels` against `truth`, plus, with `targets`
 /// (distillation), `lambda` times the segment loss (Eq. 6) of `segments` against them and,
-/// where both sides have one, the squared error of the opacity.
+/// where both sides have one, the opacity's divergence from the teacher's
+/// ([`opacity_divergence`], from the student's opacity `logit`).
 ///
 /// # Shapes
-/// - `pixels`, `truth`: `[n, 3]`; `segments`: `[n, m, 3]`; `opacity`: `[n, 1]`
+/// - `pixels`, `truth`: `[n, 3]`; `segments`: `[n, m, 3]`; `logit`: `[n, 1]`
 pub fn distillation_loss(
     pixels: &Tensor,
     truth: &Tensor,
     segments: &Tensor,
-    opacity: Option<&Tensor>,
+    logit: Option<&Tensor>,
     targets: Option<TeacherTargets>,
     lambda: f64,
 ) -> Result<RayLosses> {
+    let opacity = logit;
     let pixel_sq = (pixels - truth)?.sqr()?.sum(D::Minus1)?;
     let mut per_ray = (pixel_sq.clone() / 3.0)?;
     if let Some(targets) = targets {
         let seg_sq = (segments - targets.segments)?.sqr()?.sum((1, 2))?;
         per_ray = (per_ray + (seg_sq * (lambda / 3.0))?)?;
-        if let (Some(a), Some(t)) = (opacity, targets.opacity) {
-            let a_sq = (a - t)?.sqr()?.sum(D::Minus1)?;
-            per_ray = (per_ray + (a_sq * lambda)?)?;
+        if let (Some(z), Some(t)) = (opacity, targets.opacity) {
+            per_ray = (per_ray + (opacity_divergence(z, t)? * lambda)?)?;
         }
     }
     Ok(RayLosses { per_ray, pixel_sq })
+}
+
+/// The divergence of the student's opacity `a = sigmoid(z)` from the teacher's `t`, both
+/// read as the probability that the ray meets the head: the binary cross-entropy less the
+/// target's own entropy, `softplus(z) - t z - H(t)`, which is 0 where `a = t` and, unlike a
+/// squared error, keeps pulling an opacity towards 0 (or 1) with a gradient `a - t` in `z`,
+/// so that rays the head does not cover end up leaving the background untouched.
+///
+/// # Shapes
+/// - `z`, `t`: `[n, 1]`; returns `[n]`
+pub fn opacity_divergence(z: &Tensor, t: &Tensor) -> Result<Tensor> {
+    // softplus(z) = max(z, 0) + ln(1 + exp(-|z|)), stable for any z.
+    let softplus = (z.relu()? + (z.abs()?.neg()?.exp()? + 1.0)?.log()?)?;
+    let cross = (softplus - (t * z)?)?;
+    // H(t) from the targets alone (no gradient), with 0 ln 0 = 0.
+    let tv: Vec<f32> = t.flatten_all()?.to_vec1()?;
+    let h: Vec<f32> = tv
+        .iter()
+        .map(|&p| {
+            let p = p.clamp(0.0, 1.0);
+            let term = |q: f32| if q > 0.0 { -q * q.ln() } else { 0.0 };
+            term(p) + term(1.0 - p)
+        })
+        .collect();
+    let h = Tensor::from_vec(h, t.shape(), t.device())?;
+    (cross - h)?.sum(D::Minus1)
 }

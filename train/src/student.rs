@@ -16,14 +16,18 @@ pub use nldf_core::student_shape::StudentConfig;
 #[derive(Debug, Clone)]
 pub struct LightOut {
     /// The M segment colours, `[n_rays, m, 3]`: each a weighted sum of sample colours,
-    /// not bounded by a squashing function of its own.
+    /// not bounded by a squashing function of its own. With opacity they are premultiplied:
+    /// the network's raw segment colours times the ray's opacity, as the teacher's Eq. 5
+    /// segments carry its weights, so that a ray the head does not cover adds no colour.
     pub segments: Tensor,
     /// Their sum, `[n_rays, 3]` (Eq. 7): the pixel itself for a student without opacity,
     /// the head's colour (premultiplied by its opacity) for one with.
     pub colour: Tensor,
-    /// How much of each ray the head covers, `sigmoid` of the network's last output,
-    /// `[n_rays, 1]`; `None` for a student without opacity.
+    /// How much of each ray the head covers, `sigmoid(logit)`, `[n_rays, 1]`; `None` for a
+    /// student without opacity.
     pub opacity: Option<Tensor>,
+    /// The opacity's logit, the network's last output, `[n_rays, 1]`.
+    pub logit: Option<Tensor>,
 }
 
 impl LightOut {
@@ -45,17 +49,21 @@ impl LightOut {
     /// Splits the network's raw output `[n_rays, 3 m (+ 1)]`.
     fn from_raw(raw: &Tensor, m: usize, opacity: bool) -> Result<LightOut> {
         let n_rays = raw.dim(0)?;
-        let segments = raw.narrow(1, 0, 3 * m)?.reshape((n_rays, m, 3))?;
-        let colour = segments.sum(1)?;
-        let opacity = if opacity {
-            Some(candle_nn::ops::sigmoid(&raw.narrow(1, 3 * m, 1)?)?)
+        let colours = raw.narrow(1, 0, 3 * m)?;
+        let (colours, opacity, logit) = if opacity {
+            let logit = raw.narrow(1, 3 * m, 1)?;
+            let alpha = candle_nn::ops::sigmoid(&logit)?;
+            (colours.broadcast_mul(&alpha)?, Some(alpha), Some(logit))
         } else {
-            None
+            (colours, None, None)
         };
+        let segments = colours.reshape((n_rays, m, 3))?;
+        let colour = segments.sum(1)?;
         Ok(LightOut {
             segments,
             colour,
             opacity,
+            logit,
         })
     }
 }

@@ -43,7 +43,8 @@ use crate::student::{Student, student};
 use crate::targets::{TargetLayout, load_targets, save_targets, teacher_targets, view_targets};
 use crate::teacher_trainer::TeacherRun;
 use crate::views::{
-    FrameBeams, View, frame_beams, thin_pseudo_beams, training_views, views_fingerprint,
+    FrameBeams, View, frame_beams, mouth_surface_points, thin_pseudo_beams, training_views,
+    views_fingerprint,
 };
 
 /// Rays per forward pass when rendering.
@@ -198,7 +199,7 @@ impl StudentRun {
         teacher: Option<&TeacherRun>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
-        if let Some(layout) = self.prepare_cached(data, teacher.map(|t| t.step))? {
+        if let Some(layout) = self.prepare_cached(data, teacher)? {
             let teacher = teacher.ok_or_else(|| self.no_teacher())?;
             self.targets =
                 teacher_targets(teacher, data, &self.views, &self.beams, layout, progress)?;
@@ -218,7 +219,7 @@ impl StudentRun {
         teacher: Option<TeacherRun>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
-        let Some(layout) = self.prepare_cached(data, teacher.as_ref().map(|t| t.step))? else {
+        let Some(layout) = self.prepare_cached(data, teacher.as_ref())? else {
             return Ok(());
         };
         let teacher = teacher.ok_or_else(|| self.no_teacher())?;
@@ -260,11 +261,20 @@ impl StudentRun {
     fn prepare_cached(
         &mut self,
         data: &TrainData,
-        teacher_step: Option<usize>,
+        teacher: Option<&TeacherRun>,
     ) -> Result<Option<TargetLayout>> {
+        let teacher_step = teacher.map(|t| t.step);
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         self.views = training_views(data, &self.cfg.train);
-        self.beams = frame_beams(data, &self.views);
+        // Pseudo views find their mouth by projecting the recorded frames' mouth through
+        // the teacher's depth.
+        let mouth_points = match teacher {
+            Some(t) if self.views.iter().any(|v| !v.recorded) && self.cfg.train.project_mouth => {
+                Some(mouth_surface_points(t, data)?)
+            }
+            _ => None,
+        };
+        self.beams = frame_beams(data, &self.views, mouth_points.as_deref());
         thin_pseudo_beams(
             &self.views,
             &mut self.beams,
@@ -640,13 +650,30 @@ impl StudentRun {
             &pixels,
             &gt,
             &out.segments,
-            out.opacity.as_ref(),
+            out.logit.as_ref(),
             tgt.as_ref().map(|segments| TeacherTargets {
                 segments,
                 opacity: tgt_alpha.as_ref(),
             }),
             t.lambda,
         )?;
+        // Mouth rays weigh `mouth_weight` times another ray in the loss (and the pool).
+        let per_ray = if t.mouth_weight != 1.0 {
+            let w: Vec<f32> = all
+                .iter()
+                .map(|(b, _)| {
+                    let mouth = &self.beams[b.frame as usize].mouth;
+                    if mouth.binary_search(&b.pixel).is_ok() {
+                        t.mouth_weight
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            (per_ray * Tensor::from_vec(w, n, &dev)?)?
+        } else {
+            per_ray
+        };
         let loss = per_ray.mean_all()?;
         let loss_value = finite_loss(&loss)?;
         if update {

@@ -116,7 +116,7 @@ impl TeacherRun {
         let t = &self.cfg.train;
         crate::config::decayed_learning_rate(
             t.lr,
-            self.step,
+            self.step.saturating_sub(t.lr_hold_steps),
             t.lr_decay_steps,
             self.elapsed(),
             t.time_budget_s,

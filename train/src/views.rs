@@ -142,8 +142,17 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
     views
 }
 
-/// The hit pixels of every view; a view's face and mouth regions are its source frame's.
-pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
+/// The hit pixels of every view. A view's face region is its source frame's; its mouth is
+/// the source frame's mouth pixels for a recorded frame and, for a pseudo view given
+/// `mouth_points` (each training frame's mouth pixels carried to the head's surface by the
+/// teacher's depth, [`mouth_surface_points`]), those points projected into the view.
+/// Without them a pseudo view takes its source frame's mouth pixels as they are, which
+/// miss the mouth once the head turns.
+pub fn frame_beams(
+    data: &TrainData,
+    views: &[View],
+    mouth_points: Option<&[Vec<Vec3>]>,
+) -> Vec<FrameBeams> {
     let ds = &data.dataset;
     let frames = ds.frames(Split::Train);
     let width = ds.intrinsics.width;
@@ -151,11 +160,15 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
         .par_iter()
         .map(|view| {
             let frame = &frames[view.source];
-            let mouth: std::collections::HashSet<(u32, u32)> = data
-                .mouth_pixels
-                .get(view.source)
-                .map(|m| m.iter().copied().collect())
-                .unwrap_or_default();
+            let mouth: std::collections::HashSet<(u32, u32)> =
+                match mouth_points.and_then(|m| m.get(view.source)) {
+                    Some(points) if !view.recorded => projected_pixels(&view.camera, points),
+                    _ => data
+                        .mouth_pixels
+                        .get(view.source)
+                        .map(|m| m.iter().copied().collect())
+                        .unwrap_or_default(),
+                };
             let head = head_rays(&view.camera, &data.head_range());
             let mut fb = FrameBeams::default();
             for r in 0..head.pixels.len() {
@@ -174,6 +187,70 @@ pub fn frame_beams(data: &TrainData, views: &[View]) -> Vec<FrameBeams> {
             fb
         })
         .collect()
+}
+
+/// The pixels that `points` project to in `camera` (the nearest pixel of each), with the
+/// holes between them closed: a pixel is added when at least three of its four
+/// neighbours are hit.
+pub fn projected_pixels(camera: &Camera, points: &[Vec3]) -> std::collections::HashSet<(u32, u32)> {
+    let k = camera.intrinsics;
+    let mut hit = std::collections::HashSet::new();
+    for &p in points {
+        if let Some((i, j, _)) = camera.project(p) {
+            let (i, j) = (i.round(), j.round());
+            if i >= 0.0 && j >= 0.0 && i < k.width as f32 && j < k.height as f32 {
+                hit.insert((i as u32, j as u32));
+            }
+        }
+    }
+    let mut closed = hit.clone();
+    for &(i, j) in &hit {
+        for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (x, y) = (i as i64 + di, j as i64 + dj);
+            if x < 0 || y < 0 || x >= k.width as i64 || y >= k.height as i64 {
+                continue;
+            }
+            let around = [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+                .iter()
+                .filter(|(a, b)| {
+                    let (u, v) = (x + a, y + b);
+                    u >= 0 && v >= 0 && hit.contains(&(u as u32, v as u32))
+                })
+                .count();
+            if around >= 3 {
+                closed.insert((x as u32, y as u32));
+            }
+        }
+    }
+    closed
+}
+
+/// Each training frame's mouth pixels carried to the head's surface: the teacher renders
+/// their rays with the frame's audio and keeps the point at its expected depth
+/// ([`Teacher::surface_points`]). Pseudo views project them to find their mouth.
+///
+/// [`Teacher::surface_points`]: crate::teacher::Teacher::surface_points
+pub fn mouth_surface_points(
+    teacher: &crate::teacher_trainer::TeacherRun,
+    data: &TrainData,
+) -> crate::Result<Vec<Vec<Vec3>>> {
+    let ds = &data.dataset;
+    let frames = ds.frames(Split::Train);
+    let mut out = Vec::with_capacity(frames.len());
+    for (fi, frame) in frames.iter().enumerate() {
+        let pixels = data.mouth_pixels.get(fi).map(Vec::as_slice).unwrap_or(&[]);
+        if pixels.is_empty() {
+            out.push(Vec::new());
+            continue;
+        }
+        let rays = nldf_core::rays::rays_for_pixels(&ds.camera(frame), pixels);
+        let code = teacher.audio_codes(data, &[frame.aud_id])?;
+        let points = teacher
+            .teacher
+            .surface_points(&rays, &code, &data.head_range())?;
+        out.push(points.into_iter().flatten().collect());
+    }
+    Ok(out)
 }
 
 /// Keeps at most `n` hit pixels of each pseudo view (0 keeps all): its mouth pixels (up to

@@ -91,11 +91,15 @@ pub const DEMO_PSEUDO: PseudoSettings = PseudoSettings {
 };
 
 /// Share of a distilled demo student's batch frames drawn from the pseudo views.
-pub const DEMO_PSEUDO_FRACTION: f32 = 0.5;
+pub const DEMO_PSEUDO_FRACTION: f32 = 0.75;
 
-/// Share of the demo student's steps at the full learning rate before it decays tenfold
+/// Share of a demo student's rays drawn from the mouth, and a mouth ray's weight in its
+/// loss.
+pub const DEMO_MOUTH: (f32, f32) = (0.2, 2.0);
+
+/// Share of each demo stage's steps at the full learning rate before it decays tenfold
 /// over the rest.
-pub const DEMO_STUDENT_HOLD: f64 = 0.6;
+pub const DEMO_HOLD: f64 = 0.6;
 
 impl DemoJob {
     /// The demo as `nldf demo` runs it by default, into `out`: the synthetic scene of seed
@@ -261,8 +265,13 @@ impl DemoJob {
             budget_s: None,
         }
         .plan(on_event)?;
-        // The learning rate decays tenfold over the pinned steps; the cap only stops.
-        plan.run.cfg.train.lr_decay_steps = self.teacher_iters;
+        // The learning rate is held, then decays tenfold over the last 40 % of the pinned
+        // steps (as the budgeted teacher's did over its minutes); the cap only stops.
+        if !resume {
+            let hold = (DEMO_HOLD * self.teacher_iters as f64).round() as usize;
+            plan.run.cfg.train.lr_hold_steps = hold;
+            plan.run.cfg.train.lr_decay_steps = (self.teacher_iters - hold).max(1);
+        }
         plan.run.cfg.train.time_budget_s = 0.0;
         plan.run.cfg.train.time_cap_s = self.teacher_cap_minutes * 60.0;
         plan.run(stop, on_event)?;
@@ -303,10 +312,11 @@ impl DemoJob {
             let t = &mut plan.run.cfg.train;
             if !resume {
                 // Held, then tenfold down over the last 40 % of the pinned steps.
-                let hold = (DEMO_STUDENT_HOLD * self.student_iters as f64).round() as usize;
+                let hold = (DEMO_HOLD * self.student_iters as f64).round() as usize;
                 t.lr_hold_steps = hold;
                 t.lr_decay_steps = (self.student_iters - hold).max(1);
                 t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
+                (t.mouth_fraction, t.mouth_weight) = DEMO_MOUTH;
             }
             t.time_budget_s = 0.0;
             t.time_cap_s = self.student_cap_minutes * 60.0;
