@@ -32,17 +32,20 @@ def main() -> None:
     directions = rng.standard_normal((n, 3)).astype(np.float32)
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     audio = np.full(audio_shape, -1.0, dtype=np.float32)
+    # A model with opacity also takes each ray's background colour.
+    has_background = any(i.name == "background" for i in session.get_inputs())
+    background = np.full((n, 3), 0.5, dtype=np.float32)
 
     def frame() -> None:
         for start in range(0, n, batch):
-            session.run(
-                None,
-                {
-                    "rays_o": origins[start : start + batch],
-                    "rays_d": directions[start : start + batch],
-                    "audio": audio,
-                },
-            )
+            feeds = {
+                "rays_o": origins[start : start + batch],
+                "rays_d": directions[start : start + batch],
+                "audio": audio,
+            }
+            if has_background:
+                feeds["background"] = background[start : start + batch]
+            session.run(None, feeds)
 
     for _ in range(3):
         frame()

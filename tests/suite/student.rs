@@ -428,8 +428,16 @@ fn the_distillation_loss_adds_the_opacity_term_inside_lambda() {
     let segment = lambda as f32 * 0.09 / 3.0;
     let kl = 0.5 * (0.5f32 / 0.9).ln() + 0.5 * (0.5f32 / 0.1).ln();
     let opacity = lambda as f32 * kl;
-    assert!((loss(false) - (pixel + segment)).abs() < 1e-6, "{}", loss(false));
-    assert!((loss(true) - (pixel + segment + opacity)).abs() < 1e-5, "{}", loss(true));
+    assert!(
+        (loss(false) - (pixel + segment)).abs() < 1e-6,
+        "{}",
+        loss(false)
+    );
+    assert!(
+        (loss(true) - (pixel + segment + opacity)).abs() < 1e-5,
+        "{}",
+        loss(true)
+    );
     let z = t(vec![-30.0, 0.0, 30.0, 2.0], &[4, 1]);
     let a = t(vec![0.0, 0.5, 1.0, 1.0 / (1.0 + (-2.0f32).exp())], &[4, 1]);
     let d: Vec<f32> = nldf_train::loss::opacity_divergence(&z, &a)

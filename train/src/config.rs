@@ -416,6 +416,11 @@ pub struct StudentTrainConfig {
     /// time of 1000 whole views) took a real-time student 2.9 dB higher on `val` and 2.0
     /// dB on `novel` than 1000 whole views, in the same 15 minutes.
     pub pseudo_rays: usize,
+    /// Hit pixels of each recorded frame the student learns from and the teacher renders
+    /// targets for (its mouth first, the rest drawn at random; 0: all). The teacher's
+    /// targets of every pixel of every recorded frame cost minutes, and a short run visits
+    /// each pixel only a few times.
+    pub recorded_rays: usize,
     /// Pseudo views the teacher renders before each training step until all are done, so
     /// the student starts at once.
     pub pseudo_per_step: usize,
@@ -503,6 +508,7 @@ impl Default for StudentTrainConfig {
             pose_range: 2.0,
             pseudo_zoom: 0.15,
             pseudo_rays: 1024,
+            recorded_rays: 0,
             pseudo_per_step: 2,
             log_every: 10,
             val_every: 250,
@@ -536,6 +542,7 @@ impl RunConfig for StudentRunConfig {
         in_range("train.pose_range", t.pose_range, 0.0, 10.0)?;
         in_range("train.pseudo_zoom", t.pseudo_zoom, 0.0, 0.5)?;
         in_range("train.pseudo_rays", t.pseudo_rays, 0, 1 << 24)?;
+        in_range("train.recorded_rays", t.recorded_rays, 0, 1 << 24)?;
         in_range("train.pseudo_per_step", t.pseudo_per_step, 1, 1 << 10)?;
         Ok(())
     }

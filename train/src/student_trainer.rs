@@ -43,8 +43,8 @@ use crate::student::{Student, student};
 use crate::targets::{TargetLayout, load_targets, save_targets, teacher_targets, view_targets};
 use crate::teacher_trainer::TeacherRun;
 use crate::views::{
-    FrameBeams, View, frame_beams, mouth_surface_points, thin_pseudo_beams, training_views,
-    views_fingerprint,
+    FrameBeams, View, frame_beams, mouth_surface_points, thin_beams, thin_pseudo_beams,
+    training_views, views_fingerprint,
 };
 
 /// Rays per forward pass when rendering.
@@ -280,6 +280,13 @@ impl StudentRun {
             &mut self.beams,
             self.cfg.train.pseudo_rays,
             self.cfg.train.seed,
+        );
+        thin_beams(
+            &self.views,
+            &mut self.beams,
+            self.cfg.train.recorded_rays,
+            true,
+            self.cfg.train.seed ^ 0x7ec0_4de5,
         );
         self.pending = None;
         let spec =

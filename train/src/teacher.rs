@@ -222,72 +222,6 @@ impl Teacher {
     }
 }
 
-impl Teacher {
-    /// [`Teacher::query_chunks`] with every ray under one audio `code` (`[1, audio_dim]`),
-    /// front to back in four groups of samples: a ray leaves once its transmittance falls
-    /// below `min_transmittance`, and its later samples are handed to `visit` with zero
-    /// density and colour (their weight was below it). 0 evaluates every sample.
-    fn march_chunks(
-        &self,
-        samples: &RaySamples,
-        code: &Tensor,
-        min_transmittance: f32,
-        visit: &mut ChunkVisitor,
-    ) -> Result<()> {
-        let s = samples.n_samples;
-        let n_hit = samples.hit.len();
-        let group = s.div_ceil(4).max(1);
-        let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
-        for lo in (0..n_hit).step_by(EVAL_CHUNK) {
-            let hi = (lo + EVAL_CHUNK).min(n_hit);
-            let n = hi - lo;
-            let mut densities = vec![0.0f32; n * s];
-            let mut colors = vec![0.0f32; 3 * n * s];
-            let mut optical = vec![0.0f32; n];
-            for g0 in (0..s).step_by(group) {
-                let g1 = (g0 + group).min(s);
-                let g = g1 - g0;
-                let active: Vec<usize> = (0..n)
-                    .filter(|&a| (-optical[a]).exp() >= min_transmittance)
-                    .collect();
-                if active.is_empty() {
-                    break;
-                }
-                let mut points = Vec::with_capacity(active.len() * g * 3);
-                let mut dirs = Vec::with_capacity(active.len() * dirs_all.width);
-                for &a in &active {
-                    let h = lo + a;
-                    points.extend_from_slice(&samples.points[3 * (h * s + g0)..3 * (h * s + g1)]);
-                    dirs.extend_from_slice(
-                        &dirs_all.data[h * dirs_all.width..(h + 1) * dirs_all.width],
-                    );
-                }
-                let points = encode_vectors(&points, self.cfg.pos_freqs).tensor()?;
-                let dirs = Tensor::from_vec(dirs, (active.len(), dirs_all.width), &Device::Cpu)?;
-                let codes = code
-                    .broadcast_as((active.len(), code.dim(1)?))?
-                    .contiguous()?;
-                let (d, c) = self.field.forward(&points, &codes, &dirs, g, false)?;
-                let d: Vec<f32> = d.flatten_all()?.to_vec1()?;
-                let c: Vec<f32> = c.flatten_all()?.to_vec1()?;
-                for (k, &a) in active.iter().enumerate() {
-                    let h = lo + a;
-                    for j in 0..g {
-                        let sigma = d[k * g + j];
-                        densities[a * s + g0 + j] = sigma;
-                        colors[3 * (a * s + g0 + j)..3 * (a * s + g0 + j + 1)]
-                            .copy_from_slice(&c[3 * (k * g + j)..3 * (k * g + j + 1)]);
-                        optical[a] += (sigma.max(0.0) * samples.deltas[h * s + g0 + j])
-                            .min(crate::render::MAX_TAU);
-                    }
-                }
-            }
-            visit(lo, &densities, &colors)?;
-        }
-        Ok(())
-    }
-}
-
 /// Receives a chunk of field outputs: first hit ray, densities, colours (flat).
 type ChunkVisitor<'a> = dyn FnMut(usize, &[f32], &[f32]) -> Result<()> + 'a;
 
@@ -405,9 +339,11 @@ impl Teacher {
         let samples = self.sample_with_code(rays, range, code)?;
         let s = samples.n_samples;
         let mut out = vec![None; rays.len()];
+        let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
+            code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
+        };
         let mut weights = vec![0.0f32; s];
-        let min_t = self.cfg.min_transmittance;
-        self.march_chunks(&samples, code, min_t, &mut |lo, densities, _| {
+        self.query_chunks(&samples, &code_rows, &mut |lo, densities, _| {
             for k in 0..densities.len() / s {
                 let h = lo + k;
                 composite_weights(
@@ -439,8 +375,8 @@ impl Teacher {
     /// interval with the transmittance accumulated from the ray's start, and
     /// the background behind the last sample (AD-NeRF's last sample) belongs to the last
     /// segment, so that the segments sum to the pixel. Rays that miss the bounds are their
-    /// background, all in the last segment. No jitter; samples behind a transmittance
-    /// below `cfg.min_transmittance` are skipped (they change no colour by more than it).
+    /// background, all in the last segment. No early termination (measured: evaluating the
+    /// samples in groups to stop early made the targets 40 % slower), no jitter.
     ///
     /// With `opacity`, the background stays out of the segments, and each ray's `3 m`
     /// colours are followed by its accumulated weight `sum_k w_k` (how much of the ray the
@@ -470,10 +406,11 @@ impl Teacher {
                     .copy_from_slice(&background[3 * r..3 * r + 3]);
             }
         }
+        let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
+            code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
+        };
         let mut weights = vec![0.0f32; s];
-        // Samples behind an opaque head weigh less than `min_transmittance`: skipped.
-        let min_t = self.cfg.min_transmittance;
-        self.march_chunks(&samples, code, min_t, &mut |lo, densities, colors| {
+        self.query_chunks(&samples, &code_rows, &mut |lo, densities, colors| {
             for k in 0..densities.len() / s {
                 let h = lo + k;
                 composite_weights(

@@ -260,6 +260,11 @@ pub fn mouth_surface_points(
 /// the same teacher time covers `pixels / n` times as many poses). Recorded frames keep
 /// every pixel: they carry the ground truth.
 pub fn thin_pseudo_beams(views: &[View], beams: &mut [FrameBeams], n: usize, seed: u64) {
+    thin_beams(views, beams, n, false, seed);
+}
+
+/// [`thin_pseudo_beams`] for the recorded frames (`recorded`) or the pseudo views.
+pub fn thin_beams(views: &[View], beams: &mut [FrameBeams], n: usize, recorded: bool, seed: u64) {
     if n == 0 {
         return;
     }
@@ -267,7 +272,7 @@ pub fn thin_pseudo_beams(views: &[View], beams: &mut [FrameBeams], n: usize, see
         .par_iter_mut()
         .zip(views)
         .enumerate()
-        .filter(|(_, (fb, view))| !view.recorded && fb.pixels.len() > n)
+        .filter(|(_, (fb, view))| view.recorded == recorded && fb.pixels.len() > n)
         .for_each(|(vi, (fb, _))| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7417_0b5e);
             rng.set_stream(vi as u64);

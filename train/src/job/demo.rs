@@ -71,13 +71,13 @@ pub struct DemoReport {
 }
 
 /// The demo's teacher steps.
-pub const DEMO_TEACHER_ITERS: usize = 1300;
+pub const DEMO_TEACHER_ITERS: usize = 1100;
 
 /// The demo's cap on the teacher in minutes.
 pub const DEMO_TEACHER_CAP_MINUTES: f64 = 7.0;
 
 /// The demo's student steps.
-pub const DEMO_STUDENT_ITERS: usize = 2500;
+pub const DEMO_STUDENT_ITERS: usize = 4500;
 
 /// The demo's cap on the student in minutes.
 pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
@@ -92,6 +92,14 @@ pub const DEMO_PSEUDO: PseudoSettings = PseudoSettings {
 
 /// Share of a distilled demo student's batch frames drawn from the pseudo views.
 pub const DEMO_PSEUDO_FRACTION: f32 = 0.75;
+
+/// Rays per demo student step: half the paper's 4096, for twice the steps in the same
+/// minutes.
+pub const DEMO_STUDENT_BATCH: usize = 2048;
+
+/// Hit pixels of each recorded frame a demo student learns from (and the teacher renders
+/// targets for).
+pub const DEMO_RECORDED_RAYS: usize = 4096;
 
 /// Share of a demo student's rays drawn from the mouth, and a mouth ray's weight in its
 /// loss.
@@ -317,6 +325,8 @@ impl DemoJob {
                 t.lr_decay_steps = (self.student_iters - hold).max(1);
                 t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
                 (t.mouth_fraction, t.mouth_weight) = DEMO_MOUTH;
+                t.batch_rays = DEMO_STUDENT_BATCH;
+                t.recorded_rays = DEMO_RECORDED_RAYS;
             }
             t.time_budget_s = 0.0;
             t.time_cap_s = self.student_cap_minutes * 60.0;
