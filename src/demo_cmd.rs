@@ -16,8 +16,8 @@ use nldf_infer::backend::{BackendKind, BackendOptions};
 use nldf_infer::video::{VideoJob, VideoReport};
 use nldf_train::job::JobEvent;
 use nldf_train::job::demo::{
-    DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES, DEMO_TEACHER_ITERS,
-    DemoJob, DemoReport,
+    DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
+    DEMO_TEACHER_ITERS, DemoJob, DemoReport,
 };
 
 use crate::progress::{EventPrinter, progress_bar, stop_flag};
@@ -31,11 +31,11 @@ pub struct DemoArgs {
     /// Seed of the synthetic scene.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Teacher training steps [default: 1300, with --quick 300].
+    /// Teacher training steps [default: 1100, with --quick 300].
     #[arg(long)]
     pub teacher_iters: Option<usize>,
-    /// Student training steps (0 skips the student and the export) [default: 2500, with
-    /// --quick 300].
+    /// Student training steps (0 skips the student and the export) [default: 4500, with
+    /// --pixels-only 5000, with --quick 300].
     #[arg(long)]
     pub student_iters: Option<usize>,
     /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
@@ -43,7 +43,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub minutes: Option<f64>,
     /// A wall-clock cap on the student in minutes, its teacher targets included
-    /// [default: 8, with --quick 2].
+    /// [default: 8, with --pixels-only 15, with --quick 2].
     #[arg(long)]
     pub student_minutes: Option<f64>,
     /// Student shape: the real-time preset (16 x 128, K = 8) renders in real time.
@@ -69,9 +69,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let quick = args.quick;
     let pick = |full: f64, fast: f64| if quick { fast } else { full };
     let minutes = args.minutes.unwrap_or(pick(DEMO_TEACHER_CAP_MINUTES, 2.0));
-    let student_minutes = args
-        .student_minutes
-        .unwrap_or(pick(DEMO_STUDENT_CAP_MINUTES, 2.0));
+    // The pixels-only student stands in for the teacher too: the caps of both.
+    let student_minutes = args.student_minutes.unwrap_or(pick(
+        if args.pixels_only {
+            DEMO_TEACHER_CAP_MINUTES + DEMO_STUDENT_CAP_MINUTES
+        } else {
+            DEMO_STUDENT_CAP_MINUTES
+        },
+        2.0,
+    ));
     for (flag, v) in [
         ("--minutes", minutes),
         ("--student-minutes", student_minutes),
@@ -113,7 +119,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
         student: args.student_depth.config(),
         student_iters: args
             .student_iters
-            .unwrap_or(if quick { 300 } else { DEMO_STUDENT_ITERS }),
+            .unwrap_or(match (quick, args.pixels_only) {
+                (true, _) => 300,
+                (false, true) => DEMO_PIXELS_ITERS,
+                (false, false) => DEMO_STUDENT_ITERS,
+            }),
         student_cap_minutes: student_minutes,
         student_distill: !args.pixels_only,
         ..defaults

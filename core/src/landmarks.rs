@@ -101,7 +101,7 @@ pub fn landmarks_from_regions(regions: &[Region], width: u32) -> Option<Landmark
                 y1 = y1.max(y);
             }
         }
-        (x0 != usize::MAX).then(|| [x0 as f32, x1 as f32, y0 as f32, y1 as f32])
+        (x0 != usize::MAX).then_some([x0 as f32, x1 as f32, y0 as f32, y1 as f32])
     };
     let mouth = bbox(&|r| r == Region::Mouth)?;
     let head = bbox(&|r| r.is_head())?;

@@ -357,7 +357,7 @@ pub fn repainted_share(
         // A NaN counts as changed.
         if a.iter()
             .zip(b)
-            .any(|(x, y)| !((x - y).abs() <= REPAINT_THRESHOLD))
+            .any(|(x, y)| (x - y).abs() > REPAINT_THRESHOLD || (x - y).is_nan())
         {
             changed += 1;
         }
