@@ -222,6 +222,36 @@ impl Teacher {
     }
 }
 
+impl Teacher {
+    /// Every hit ray of `samples` under one audio `code` (`[1, audio_dim]`), with its
+    /// compositing weights (Eq. 3-4): `visit(h, weights, densities, colours)` for hit ray
+    /// `h`, its `[n_samples]` weights, densities and `[n_samples, 3]` colours.
+    fn visit_weights(
+        &self,
+        samples: &RaySamples,
+        code: &Tensor,
+        visit: &mut RayVisitor,
+    ) -> Result<()> {
+        let s = samples.n_samples;
+        let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
+            code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
+        };
+        let mut weights = vec![0.0f32; s];
+        self.query_chunks(samples, &code_rows, &mut |lo, densities, colors| {
+            for k in 0..densities.len() / s {
+                let h = lo + k;
+                let densities = &densities[k * s..(k + 1) * s];
+                composite_weights(densities, &samples.deltas[h * s..(h + 1) * s], &mut weights);
+                visit(h, &weights, densities, &colors[3 * s * k..3 * s * (k + 1)])?;
+            }
+            Ok(())
+        })
+    }
+}
+
+/// Receives one hit ray's index, weights, densities and colours (flat).
+type RayVisitor<'a> = dyn FnMut(usize, &[f32], &[f32], &[f32]) -> Result<()> + 'a;
+
 /// Receives a chunk of field outputs: first hit ray, densities, colours (flat).
 type ChunkVisitor<'a> = dyn FnMut(usize, &[f32], &[f32]) -> Result<()> + 'a;
 
@@ -339,29 +369,17 @@ impl Teacher {
         let samples = self.sample_with_code(rays, range, code)?;
         let s = samples.n_samples;
         let mut out = vec![None; rays.len()];
-        let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
-            code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
-        };
-        let mut weights = vec![0.0f32; s];
-        self.query_chunks(&samples, &code_rows, &mut |lo, densities, _| {
-            for k in 0..densities.len() / s {
-                let h = lo + k;
-                composite_weights(
-                    &densities[k * s..(k + 1) * s],
-                    &samples.deltas[h * s..(h + 1) * s],
-                    &mut weights,
-                );
-                let acc: f32 = weights.iter().sum();
-                if acc > 0.5 {
-                    let t: f32 = weights
-                        .iter()
-                        .zip(&samples.t_vals[h * s..(h + 1) * s])
-                        .map(|(w, t)| w * t)
-                        .sum::<f32>()
-                        / acc;
-                    let r = samples.hit[h];
-                    out[r] = Some(rays.origin(r) + t * rays.direction(r));
-                }
+        self.visit_weights(&samples, code, &mut |h, weights, _, _| {
+            let acc: f32 = weights.iter().sum();
+            if acc > 0.5 {
+                let t: f32 = weights
+                    .iter()
+                    .zip(&samples.t_vals[h * s..(h + 1) * s])
+                    .map(|(w, t)| w * t)
+                    .sum::<f32>()
+                    / acc;
+                let r = samples.hit[h];
+                out[r] = Some(rays.origin(r) + t * rays.direction(r));
             }
             Ok(())
         })?;
@@ -406,42 +424,29 @@ impl Teacher {
                     .copy_from_slice(&background[3 * r..3 * r + 3]);
             }
         }
-        let code_rows = |lo: usize, hi: usize| -> Result<Tensor> {
-            code.broadcast_as((hi - lo, code.dim(1)?))?.contiguous()
-        };
-        let mut weights = vec![0.0f32; s];
-        self.query_chunks(&samples, &code_rows, &mut |lo, densities, colors| {
-            for k in 0..densities.len() / s {
-                let h = lo + k;
-                composite_weights(
-                    &densities[k * s..(k + 1) * s],
-                    &samples.deltas[h * s..(h + 1) * s],
-                    &mut weights,
-                );
-                let segments = segment_colors(
-                    &weights,
-                    &colors[3 * s * k..3 * s * (k + 1)],
-                    &samples.t_vals[h * s..(h + 1) * s],
-                    samples.spans[h],
-                    m,
-                );
-                let optical_depth: f32 = (0..s)
-                    .map(|j| {
-                        (densities[k * s + j].max(0.0) * samples.deltas[h * s + j])
-                            .min(crate::render::MAX_TAU)
-                    })
-                    .sum();
-                let left = (-optical_depth).exp();
-                let r = samples.hit[h];
-                let dst = &mut out[r * width..(r + 1) * width];
-                dst[..3 * m].copy_from_slice(&segments);
-                if opacity {
-                    // 1 - exp(-x) without cancellation for thin rays.
-                    dst[3 * m] = -(-optical_depth).exp_m1();
-                } else {
-                    for c in 0..3 {
-                        dst[(m - 1) * 3 + c] += left * background[3 * r + c];
-                    }
+        self.visit_weights(&samples, code, &mut |h, weights, densities, colors| {
+            let segments = segment_colors(
+                weights,
+                colors,
+                &samples.t_vals[h * s..(h + 1) * s],
+                samples.spans[h],
+                m,
+            );
+            let optical_depth: f32 = (0..s)
+                .map(|j| {
+                    (densities[j].max(0.0) * samples.deltas[h * s + j]).min(crate::render::MAX_TAU)
+                })
+                .sum();
+            let left = (-optical_depth).exp();
+            let r = samples.hit[h];
+            let dst = &mut out[r * width..(r + 1) * width];
+            dst[..3 * m].copy_from_slice(&segments);
+            if opacity {
+                // 1 - exp(-x) without cancellation for thin rays.
+                dst[3 * m] = -(-optical_depth).exp_m1();
+            } else {
+                for c in 0..3 {
+                    dst[(m - 1) * 3 + c] += left * background[3 * r + c];
                 }
             }
             Ok(())

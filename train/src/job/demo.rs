@@ -169,32 +169,20 @@ impl DemoJob {
     /// Writes the whole run's time breakdown, `OUT/timing.json`: the scene, each stage's
     /// parts (from its own `timing.json`), the export and the evaluation.
     fn save_timing(&self, own: &Timing, on_event: OnEvent) -> Result<()> {
-        let mut all = Timing::default();
-        all.absorb(
-            "",
-            &Timing {
-                parts: own
-                    .parts
-                    .iter()
-                    .filter(|p| p.what == "synthetic scene")
-                    .cloned()
-                    .collect(),
-            },
-        );
+        // The scene first, then the stages, then the demo's other parts.
+        let own_parts = |scene: bool| Timing {
+            parts: own
+                .parts
+                .iter()
+                .filter(|p| (p.what == "synthetic scene") == scene)
+                .cloned()
+                .collect(),
+        };
+        let mut all = own_parts(true);
         for stage in [TEACHER_DIR, STUDENT_DIR] {
             all.absorb(&format!("{stage}: "), &Timing::open(&self.out.join(stage))?);
         }
-        all.absorb(
-            "",
-            &Timing {
-                parts: own
-                    .parts
-                    .iter()
-                    .filter(|p| p.what != "synthetic scene")
-                    .cloned()
-                    .collect(),
-            },
-        );
+        all.absorb("", &own_parts(false));
         // The demo's own parts are kept apart, so that a rerun adds to them only.
         let own_dir = self.out.join(DEMO_TIMING_DIR);
         std::fs::create_dir_all(&own_dir).map_err(|e| Error::io(&own_dir, e))?;
