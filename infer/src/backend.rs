@@ -159,11 +159,7 @@ pub trait Backend {
             let part = self.run_batch(
                 &origins[3 * start..3 * end],
                 &directions[3 * start..3 * end],
-                if opacity {
-                    &background[3 * start..3 * end]
-                } else {
-                    &[]
-                },
+                batch_background(self.info(), background, start..end),
                 audio,
             )?;
             out.rgb.extend_from_slice(&part.rgb);
@@ -171,6 +167,20 @@ pub trait Backend {
             out.opacity.extend_from_slice(&part.opacity);
         }
         Ok(out)
+    }
+}
+
+/// The background colours of rays `rays` (`[rays.len(), 3]` flat) for a model with
+/// opacity; none for one without, which takes no background input.
+pub fn batch_background<'a>(
+    info: &ModelInfo,
+    background: &'a [f32],
+    rays: std::ops::Range<usize>,
+) -> &'a [f32] {
+    if info.opacity {
+        &background[3 * rays.start..3 * rays.end]
+    } else {
+        &[]
     }
 }
 

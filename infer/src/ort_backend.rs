@@ -136,18 +136,13 @@ impl OrtBackend {
     ) -> Result<()> {
         crate::backend::check_inputs(&self.info, origins, directions, background, audio)?;
         let n = origins.len() / 3;
-        let opacity = self.info.opacity;
         for start in (0..n).step_by(self.batch_size) {
             let end = (start + self.batch_size).min(n);
             let (o, d) = (
                 &origins[3 * start..3 * end],
                 &directions[3 * start..3 * end],
             );
-            let b = if opacity {
-                &background[3 * start..3 * end]
-            } else {
-                &[]
-            };
+            let b = crate::backend::batch_background(&self.info, background, start..end);
             self.run_session(o, d, b, audio, |_| Ok(()))?;
         }
         Ok(())

@@ -184,13 +184,7 @@ pub fn train_loop_timed(
     // A run resumed with its budget already spent trains no further step.
     while run.step() < t.iters && !spent(&*run) {
         if stop.load(Ordering::Relaxed) {
-            let started = Instant::now();
-            run.save()?;
-            timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
-            on_event(&Event::Checkpoint {
-                step: run.step(),
-                dir: dir.clone(),
-            });
+            checkpoint(&*run, &dir, timing, on_event)?;
             return Ok(None);
         }
         let started = Instant::now();
@@ -247,14 +241,8 @@ pub fn train_loop_timed(
             )?;
         }
         if (t.checkpoint_every > 0 && step.is_multiple_of(t.checkpoint_every)) || last {
-            let started = Instant::now();
-            run.save()?;
-            timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
+            checkpoint(&*run, &dir, timing, on_event)?;
             saved = Some(step);
-            on_event(&Event::Checkpoint {
-                step,
-                dir: dir.clone(),
-            });
         }
         if out_of_time {
             break;
@@ -263,13 +251,24 @@ pub fn train_loop_timed(
     // A new run whose budget was spent before its first step (on its teacher's targets,
     // say) is still written, at step 0, so that it can be opened, resumed and scored.
     if saved.is_none() && !stop.load(Ordering::Relaxed) {
-        let started = Instant::now();
-        run.save()?;
-        timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
-        on_event(&Event::Checkpoint {
-            step: run.step(),
-            dir: dir.clone(),
-        });
+        checkpoint(&*run, &dir, timing, on_event)?;
     }
     Ok(last_val)
+}
+
+/// Writes `run`'s checkpoint, adds its seconds to `timing` and reports it.
+fn checkpoint(
+    run: &dyn TrainingRun,
+    dir: &Path,
+    timing: &mut Timing,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<()> {
+    let started = Instant::now();
+    run.save()?;
+    timing.add(CHECKPOINT_PART, started.elapsed().as_secs_f64(), 1);
+    on_event(&Event::Checkpoint {
+        step: run.step(),
+        dir: dir.to_path_buf(),
+    });
+    Ok(())
 }
