@@ -96,6 +96,12 @@ pub struct StudentConfig {
     /// checkpoints made before it existed (their last segment holds the background).
     #[serde(default)]
     pub opacity: bool,
+    /// Anchor the beams at the head ([`crate::beam::BeamAnchor`]): the trainer sets
+    /// `beam.anchor` from the training cameras when it is not set, so that a ray's beam
+    /// depends on its line alone and a closer or farther camera asks nothing new. Off in
+    /// checkpoints made before it existed.
+    #[serde(default)]
+    pub anchor_beams: bool,
 }
 
 impl Default for StudentConfig {
@@ -114,6 +120,7 @@ impl StudentConfig {
             segments: 4,
             attention: true,
             opacity: true,
+            anchor_beams: true,
         }
     }
 
@@ -156,12 +163,14 @@ impl StudentConfig {
             beam: BeamSpec {
                 n_points: 4,
                 n_freqs: 4,
+                anchor: None,
             },
             depth: 6,
             width: 32,
             segments: 4,
             attention: true,
             opacity: true,
+            anchor_beams: true,
         }
     }
 
@@ -200,6 +209,16 @@ impl StudentConfig {
         in_range("model.segments", self.segments, 1, 64)?;
         in_range("model.beam.n_points", self.beam.n_points, 2, 256)?;
         in_range("model.beam.n_freqs", self.beam.n_freqs, 0, 16)?;
+        if let Some(a) = &self.beam.anchor {
+            let finite = a.centre.iter().all(|v| v.is_finite() && v.abs() <= 1e6);
+            if !finite || !(a.distance.is_finite() && a.distance.abs() <= 1e6) {
+                return Err(Error::Argument(format!(
+                    "`model.beam.anchor` must hold finite values within 1e6, got centre {:?}, \
+                     distance {}",
+                    a.centre, a.distance
+                )));
+            }
+        }
         self.audio.check("model.audio")
     }
 }

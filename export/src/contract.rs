@@ -99,9 +99,10 @@ pub fn output_names(opacity: bool) -> Vec<&'static str> {
 pub const FORMAT: &str = "nldf-student";
 /// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change
 /// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]; 3: [`keys::OPACITY`],
-/// with the background input and opacity output of a model that has one). Contract 2
-/// models are still read: they have no opacity.
-pub const CONTRACT_VERSION: u32 = 3;
+/// with the background input and opacity output of a model that has one; 4:
+/// [`keys::BEAM_ANCHOR`], the graph anchoring rays before sampling them). Contract 2 and 3
+/// models are still read: they have no anchor, and contract 2 no opacity.
+pub const CONTRACT_VERSION: u32 = 4;
 
 /// `metadata_props` keys.
 pub mod keys {
@@ -124,6 +125,10 @@ pub mod keys {
     /// Beam points K and positional-encoding frequencies L.
     pub const BEAM_POINTS: &str = "nldf.beam_points";
     pub const BEAM_FREQS: &str = "nldf.beam_freqs";
+    /// Where the graph anchors each ray before sampling its beam (JSON `null`, or
+    /// `{"centre": [x, y, z], "distance": d}`; see `nldf_core::beam::BeamAnchor`): for
+    /// reading only, the graph applies it itself. Contract 4.
+    pub const BEAM_ANCHOR: &str = "nldf.beam_anchor";
     /// Coordinates are clamped to ± this before the encoding.
     pub const MAX_COORD: &str = "nldf.max_coord";
     /// Segments per ray, M.
@@ -250,6 +255,7 @@ impl ModelInfo {
             (keys::FPS, json(&s.fps)),
             (keys::BEAM_POINTS, json(&self.beam.n_points)),
             (keys::BEAM_FREQS, json(&self.beam.n_freqs)),
+            (keys::BEAM_ANCHOR, json(&self.beam.anchor)),
             (keys::MAX_COORD, json(&MAX_COORD)),
             (keys::SEGMENTS, json(&self.segments)),
             (keys::OPACITY, json(&self.opacity)),
@@ -343,6 +349,12 @@ impl ModelInfo {
             beam: BeamSpec {
                 n_points: value(keys::BEAM_POINTS)?,
                 n_freqs: value(keys::BEAM_FREQS)?,
+                // Contracts 2 and 3 predate anchoring.
+                anchor: if contract >= 4 {
+                    parse(keys::BEAM_ANCHOR, get(keys::BEAM_ANCHOR)?)?
+                } else {
+                    None
+                },
             },
             segments: value(keys::SEGMENTS)?,
             // Contract 2 predates opacity.

@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use nldf_core::beam::{BeamAnchor, MIN_DIRECTION_LENGTH};
 use nldf_core::encoding::MAX_COORD;
 
 use crate::checkpoint::StudentCheckpoint;
@@ -260,14 +261,18 @@ fn encode_beams(
     let beam = ckpt.shape.beam;
     let (near, far) = (ckpt.spec.near, ckpt.spec.far);
     let (k, l) = (beam.n_points, beam.n_freqs);
+    let (origins, directions) = match &beam.anchor {
+        Some(anchor) => anchor_rays(g, anchor, origins, directions),
+        None => (origins.to_string(), directions.to_string()),
+    };
     let t: Vec<f32> = (0..k).map(|i| beam.t_value(i, near, far, 0.0)).collect();
     let t = g.constant_f32("beam.t_vals", &[1, k, 1], &t);
     let axis1 = g.constant_i64("beam.axis1", &[1], &[1]);
-    let o = g.node("Unsqueeze", "beam.origins", &[origins, &axis1], vec![]);
+    let o = g.node("Unsqueeze", "beam.origins", &[&origins, &axis1], vec![]);
     let d = g.node(
         "Unsqueeze",
         "beam.directions",
-        &[directions, &axis1],
+        &[&directions, &axis1],
         vec![],
     );
     let td = g.node("Mul", "beam.offsets", &[&d, &t], vec![]);
@@ -323,6 +328,75 @@ fn encode_beams(
     // tract splits a product whose input is a feature-axis Concat into one small product
     // per block (21 for L = 10), several times slower than the single product.
     g.node("Clip", "beam.encoded", &[&encoded, &lo, &hi], vec![])
+}
+
+/// The anchored rays of `nldf_core::beam::BeamAnchor::apply`, op for op in f64 and rounded
+/// to f32 once: `u = d / max(|d|, MIN_DIRECTION_LENGTH)`, `s = (centre - o) . u`,
+/// `o' = o + (s - distance) u`. Dot products add their terms x, y, z in that order, as
+/// glam does, so that the graph and the trainer agree to the bit on common inputs.
+///
+/// # Shapes
+/// - `origins`, `directions`: `[n_rays, 3]`; returns the anchored pair, `[n_rays, 3]` each
+fn anchor_rays(
+    g: &mut GraphBuilder,
+    anchor: &BeamAnchor,
+    origins: &str,
+    directions: &str,
+) -> (String, String) {
+    let double = attr_int("to", DataType::Double as i64);
+    let float = attr_int("to", DataType::Float as i64);
+    let o = g.node("Cast", "anchor.o", &[origins], vec![double.clone()]);
+    let d = g.node("Cast", "anchor.d", &[directions], vec![double.clone()]);
+    let axis = g.constant_i64("anchor.axis", &[1], &[1]);
+    let bounds: Vec<(String, String)> = (0..3)
+        .map(|c| {
+            (
+                g.constant_i64(&format!("anchor.start{c}"), &[1], &[c]),
+                g.constant_i64(&format!("anchor.end{c}"), &[1], &[c + 1]),
+            )
+        })
+        .collect();
+    // `a . b` per ray, `[n_rays, 1]`: ((a_x b_x + a_y b_y) + a_z b_z).
+    let dot = |g: &mut GraphBuilder, name: &str, a: &str, b: &str| -> String {
+        let p = g.node("Mul", &format!("anchor.{name}.products"), &[a, b], vec![]);
+        let terms: Vec<String> = bounds
+            .iter()
+            .enumerate()
+            .map(|(c, (start, end))| {
+                g.node(
+                    "Slice",
+                    &format!("anchor.{name}.term{c}"),
+                    &[&p, start, end, &axis],
+                    vec![],
+                )
+            })
+            .collect();
+        let xy = g.node(
+            "Add",
+            &format!("anchor.{name}.xy"),
+            &[&terms[0], &terms[1]],
+            vec![],
+        );
+        g.node("Add", &format!("anchor.{name}"), &[&xy, &terms[2]], vec![])
+    };
+    let len2 = dot(g, "length2", &d, &d);
+    let len = g.node("Sqrt", "anchor.length_raw", &[&len2], vec![]);
+    let min = g.constant_f32("anchor.min_length_f32", &[], &[MIN_DIRECTION_LENGTH]);
+    let min = g.node("Cast", "anchor.min_length", &[&min], vec![double.clone()]);
+    let len = g.node("Max", "anchor.length", &[&len, &min], vec![]);
+    let u = g.node("Div", "anchor.u", &[&d, &len], vec![]);
+    let centre = g.constant_f32("anchor.centre_f32", &[1, 3], &anchor.centre);
+    let centre = g.node("Cast", "anchor.centre", &[&centre], vec![double.clone()]);
+    let to_centre = g.node("Sub", "anchor.to_centre", &[&centre, &o], vec![]);
+    let s = dot(g, "closest", &to_centre, &u);
+    let distance = g.constant_f32("anchor.distance_f32", &[], &[anchor.distance]);
+    let distance = g.node("Cast", "anchor.distance", &[&distance], vec![double]);
+    let shift = g.node("Sub", "anchor.shift", &[&s, &distance], vec![]);
+    let step = g.node("Mul", "anchor.step", &[&shift, &u], vec![]);
+    let origin = g.node("Add", "anchor.origin_f64", &[&o, &step], vec![]);
+    let origin = g.node("Cast", "anchor.origin", &[&origin], vec![float.clone()]);
+    let u = g.node("Cast", "anchor.direction", &[&u], vec![float]);
+    (origin, u)
 }
 
 /// `x W^T + b` with the checkpoint's Linear `name` for a product every ray passes through:

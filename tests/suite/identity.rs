@@ -46,7 +46,7 @@ fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {
     .unwrap();
     let renderer = FrameRenderer::new(backend, None).unwrap();
 
-    let views = training_views(&data, &run.cfg.train);
+    let views = training_views(&data, &run.cfg.train, run.cfg.model.beam.anchor.is_some());
     let beams = frame_beams(&data, &views, None);
     let frames = data.dataset.frames(Split::Train);
     let width = data.dataset.intrinsics.width as usize;

@@ -218,7 +218,7 @@ fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
         pseudo_zoom: 0.15,
         ..StudentTrainConfig::default()
     };
-    let views = training_views(&data, &cfg);
+    let views = training_views(&data, &cfg, false);
     assert_eq!(views.len(), frames.len() + 300);
     let (yaw, pitch) = recorded_range(&data);
     let widened = |[lo, hi]: [f32; 2]| {
@@ -263,7 +263,7 @@ fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
         pseudo_zoom: 0.0,
         ..cfg
     };
-    for v in &training_views(&data, &tight)[frames.len()..] {
+    for v in &training_views(&data, &tight, false)[frames.len()..] {
         let (y, p, _) = view_angles(&v.camera, centre);
         assert!(y >= yaw[0] - 2e-3 && y <= yaw[1] + 2e-3, "{y} {yaw:?}");
         assert!(
@@ -271,6 +271,48 @@ fn pseudo_views_keep_their_recorded_audio_and_reach_the_widened_pose_range() {
             "{p} {pitch:?}"
         );
     }
+}
+
+/// An anchored student's pseudo views come closer than the rays' near bound allows an
+/// unanchored one (the teacher's targets follow the anchored rays, whose window never cuts
+/// into the head), and never into the head's bounds.
+#[test]
+fn anchored_pseudo_views_come_closer_than_the_near_bound_and_stay_outside_the_head() {
+    let data = TrainData::open(tiny_scene(), false).unwrap();
+    let frames = data.dataset.frames(Split::Train);
+    let cfg = StudentTrainConfig {
+        pseudo_frames: 300,
+        pseudo_zoom: 0.15,
+        ..StudentTrainConfig::default()
+    };
+    let centre = data.bounds.centre();
+    let extent = data.bounds.hi - data.bounds.lo;
+    let near_bound = data.dataset.near + 0.5 * extent.max_element();
+    let nearest = |anchored: bool| {
+        training_views(&data, &cfg, anchored)[frames.len()..]
+            .iter()
+            .map(|v| {
+                let (_, _, r) = view_angles(&v.camera, centre);
+                let (_, _, r0) = view_angles(&data.dataset.camera(&frames[v.source]), centre);
+                (r, r / r0)
+            })
+            .fold((f32::INFINITY, f32::INFINITY), |a, b| {
+                (a.0.min(b.0), a.1.min(b.1))
+            })
+    };
+    let (plain, _) = nearest(false);
+    let (anchored, ratio) = nearest(true);
+    assert!(near_bound > 0.9, "the tiny scene must clamp: {near_bound}");
+    assert!(plain >= near_bound - 1e-4, "{plain} {near_bound}");
+    assert!(
+        ratio < 0.86,
+        "anchored views reach {ratio} of the recorded distance"
+    );
+    assert!(anchored < near_bound - 0.05, "{anchored} {near_bound}");
+    assert!(
+        anchored >= 0.5 * extent.length() - 1e-4,
+        "{anchored} inside the head"
+    );
 }
 
 #[test]
@@ -281,7 +323,7 @@ fn thinned_pseudo_views_keep_their_mouth_and_a_seeded_subset_and_recorded_frames
         pseudo_frames: 40,
         ..StudentTrainConfig::default()
     };
-    let views = training_views(&data, &cfg);
+    let views = training_views(&data, &cfg, false);
     let full = frame_beams(&data, &views, None);
     let n = full[n_recorded..]
         .iter()

@@ -10,6 +10,7 @@ use std::sync::OnceLock;
 use candle_core::{DType, Device, Tensor};
 use glam::{Mat4, Vec3};
 use nldf_core::audio::{AudioWindows, FeatureConfig, FeatureSource, Waveform, write_wav};
+use nldf_core::beam::BeamAnchor;
 use nldf_core::bounds::Bounds;
 use nldf_core::camera::{Camera, Intrinsics, look_at};
 use nldf_core::image::ImageRgb;
@@ -267,7 +268,15 @@ pub(crate) fn configs() -> Vec<StudentConfig> {
     });
     paper_beam.audio.att_frames = 4;
     paper_beam.segments = 3;
-    vec![StudentConfig::tiny(), paper_beam]
+    // The tiny student anchors its beams as a trained one does (the centre off the origin,
+    // so that the anchor's arithmetic is exercised in full); the other keeps them at fixed
+    // distances from the camera, as models made before anchoring do.
+    let mut anchored = StudentConfig::tiny();
+    anchored.beam.anchor = Some(BeamAnchor {
+        centre: [0.05, -0.03, 0.02],
+        distance: 2.2,
+    });
+    vec![anchored, paper_beam]
 }
 
 /// A valid ONNX model (an Identity) with the given metadata.

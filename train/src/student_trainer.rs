@@ -13,9 +13,9 @@ use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor};
 use candle_nn::VarMap;
-use nldf_core::beam::encode_beams_parallel;
+use nldf_core::beam::{BeamAnchor, encode_beams_parallel};
 use nldf_core::camera::Camera;
-use nldf_core::dataset::Frame;
+use nldf_core::dataset::{Frame, Split};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr_from_mse;
 use nldf_core::rays::{Rays, head_rays};
@@ -111,6 +111,15 @@ impl StudentRun {
         teacher: Option<&TeacherRun>,
     ) -> Result<StudentRun> {
         cfg.model.audio.set_from(&data.dataset);
+        if cfg.model.anchor_beams && cfg.model.beam.anchor.is_none() {
+            let c2ws: Vec<_> = data
+                .dataset
+                .frames(Split::Train)
+                .iter()
+                .map(|f| f.c2w)
+                .collect();
+            cfg.model.beam.anchor = BeamAnchor::of_cameras(data.bounds.centre(), &c2ws);
+        }
         if let Some(t) = teacher {
             if t.cfg.model.audio.features != data.dataset.audio_source {
                 return Err(Error::Config(format!(
@@ -253,6 +262,7 @@ impl StudentRun {
         TargetLayout {
             segments: self.cfg.model.segments,
             opacity: self.cfg.model.opacity,
+            anchor: self.cfg.model.beam.anchor,
         }
     }
 
@@ -265,7 +275,7 @@ impl StudentRun {
     ) -> Result<Option<TargetLayout>> {
         let teacher_step = teacher.map(|t| t.step);
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        self.views = training_views(data, &self.cfg.train);
+        self.views = training_views(data, &self.cfg.train, self.cfg.model.beam.anchor.is_some());
         // Pseudo views find their mouth by projecting the recorded frames' mouth through
         // the teacher's depth.
         let mouth_points = match teacher {

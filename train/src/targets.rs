@@ -7,6 +7,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
+use nldf_core::beam::BeamAnchor;
 use nldf_core::rays::Rays;
 
 use crate::checkpoint::{load_tensors, save_tensors};
@@ -16,11 +17,14 @@ use crate::teacher_trainer::TeacherRun;
 use crate::views::{FrameBeams, View};
 
 /// What the teacher renders per ray for the student: `segments` Eq. 5 colours and, with
-/// `opacity`, the accumulated weight after them (see `Teacher::segment_targets`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// `opacity`, the accumulated weight after them (see `Teacher::segment_targets`), along
+/// each ray anchored as the student's beams are (`anchor`), so that the teacher's
+/// `[near, far]` window sits where the student's beam points do, however close the camera.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TargetLayout {
     pub segments: usize,
     pub opacity: bool,
+    pub anchor: Option<BeamAnchor>,
 }
 
 impl TargetLayout {
@@ -62,6 +66,10 @@ pub fn view_targets(
     let mut bg = Vec::with_capacity(3 * fb.pixels.len());
     for &(i, j) in &fb.pixels {
         let (o, d) = view.camera.ray(i as f32, j as f32);
+        let (o, d) = match &layout.anchor {
+            Some(anchor) => anchor.apply(o, d),
+            None => (o, d),
+        };
         rays.push(o, d);
         bg.extend_from_slice(&ds.background.get(i, j));
     }

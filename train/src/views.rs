@@ -69,9 +69,11 @@ pub fn recorded_range(data: &TrainData) -> ([f32; 2], [f32; 2]) {
 /// turns its camera about the head's centre to a yaw and pitch drawn uniformly from the
 /// recorded range widened `cfg.pose_range` times about its middle (the training data's own
 /// units: 1 keeps to the recorded poses, 2 reaches twice as far out), then moves it closer
-/// or farther by up to `cfg.pseudo_zoom` of its distance (closer only while the head's
-/// bounds stay beyond the rays' near bound).
-pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
+/// or farther by up to `cfg.pseudo_zoom` of its distance. Closer only while the camera
+/// stays outside the head's bounds, and for a student whose beams are not `anchored` (see
+/// `nldf_core::beam::BeamAnchor`) only while the bounds stay beyond the rays' near bound,
+/// which would otherwise cut the teacher's samples into the face.
+pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig, anchored: bool) -> Vec<View> {
     let ds = &data.dataset;
     let frames = ds.frames(Split::Train);
     let mut views: Vec<View> = frames
@@ -95,7 +97,12 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         (mid - half, mid + half)
     };
     let (yaw, pitch) = (widen(yaw), widen(pitch));
-    let closest = ds.near + 0.5 * (data.bounds.hi - data.bounds.lo).max_element();
+    let extent = data.bounds.hi - data.bounds.lo;
+    let closest = if anchored {
+        0.5 * extent.length()
+    } else {
+        ds.near + 0.5 * extent.max_element()
+    };
     let draw = |rng: &mut ChaCha8Rng, (lo, hi): (f32, f32)| {
         if hi > lo {
             rng.random_range(lo..=hi)
@@ -124,9 +131,8 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
         let mut c2w = tilt * turned;
         let offset = c2w.w_axis.truncate() - centre;
         let r = offset.length();
-        // Closer only as far as keeps the head's bounds beyond the rays' near bound (the
-        // teacher would otherwise cut into the face), and never closer than recorded when
-        // the recording itself is nearer than that.
+        // Closer only as far as `closest` allows, and never closer than recorded when the
+        // recording itself is nearer than that.
         let r_new = (zoom * r).max(closest.min(r));
         c2w.w_axis = (centre + offset * (r_new / r.max(1e-12))).extend(1.0);
         views.push(View {
