@@ -30,6 +30,13 @@ fn the_student_presets_have_the_papers_depths_and_cost() {
         .is_err()
     );
 
+    // An anchor must be finite: a NaN centre or an infinite distance is refused.
+    for (centre, distance) in [([f32::NAN, 0.0, 0.0], 1.0), ([0.0; 3], f32::INFINITY)] {
+        let mut bad = StudentConfig::tiny();
+        bad.beam.anchor = Some(nldf_core::beam::BeamAnchor { centre, distance });
+        let e = bad.check().unwrap_err().to_string();
+        assert!(e.contains("model.beam.anchor"), "{e}");
+    }
     let cfg = StudentConfig::tiny();
     let (varmap, vb) = new_varmap();
     let net = residual_mlp(&cfg, vb).unwrap();
