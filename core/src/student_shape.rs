@@ -210,8 +210,8 @@ impl StudentConfig {
         in_range("model.beam.n_points", self.beam.n_points, 2, 256)?;
         in_range("model.beam.n_freqs", self.beam.n_freqs, 0, 16)?;
         if let Some(a) = &self.beam.anchor {
-            let finite = a.centre.iter().all(|v| v.is_finite() && v.abs() <= 1e6);
-            if !finite || !(a.distance.is_finite() && a.distance.abs() <= 1e6) {
+            let within = |v: f32| v.is_finite() && v.abs() <= 1e6;
+            if !(a.centre.iter().all(|&v| within(v)) && within(a.distance)) {
                 return Err(Error::Argument(format!(
                     "`model.beam.anchor` must hold finite values within 1e6, got centre {:?}, \
                      distance {}",
