@@ -91,7 +91,11 @@ pub struct RenderArgs {
     /// With --skip-still: the colour spread (in 1/255 steps) above which a pixel is
     /// re-rendered (`nldf bench still` measures the trade: lower is closer to full frames,
     /// higher is faster).
-    #[arg(long, default_value_t = 12.0, requires = "skip_still")]
+    #[arg(
+        long,
+        default_value_t = nldf_infer::still::DEFAULT_THRESHOLD_STEPS,
+        requires = "skip_still"
+    )]
     pub skip_threshold: f32,
 }
 

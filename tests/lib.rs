@@ -9,8 +9,7 @@ use glam::{Mat4, Vec3};
 use nldf_core::audio::AudioWindows;
 use nldf_core::camera::look_at;
 use nldf_core::dataset::{FrameEntry, TransformsFile, save_audio_npy};
-use nldf_core::image::ImageRgb;
-use nldf_core::rays::Rect;
+use nldf_core::image::{ImageRgb, Rect};
 
 /// Rows of a matrix, as transforms files store them.
 pub fn rows(m: &Mat4) -> [[f32; 4]; 4] {

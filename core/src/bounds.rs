@@ -9,7 +9,7 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::dataset::{Dataset, Split};
+use crate::dataset::{Dataset, SCENE_FILE, Split};
 use crate::error::Result;
 
 /// An axis-aligned box in world (head) space.
@@ -75,7 +75,7 @@ const HULL_VIEWS: usize = 24;
 /// there are none) over up to 24 training frames, sampled on a 40^3 grid spanning the
 /// cameras' [near, far] range, grown by one grid cell.
 pub fn dataset_bounds(ds: &Dataset) -> Result<Bounds> {
-    let scene = ds.root.join(crate::synth::SCENE_FILE);
+    let scene = ds.root.join(SCENE_FILE);
     if scene.is_file() {
         let text = std::fs::read_to_string(&scene).map_err(|e| crate::Error::io(&scene, e))?;
         #[derive(Deserialize)]

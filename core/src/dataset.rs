@@ -17,9 +17,8 @@ use crate::audio::{
 use crate::camera::{Camera, Intrinsics, rigid_problem};
 use crate::error::{Error, Result};
 use crate::files::{read_json, write_atomic, write_json};
-use crate::image::{ImageRgb, save_png_bytes};
+use crate::image::{ImageRgb, Rect, save_png_bytes};
 use crate::landmarks::{LANDMARKS_EXT, Landmarks};
-use crate::rays::Rect;
 use crate::region::{MouthSource, Region};
 
 /// The audio feature windows, `[N, 16, F]` (AD-NeRF's name).
@@ -56,6 +55,9 @@ pub const LABELS_DIR: &str = "regions";
 /// Where AD-NeRF keeps its landmark files (`<img_id>.lms`); the frames' own folder is
 /// searched after it.
 pub const LANDMARKS_DIR: &str = "ori_imgs";
+/// The synthetic scene's ground truth file in a dataset folder (`nldf synth`, see
+/// [`crate::synth`]).
+pub const SCENE_FILE: &str = "scene.json";
 /// Tolerance of the rigidity check of camera matrices.
 pub const RIGID_TOL: f32 = 1e-3;
 

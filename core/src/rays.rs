@@ -4,57 +4,10 @@
 
 use glam::Vec3;
 use rand::Rng;
-use serde::{Deserialize, Serialize};
 
 use crate::bounds::HeadRange;
 use crate::camera::Camera;
-
-/// A pixel rectangle `[x, y, w, h]` (AD-NeRF's `face_rect`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(from = "[i64; 4]", into = "[i64; 4]")]
-pub struct Rect {
-    pub x: i64,
-    pub y: i64,
-    pub w: i64,
-    pub h: i64,
-}
-
-impl From<[i64; 4]> for Rect {
-    fn from([x, y, w, h]: [i64; 4]) -> Self {
-        Rect { x, y, w, h }
-    }
-}
-
-impl From<Rect> for [i64; 4] {
-    fn from(r: Rect) -> Self {
-        [r.x, r.y, r.w, r.h]
-    }
-}
-
-impl Rect {
-    /// The rectangle cut to a `width` x `height` image; `None` if nothing is left.
-    pub fn clipped(&self, width: u32, height: u32) -> Option<Rect> {
-        let x0 = self.x.max(0);
-        let y0 = self.y.max(0);
-        let x1 = self.x.saturating_add(self.w).min(width as i64);
-        let y1 = self.y.saturating_add(self.h).min(height as i64);
-        (x1 > x0 && y1 > y0).then_some(Rect {
-            x: x0,
-            y: y0,
-            w: x1 - x0,
-            h: y1 - y0,
-        })
-    }
-
-    /// True if pixel (`i`, `j`) lies inside.
-    pub fn contains(&self, i: u32, j: u32) -> bool {
-        let (i, j) = (i as i64, j as i64);
-        i >= self.x
-            && i < self.x.saturating_add(self.w)
-            && j >= self.y
-            && j < self.y.saturating_add(self.h)
-    }
-}
+use crate::image::Rect;
 
 /// A set of rays, `origins` and `directions` each flat `[n_rays, 3]`. Directions are not
 /// normalised (NeRF's convention): a point at parameter `t` is `o + t d`, and `t` is depth

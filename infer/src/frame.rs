@@ -9,8 +9,8 @@ use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
 use nldf_export::contract::ModelInfo;
 
-use crate::backend::{Backend, RayOutputs};
 use crate::error::{Error, Result};
+use crate::runtime::{Backend, RayOutputs};
 
 /// Largest image side `nldf render` accepts.
 pub const MAX_SIDE: u32 = 8192;

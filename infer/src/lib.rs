@@ -3,8 +3,9 @@
 //! Builds on nldf-core for rays, bounds and audio features and on nldf-export for the ONNX
 //! contract; never depends on candle.
 //!
-//! [`backend`] is the network behind one trait ([`tract_backend`], [`ort_backend`] with the
-//! `ort` feature, the library found by [`ort_library`]); [`frame`] renders one frame from a
+//! [`runtime`] is the network behind one trait ([`tract_backend`], [`ort_backend`] with the
+//! `ort` feature, the library found by [`ort_library`]), and [`backend`] opens a model in
+//! the runtime asked for; [`frame`] renders one frame from a
 //! pose and an audio neighbourhood, sending only the rays that meet the head's bounds
 //! through the network; [`audio`] and [`poses`] make each frame's inputs; [`video`] renders
 //! a whole WAV into PNG frames and an MP4, written through a staging folder ([`output`]);
@@ -24,12 +25,14 @@ pub mod ort_backend;
 pub mod ort_library;
 pub mod output;
 pub mod poses;
+pub mod runtime;
 pub mod still;
 pub mod stream;
 pub mod tract_backend;
 pub mod video;
 
-pub use backend::{Backend, BackendKind, BackendOptions, RayOutputs, backend_for, open_backend};
+pub use backend::{backend_for, open_backend};
 pub use error::{Error, Result};
 pub use frame::{Frame, FrameRenderer};
+pub use runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
 pub use video::{VideoJob, VideoPlan, VideoReport};

@@ -14,9 +14,9 @@ use ort::environment::Environment;
 use ort::session::{Session, SessionOutputs};
 use ort::value::TensorRef;
 
-use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
 use crate::error::{Error, Result};
 use crate::ort_library::find_ort_library;
+use crate::runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
 
 const NAME: &str = "ort";
 
@@ -134,7 +134,7 @@ impl OrtBackend {
         background: &[f32],
         audio: &[f32],
     ) -> Result<()> {
-        crate::backend::check_inputs(&self.info, origins, directions, background, audio)?;
+        crate::runtime::check_inputs(&self.info, origins, directions, background, audio)?;
         let n = origins.len() / 3;
         for start in (0..n).step_by(self.batch_size) {
             let end = (start + self.batch_size).min(n);
@@ -142,7 +142,7 @@ impl OrtBackend {
                 &origins[3 * start..3 * end],
                 &directions[3 * start..3 * end],
             );
-            let b = crate::backend::batch_background(&self.info, background, start..end);
+            let b = crate::runtime::batch_background(&self.info, background, start..end);
             self.run_session(o, d, b, audio, |_| Ok(()))?;
         }
         Ok(())

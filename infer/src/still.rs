@@ -18,13 +18,18 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::frame::{Frame, FrameRenderer};
 
+/// The default [`SkipConfig::threshold`] in steps of 1/255 of a colour channel, the unit
+/// the command line's `--skip-threshold` takes.
+pub const DEFAULT_THRESHOLD_STEPS: f32 = 12.0;
+
 /// Settings of [`StillSkipper`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SkipConfig {
     /// A pixel is re-rendered when its colour spread over the probes (and the last full
-    /// frame) exceeds this, in colour units of [0, 1] (default 12/255). It bounds a kept
-    /// pixel's error for the probes' audio only: a sound between the probes can move a kept
-    /// pixel further (`nldf bench still` measures by how much).
+    /// frame) exceeds this, in colour units of [0, 1] (default
+    /// [`DEFAULT_THRESHOLD_STEPS`] / 255, 12/255). It bounds a kept pixel's error for the
+    /// probes' audio only: a sound between the probes can move a kept pixel further
+    /// (`nldf bench still` measures by how much).
     pub threshold: f32,
     /// Pixels within this many pixels (a square) of one over the threshold are re-rendered
     /// too (default 2).
@@ -38,7 +43,7 @@ pub struct SkipConfig {
 impl Default for SkipConfig {
     fn default() -> Self {
         SkipConfig {
-            threshold: 12.0 / 255.0,
+            threshold: DEFAULT_THRESHOLD_STEPS / 255.0,
             margin: 2,
             refresh: 25,
             probes: 8,

@@ -12,8 +12,8 @@ use nldf_export::ExportedModel;
 use nldf_export::contract::{ModelInfo, input_names, output_names};
 use tract_onnx::prelude::*;
 
-use crate::backend::{Backend, BackendKind, BackendOptions, RayOutputs};
 use crate::error::{Error, Result};
+use crate::runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
 
 /// Partial batches are padded up to a multiple of this many rays.
 pub const PLAN_GRANULE: usize = 512;

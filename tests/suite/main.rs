@@ -10,6 +10,7 @@ mod fuzz;
 mod identity;
 mod infer;
 mod jobs;
+mod layers;
 mod metrics;
 mod posed;
 mod rendering;

@@ -7,7 +7,8 @@ use nldf_core::composite::{
     composite, composite_f64, segment_colors, segment_colors_f64, segment_of,
 };
 use nldf_core::encoding::{MAX_COORD, encoded_len, positional_encoding};
-use nldf_core::rays::{Rays, Rect, rays_for_image, rays_for_pixels, sample_batch};
+use nldf_core::image::Rect;
+use nldf_core::rays::{Rays, rays_for_image, rays_for_pixels, sample_batch};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

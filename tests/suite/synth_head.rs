@@ -4,9 +4,8 @@ use glam::Vec3;
 use nldf_core::camera::{Camera, Intrinsics, look_at};
 use nldf_core::image::ImageRgb;
 use nldf_core::region::Region;
-use nldf_core::synth::head::{
-    FaceState, HeadFrame, HeadParams, head_bounds, render_background, render_head,
-};
+use nldf_core::synth::head::{FaceState, HeadParams, head_bounds};
+use nldf_core::synth::trace::{HeadFrame, render_background, render_head};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

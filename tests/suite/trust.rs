@@ -601,7 +601,7 @@ fn ad_nerf_bounds_use_the_depth_along_the_view_axis() {
         img_id: 0,
         aud_id: 0,
         c2w,
-        face_rect: nldf_core::rays::Rect {
+        face_rect: nldf_core::image::Rect {
             x: 0,
             y: 0,
             w: 1,

@@ -535,7 +535,7 @@ pub fn bench_encoding(n_freqs: usize, scene_range: f32, reps: usize) -> Encoding
                 }
             }
             let inputs: Vec<Vec<f32>> = (0..1024).map(|_| sample(&mut rng, scene_range)).collect();
-            let mut times: Vec<f64> = (0..reps.max(1))
+            let times: Vec<f64> = (0..reps.max(1))
                 .map(|_| {
                     let started = Instant::now();
                     for values in &inputs {
@@ -545,10 +545,9 @@ pub fn bench_encoding(n_freqs: usize, scene_range: f32, reps: usize) -> Encoding
                     started.elapsed().as_secs_f64() * 1e9 / (inputs.len() * n) as f64
                 })
                 .collect();
-            times.sort_by(f64::total_cmp);
             EncodingVariant {
                 name: names[variant].to_string(),
-                ns_per_value: times[times.len() / 2],
+                ns_per_value: nldf_core::stats::median(&times),
                 max_error_scene: worst[0],
                 max_error_clamp: worst[1],
             }

@@ -5,7 +5,8 @@
 //! The head is a smooth union of ellipsoids, spheres and capsules in head space (AD-NeRF's
 //! world: head near the origin, facing +z, +y up, about 0.25 units tall). Eyes with blinking
 //! lids and a mouth whose opening and width follow a [`FaceState`] are carved into and added
-//! onto it. [`render_head`] and [`render_background`] render it into images.
+//! onto it. [`render_head`](super::trace::render_head) and
+//! [`render_background`](super::trace::render_background) render it into images.
 
 use glam::{Vec2, Vec3};
 use rand::Rng;
@@ -13,8 +14,6 @@ use serde::{Deserialize, Serialize};
 
 use super::sdf::{Ellipsoid, RoundBox, RoundCone, smax, smin, smoothstep};
 use crate::region::Region;
-
-pub use super::trace::{HeadFrame, render_background, render_head};
 
 /// Margin added to every part's bounds: covers the bulge of the smooth unions.
 const BOUNDS_MARGIN: f32 = 0.01;

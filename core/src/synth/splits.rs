@@ -12,14 +12,15 @@
 
 use std::path::Path;
 
+use super::frames::{Tracks, camera_at, feature_windows, stream, transforms_file};
+use super::head::FaceState;
+use super::scene::{EvalFrame, HeadPose, SynthConfig};
 use super::speech::{Voice, mouth_track, synthesize_speech};
-use super::{EvalFrame, HeadPose, SynthConfig, Tracks, feature_windows, stream, transforms_file};
 use crate::audio::{FeatureSource, write_wav};
 use crate::camera::Intrinsics;
 use crate::dataset::{FrameEntry, Split, save_audio_features};
 use crate::error::{Error, Result};
-use crate::rays::Rect;
-use crate::synth::head::FaceState;
+use crate::image::Rect;
 
 /// Camera distances of the `novel` split's two unturned views, as factors of the recorded
 /// one: closer (the head's bounds stay beyond the rays' near bound) and farther.
@@ -169,7 +170,7 @@ impl EvalSplits {
                 .map(|(f, rect)| FrameEntry {
                     img_id: f.img_id,
                     aud_id: f.aud_id,
-                    transform_matrix: super::camera_at(intrinsics, &f.pose, f.camera_distance)
+                    transform_matrix: camera_at(intrinsics, &f.pose, f.camera_distance)
                         .c2w
                         .transpose()
                         .to_cols_array_2d(),

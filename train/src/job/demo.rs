@@ -206,7 +206,7 @@ impl DemoJob {
         let mut own = Timing::open(&self.out.join(DEMO_TIMING_DIR))?;
         let data = self.out.join("data");
         let started = Instant::now();
-        if data.join(nldf_core::synth::SCENE_FILE).is_file() {
+        if data.join(nldf_core::dataset::SCENE_FILE).is_file() {
             on_event(&JobEvent::Stage(format!(
                 "synthetic scene: reusing {}",
                 data.display()

@@ -1,0 +1,217 @@
+//! The network as a function of rays and audio, behind one trait so that the frame renderer
+//! does not care which runtime evaluates it: [`TractBackend`](crate::tract_backend) (pure
+//! Rust, the default) or the onnxruntime backend (cargo feature `ort`). The runtimes build
+//! on this module; [`crate::backend`] opens a model in the one a [`BackendKind`] names.
+
+use nldf_export::contract::ModelInfo;
+
+use crate::error::{Error, Result};
+
+/// Which runtime evaluates the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BackendKind {
+    /// tract: pure Rust, always built.
+    Tract,
+    /// onnxruntime through the `ort` crate, loaded at run time (cargo feature `ort`).
+    Ort,
+}
+
+impl BackendKind {
+    /// The runtime's name as the CLI spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendKind::Tract => "tract",
+            BackendKind::Ort => "ort",
+        }
+    }
+}
+
+impl std::fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How a backend runs the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct BackendOptions {
+    /// Rays per network call: larger batches use the matrix units better, smaller ones
+    /// waste less on a frame's last, partial batch.
+    pub batch_size: usize,
+    /// Threads for the matrix products (1 = the calling thread only).
+    pub threads: usize,
+    /// Whether onnxruntime's worker threads keep spinning (busy-waiting) after a call
+    /// returns, ready for the next, instead of parking. They always spin within a call
+    /// (without it a 2-core EPYC frame of the real-time student takes 20-30 % longer); the
+    /// spinning after it helps only calls that follow at once, and takes a core (or its
+    /// SMT sibling) from every other thread: a second session, a stream's reader, the PNG
+    /// writer. Streams turn it off. tract ignores it.
+    pub spin: bool,
+}
+
+impl Default for BackendOptions {
+    fn default() -> Self {
+        BackendOptions {
+            batch_size: 4096,
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            spin: true,
+        }
+    }
+}
+
+impl BackendOptions {
+    /// The largest batch size and thread count accepted.
+    pub const LIMITS: BackendOptions = BackendOptions {
+        batch_size: 1 << 20,
+        threads: 1024,
+        spin: true,
+    };
+
+    /// Checks the options.
+    pub fn validate(&self) -> Result<()> {
+        let max = Self::LIMITS;
+        if self.batch_size == 0 || self.batch_size > max.batch_size {
+            return Err(Error::Argument(format!(
+                "batch size must be 1 to {}, got {}",
+                max.batch_size, self.batch_size
+            )));
+        }
+        if self.threads == 0 || self.threads > max.threads {
+            return Err(Error::Argument(format!(
+                "threads must be 1 to {}, got {}",
+                max.threads, self.threads
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The network's outputs for a set of rays.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RayOutputs {
+    /// Pixel colours, `[n_rays, 3]` (paper Eq. 7).
+    pub rgb: Vec<f32>,
+    /// Segment colours, `[n_rays, M, 3]`, summing to `rgb` (to `rgb` less the background's
+    /// share for a model with opacity).
+    pub segments: Vec<f32>,
+    /// How much of each ray the head covers, `[n_rays]`; empty for a model without
+    /// opacity.
+    pub opacity: Vec<f32>,
+}
+
+/// A runtime holding one exported model.
+pub trait Backend {
+    /// Which runtime this is.
+    fn kind(&self) -> BackendKind;
+
+    /// The model's metadata.
+    fn info(&self) -> &ModelInfo;
+
+    /// Rays per network call.
+    fn batch_size(&self) -> usize;
+
+    /// Runs the network on one batch of 1 to [`Backend::batch_size`] rays with one audio
+    /// neighbourhood; [`Backend::run`] has checked the inputs' lengths.
+    ///
+    /// # Shapes
+    /// - `origins`, `directions`: `[n_rays, 3]` flat, `1 <= n_rays <= batch_size`
+    /// - `background`: `[n_rays, 3]` flat for a model with opacity, else ignored
+    /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_export::contract`)
+    /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
+    fn run_batch(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        background: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs>;
+
+    /// Runs the network on any number of rays, batch by batch.
+    ///
+    /// # Shapes
+    /// - `origins`, `directions`: `[n_rays, 3]` flat
+    /// - `background`: `[n_rays, 3]` flat, the background behind each ray, for a model
+    ///   with opacity (see [`ModelInfo::opacity`]); ignored (may be empty) otherwise
+    /// - `audio`: `[att_frames, window, n_features]` flat
+    /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
+    fn run(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        background: &[f32],
+        audio: &[f32],
+    ) -> Result<RayOutputs> {
+        check_inputs(self.info(), origins, directions, background, audio)?;
+        let n = origins.len() / 3;
+        let m = self.info().segments;
+        let opacity = self.info().opacity;
+        let mut out = RayOutputs {
+            rgb: Vec::with_capacity(3 * n),
+            segments: Vec::with_capacity(3 * m * n),
+            opacity: Vec::with_capacity(if opacity { n } else { 0 }),
+        };
+        let batch = self.batch_size();
+        for start in (0..n).step_by(batch) {
+            let end = (start + batch).min(n);
+            let part = self.run_batch(
+                &origins[3 * start..3 * end],
+                &directions[3 * start..3 * end],
+                batch_background(self.info(), background, start..end),
+                audio,
+            )?;
+            out.rgb.extend_from_slice(&part.rgb);
+            out.segments.extend_from_slice(&part.segments);
+            out.opacity.extend_from_slice(&part.opacity);
+        }
+        Ok(out)
+    }
+}
+
+/// The background colours of rays `rays` (`[rays.len(), 3]` flat) for a model with
+/// opacity; none for one without, which takes no background input.
+pub fn batch_background<'a>(
+    info: &ModelInfo,
+    background: &'a [f32],
+    rays: std::ops::Range<usize>,
+) -> &'a [f32] {
+    if info.opacity {
+        &background[3 * rays.start..3 * rays.end]
+    } else {
+        &[]
+    }
+}
+
+/// Checks the lengths of a call's inputs against the model.
+pub fn check_inputs(
+    info: &ModelInfo,
+    origins: &[f32],
+    directions: &[f32],
+    background: &[f32],
+    audio: &[f32],
+) -> Result<()> {
+    if !origins.len().is_multiple_of(3) || origins.len() != directions.len() {
+        return Err(Error::Argument(format!(
+            "rays: origins hold {} values and directions {}, expected equal multiples of 3",
+            origins.len(),
+            directions.len()
+        )));
+    }
+    if info.opacity && background.len() != origins.len() {
+        return Err(Error::Argument(format!(
+            "rays: the model composites over the background, which holds {} values for {} \
+             rays (expected 3 per ray)",
+            background.len(),
+            origins.len() / 3
+        )));
+    }
+    if audio.len() != info.audio.len() {
+        return Err(Error::Argument(format!(
+            "audio: expected {:?} = {} values, got {}",
+            info.audio.shape(),
+            info.audio.len(),
+            audio.len()
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,432 @@
+//! Layering: the module graphs of `nldf-core`, `nldf-train` and `nldf-infer` have no cycle.
+//!
+//! Each `*.rs` file under a crate's `src/` is a module (`mod.rs` is its folder's module,
+//! `lib.rs` the crate root). A module depends on another that it names in a path:
+//! `crate::a::b`, `super::b` (from the file, or from the inline module it is written in),
+//! `self::b`, or a child module by its bare name (`b::f()` beside `mod b;`), with `use`
+//! groups expanded; the module is the longest prefix of the path that is a file. Comments,
+//! doc links and strings do not count. The crate root declares and re-exports every module,
+//! so it is left out. The check fails naming each cycle it meets, as
+//! `rays -> bounds -> dataset -> rays`.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// The crates checked: their source folders, relative to the workspace root.
+const SOURCE_DIRS: [&str; 3] = ["core/src", "train/src", "infer/src"];
+
+/// Every `*.rs` file under `dir` with its text, by its path relative to `dir`.
+fn rust_files(dir: &Path) -> BTreeMap<PathBuf, String> {
+    let mut files = BTreeMap::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                todo.push(path);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                files.insert(path.strip_prefix(dir).unwrap().to_path_buf(), text);
+            }
+        }
+    }
+    files
+}
+
+/// The module a file holds: `synth/splits.rs` is `synth::splits`, `synth/mod.rs` is
+/// `synth`, `lib.rs` the root (empty).
+fn module_of(rel: &Path) -> Vec<String> {
+    let mut parts: Vec<String> = rel
+        .iter()
+        .map(|p| p.to_string_lossy().into_owned())
+        .collect();
+    let file = parts.pop().unwrap_or_default();
+    let stem = file.trim_end_matches(".rs");
+    if stem != "mod" && stem != "lib" {
+        parts.push(stem.to_string());
+    }
+    parts
+}
+
+fn is_ident(c: u8) -> bool {
+    c.is_ascii_alphanumeric() || c == b'_'
+}
+
+/// The identifier starting at `t[i]`, empty if none does.
+fn ident_at(t: &[u8], i: usize) -> String {
+    let starts = t
+        .get(i)
+        .is_some_and(|&c| c.is_ascii_alphabetic() || c == b'_');
+    if !starts {
+        return String::new();
+    }
+    let n = t[i..].iter().take_while(|&&c| is_ident(c)).count();
+    String::from_utf8_lossy(&t[i..i + n]).into_owned()
+}
+
+fn skip_ws(t: &[u8], mut i: usize) -> usize {
+    while t.get(i).is_some_and(|c| c.is_ascii_whitespace()) {
+        i += 1;
+    }
+    i
+}
+
+/// `src` with comments, strings and character literals blanked (a literal becomes `""` or
+/// `' '`), so that neither the paths nor the braces inside them count.
+fn strip(src: &str) -> Vec<u8> {
+    let s = src.as_bytes();
+    let mut out = Vec::with_capacity(s.len());
+    let mut i = 0;
+    while i < s.len() {
+        let rest = &s[i..];
+        let after_ident = i > 0 && is_ident(s[i - 1]);
+        let raw_prefix = match rest {
+            [b'b', b'r', ..] => 2,
+            [b'r', ..] => 1,
+            _ => 0,
+        };
+        let hashes = rest[raw_prefix..]
+            .iter()
+            .take_while(|&&c| c == b'#')
+            .count();
+        if rest.starts_with(b"//") {
+            i += rest.iter().position(|&c| c == b'\n').unwrap_or(rest.len());
+        } else if rest.starts_with(b"/*") {
+            let mut depth = 0usize;
+            while i < s.len() {
+                if s[i..].starts_with(b"/*") {
+                    depth += 1;
+                    i += 2;
+                } else if s[i..].starts_with(b"*/") {
+                    depth -= 1;
+                    i += 2;
+                    if depth == 0 {
+                        break;
+                    }
+                } else {
+                    i += 1;
+                }
+            }
+            out.push(b' ');
+        } else if raw_prefix > 0 && !after_ident && rest.get(raw_prefix + hashes) == Some(&b'"') {
+            let close: Vec<u8> = std::iter::once(b'"')
+                .chain(std::iter::repeat_n(b'#', hashes))
+                .collect();
+            let body = i + raw_prefix + hashes + 1;
+            let end = s[body..]
+                .windows(close.len())
+                .position(|w| w == close.as_slice());
+            i = end.map_or(s.len(), |e| body + e + close.len());
+            out.extend_from_slice(b"\"\"");
+        } else if rest[0] == b'"' {
+            i += 1;
+            while i < s.len() && s[i] != b'"' {
+                i += if s[i] == b'\\' { 2 } else { 1 };
+            }
+            i += 1;
+            out.extend_from_slice(b"\"\"");
+        } else if rest[0] == b'\'' && rest.get(1) == Some(&b'\\') {
+            let end = s
+                .get(i + 3..)
+                .and_then(|r| r.iter().position(|&c| c == b'\''));
+            i = end.map_or(s.len(), |e| i + 3 + e + 1);
+            out.extend_from_slice(b"' '");
+        } else if rest[0] == b'\''
+            && src[i + 1..]
+                .chars()
+                .next()
+                .is_some_and(|c| s.get(i + 1 + c.len_utf8()) == Some(&b'\''))
+        {
+            let width = src[i + 1..].chars().next().map_or(1, char::len_utf8);
+            i += width + 2;
+            out.extend_from_slice(b"' '");
+        } else {
+            out.push(rest[0]);
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Parses the path or `use` tree at `t[i..]` below `prefix`, adding each whole path to
+/// `paths`; returns where it ends.
+fn parse_tree(t: &[u8], mut i: usize, prefix: &[String], paths: &mut Vec<Vec<String>>) -> usize {
+    let mut segments = prefix.to_vec();
+    loop {
+        i = skip_ws(t, i);
+        match t.get(i) {
+            Some(b'{') => {
+                i += 1;
+                loop {
+                    i = skip_ws(t, i);
+                    match t.get(i) {
+                        None => return i,
+                        Some(b'}') => return i + 1,
+                        Some(b',') => i += 1,
+                        Some(_) => {
+                            let end = parse_tree(t, i, &segments, paths);
+                            i = if end == i { i + 1 } else { end };
+                        }
+                    }
+                }
+            }
+            Some(b'*') => {
+                paths.push(segments);
+                return i + 1;
+            }
+            _ => {}
+        }
+        let word = ident_at(t, i);
+        if word.is_empty() {
+            paths.push(segments);
+            return i;
+        }
+        i += word.len();
+        segments.push(word);
+        let next = skip_ws(t, i);
+        if !t[next..].starts_with(b"::") {
+            paths.push(segments);
+            return i;
+        }
+        i = next + 2;
+    }
+}
+
+/// The modules that the file of `module` depends on (see the module docs): neither itself
+/// nor the root. `modules` holds every module of the crate.
+fn dependencies(
+    module: &[String],
+    src: &str,
+    modules: &BTreeSet<Vec<String>>,
+) -> BTreeSet<Vec<String>> {
+    let t = strip(src);
+    let mut paths = Vec::new();
+    // Inline modules (`mod tests { .. }`) open at a brace depth: `super` starts from them.
+    let mut inline: Vec<(String, usize)> = Vec::new();
+    let mut depth = 0;
+    let mut i = 0;
+    while i < t.len() {
+        match t[i] {
+            b'{' => {
+                depth += 1;
+                i += 1;
+                continue;
+            }
+            b'}' => {
+                if inline.last().is_some_and(|&(_, d)| d == depth) {
+                    inline.pop();
+                }
+                depth = depth.saturating_sub(1);
+                i += 1;
+                continue;
+            }
+            _ => {}
+        }
+        let word = if i > 0 && is_ident(t[i - 1]) {
+            String::new()
+        } else {
+            ident_at(&t, i)
+        };
+        if word.is_empty() {
+            i += 1;
+            continue;
+        }
+        let mut next = skip_ws(&t, i + word.len());
+        if word == "mod" {
+            let name = ident_at(&t, next);
+            let after = skip_ws(&t, next + name.len());
+            if !name.is_empty() && t.get(after) == Some(&b'{') {
+                depth += 1;
+                inline.push((name, depth));
+                i = after + 1;
+            } else {
+                i = next;
+            }
+            continue;
+        }
+        let starts_path = t[next..].starts_with(b"::") && !t[..i].trim_ascii_end().ends_with(b"::");
+        let here = || -> Vec<String> {
+            let inner = inline.iter().map(|(name, _)| name.clone());
+            module.iter().cloned().chain(inner).collect()
+        };
+        let mut child = module.to_vec();
+        child.push(word.clone());
+        let base = match word.as_str() {
+            _ if !starts_path => None,
+            "crate" => Some(Vec::new()),
+            "self" => Some(here()),
+            "super" => {
+                let mut base = here();
+                base.pop();
+                loop {
+                    let at = skip_ws(&t, next + 2);
+                    let after = skip_ws(&t, at + "super".len());
+                    if ident_at(&t, at) != "super" || !t[after..].starts_with(b"::") {
+                        break;
+                    }
+                    base.pop();
+                    next = after;
+                }
+                Some(base)
+            }
+            _ if inline.is_empty() && modules.contains(&child) => Some(child),
+            _ => None,
+        };
+        match base {
+            Some(base) => i = parse_tree(&t, next + 2, &base, &mut paths),
+            None => i += word.len(),
+        }
+    }
+    paths
+        .iter()
+        .filter_map(|p| {
+            (0..=p.len())
+                .rev()
+                .map(|n| p[..n].to_vec())
+                .find(|m| modules.contains(m))
+        })
+        .filter(|m| !m.is_empty() && m.as_slice() != module)
+        .collect()
+}
+
+/// The module graph of a crate's source files (by path relative to `src/`): each module,
+/// named as a path (`synth::splits`), with the modules it depends on.
+fn module_graph(files: &BTreeMap<PathBuf, String>) -> BTreeMap<String, BTreeSet<String>> {
+    let modules: BTreeSet<Vec<String>> = files.keys().map(|p| module_of(p)).collect();
+    files
+        .iter()
+        .filter(|(p, _)| !module_of(p).is_empty())
+        .map(|(p, src)| {
+            let module = module_of(p);
+            let deps = dependencies(&module, src, &modules)
+                .iter()
+                .map(|m| m.join("::"))
+                .collect();
+            (module.join("::"), deps)
+        })
+        .collect()
+}
+
+/// Every cycle that a depth-first search of `graph` (modules and their dependencies in
+/// sorted order) meets, one per edge back to a module on its path, as `a -> b -> a`.
+fn cycles(graph: &BTreeMap<String, BTreeSet<String>>) -> Vec<String> {
+    fn visit<'a>(
+        m: &'a str,
+        graph: &'a BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<&'a str>,
+        done: &mut BTreeSet<&'a str>,
+        found: &mut Vec<String>,
+    ) {
+        path.push(m);
+        for next in graph.get(m).into_iter().flatten() {
+            if let Some(at) = path.iter().position(|p| *p == next.as_str()) {
+                let mut cycle = path[at..].to_vec();
+                cycle.push(next);
+                found.push(cycle.join(" -> "));
+            } else if !done.contains(next.as_str()) {
+                visit(next, graph, path, done, found);
+            }
+        }
+        path.pop();
+        done.insert(m);
+    }
+    let (mut done, mut found) = (BTreeSet::new(), Vec::new());
+    for m in graph.keys() {
+        if !done.contains(m.as_str()) {
+            visit(m, graph, &mut Vec::new(), &mut done, &mut found);
+        }
+    }
+    found
+}
+
+/// The cycles of the module graph of the files given as (path relative to `src/`, text).
+fn cycles_of(files: &[(&str, &str)]) -> Vec<String> {
+    let files: BTreeMap<PathBuf, String> = files
+        .iter()
+        .map(|&(p, s)| (PathBuf::from(p), s.to_string()))
+        .collect();
+    cycles(&module_graph(&files))
+}
+
+#[test]
+fn module_graphs_have_no_cycle() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut found = Vec::new();
+    for dir in SOURCE_DIRS {
+        let files = rust_files(&root.join(dir));
+        assert!(
+            files.len() > 5,
+            "{dir}: only {} source files found",
+            files.len()
+        );
+        found.extend(
+            cycles(&module_graph(&files))
+                .into_iter()
+                .map(|c| format!("{dir}: {c}")),
+        );
+    }
+    assert!(
+        found.is_empty(),
+        "import cycles between modules:\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn a_planted_cycle_is_named() {
+    let found = cycles_of(&[
+        (
+            "lib.rs",
+            "pub mod a;\npub mod b;\npub mod c;\npub use a::X;",
+        ),
+        ("a.rs", "use crate::{b::{Y, self}, c};\npub struct X;"),
+        ("b.rs", "pub fn y() -> u8 { crate::c::z() }"),
+        ("c.rs", "pub fn z() -> u8 { let _ = $crate::a::X; 0 }"),
+    ]);
+    // One cycle per edge back: `a -> c -> a` is not named again, as the search has finished
+    // `c` (through `b`) when it comes back to `a`.
+    assert_eq!(found, ["a -> b -> c -> a"]);
+}
+
+#[test]
+fn parents_children_and_super_count() {
+    let found = cycles_of(&[
+        ("lib.rs", "pub mod synth;"),
+        (
+            "synth/mod.rs",
+            "mod splits;\nfn f() { splits::g() }\npub struct Cfg;",
+        ),
+        ("synth/splits.rs", "use super::Cfg;\npub fn g() {}"),
+    ]);
+    assert_eq!(found, ["synth -> synth::splits -> synth"]);
+    let found = cycles_of(&[
+        ("lib.rs", "pub mod synth;"),
+        ("synth/mod.rs", "pub mod head;\npub mod trace;"),
+        (
+            "synth/head.rs",
+            "pub use super::trace::render;\npub struct Head;",
+        ),
+        (
+            "synth/trace.rs",
+            "use super::super::synth::head::Head;\npub fn render() {}",
+        ),
+    ]);
+    assert_eq!(found, ["synth::head -> synth::trace -> synth::head"]);
+}
+
+#[test]
+fn comments_strings_and_test_modules_do_not_count() {
+    let found = cycles_of(&[
+        ("lib.rs", "pub mod a;\npub mod b;"),
+        ("a.rs", "use crate::b::Y;\npub struct X;"),
+        (
+            "b.rs",
+            "//! See [`crate::a::X`].\n/* crate::a:: /* nested */ crate::a:: */\n\
+             pub struct Y;\nfn f() -> char { let _ = \"crate::a::X {\"; \
+             let _ = r#\"crate::a::X\"#; '{' }\n\
+             #[cfg(test)]\nmod tests {\n    use super::*;\n    fn g<'a>(y: &'a Y) {}\n}\n\
+             fn h() -> nldf::a::X { todo!() }",
+        ),
+    ]);
+    assert!(found.is_empty(), "{found:?}");
+}
