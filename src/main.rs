@@ -2,6 +2,7 @@
 
 mod ablate_cmd;
 mod bench_cmd;
+mod bench_model_cmd;
 mod demo_cmd;
 mod doctor_cmd;
 mod eval_cmd;

@@ -1,0 +1,116 @@
+//! The frontier's exports: every student of the run in every precision, and each export
+//! opened in a runtime as a point that renders whole frames.
+
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+
+use nldf_export::WeightType;
+use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
+use nldf_train::eval::{FrameModel, student_short_name};
+use nldf_train::job::{JobEvent, OnEvent};
+use nldf_train::student_trainer::StudentRun;
+
+use super::points::OnnxPoint;
+use super::{PRECISIONS, precision_name};
+use crate::error::{Error, Result, chain, create_dir};
+
+/// One student exported in one precision.
+pub(crate) struct Export {
+    /// The student's folder name.
+    pub(crate) student: String,
+    pub(crate) describe: String,
+    /// The student's name in plots ([`student_short_name`]).
+    pub(crate) short: String,
+    pub(crate) step: usize,
+    pub(crate) macs_per_ray: f64,
+    pub(crate) precision: WeightType,
+    pub(crate) path: PathBuf,
+}
+
+/// Exports every student of the run in every precision into `dir`; the int8 exports are
+/// calibrated on `calibration_frames` training frames of `data`. A student whose weights do
+/// not fit half precision has no f16 point (a note says so).
+pub(crate) fn export_all(
+    students: &[StudentRun],
+    data: &Path,
+    calibration_frames: usize,
+    dir: &Path,
+    on_event: OnEvent,
+) -> Result<Vec<Export>> {
+    create_dir(dir)?;
+    let mut out = Vec::new();
+    for s in students {
+        let name = s.label();
+        for w in PRECISIONS {
+            let path = dir.join(format!("{name}.{}.onnx", precision_name(w)));
+            let report = match w {
+                WeightType::Int8 => {
+                    nldf_infer::calibrate::export_int8(&s.dir, data, calibration_frames, &path)
+                        .map(|_| ())
+                        .map_err(Error::from)
+                }
+                _ => nldf_export::export_student(&s.dir, &path, w)
+                    .map(|_| ())
+                    .map_err(Error::from),
+            };
+            match report {
+                Ok(()) => {
+                    on_event(&JobEvent::Note(format!("exported {}", path.display())));
+                    out.push(Export {
+                        student: name.clone(),
+                        describe: s.describe(),
+                        short: student_short_name(&s.cfg),
+                        step: s.step,
+                        macs_per_ray: s.macs_per_ray(),
+                        precision: w,
+                        path,
+                    });
+                }
+                Err(e) if w == WeightType::F16 => on_event(&JobEvent::Note(format!(
+                    "{name}: no fp16 point: {}",
+                    chain(&e)
+                ))),
+                Err(e) => return Err(e.context(format!("exporting {name}"))),
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// `e` in `kind`, rendering frames of `size` (`None`: the model's own), each `upscale` times
+/// smaller and then upscaled.
+pub(crate) fn open_point(
+    e: &Export,
+    kind: BackendKind,
+    threads: usize,
+    batch: usize,
+    size: Option<u32>,
+    upscale: u32,
+) -> Result<OnnxPoint> {
+    let model = nldf_export::read_model(&e.path)?;
+    // The points take turns frame by frame: a pool left spinning after its call would run
+    // beside the next point's.
+    let backend = backend_for(
+        &model,
+        kind,
+        BackendOptions {
+            batch_size: batch,
+            threads,
+            spin: false,
+        },
+    )?;
+    let size = size.map(|s| s / upscale.max(1));
+    Ok(OnnxPoint {
+        student: e.student.clone(),
+        describe: e.describe.clone(),
+        short: e.short.clone(),
+        precision: e.precision,
+        kind,
+        step: e.step,
+        macs_per_ray: e.macs_per_ray,
+        path: e.path.clone(),
+        renderer: RefCell::new(FrameRenderer::new(backend, size)?),
+        upscale: upscale.max(1),
+        seconds: RefCell::new(Vec::new()),
+    })
+}

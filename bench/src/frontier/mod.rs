@@ -1,0 +1,332 @@
+//! Run time against error (`nldf bench frontier`). Every way nldf can render a run's
+//! held-out frames renders the same frames one after another: the teacher in candle (with
+//! its empty-space skipping and early stop, without early stop, and without either, as
+//! AD-NeRF renders), and every student exported in f32, f16 and int8, each in onnxruntime
+//! and tract. Each is scored against the ground truth (PSNR, SSIM, mouth PSNR) and timed
+//! per whole frame (ray set-up, network and compositing): the median over the `val` scoring
+//! pass with 2 threads, where the ways of rendering take turns frame by frame (so a burst of
+//! load on the machine touches all alike), a second median over a few frames rendered back
+//! to back, as a video renders them, and one over a few frames with 1 thread. AD-NeRF's own
+//! setting (8 x 256, 64 + 128 samples) is timed on a few frames with seeded weights.
+//! [`FrontierReport::write`] writes `frontier.json` (machine, commit, load, settings,
+//! points), `frontier.md` and `frontier.png` (PSNR against time on a log axis, the Pareto
+//! front marked), and states the students' speed-up over the teacher at matched PSNR.
+//!
+//! The job is split by what it does: `exports` (every student in every precision),
+//! `points` (the ways of rendering, timed), `timing` (back to back, AD-NeRF's setting),
+//! [`front`] (rows, the front, speed-ups), `hires` (the higher resolution pass) and
+//! [`report`] (the files).
+
+mod exports;
+pub mod front;
+mod hires;
+mod points;
+pub mod report;
+mod timing;
+
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+
+use nldf_core::dataset::Split;
+use nldf_core::stats::median;
+use nldf_export::WeightType;
+use nldf_infer::BackendKind;
+use nldf_train::bench::Machine;
+use nldf_train::data::TrainData;
+use nldf_train::eval::{EvalReport, Evaluation, FrameModel, eval_models};
+use nldf_train::job::eval::EvalJob;
+use nldf_train::job::{JobEvent, OnEvent};
+
+pub use front::{Point, SpeedUp, SplitScore, mark_front, speed_ups};
+pub use report::{AdNerfSetting, FrontierReport, FrontierSettings};
+
+use crate::error::{Error, Result};
+use exports::{Export, export_all, open_point};
+use front::{Times, score};
+use points::{OnnxPoint, Timed};
+use timing::{time_adnerf_setting, time_back_to_back};
+
+/// Threads of the main timing.
+pub const THREADS: usize = 2;
+
+/// Precisions every student is exported in.
+const PRECISIONS: [WeightType; 3] = [WeightType::F32, WeightType::F16, WeightType::Int8];
+
+fn precision_name(w: WeightType) -> &'static str {
+    match w {
+        WeightType::F32 => "fp32",
+        WeightType::F16 => "fp16",
+        WeightType::Int8 => "int8",
+    }
+}
+
+/// What the frontier measures, and where its files go.
+#[derive(Debug, Clone)]
+pub struct FrontierJob {
+    /// Run folder: its teacher and every student in it.
+    pub run: PathBuf,
+    /// The dataset the run was trained on (its `val` split, and `novel` and `voice` where
+    /// `nldf synth` wrote them).
+    pub data: PathBuf,
+    /// Output folder (the exports, each split's renders, the report).
+    pub out: PathBuf,
+    /// At most this many frames per split, spread evenly.
+    pub frames: Option<usize>,
+    /// Frames timed with 1 thread per point.
+    pub one_thread_frames: usize,
+    /// Training frames that calibrate the int8 exports.
+    pub calibration_frames: usize,
+    /// Rays per network call.
+    pub batch: usize,
+    /// Frames timed for AD-NeRF's setting; 0 leaves it out.
+    pub adnerf_frames: usize,
+    /// The same scene at a higher resolution, scored and timed apart.
+    pub hires_data: Option<PathBuf>,
+    /// Frames each point also renders back to back, for a second 2-thread median.
+    pub timed_frames: usize,
+}
+
+impl FrontierJob {
+    /// Exports, scores and times every way of rendering the run; `on_event` hears the
+    /// evaluation plans' notes, what is exported and timed, and each scored frame.
+    pub fn run(&self, on_event: OnEvent) -> Result<FrontierReport> {
+        // Every point runs in onnxruntime too: refuse before anything is exported.
+        nldf_infer::ort_library::OrtSearch::from_env()
+            .find()
+            .map_err(|e| {
+                Error::from(e).context("bench frontier renders every export in onnxruntime")
+            })?;
+        let machine = Machine::here();
+        let splits = splits(&self.data);
+        let val = self.eval_job(Split::Val).plan(&mut *on_event)?;
+        if val.students.is_empty() {
+            return Err(Error::Missing(format!(
+                "{} has no trained student to put on the frontier",
+                self.run.display()
+            )));
+        }
+        let exports = export_all(
+            &val.students,
+            &self.data,
+            self.calibration_frames,
+            &self.out.join("models"),
+            &mut *on_event,
+        )?;
+        // Every export in both runtimes; `val` scores them all, the other splits score the
+        // onnxruntime points (tract runs the same graphs: the suite's parity tests).
+        let mut points: Vec<OnnxPoint> = Vec::new();
+        for e in &exports {
+            for kind in [BackendKind::Ort, BackendKind::Tract] {
+                points.push(open_point(e, kind, THREADS, self.batch, None, 1)?);
+            }
+        }
+        let teacher = Timed::new(&val.teacher, true, true);
+        // The teacher without its savings: scored and timed on `val` only.
+        let plain = [
+            Timed::new(&val.teacher, true, false),
+            Timed::new(&val.teacher, false, false),
+        ];
+        let mut reports: Vec<Vec<EvalReport>> = Vec::new();
+        for &split in &splits {
+            let plan = if split == Split::Val {
+                None
+            } else {
+                Some(self.eval_job(split).plan(&mut *on_event)?)
+            };
+            let data = plan.as_ref().map_or(&val.data, |p| &p.data);
+            let mut models: Vec<&dyn FrameModel> = vec![&teacher];
+            if split == Split::Val {
+                models.extend(plain.iter().map(|t| t as &dyn FrameModel));
+            }
+            models.extend(
+                points
+                    .iter()
+                    .filter(|p| split == Split::Val || p.kind == BackendKind::Ort)
+                    .map(|p| p as &dyn FrameModel),
+            );
+            let n = self
+                .frames
+                .unwrap_or(usize::MAX)
+                .min(data.dataset.frames(split).len());
+            on_event(&JobEvent::Note(format!(
+                "{}: {} frames x {} ways of rendering",
+                split.name(),
+                n,
+                models.len()
+            )));
+            let out = self.out.join(split.name());
+            let evaluation =
+                eval_counted(&models, data, split, self.frames, &out, n, &mut *on_event)?;
+            reports.push(evaluation.models);
+        }
+        // Medians over the `val` pass: the first frames each point rendered.
+        let n_val = reports[0].first().map_or(0, |r| r.frames.len());
+        let val_median = |s: &RefCell<Vec<f64>>| median(&s.borrow()[..n_val.min(s.borrow().len())]);
+        // Back-to-back times over `--timed-frames`, every way of rendering in turn.
+        let val_frames = val.data.dataset.frames(Split::Val);
+        let timed = &val_frames[..self.timed_frames.min(val_frames.len())];
+        let back_to_back = {
+            let models: Vec<&dyn FrameModel> = std::iter::once(&teacher)
+                .chain(&plain)
+                .map(|t| t as &dyn FrameModel)
+                .chain(points.iter().map(|p| p as &dyn FrameModel))
+                .collect();
+            time_back_to_back(&models, &val.data, timed)?
+        };
+        let one_thread = self.one_thread_times(&exports, &val.data)?;
+        let mut table: Vec<Point> = Vec::new();
+        let scores_of = |label: &str| -> Vec<SplitScore> {
+            reports
+                .iter()
+                .filter_map(|rs| rs.iter().find(|r| r.label == label).map(score))
+                .collect()
+        };
+        // The teacher first: `speed_ups` compares every point with the first row.
+        for (k, t) in std::iter::once(&teacher).chain(&plain).enumerate() {
+            let report = reports[0]
+                .iter()
+                .find(|r| r.label == t.label())
+                .ok_or_else(|| Error::Missing("a teacher lacks its val report".into()))?;
+            let times = Times {
+                taking_turns: val_median(&t.seconds),
+                back_to_back: back_to_back[k],
+                one_thread: None,
+            };
+            let size = val.data.dataset.intrinsics.width;
+            table.push(Point::of_teacher(
+                t,
+                report,
+                size,
+                times,
+                scores_of(&t.label()),
+            ));
+        }
+        let adnerf = if self.adnerf_frames > 0 {
+            Some(time_adnerf_setting(
+                &val.data,
+                self.adnerf_frames,
+                &mut *on_event,
+            )?)
+        } else {
+            None
+        };
+        for (i, p) in points.iter().enumerate() {
+            let label = p.label();
+            let size = p.renderer.borrow().intrinsics().width;
+            let report = reports[0]
+                .iter()
+                .find(|r| r.label == label)
+                .ok_or_else(|| Error::Missing("a point lacks its val report".into()))?;
+            let times = Times {
+                taking_turns: val_median(&p.seconds),
+                back_to_back: back_to_back[1 + plain.len() + i],
+                one_thread: one_thread.get(i).copied(),
+            };
+            table.push(Point::of_export(p, report, size, times, scores_of(&label)));
+        }
+        mark_front(&mut table);
+        let speed_up = speed_ups(&table);
+        let hires_points = match &self.hires_data {
+            Some(dir) => Some(hires::hires_points(self, dir, &exports, on_event)?),
+            None => None,
+        };
+        Ok(FrontierReport {
+            machine,
+            settings: self.settings(),
+            points: table,
+            speed_up,
+            adnerf_setting: adnerf.map(|(ms, macs)| AdNerfSetting {
+                ms_2_threads: ms,
+                gmac_per_frame: macs / 1e9,
+                frames: self.adnerf_frames,
+            }),
+            hires_points,
+            splits,
+        })
+    }
+
+    /// The evaluation of the run on `split`, its renders left to the frontier's folders.
+    fn eval_job(&self, split: Split) -> EvalJob {
+        EvalJob {
+            run: self.run.clone(),
+            data: self.data.clone(),
+            split,
+            frames: self.frames,
+            out: None,
+        }
+    }
+
+    /// 1-thread times: each export in each runtime on the first frames of `val`, the first
+    /// frame untimed (it pays for plans and caches).
+    fn one_thread_times(&self, exports: &[Export], data: &TrainData) -> Result<Vec<f64>> {
+        let frames = data.dataset.frames(Split::Val);
+        let k = self.one_thread_frames.min(frames.len());
+        let mut one_thread = Vec::new();
+        for e in exports {
+            for kind in [BackendKind::Ort, BackendKind::Tract] {
+                let p = open_point(e, kind, 1, self.batch, None, 1)?;
+                for f in &frames[..k] {
+                    p.render_frame(data, f)?;
+                }
+                one_thread.push(median(p.seconds.borrow().get(1..).unwrap_or(&[])));
+            }
+        }
+        Ok(one_thread)
+    }
+
+    /// The settings as the report records them.
+    fn settings(&self) -> FrontierSettings {
+        FrontierSettings {
+            run: self.run.clone(),
+            data: self.data.clone(),
+            frames: self.frames,
+            threads: THREADS,
+            one_thread_frames: self.one_thread_frames,
+            calibration_frames: self.calibration_frames,
+            batch: self.batch,
+            hires_data: self.hires_data.clone(),
+            timed_frames: self.timed_frames,
+        }
+    }
+}
+
+/// The splits to score: `val`, then `novel` and `voice` where the dataset has them.
+fn splits(data: &Path) -> Vec<Split> {
+    let mut splits = vec![Split::Val];
+    for s in [Split::Novel, Split::Voice] {
+        if data.join(format!("transforms_{}.json", s.name())).is_file() {
+            splits.push(s);
+        }
+    }
+    splits
+}
+
+/// [`eval_models`] on `n` frames of `split`, each scored frame told as progress of
+/// `split`'s name, and its renders checked finite.
+fn eval_counted(
+    models: &[&dyn FrameModel],
+    data: &TrainData,
+    split: Split,
+    frames: Option<usize>,
+    out: &Path,
+    n: usize,
+    on_event: OnEvent,
+) -> Result<Evaluation> {
+    let what = split.name().to_string();
+    let progress = |done: usize| JobEvent::Progress {
+        what: what.clone(),
+        done,
+        total: n,
+    };
+    on_event(&progress(0));
+    let mut done = 0;
+    let evaluation = eval_models(models, data, split, frames, out, &mut || {
+        done += 1;
+        on_event(&progress(done));
+    })?;
+    if done < n {
+        on_event(&progress(n));
+    }
+    evaluation.check_finite()?;
+    Ok(evaluation)
+}

@@ -1,0 +1,78 @@
+//! The frontier's timings beside the scoring pass: every way of rendering back to back, in
+//! turns, and AD-NeRF's own setting with seeded weights.
+
+use std::time::Instant;
+
+use nldf_core::dataset::{Frame, Split};
+use nldf_core::stats::median;
+use nldf_train::config::{TeacherConfig, TeacherRunConfig};
+use nldf_train::data::TrainData;
+use nldf_train::eval::FrameModel;
+use nldf_train::job::{JobEvent, OnEvent};
+use nldf_train::teacher_trainer::TeacherRun;
+
+use super::points::Timed;
+use crate::error::{Result, temp_dir};
+
+/// Rounds of [`time_back_to_back`].
+const BACK_TO_BACK_ROUNDS: usize = 3;
+
+/// Each model's median time per whole frame rendered back to back, interleaved: in each of
+/// [`BACK_TO_BACK_ROUNDS`] rounds every model renders one untimed frame, then its share of
+/// `frames` back to back. Each frame follows the model's own previous one (warm caches, as
+/// a video renders them), and each model's times span the whole timing period, so a drift
+/// of the machine's speed over minutes touches every model alike.
+pub(crate) fn time_back_to_back(
+    models: &[&dyn FrameModel],
+    data: &TrainData,
+    frames: &[Frame],
+) -> Result<Vec<f64>> {
+    let rounds = BACK_TO_BACK_ROUNDS.min(frames.len()).max(1);
+    let mut times = vec![Vec::with_capacity(frames.len()); models.len()];
+    for r in 0..rounds {
+        let chunk = &frames[r * frames.len() / rounds..(r + 1) * frames.len() / rounds];
+        let Some(first) = chunk.first() else {
+            continue;
+        };
+        for (model, times) in models.iter().zip(times.iter_mut()) {
+            model.render_frame(data, first)?;
+            for f in chunk {
+                let started = Instant::now();
+                model.render_frame(data, f)?;
+                times.push(started.elapsed().as_secs_f64());
+            }
+        }
+    }
+    Ok(times.iter().map(|t| median(t)).collect())
+}
+
+/// AD-NeRF's setting timed as the paper compares against it: 8 x 256 with 64 coarse + 128
+/// fine samples, every pixel of the frame sampled over `[near, far]` and every sample
+/// evaluated. The weights are seeded (training it takes hours on 2 cores), so this is its
+/// time per frame, not its quality; returns milliseconds per frame (median of `n`
+/// frames) and multiply-adds per frame.
+pub(crate) fn time_adnerf_setting(
+    data: &TrainData,
+    n: usize,
+    on_event: OnEvent,
+) -> Result<(f64, f64)> {
+    let cfg = TeacherRunConfig {
+        model: TeacherConfig::ad_nerf(),
+        ..TeacherRunConfig::default()
+    };
+    let scratch = temp_dir()?;
+    let run = TeacherRun::create(scratch.path(), cfg, data)?;
+    let timed = Timed::new(&run, false, false);
+    let frames = data.dataset.frames(Split::Val);
+    on_event(&JobEvent::Note(format!(
+        "timing AD-NeRF's setting on {n} frames after an untimed one (seeded weights)"
+    )));
+    for f in frames.iter().cycle().take(n + 1) {
+        timed.render_frame(data, f)?;
+    }
+    let pixels = (data.dataset.intrinsics.width * data.dataset.intrinsics.height) as f64;
+    Ok((
+        1e3 * median(timed.seconds.borrow().get(1..).unwrap_or(&[])),
+        pixels * run.macs_per_ray(),
+    ))
+}

@@ -1,0 +1,23 @@
+//! nldf-bench: the benchmarks as a library. Each benchmark is a job that measures and
+//! returns a typed report, and the report writes its JSON, Markdown and plots, recording
+//! the machine it ran on; the `nldf bench` command line only turns flags into jobs and
+//! prints what was written. Sits above nldf-train (training steps, the teacher, evaluation,
+//! plots), nldf-export (the students' exports) and nldf-infer (tract and onnxruntime), since
+//! the frontier puts all of them side by side.
+//!
+//! [`step`] times training steps, [`encoding`] the positional encoding, [`render`] whole
+//! frames in both runtimes, [`stream`] a live stream's latency, [`still`] re-rendering only
+//! the pixels the audio moves, and [`frontier`] run time against error for a whole run;
+//! [`report`] writes the files they share.
+
+pub mod encoding;
+pub mod error;
+pub mod frontier;
+pub mod render;
+pub mod report;
+pub mod step;
+pub mod still;
+pub mod stream;
+
+pub use error::{Error, Result};
+pub use report::Written;

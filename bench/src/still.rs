@@ -1,0 +1,216 @@
+//! The still-pixel benchmark (`nldf bench still`): frames that re-render only the pixels
+//! the audio moves, against full renders, on a still pose, a pose held 2 s at a time and a
+//! moving pose; time per frame and error against the full frames.
+
+use std::path::{Path, PathBuf};
+
+use nldf_core::audio::neighbourhood;
+use nldf_infer::frame::FrameRenderer;
+use nldf_infer::poses::{default_pose, default_track};
+use nldf_infer::still::{SkipConfig, StillTrack, bench_track, probe_frames};
+use nldf_infer::{BackendKind, BackendOptions, backend_for};
+use nldf_train::bench::Machine;
+use nldf_train::job::{JobEvent, OnEvent};
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::report::{Written, machine_cell, write_bench_files};
+
+/// What the still-pixel benchmark renders.
+#[derive(Debug, Clone)]
+pub struct StillBenchJob {
+    /// The exported model.
+    pub model: PathBuf,
+    /// Speech to render (its first `seconds` are used).
+    pub audio: PathBuf,
+    /// Seconds of audio per pose track (positive).
+    pub seconds: f64,
+    /// Runtime for the network.
+    pub backend: BackendKind,
+    /// Colour spreads (in 1/255 steps) above which a pixel is re-rendered, one measurement
+    /// each (at least one).
+    pub thresholds: Vec<f32>,
+    /// Batch size and threads (the pools never spin: the two renderers take turns).
+    pub options: BackendOptions,
+}
+
+/// The still-pixel benchmark's settings, as its JSON records them.
+#[derive(Debug, Clone, Serialize)]
+pub struct StillSettings {
+    pub audio: PathBuf,
+    pub seconds: f64,
+    /// Frames per track.
+    pub frames: usize,
+    pub backend: String,
+    pub threads: usize,
+    pub batch: usize,
+    /// The first threshold's skipping settings.
+    pub skip: SkipConfig,
+    pub thresholds: Vec<f32>,
+}
+
+/// The model's shape and frame rate, for the table's heading.
+#[derive(Debug, Clone, Copy)]
+pub struct StillModel {
+    pub depth: usize,
+    pub width: usize,
+    pub fps: f64,
+}
+
+/// The still-pixel benchmark's report: `still.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct StillReport {
+    /// `still`.
+    pub bench: &'static str,
+    pub machine: Machine,
+    /// The exported model.
+    pub model: PathBuf,
+    pub settings: StillSettings,
+    /// One row per track and threshold.
+    pub tracks: Vec<StillTrack>,
+    #[serde(skip)]
+    pub network: StillModel,
+}
+
+impl StillBenchJob {
+    /// Renders every track in full and with skipping, frame by frame in turn.
+    pub fn run(&self, on_event: OnEvent) -> Result<StillReport> {
+        let machine = Machine::here();
+        let mut options = self.options;
+        // The full and the skipping renderer take turns: neither pool may spin beside the
+        // other.
+        options.spin = false;
+        let model = nldf_export::read_model(&self.model)?;
+        let info = model.info.clone();
+        let windows = nldf_infer::audio::windows_from_wav(&info, &self.model, &self.audio)?;
+        let frames = ((self.seconds * info.spec.fps as f64).round() as usize)
+            .clamp(1, windows.n_frames.max(1));
+        let att = info.audio.att_frames;
+        let configs = self
+            .thresholds
+            .iter()
+            .map(|&t| {
+                let c = SkipConfig {
+                    threshold: t / 255.0,
+                    ..SkipConfig::default()
+                };
+                c.validate().map(|_| c)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let config = configs[0];
+        let audio = |f: usize| neighbourhood(&windows, f, att);
+        let probes: Vec<Vec<f32>> = probe_frames(frames, config.probes)
+            .into_iter()
+            .map(audio)
+            .collect();
+        let kind = self.backend;
+        let mut full = FrameRenderer::new(backend_for(&model, kind, options)?, None)?;
+        let mut skipping = FrameRenderer::new(backend_for(&model, kind, options)?, None)?;
+        let moving = default_track(&info, frames);
+        let hold = (2.0 * info.spec.fps).round().max(1.0) as usize;
+        let tracks = [
+            ("still pose", vec![default_pose(&info, 0); frames]),
+            (
+                "pose held 2 s at a time",
+                (0..frames).map(|f| moving[f - f % hold]).collect(),
+            ),
+            ("moving pose (the default sway)", moving.clone()),
+        ];
+        // Every threshold on the still and the held tracks; the moving track never skips,
+        // so it runs once.
+        let mut rows = Vec::new();
+        for (i, (label, poses)) in tracks.iter().enumerate() {
+            let moving = i == tracks.len() - 1;
+            for c in if moving { &configs[..1] } else { &configs[..] } {
+                on_event(&JobEvent::Note(format!(
+                    "{label}, threshold {}/255: {frames} frames in full and with skipping",
+                    255.0 * c.threshold
+                )));
+                let mut row = bench_track(
+                    &mut full,
+                    &mut skipping,
+                    label,
+                    poses,
+                    &audio,
+                    *c,
+                    probes.clone(),
+                )?;
+                row.label = format!("{label}, threshold {:.0}/255", 255.0 * c.threshold);
+                rows.push(row);
+            }
+        }
+        Ok(StillReport {
+            bench: "still",
+            machine,
+            model: self.model.clone(),
+            settings: StillSettings {
+                audio: self.audio.clone(),
+                seconds: self.seconds,
+                frames,
+                backend: kind.to_string(),
+                threads: options.threads,
+                batch: options.batch_size,
+                skip: config,
+                thresholds: self.thresholds.clone(),
+            },
+            tracks: rows,
+            network: StillModel {
+                depth: info.network.depth,
+                width: info.network.width,
+                fps: info.spec.fps as f64,
+            },
+        })
+    }
+}
+
+impl StillReport {
+    /// Writes `still.json` and `still.md` into `out`.
+    pub fn write(&self, out: &Path) -> Result<Written> {
+        write_bench_files(out, "still", self, self.markdown())
+    }
+
+    /// The settings, then one row per track and threshold.
+    pub fn markdown(&self) -> String {
+        let s = &self.settings;
+        let config = s.skip;
+        let opt = |v: Option<f64>| v.map_or("identical".into(), |p| format!("{p:.2} dB"));
+        let mut md = format!(
+            "| skipping still pixels, {} x {} student, {} | value |\n|---|---|\n\
+             | machine | {} |\n\
+             | settings | {:.1} s of {} ({} frames), {} with {} threads, batch {}; thresholds {:?}/255, margin {} px, {} probes, a full frame every {} still frames |\n",
+            self.network.depth,
+            self.network.width,
+            s.backend,
+            machine_cell(&self.machine),
+            s.frames as f64 / self.network.fps,
+            s.audio.display(),
+            s.frames,
+            s.backend,
+            s.threads,
+            s.batch,
+            s.thresholds,
+            config.margin,
+            config.probes,
+            config.refresh,
+        );
+        md += "\n| track | full ms/frame (mean, median) | skipping ms/frame (mean, median) | speed-up | network rays | full frames | PSNR vs full | worst frame | max error |\n|---|---|---|---|---|---|---|---|---|\n";
+        for r in &self.tracks {
+            md += &format!(
+                "| {} | {:.1}, {:.1} | {:.1}, {:.1} | {:.2}x | {:.1} % | {} of {} | {} | {} | {:.1}/255 |\n",
+                r.label,
+                r.full_ms_mean,
+                r.full_ms_median,
+                r.skip_ms_mean,
+                r.skip_ms_median,
+                r.speedup,
+                100.0 * r.ray_share,
+                r.full_frames,
+                r.frames,
+                opt(r.psnr_vs_full),
+                opt(r.worst_frame_psnr),
+                255.0 * r.max_abs_error,
+            );
+        }
+        md
+    }
+}
