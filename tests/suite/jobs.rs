@@ -5,7 +5,9 @@
 use std::sync::atomic::AtomicBool;
 
 use nldf_core::dataset::Split;
-use nldf_core::run_files::{ONNX_FILE, STUDENT_FILES, TARGETS_FILE, TEACHER_FILES};
+use nldf_core::run_files::{
+    ONNX_FILE, POOL_FILE, STATE_FILE, STUDENT_FILES, TARGETS_FILE, TEACHER_FILES,
+};
 use nldf_core::synth::SynthConfig;
 use nldf_train::config::TeacherConfig;
 use nldf_train::job::JobEvent;
@@ -208,6 +210,32 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
             .sum::<f64>()
             / 3.0;
         assert!((pooled - m.psnr).abs() < 1e-9, "{pooled} {}", m.psnr);
+    }
+
+    // A model to render is not a run to resume: with every optimizer state and beam pool
+    // deleted, `nldf eval` still scores the teacher and every student, as before.
+    let mut deleted = 0;
+    for entry in std::fs::read_dir(&out).unwrap().flatten() {
+        for file in [STATE_FILE, POOL_FILE] {
+            let path = entry.path().join(file);
+            if path.is_file() {
+                std::fs::remove_file(&path).unwrap();
+                deleted += 1;
+            }
+        }
+    }
+    assert!(deleted >= 3, "{deleted} optimizer and pool files deleted");
+    let bare = EvalJob {
+        out: Some(out.join("eval_bare")),
+        ..eval
+    }
+    .plan(&mut |_| {})
+    .unwrap()
+    .run(&mut |_| {})
+    .unwrap();
+    assert_eq!(bare.models.len(), evaluation.models.len());
+    for (a, b) in bare.models.iter().zip(&evaluation.models) {
+        assert_eq!((&a.model, a.psnr), (&b.model, b.psnr));
     }
 
     // The posed ablation: three students at equal total wall time, scored on val, novel
