@@ -34,8 +34,9 @@ pub trait FrameModel {
 }
 
 /// A student's name from its config: the network's shape, then its recipe where it is not
-/// the default one (pixels only, pseudo views and their share, mouth rays, no pool), so
-/// that students trained differently never print alike.
+/// the default one (pixels only, pseudo views and their share, the segment term's lambda,
+/// mouth rays, no pool, beams not anchored), so that students trained differently never
+/// print alike.
 pub fn student_name(cfg: &StudentRunConfig) -> String {
     let (m, t) = (&cfg.model, &cfg.train);
     let defaults = StudentTrainConfig::default();
@@ -60,11 +61,17 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
             recipe.push(format!("mix {}", t.pseudo_fraction));
         }
     }
+    if t.distill && t.lambda != defaults.lambda {
+        recipe.push(format!("lambda {}", t.lambda));
+    }
     if t.mouth_fraction != defaults.mouth_fraction {
         recipe.push(format!("mouth {}", t.mouth_fraction));
     }
     if !t.pool {
         recipe.push("no pool".into());
+    }
+    if m.beam.anchor.is_none() {
+        recipe.push("beams unanchored".into());
     }
     for r in recipe {
         name.push_str(", ");
@@ -431,6 +438,7 @@ impl Evaluation {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nldf_core::beam::BeamAnchor;
 
     #[test]
     fn students_trained_differently_are_named_differently() {
@@ -453,7 +461,7 @@ mod tests {
                 assert_ne!(name, other);
             }
         }
-        assert!(names[1].ends_with(", pixels only"), "{}", names[1]);
+        assert!(names[1].contains(", pixels only"), "{}", names[1]);
         let short: Vec<String> = [&base, &pixels, &pseudo]
             .into_iter()
             .map(student_short_name)
@@ -468,5 +476,47 @@ mod tests {
             "{}",
             names[4]
         );
+    }
+
+    fn run_config() -> StudentRunConfig {
+        let mut cfg = StudentRunConfig::default();
+        cfg.model = crate::student::StudentConfig::realtime();
+        cfg.model.beam.anchor = Some(BeamAnchor {
+            centre: [0.0; 3],
+            distance: 1.0,
+        });
+        cfg.train.pseudo_frames = 600;
+        cfg.train.pseudo_rays = 1024;
+        cfg.train.pseudo_fraction = 0.75;
+        cfg
+    }
+
+    #[test]
+    fn lambda_and_unanchored_beams_are_named() {
+        let base = run_config();
+        assert_eq!(
+            student_name(&base),
+            "student 16x128 (K = 8), 600 pseudo views of 1024 px at 2x, mix 0.75"
+        );
+        let mut lambda = base.clone();
+        lambda.train.lambda = 0.0;
+        let mut fixed = base.clone();
+        fixed.model.beam.anchor = None;
+        let mut pixels = base.clone();
+        pixels.train.distill = false;
+        pixels.train.lambda = 0.0;
+        let names: Vec<String> = [&base, &lambda, &fixed, &pixels]
+            .iter()
+            .map(|c| student_name(c))
+            .collect();
+        assert!(names[1].ends_with(", lambda 0"), "{}", names[1]);
+        assert!(names[2].ends_with(", beams unanchored"), "{}", names[2]);
+        // Without distillation lambda weighs nothing, so it is not named.
+        assert_eq!(names[3], "student 16x128 (K = 8), pixels only");
+        for (i, a) in names.iter().enumerate() {
+            for b in &names[i + 1..] {
+                assert_ne!(a, b);
+            }
+        }
     }
 }
