@@ -479,8 +479,10 @@ mod tests {
     }
 
     fn run_config() -> StudentRunConfig {
-        let mut cfg = StudentRunConfig::default();
-        cfg.model = crate::student::StudentConfig::realtime();
+        let mut cfg = StudentRunConfig {
+            model: crate::student::StudentConfig::realtime(),
+            ..StudentRunConfig::default()
+        };
         cfg.model.beam.anchor = Some(BeamAnchor {
             centre: [0.0; 3],
             distance: 1.0,
