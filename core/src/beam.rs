@@ -6,12 +6,11 @@
 //! the same line. Without an anchor the points sit at fixed distances from the camera and
 //! the head slides through them as the camera moves.
 
+use glam::{DVec3, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-
-use glam::{DVec3, Vec3};
 
 use crate::encoding::{encode_positions, encoded_len};
 use crate::rays::Rays;
@@ -65,6 +64,16 @@ impl BeamAnchor {
         let s = (DVec3::from_array(self.centre.map(f64::from)) - o64).dot(u);
         let origin = o64 + (s - f64::from(self.distance)) * u;
         (origin.as_vec3(), u.as_vec3())
+    }
+}
+
+/// The ray `(o, d)` as a beam samples it: anchored by `anchor` ([`BeamAnchor::apply`]) when
+/// there is one, else as it is. The student's beams and the teacher's targets for them go
+/// through here, so that both see the same rays.
+pub fn beam_ray(anchor: Option<&BeamAnchor>, o: Vec3, d: Vec3) -> (Vec3, Vec3) {
+    match anchor {
+        Some(anchor) => anchor.apply(o, d),
+        None => (o, d),
     }
 }
 
@@ -137,10 +146,7 @@ pub fn encode_beams(
     assert_eq!(out.len(), rays.len() * width, "beam buffer length");
     let mut points = vec![0.0f32; 3 * spec.n_points];
     for (r, row) in out.chunks_exact_mut(width).enumerate() {
-        let (o, d) = match &spec.anchor {
-            Some(anchor) => anchor.apply(rays.origin(r), rays.direction(r)),
-            None => (rays.origin(r), rays.direction(r)),
-        };
+        let (o, d) = beam_ray(spec.anchor.as_ref(), rays.origin(r), rays.direction(r));
         for k in 0..spec.n_points {
             let u = match jitter.as_deref_mut() {
                 Some(rng) => rng.random::<f32>() - 0.5,

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use candle_core::{Device, Tensor};
-use nldf_core::beam::BeamAnchor;
+use nldf_core::beam::{BeamAnchor, beam_ray};
 use nldf_core::rays::Rays;
 
 use crate::checkpoint::{load_tensors, save_tensors};
@@ -66,10 +66,7 @@ pub fn view_targets(
     let mut bg = Vec::with_capacity(3 * fb.pixels.len());
     for &(i, j) in &fb.pixels {
         let (o, d) = view.camera.ray(i as f32, j as f32);
-        let (o, d) = match &layout.anchor {
-            Some(anchor) => anchor.apply(o, d),
-            None => (o, d),
-        };
+        let (o, d) = beam_ray(layout.anchor.as_ref(), o, d);
         rays.push(o, d);
         bg.extend_from_slice(&ds.background.get(i, j));
     }
