@@ -432,8 +432,9 @@ fn mel_to_hz(m: f64) -> f64 {
     700.0 * (10f64.powf(m / 2595.0) - 1.0)
 }
 
-/// Triangular mel filters (HTK mel scale, peak 1), `[n_mels][n_fft / 2 + 1]`.
-fn mel_filters(cfg: &FeatureConfig) -> Vec<Vec<f32>> {
+/// Triangular mel filters (HTK mel scale, peak 1), `[n_mels][n_fft / 2 + 1]`: the
+/// weights [`log_mel`] sums each band's power with.
+pub fn mel_filters(cfg: &FeatureConfig) -> Vec<Vec<f32>> {
     let n_bins = cfg.n_fft / 2 + 1;
     let (lo, hi) = (hz_to_mel(cfg.f_min as f64), hz_to_mel(cfg.f_max as f64));
     let edges: Vec<f64> = (0..cfg.n_mels + 2)
@@ -458,6 +459,16 @@ fn mel_filters(cfg: &FeatureConfig) -> Vec<Vec<f32>> {
                 .collect()
         })
         .collect()
+}
+
+/// The periodic Hann window of `win` samples that each feature frame is weighted by, and the
+/// factor `1 / (sum of the window)^2` its power spectrum is scaled by.
+pub fn hann_window(cfg: &FeatureConfig) -> (Vec<f32>, f32) {
+    let hann: Vec<f32> = (0..cfg.win)
+        .map(|i| (0.5 - 0.5 * (2.0 * PI * i as f64 / cfg.win as f64).cos()) as f32)
+        .collect();
+    let s: f32 = hann.iter().sum();
+    (hann, 1.0 / (s * s))
 }
 
 /// Number of feature frames of `n_samples` samples (at the feature rate): frame `k` is
@@ -513,13 +524,7 @@ impl std::fmt::Debug for MelFrontEnd {
 impl MelFrontEnd {
     pub(crate) fn new(cfg: &FeatureConfig) -> Result<MelFrontEnd> {
         cfg.validate()?;
-        let hann: Vec<f32> = (0..cfg.win)
-            .map(|i| (0.5 - 0.5 * (2.0 * PI * i as f64 / cfg.win as f64).cos()) as f32)
-            .collect();
-        let norm = {
-            let s: f32 = hann.iter().sum();
-            1.0 / (s * s)
-        };
+        let (hann, norm) = hann_window(cfg);
         let fft = RealFftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft);
         Ok(MelFrontEnd {
             cfg: cfg.clone(),
@@ -541,7 +546,17 @@ impl MelFrontEnd {
     /// Appends feature frame `k` of the signal `x` (`n_mels` values) to `out`; samples
     /// outside `x` count as zero.
     pub(crate) fn push_frame(&mut self, x: &[f32], k: usize, out: &mut Vec<f32>) -> Result<()> {
-        let start = self.first_sample(k);
+        self.push_frame_from(x, self.first_sample(k), out)
+    }
+
+    /// Appends the feature frame (`n_mels` values) whose `win` samples start at sample
+    /// `start` of `x`; samples outside `x` count as zero.
+    pub(crate) fn push_frame_from(
+        &mut self,
+        x: &[f32],
+        start: isize,
+        out: &mut Vec<f32>,
+    ) -> Result<()> {
         self.frame.iter_mut().for_each(|v| *v = 0.0);
         for (i, w) in self.hann.iter().enumerate() {
             let s = start + i as isize;

@@ -21,6 +21,7 @@ pub mod dataset;
 pub mod encoding;
 pub mod error;
 pub mod files;
+pub mod frame_audio;
 pub mod host;
 pub mod image;
 pub mod landmarks;
