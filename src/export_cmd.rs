@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use nldf_export::{WeightType, export_student, read_model};
+use nldf_export::{WeightType, export_frame, export_student, read_frame_model, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {
@@ -15,9 +15,15 @@ pub struct ExportArgs {
     /// `posed_distilled`).
     #[arg(long, default_value = "student")]
     pub student: String,
-    /// Output file (default RUN/model.onnx).
+    /// Output file (default RUN/model.onnx, or RUN/frame.onnx with --frame).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Export the frame graph: inputs the frame's audio samples and the camera pose, output
+    /// the frame, with the audio front end, the rays, the head-bounds test and the
+    /// compositing inside the graph, so that any ONNX runtime renders from it alone
+    /// (docs/frame-graph.md). nldf's own commands render from the ray graph.
+    #[arg(long)]
+    pub frame: bool,
     /// Store the weights in half precision (cast back to f32 in the graph): half the size.
     #[arg(long, conflicts_with = "int8")]
     pub fp16: bool,
@@ -45,7 +51,12 @@ pub fn run(args: ExportArgs) -> Result<()> {
             student.display()
         );
     }
-    let out = args.out.unwrap_or_else(|| args.run.join("model.onnx"));
+    let default_name = if args.frame {
+        "frame.onnx"
+    } else {
+        "model.onnx"
+    };
+    let out = args.out.unwrap_or_else(|| args.run.join(default_name));
     let weights = if args.fp16 {
         WeightType::F16
     } else if args.int8 {
@@ -55,20 +66,45 @@ pub fn run(args: ExportArgs) -> Result<()> {
     };
     let report = match (&args.data, weights) {
         (Some(data), WeightType::Int8) => {
-            nldf_infer::calibrate::export_int8(&student, data, args.calibration_frames, &out)
-                .with_context(|| {
-                    format!(
-                        "exporting the student in {} in int8, calibrated on {}",
-                        student.display(),
-                        data.display()
-                    )
-                })?
+            let export = if args.frame {
+                nldf_infer::calibrate::export_frame_int8
+            } else {
+                nldf_infer::calibrate::export_int8
+            };
+            export(&student, data, args.calibration_frames, &out).with_context(|| {
+                format!(
+                    "exporting the student in {} in int8, calibrated on {}",
+                    student.display(),
+                    data.display()
+                )
+            })?
         }
+        _ if args.frame => export_frame(&student, &out, weights).with_context(|| {
+            format!(
+                "exporting the student in {} as a frame graph",
+                student.display()
+            )
+        })?,
         _ => export_student(&student, &out, weights)
             .with_context(|| format!("exporting the student in {}", student.display()))?,
     };
     // Read it back as every loader will, so that a bad file never leaves this command.
-    read_model(&out)?;
+    if args.frame {
+        let model = read_frame_model(&out)?;
+        let a = &model.audio;
+        println!(
+            "frame graph: audio [{}] at {} Hz from sample {} + frame x {} (NaN off the \
+             track), pose [4, 4], image [{}, {}, 3]",
+            a.samples,
+            a.sample_rate,
+            a.offset,
+            a.samples_per_frame,
+            model.info.spec.intrinsics.height,
+            model.info.spec.intrinsics.width
+        );
+    } else {
+        read_model(&out)?;
+    }
     let info = &report.info;
     let k = &info.spec.intrinsics;
     println!(

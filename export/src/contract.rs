@@ -45,6 +45,7 @@ use base64::Engine;
 use nldf_core::audio::FeatureSource;
 use nldf_core::beam::BeamSpec;
 use nldf_core::encoding::MAX_COORD;
+use nldf_core::frame_audio::FrameAudio;
 use nldf_core::render_spec::RenderSpec;
 use serde::{Deserialize, Serialize};
 
@@ -97,6 +98,24 @@ pub fn output_names(opacity: bool) -> Vec<&'static str> {
 
 /// Value of [`keys::FORMAT`] that marks a model as an nldf student.
 pub const FORMAT: &str = "nldf-student";
+
+/// Value of [`keys::FORMAT`] that marks a frame graph (`nldf export --frame`): the same
+/// student and metadata, with the rays, the head-bounds test, the audio front end and the
+/// compositing inside the graph. Its inputs are [`FRAME_INPUT_AUDIO`] and
+/// [`FRAME_INPUT_POSE`], its output [`FRAME_OUTPUT_IMAGE`]; [`keys::FRAME_AUDIO`] says
+/// which samples the audio input holds.
+pub const FRAME_FORMAT: &str = "nldf-frame";
+/// The frame's audio, f32 `[samples]` at 16 kHz (`nldf_core::frame_audio::FrameAudio`):
+/// NaN where the span lies outside the track.
+pub const FRAME_INPUT_AUDIO: &str = "audio";
+/// The camera-to-world matrix, f32 `[4, 4]`, row-major (OpenGL axes, as
+/// [`keys::DEFAULT_POSE`]).
+pub const FRAME_INPUT_POSE: &str = "pose";
+/// The frame, f32 `[height, width, 3]` in [0, 1], the background composited in.
+pub const FRAME_OUTPUT_IMAGE: &str = "image";
+/// The audio windows the graph's front end made, f32 `[att_frames, window, n_features]`
+/// (what the ray graph's `audio` input takes), for checking a front end against nldf's.
+pub const FRAME_OUTPUT_WINDOWS: &str = "audio_windows";
 /// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change
 /// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]; 3: [`keys::OPACITY`],
 /// with the background input and opacity output of a model that has one; 4:
@@ -163,6 +182,10 @@ pub mod keys {
     /// Whether the graph predicts opacity and composites over its `background` input
     /// (JSON `true` / `false`; contract 3).
     pub const OPACITY: &str = "nldf.opacity";
+    /// A frame graph's audio input (`nldf_core::frame_audio::FrameAudio` as JSON):
+    /// frame `f` takes the `samples` samples from `f * samples_per_frame + offset` of the
+    /// 16 kHz track, NaN where they lie outside it.
+    pub const FRAME_AUDIO: &str = "nldf.frame_audio";
     /// The background as base64 of an 8-bit RGB PNG (plain string). Written last.
     pub const BACKGROUND_PNG: &str = "nldf.background_png";
 }
@@ -289,8 +312,51 @@ impl ModelInfo {
             .collect()
     }
 
+    /// The metadata entries of the frame graph of this model whose audio input is `audio`:
+    /// [`ModelInfo::to_metadata`]'s, marked [`FRAME_FORMAT`], with [`keys::FRAME_AUDIO`]
+    /// before the background.
+    pub fn to_frame_metadata(&self, audio: &FrameAudio) -> Vec<StringStringEntryProto> {
+        let mut entries = self.to_metadata();
+        for e in &mut entries {
+            if e.key.as_deref() == Some(keys::FORMAT) {
+                e.value = Some(FRAME_FORMAT.to_string());
+            }
+        }
+        let at = entries.len().saturating_sub(1);
+        entries.insert(
+            at,
+            StringStringEntryProto {
+                key: Some(keys::FRAME_AUDIO.to_string()),
+                value: Some(json(audio)),
+            },
+        );
+        entries
+    }
+
+    /// Reads a frame graph's metadata back: the model's and its audio input's.
+    pub fn from_frame_metadata(
+        props: &[StringStringEntryProto],
+    ) -> Result<(ModelInfo, FrameAudio), MetadataError> {
+        let info = Self::parse_metadata(props, FRAME_FORMAT)?;
+        let text = props
+            .iter()
+            .find(|p| p.key.as_deref() == Some(keys::FRAME_AUDIO))
+            .and_then(|p| p.value.as_deref())
+            .ok_or_else(|| MetadataError::Missing(keys::FRAME_AUDIO.to_string()))?;
+        let audio: FrameAudio = serde_json::from_str(text)
+            .map_err(|e| MetadataError::Malformed(keys::FRAME_AUDIO.to_string(), e.to_string()))?;
+        Ok((info, audio))
+    }
+
     /// Reads the metadata back; the error says which key is missing or malformed.
     pub fn from_metadata(props: &[StringStringEntryProto]) -> Result<ModelInfo, MetadataError> {
+        Self::parse_metadata(props, FORMAT)
+    }
+
+    fn parse_metadata(
+        props: &[StringStringEntryProto],
+        format: &str,
+    ) -> Result<ModelInfo, MetadataError> {
         let map: HashMap<&str, &str> = props
             .iter()
             .map(|p| {
@@ -301,7 +367,19 @@ impl ModelInfo {
             })
             .collect();
         match map.get(keys::FORMAT) {
-            Some(&FORMAT) => {}
+            Some(&f) if f == format => {}
+            Some(&FRAME_FORMAT) => {
+                return Err(MetadataError::WrongKind(
+                    "it is a frame graph (`nldf export --frame`), for runtimes other than \
+                     nldf's: nldf renders with the ray graph, exported without --frame"
+                        .into(),
+                ));
+            }
+            Some(&FORMAT) => {
+                return Err(MetadataError::WrongKind(
+                    "it is a ray graph, not a frame graph: export it with `--frame`".into(),
+                ));
+            }
             Some(other) => {
                 return Err(MetadataError::Foreign(format!(
                     "`{}` is `{other}`",
@@ -454,6 +532,9 @@ pub enum MetadataError {
     /// The model is not an nldf student (another exporter's model).
     #[error("{0}")]
     Foreign(String),
+    /// The model is nldf's, but of the other kind (frame graph or ray graph).
+    #[error("{0}")]
+    WrongKind(String),
     /// A required key is absent.
     #[error("metadata lacks `{0}`")]
     Missing(String),

@@ -15,6 +15,13 @@ pub enum Error {
     /// The file is an ONNX model, but not one that `nldf export` wrote.
     #[error("{}: not an nldf model ({reason}); make one with `nldf export`", path.display())]
     Foreign { path: PathBuf, reason: String },
+    /// The file is an nldf model of the other kind (a frame graph where a ray graph is
+    /// wanted, or the reverse).
+    #[error("{}: {reason}", path.display())]
+    WrongKind { path: PathBuf, reason: String },
+    /// The student cannot be exported as a frame graph.
+    #[error("frame graph: {0}")]
+    Frame(String),
     /// An int8 export lacks what its calibration must provide.
     #[error("int8 export: {0}")]
     Calibration(String),

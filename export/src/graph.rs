@@ -287,6 +287,12 @@ impl GraphBuilder {
         name.to_string()
     }
 
+    /// A u8 constant (an 8-bit image); returns its name.
+    pub fn constant_u8(&mut self, name: &str, dims: &[usize], data: &[u8]) -> String {
+        self.initializers.push(tensor_u8(name, dims, data));
+        name.to_string()
+    }
+
     /// How the builder stores weights.
     pub fn weight_type(&self) -> WeightType {
         self.weights

@@ -11,12 +11,14 @@
 pub mod checkpoint;
 pub mod contract;
 pub mod error;
+pub mod frame;
 pub mod graph;
 pub mod load;
 pub mod onnx;
 pub mod student;
 
 pub use error::{Error, Result};
+pub use frame::{export_frame, export_frame_int8};
 pub use graph::{ActivationRanges, Tap, WeightType};
-pub use load::{ExportedModel, read_model};
+pub use load::{ExportedModel, FrameModel, read_frame_model, read_model};
 pub use student::{ExportReport, calibration_model, export_student, export_student_int8};

@@ -7,8 +7,11 @@ use std::path::{Path, PathBuf};
 
 use prost::Message;
 
+use nldf_core::frame_audio::FrameAudio;
+
 use crate::contract::{
-    self, INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, MetadataError, ModelInfo, OUTPUT_RGB,
+    self, FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS,
+    INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, MetadataError, ModelInfo, OUTPUT_RGB,
     OUTPUT_SEGMENTS,
 };
 use crate::error::{Error, Result};
@@ -40,25 +43,90 @@ pub fn read_model(path: &Path) -> Result<ExportedModel> {
     })
 }
 
-/// The checks of [`read_model`] on bytes already read; `path` names them in errors.
-pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)> {
+/// A frame graph (`nldf export --frame`), read and checked.
+#[derive(Debug, Clone)]
+pub struct FrameModel {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// The file's bytes (what a runtime loads).
+    pub bytes: Vec<u8>,
+    /// Its metadata.
+    pub info: ModelInfo,
+    /// Which samples its audio input holds.
+    pub audio: FrameAudio,
+}
+
+/// Reads and checks the frame graph at `path`, as [`read_model`] reads a ray graph.
+pub fn read_frame_model(path: &Path) -> Result<FrameModel> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let proto = decode(path, &bytes)?;
+    let (info, audio) = ModelInfo::from_frame_metadata(&proto.metadata_props)
+        .map_err(|e| metadata_error(path, e))?;
+    check_graph(
+        path,
+        &proto,
+        &info,
+        &[FRAME_INPUT_AUDIO, FRAME_INPUT_POSE],
+        &[FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS],
+    )?;
+    Ok(FrameModel {
+        path: path.to_path_buf(),
+        bytes,
+        info,
+        audio,
+    })
+}
+
+fn decode(path: &Path, bytes: &[u8]) -> Result<ModelProto> {
     if bytes.is_empty() {
         return Err(Error::corrupt(path, "the file is empty"));
     }
-    let proto =
-        ModelProto::decode(bytes).map_err(|e| Error::corrupt(path, format!("protobuf: {e}")))?;
+    ModelProto::decode(bytes).map_err(|e| Error::corrupt(path, format!("protobuf: {e}")))
+}
+
+fn metadata_error(path: &Path, e: MetadataError) -> Error {
+    match e {
+        MetadataError::Foreign(reason) => Error::foreign(path, reason),
+        MetadataError::WrongKind(reason) => Error::WrongKind {
+            path: path.to_path_buf(),
+            reason,
+        },
+        other => Error::corrupt(path, other.to_string()),
+    }
+}
+
+/// The checks of [`read_model`] on bytes already read; `path` names them in errors.
+pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)> {
+    let proto = decode(path, bytes)?;
+    let info =
+        ModelInfo::from_metadata(&proto.metadata_props).map_err(|e| metadata_error(path, e))?;
+    check_graph(
+        path,
+        &proto,
+        &info,
+        &[INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO],
+        &[OUTPUT_RGB, OUTPUT_SEGMENTS],
+    )?;
+    Ok((proto, info))
+}
+
+/// The graph has the named inputs and outputs, and its initializers are whole and match
+/// the checksum.
+fn check_graph(
+    path: &Path,
+    proto: &ModelProto,
+    info: &ModelInfo,
+    want_inputs: &[&str],
+    want_outputs: &[&str],
+) -> Result<()> {
     let Some(graph) = &proto.graph else {
         return Err(Error::corrupt(path, "the model has no graph"));
     };
-    let info = ModelInfo::from_metadata(&proto.metadata_props).map_err(|e| match e {
-        MetadataError::Foreign(reason) => Error::foreign(path, reason),
-        other => Error::corrupt(path, other.to_string()),
-    })?;
     let names = |v: &[crate::onnx::ValueInfoProto]| -> Vec<String> {
         v.iter().filter_map(|i| i.name.clone()).collect()
     };
     let (inputs, outputs) = (names(&graph.input), names(&graph.output));
-    for want in [INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO] {
+    for &want in want_inputs {
         if !inputs.iter().any(|n| n == want) {
             return Err(Error::corrupt(
                 path,
@@ -66,7 +134,7 @@ pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)>
             ));
         }
     }
-    for want in [OUTPUT_RGB, OUTPUT_SEGMENTS] {
+    for &want in want_outputs {
         if !outputs.iter().any(|n| n == want) {
             return Err(Error::corrupt(
                 path,
@@ -106,5 +174,5 @@ pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)>
             ));
         }
     }
-    Ok((proto, info))
+    Ok(())
 }

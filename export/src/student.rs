@@ -40,6 +40,18 @@ pub struct ExportReport {
 /// [`export_student_int8`].
 pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Result<ExportReport> {
     let ckpt = StudentCheckpoint::open(student_dir)?;
+    check_f16_range(&ckpt, student_dir, weights)?;
+    let (model, info, n_values) = student_model(&ckpt, weights)?;
+    write_model(&model, info, n_values, out)
+}
+
+/// Under [`WeightType::F16`], refuses a student whose largest weight half precision cannot
+/// hold.
+pub(crate) fn check_f16_range(
+    ckpt: &StudentCheckpoint,
+    student_dir: &Path,
+    weights: WeightType,
+) -> Result<()> {
     if weights == WeightType::F16
         && let Some((name, largest)) = ckpt.largest_weight()
         && largest > half::f16::MAX.to_f32()
@@ -53,8 +65,7 @@ pub fn export_student(student_dir: &Path, out: &Path, weights: WeightType) -> Re
             ),
         ));
     }
-    let (model, info, n_values) = student_model(&ckpt, weights)?;
-    write_model(&model, info, n_values, out)
+    Ok(())
 }
 
 /// Exports the student in `student_dir` with int8 products ([`WeightType::Int8`]) whose
@@ -90,7 +101,7 @@ pub fn calibration_model(student_dir: &Path) -> Result<(Vec<u8>, ModelInfo, Vec<
 }
 
 /// Encodes `model` and writes it to `out` atomically.
-fn write_model(
+pub(crate) fn write_model(
     model: &ModelProto,
     info: ModelInfo,
     n_values: usize,
@@ -185,9 +196,13 @@ fn build(
             &[rays.clone(), Dim::Fixed(3)],
         )
     });
-    let beams = encode_beams(&mut g, ckpt, &origins, &directions);
-    let code = audio_code(&mut g, ckpt, &audio)?;
-    residual_mlp(&mut g, ckpt, &beams, &code, background.as_deref())?;
+    student_nodes(
+        &mut g,
+        ckpt,
+        (&origins, &directions),
+        &audio,
+        background.as_deref(),
+    )?;
     g.output(OUTPUT_RGB, DataType::Float, &[rays.clone(), Dim::Fixed(3)]);
     g.output(
         OUTPUT_SEGMENTS,
@@ -241,6 +256,26 @@ fn build(
         metadata_props: info.to_metadata(),
     };
     Ok((model, info, n_values, taps))
+}
+
+/// The student's nodes on rays `(origins, directions)` with the audio neighbourhood
+/// `windows`: beam encoding, audio code and residual MLP. They compute the tensors
+/// [`OUTPUT_RGB`], [`OUTPUT_SEGMENTS`] and, for a model with opacity (which needs
+/// `background`), [`OUTPUT_OPACITY`]; the caller declares which are graph outputs.
+///
+/// # Shapes
+/// - `origins`, `directions`, `background`: `[n_rays, 3]`
+/// - `windows`: `[att_frames, window, n_features]`
+pub(crate) fn student_nodes(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    (origins, directions): (&str, &str),
+    windows: &str,
+    background: Option<&str>,
+) -> Result<()> {
+    let beams = encode_beams(g, ckpt, origins, directions);
+    let code = audio_code(g, ckpt, windows)?;
+    residual_mlp(g, ckpt, &beams, &code, background)
 }
 
 /// Beam encoding: points `x_k = o + t_k d` at the K evenly spaced `t_k` of

@@ -20,6 +20,7 @@ pub mod calibrate;
 pub mod doctor;
 pub mod error;
 pub mod frame;
+pub mod frame_graph;
 #[cfg(feature = "ort")]
 pub mod ort_backend;
 pub mod ort_library;

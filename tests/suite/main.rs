@@ -6,6 +6,7 @@ mod dataset;
 mod export;
 mod export_ort;
 mod figures;
+mod frame_graph;
 mod fuzz;
 mod identity;
 mod infer;

@@ -133,6 +133,11 @@ pub(crate) fn spec_for(cfg: &StudentConfig) -> RenderSpec {
 /// Writes `RUN/student/` for a seeded, untrained student of shape `cfg`, as the trainer
 /// leaves it: weights with step metadata, config.json, render.json and the background.
 pub(crate) fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
+    write_run_with(cfg, seed, spec_for(cfg))
+}
+
+/// [`write_run`] with the render spec `spec` (another camera or image size).
+pub(crate) fn write_run_with(cfg: &StudentConfig, seed: u64, spec: RenderSpec) -> Run {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("run");
     let student_dir = root.join("student");
@@ -152,7 +157,6 @@ pub(crate) fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
     .unwrap();
     let config = serde_json::json!({ "model": cfg, "seed": seed, "lr": 5e-4 });
     std::fs::write(student_dir.join("config.json"), config.to_string()).unwrap();
-    let spec = spec_for(cfg);
     spec.save(&student_dir.join(RENDER_SPEC_FILE)).unwrap();
     let k = spec.intrinsics;
     nldf_tests::pattern_image(k.width, k.height, 5)

@@ -1,0 +1,462 @@
+//! The frame graph: one ONNX file that turns a frame's audio samples and a camera pose into
+//! the frame, from standard ops alone, so that any ONNX runtime renders the talking head
+//! without rebuilding what nldf does around the ray graph:
+//!
+//! 1. the log-mel front end (`nldf_core::audio::log_mel`): framing by Gather, the Hann
+//!    window, the DFT as two products with cosine and sine tables, the mel filters as a
+//!    product, the log; then the windows and the neighbourhood, clamped to the track where
+//!    the input marks samples off it with NaN (`nldf_core::frame_audio::FrameAudio`);
+//! 2. the camera rays of AD-NeRF's `get_rays` from the intrinsics, as glam computes them;
+//! 3. the head-bounds test of `nldf_core::bounds::Bounds::intersect`, and only the rays that
+//!    meet the head go on (NonZero, Gather);
+//! 4. the student ([`crate::student`]);
+//! 5. the composite: the student's colours scattered into the background image (ScatterND),
+//!    through its opacity when it has one.
+//!
+//! The ray graph stays what nldf's own renderer and streaming run.
+
+use std::path::Path;
+
+use nldf_core::audio::{FeatureConfig, hann_window, mel_filters};
+use nldf_core::frame_audio::FrameAudio;
+
+use crate::checkpoint::StudentCheckpoint;
+use crate::contract::{
+    self, FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS, OUTPUT_RGB,
+};
+use crate::error::{Error, Result};
+use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
+use crate::onnx::{DataType, ModelProto, OperatorSetIdProto};
+use crate::student::{ExportReport, model_info, student_nodes, write_model};
+
+/// Name of the frame graph.
+pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
+
+/// Exports the student in `student_dir` as a frame graph to `out` (written atomically),
+/// with weights stored as `weights` ([`WeightType::Int8`] needs calibrated ranges: see
+/// [`export_frame_int8`]).
+pub fn export_frame(student_dir: &Path, out: &Path, weights: WeightType) -> Result<ExportReport> {
+    if weights == WeightType::Int8 {
+        return Err(Error::Calibration(
+            "the activations' ranges must be measured on training rays first \
+             (`nldf export --frame --int8 --data DIR` does it)"
+                .into(),
+        ));
+    }
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    crate::student::check_f16_range(&ckpt, student_dir, weights)?;
+    let (model, report_info, n_values) = frame_model(&ckpt, GraphBuilder::new(weights))?;
+    write_model(&model, report_info, n_values, out)
+}
+
+/// [`export_frame`] with int8 products whose inputs have the calibrated `ranges` (the ray
+/// graph's: the products are the same).
+pub fn export_frame_int8(
+    student_dir: &Path,
+    out: &Path,
+    ranges: &ActivationRanges,
+) -> Result<ExportReport> {
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    let (model, info, n_values) = frame_model(&ckpt, GraphBuilder::int8(ranges.clone()))?;
+    write_model(&model, info, n_values, out)
+}
+
+/// The frame graph of `ckpt` built with `g`, its metadata and the number of values its
+/// initializers hold.
+fn frame_model(
+    ckpt: &StudentCheckpoint,
+    mut g: GraphBuilder,
+) -> Result<(ModelProto, contract::ModelInfo, usize)> {
+    let spec = &ckpt.spec;
+    let cfg = spec.features.nldf().cloned().ok_or_else(|| {
+        Error::Frame(format!(
+            "it holds nldf's audio front end, but this student was trained on {}",
+            spec.features.describe()
+        ))
+    })?;
+    let s = &ckpt.shape;
+    let layout = FrameAudio::new(&cfg, spec.fps, s.audio.att_frames)
+        .map_err(|e| Error::Frame(e.to_string()))?;
+    if (cfg.window, cfg.n_mels) != (s.audio.window, s.audio.n_features) {
+        return Err(Error::Frame(format!(
+            "the features make {} x {} windows, the student takes {} x {}",
+            cfg.window, cfg.n_mels, s.audio.window, s.audio.n_features
+        )));
+    }
+    let k = spec.intrinsics;
+    let (h, w) = (k.height as usize, k.width as usize);
+    let background = background_rgb8(ckpt, w, h)?;
+
+    let audio = g.input(
+        FRAME_INPUT_AUDIO,
+        DataType::Float,
+        &[Dim::Fixed(layout.samples)],
+    );
+    let pose = g.input(
+        FRAME_INPUT_POSE,
+        DataType::Float,
+        &[Dim::Fixed(4), Dim::Fixed(4)],
+    );
+    let windows = front_end(&mut g, &layout, &cfg, &audio);
+    let rays = camera_rays(&mut g, ckpt, &pose);
+    let hits = head_hits(&mut g, ckpt, &rays);
+    let image = composite_frame(&mut g, ckpt, &rays, &hits, &windows, &background, (h, w))?;
+    g.node("Identity", FRAME_OUTPUT_IMAGE, &[&image], vec![]);
+    g.node("Identity", FRAME_OUTPUT_WINDOWS, &[&windows], vec![]);
+    g.output(
+        FRAME_OUTPUT_IMAGE,
+        DataType::Float,
+        &[Dim::Fixed(h), Dim::Fixed(w), Dim::Fixed(3)],
+    );
+    g.output(
+        FRAME_OUTPUT_WINDOWS,
+        DataType::Float,
+        &[
+            Dim::Fixed(s.audio.att_frames),
+            Dim::Fixed(s.audio.window),
+            Dim::Fixed(s.audio.n_features),
+        ],
+    );
+    let n_values = g.n_initializer_values();
+    let doc = format!(
+        "NLDF frame graph: input {FRAME_INPUT_AUDIO} [{}] (16 kHz samples from frame f's \
+         sample f * {} + {}; NaN off the track), {FRAME_INPUT_POSE} [4, 4] (camera to world, \
+         row-major); output {FRAME_OUTPUT_IMAGE} [{h}, {w}, 3] in [0, 1]. Inside: log-mel \
+         front end, rays, head-bounds test, student ({} x {}), composite over the \
+         background.",
+        layout.samples, layout.samples_per_frame, layout.offset, s.depth, s.width
+    );
+    let graph = g.finish(FRAME_GRAPH_NAME, &doc);
+    let info = model_info(ckpt, &graph);
+    let model = ModelProto {
+        ir_version: Some(contract::IR_VERSION),
+        opset_import: vec![OperatorSetIdProto {
+            domain: Some(String::new()),
+            version: Some(contract::OPSET),
+        }],
+        producer_name: Some(contract::PRODUCER.to_string()),
+        producer_version: Some(env!("CARGO_PKG_VERSION").to_string()),
+        domain: Some(String::new()),
+        model_version: Some(1),
+        doc_string: Some(doc),
+        graph: Some(graph),
+        metadata_props: info.to_frame_metadata(&layout),
+    };
+    Ok((model, info, n_values))
+}
+
+/// The background as 8-bit RGB at the image's size, `[h * w * 3]`.
+fn background_rgb8(ckpt: &StudentCheckpoint, w: usize, h: usize) -> Result<Vec<u8>> {
+    let bad = |e: String| Error::Frame(format!("the student's background image: {e}"));
+    let img = image::load_from_memory(&ckpt.background_png)
+        .map_err(|e| bad(e.to_string()))?
+        .to_rgb8();
+    if img.dimensions() != (w as u32, h as u32) {
+        return Err(bad(format!(
+            "{} x {}, the image is {w} x {h}",
+            img.width(),
+            img.height()
+        )));
+    }
+    Ok(img.into_raw())
+}
+
+/// The front end: the chunk of samples to the audio neighbourhood, as
+/// `FrameAudio::windows` computes it.
+///
+/// # Shapes
+/// - `audio`: `[samples]`; returns `[att_frames, window, n_mels]`
+fn front_end(
+    g: &mut GraphBuilder,
+    layout: &FrameAudio,
+    cfg: &FeatureConfig,
+    audio: &str,
+) -> String {
+    let n_k = layout.n_features();
+    let (win, n_fft, n_mels) = (cfg.win, cfg.n_fft, cfg.n_mels);
+    let n_bins = n_fft / 2 + 1;
+    let off_track = g.node("IsNaN", "front.off_track", &[audio], vec![]);
+    let on_track = g.node("Not", "front.on_track", &[&off_track], vec![]);
+    let zero = g.constant_f32("front.zero", &[], &[0.0]);
+    let x = g.node(
+        "Where",
+        "front.samples",
+        &[&off_track, &zero, audio],
+        vec![],
+    );
+
+    // Framing: frame q reads samples q hop .. q hop + win.
+    let starts: Vec<i64> = (0..n_k).map(|q| layout.feature_start(q) as i64).collect();
+    let starts = g.constant_i64("front.frame_starts", &[n_k, 1], &starts);
+    let taps: Vec<i64> = (0..win as i64).collect();
+    let taps_row = g.constant_i64("front.frame_taps", &[1, win], &taps);
+    let index = g.node("Add", "front.frame_index", &[&starts, &taps_row], vec![]);
+    let frames = g.node(
+        "Gather",
+        "front.frames",
+        &[&x, &index],
+        vec![attr_int("axis", 0)],
+    );
+    let (hann, norm) = hann_window(cfg);
+    let hann = g.constant_f32("front.hann", &[1, win], &hann);
+    let frames = g.node("Mul", "front.windowed", &[&frames, &hann], vec![]);
+
+    // The DFT's cosine and sine at (n k mod n_fft), gathered from one period of each.
+    let taps_col = g.constant_i64("front.dft_taps", &[win, 1], &taps);
+    let bins: Vec<i64> = (0..n_bins as i64).collect();
+    let bins = g.constant_i64("front.dft_bins", &[1, n_bins], &bins);
+    let period = g.constant_i64("front.dft_period", &[], &[n_fft as i64]);
+    let phase = g.node("Mul", "front.dft_phase_raw", &[&taps_col, &bins], vec![]);
+    let phase = g.node("Mod", "front.dft_phase", &[&phase, &period], vec![]);
+    let angle = |m: usize| 2.0 * std::f64::consts::PI * m as f64 / n_fft as f64;
+    let cos: Vec<f32> = (0..n_fft).map(|m| angle(m).cos() as f32).collect();
+    let sin: Vec<f32> = (0..n_fft).map(|m| angle(m).sin() as f32).collect();
+    let cos = g.constant_f32("front.cos_period", &[n_fft], &cos);
+    let sin = g.constant_f32("front.sin_period", &[n_fft], &sin);
+    let cos = g.node(
+        "Gather",
+        "front.dft_cos",
+        &[&cos, &phase],
+        vec![attr_int("axis", 0)],
+    );
+    let sin = g.node(
+        "Gather",
+        "front.dft_sin",
+        &[&sin, &phase],
+        vec![attr_int("axis", 0)],
+    );
+    let re = g.node("MatMul", "front.re", &[&frames, &cos], vec![]);
+    let im = g.node("MatMul", "front.im", &[&frames, &sin], vec![]);
+    let re2 = g.node("Mul", "front.re2", &[&re, &re], vec![]);
+    let im2 = g.node("Mul", "front.im2", &[&im, &im], vec![]);
+    let power = g.node("Add", "front.power_raw", &[&re2, &im2], vec![]);
+    let norm = g.constant_f32("front.norm", &[], &[norm]);
+    let power = g.node("Mul", "front.power", &[&power, &norm], vec![]);
+    let filters = mel_filters(cfg);
+    let mut mel_t = vec![0.0f32; n_bins * n_mels];
+    for (m, filter) in filters.iter().enumerate() {
+        for (b, &v) in filter.iter().enumerate() {
+            mel_t[b * n_mels + m] = v;
+        }
+    }
+    let mel_t = g.constant_f32("front.mel_filters", &[n_bins, n_mels], &mel_t);
+    let energy = g.node("MatMul", "front.energy", &[&power, &mel_t], vec![]);
+    let floor = g.constant_f32("front.floor", &[], &[1e-10]);
+    let energy = g.node("Max", "front.energy_floored", &[&energy, &floor], vec![]);
+    let ln = g.node("Log", "front.ln", &[&energy], vec![]);
+    let ln10 = g.constant_f32("front.ln10", &[], &[std::f32::consts::LN_10]);
+    let log10 = g.node("Div", "front.log10", &[&ln, &ln10], vec![]);
+    let five = g.constant_f32("front.five", &[], &[5.0]);
+    let shifted = g.node("Add", "front.shifted", &[&log10, &five], vec![]);
+    let feats = g.node("Div", "front.features", &[&shifted, &five], vec![]);
+
+    // The track's ends: the first and last feature frame and neighbour on it.
+    let axis0 = vec![attr_int("axis", 0)];
+    let span = |g: &mut GraphBuilder, name: &str, deciding: Vec<i64>| -> (String, String) {
+        let n = deciding.len();
+        let deciding = g.constant_i64(&format!("{name}.deciding"), &[n], &deciding);
+        let on = g.node(
+            "Gather",
+            &format!("{name}.on_track"),
+            &[&on_track, &deciding],
+            axis0.clone(),
+        );
+        let index: Vec<i64> = (0..n as i64).collect();
+        let index = g.constant_i64(&format!("{name}.index"), &[n], &index);
+        let past = g.constant_i64(&format!("{name}.past"), &[], &[n as i64]);
+        let before = g.constant_i64(&format!("{name}.before"), &[], &[-1]);
+        let lo = g.node(
+            "Where",
+            &format!("{name}.lo_each"),
+            &[&on, &index, &past],
+            vec![],
+        );
+        let hi = g.node(
+            "Where",
+            &format!("{name}.hi_each"),
+            &[&on, &index, &before],
+            vec![],
+        );
+        let reduce = || vec![attr_ints("axes", &[0]), attr_int("keepdims", 0)];
+        (
+            g.node("ReduceMin", &format!("{name}.lo"), &[&lo], reduce()),
+            g.node("ReduceMax", &format!("{name}.hi"), &[&hi], reduce()),
+        )
+    };
+    let centres = (0..n_k).map(|q| layout.feature_centre(q) as i64).collect();
+    let (k_lo, k_hi) = span(g, "front.feature_span", centres);
+    let ends = (0..layout.att_frames)
+        .map(|s| layout.frame_end(s) as i64)
+        .collect();
+    let (s_lo, s_hi) = span(g, "front.frame_span", ends);
+    let none = g.constant_i64("front.index_zero", &[], &[0]);
+    let clamp = |g: &mut GraphBuilder, name: &str, x: &str, lo: &str, hi: &str| -> String {
+        let x = g.node("Max", &format!("{name}.above_lo"), &[x, lo], vec![]);
+        let x = g.node("Min", &format!("{name}.below_hi"), &[&x, hi], vec![]);
+        g.node("Max", name, &[&x, &none], vec![])
+    };
+    let neighbours: Vec<i64> = (0..layout.att_frames as i64).collect();
+    let neighbours = g.constant_i64("front.neighbours", &[layout.att_frames, 1], &neighbours);
+    let neighbours = clamp(g, "front.neighbours_clamped", &neighbours, &s_lo, &s_hi);
+    let per_frame = g.constant_i64(
+        "front.features_per_frame",
+        &[],
+        &[layout.features_per_frame as i64],
+    );
+    let first = g.node(
+        "Mul",
+        "front.window_first",
+        &[&neighbours, &per_frame],
+        vec![],
+    );
+    let entries: Vec<i64> = (0..layout.window as i64).collect();
+    let entries = g.constant_i64("front.window_entries", &[1, layout.window], &entries);
+    let which = g.node("Add", "front.window_index_raw", &[&first, &entries], vec![]);
+    let which = clamp(g, "front.window_index", &which, &k_lo, &k_hi);
+    g.node("Gather", "front.windows", &[&feats, &which], axis0)
+}
+
+/// The camera's rays through every pixel, row by row: `(origin [1, 3], directions
+/// [h w, 3])`, `d = (c0 x_i + c1 y_j) + c2 (-1)` with the rotation's columns `c` and
+/// AD-NeRF's `x_i = (i - cx) / f`, `y_j = -(j - cy) / f`, added in glam's order.
+fn camera_rays(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, pose: &str) -> (String, String) {
+    let k = ckpt.spec.intrinsics;
+    let xs: Vec<f32> = (0..k.width)
+        .map(|i| k.camera_direction(i as f32, 0.0).x)
+        .collect();
+    let ys: Vec<f32> = (0..k.height)
+        .map(|j| k.camera_direction(0.0, j as f32).y)
+        .collect();
+    let xs = g.constant_f32("rays.x", &[1, k.width as usize, 1], &xs);
+    let ys = g.constant_f32("rays.y", &[k.height as usize, 1, 1], &ys);
+    let slice = |g: &mut GraphBuilder, name: &str, x: &str, lo: [i64; 2], hi: [i64; 2]| {
+        let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
+        let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
+        g.node("Slice", name, &[x, &lo, &hi], vec![])
+    };
+    let column_shape = g.constant_i64("rays.column_shape", &[3], &[1, 1, 3]);
+    let mut columns = Vec::new();
+    for c in 0..3i64 {
+        let col = slice(g, &format!("rays.rotation{c}"), pose, [0, c], [3, c + 1]);
+        columns.push(g.node(
+            "Reshape",
+            &format!("rays.column{c}"),
+            &[&col, &column_shape],
+            vec![],
+        ));
+    }
+    let origin = slice(g, "rays.origin_column", pose, [0, 3], [3, 4]);
+    let row = g.constant_i64("rays.row_shape", &[2], &[1, 3]);
+    let origin = g.node("Reshape", "rays.origin", &[&origin, &row], vec![]);
+    let along_x = g.node("Mul", "rays.along_x", &[&columns[0], &xs], vec![]);
+    let along_y = g.node("Mul", "rays.along_y", &[&columns[1], &ys], vec![]);
+    let across = g.node("Add", "rays.across", &[&along_x, &along_y], vec![]);
+    let back = g.node("Neg", "rays.back", &[&columns[2]], vec![]);
+    let d = g.node("Add", "rays.directions_grid", &[&across, &back], vec![]);
+    let flat = g.constant_i64("rays.flat_shape", &[2], &[-1, 3]);
+    let d = g.node("Reshape", "rays.directions", &[&d, &flat], vec![]);
+    (origin, d)
+}
+
+/// The pixels whose rays meet the head's bounds within `[near, far]`
+/// (`Bounds::intersect`'s slab test, axis by axis): `[n_hit]` int64 indices, row-major.
+fn head_hits(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, (o, d): &(String, String)) -> String {
+    let spec = &ckpt.spec;
+    let lo = g.constant_f32("bounds.lo", &[1, 3], &spec.bounds.lo.to_array());
+    let hi = g.constant_f32("bounds.hi", &[1, 3], &spec.bounds.hi.to_array());
+    let to_lo = g.node("Sub", "bounds.to_lo", &[&lo, o], vec![]);
+    let to_hi = g.node("Sub", "bounds.to_hi", &[&hi, o], vec![]);
+    let u = g.node("Div", "bounds.u", &[&to_lo, d], vec![]);
+    let v = g.node("Div", "bounds.v", &[&to_hi, d], vec![]);
+    let enter = g.node("Min", "bounds.enter_raw", &[&u, &v], vec![]);
+    let exit = g.node("Max", "bounds.exit_raw", &[&u, &v], vec![]);
+    // An axis the ray runs parallel to: no limit from inside the slab, a miss from outside.
+    let abs = g.node("Abs", "bounds.abs_d", &[d], vec![]);
+    let tiny = g.constant_f32("bounds.parallel", &[], &[1e-12]);
+    let parallel = g.node("Less", "bounds.is_parallel", &[&abs, &tiny], vec![]);
+    let below = g.node("Less", "bounds.below", &[o, &lo], vec![]);
+    let above = g.node("Greater", "bounds.above", &[o, &hi], vec![]);
+    let outside = g.node("Or", "bounds.outside", &[&below, &above], vec![]);
+    let inf = g.constant_f32("bounds.inf", &[], &[f32::INFINITY]);
+    let neg_inf = g.constant_f32("bounds.neg_inf", &[], &[f32::NEG_INFINITY]);
+    let enter_par = g.node(
+        "Where",
+        "bounds.enter_parallel",
+        &[&outside, &inf, &neg_inf],
+        vec![],
+    );
+    let exit_par = g.node(
+        "Where",
+        "bounds.exit_parallel",
+        &[&outside, &neg_inf, &inf],
+        vec![],
+    );
+    let enter = g.node(
+        "Where",
+        "bounds.enter",
+        &[&parallel, &enter_par, &enter],
+        vec![],
+    );
+    let exit = g.node(
+        "Where",
+        "bounds.exit",
+        &[&parallel, &exit_par, &exit],
+        vec![],
+    );
+    let reduce = || vec![attr_ints("axes", &[1]), attr_int("keepdims", 0)];
+    let t0 = g.node("ReduceMax", "bounds.t0_axes", &[&enter], reduce());
+    let t1 = g.node("ReduceMin", "bounds.t1_axes", &[&exit], reduce());
+    let near = g.constant_f32("bounds.near", &[], &[spec.near]);
+    let far = g.constant_f32("bounds.far", &[], &[spec.far]);
+    let t0 = g.node("Max", "bounds.t0", &[&t0, &near], vec![]);
+    let t1 = g.node("Min", "bounds.t1", &[&t1, &far], vec![]);
+    let hit = g.node("Greater", "bounds.hit", &[&t1, &t0], vec![]);
+    let hits = g.node("NonZero", "bounds.hits_2d", &[&hit], vec![]);
+    let flat = g.constant_i64("bounds.hits_shape", &[1], &[-1]);
+    g.node("Reshape", "bounds.hits", &[&hits, &flat], vec![])
+}
+
+/// The student on the rays `hits` selects, scattered into the background image.
+///
+/// # Shapes
+/// - `rays`: origin `[1, 3]`, directions `[h w, 3]`; `hits` `[n_hit]`
+/// - `windows`: `[att_frames, window, n_features]`; `background`: `[h w 3]` bytes
+/// - returns `[h, w, 3]`
+fn composite_frame(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    (origin, directions): &(String, String),
+    hits: &str,
+    windows: &str,
+    background: &[u8],
+    (h, w): (usize, usize),
+) -> Result<String> {
+    let axis0 = || vec![attr_int("axis", 0)];
+    let d = g.node("Gather", "frame.directions", &[directions, hits], axis0());
+    let shape = g.node("Shape", "frame.ray_shape", &[&d], vec![]);
+    let o = g.node("Expand", "frame.origins", &[origin, &shape], vec![]);
+    let bg = g.constant_u8("frame.background_rgb8", &[h * w, 3], background);
+    let bg = g.node(
+        "Cast",
+        "frame.background_raw",
+        &[&bg],
+        vec![attr_int("to", DataType::Float as i64)],
+    );
+    let full = g.constant_f32("frame.full_scale", &[], &[255.0]);
+    let bg = g.node("Div", "frame.background", &[&bg, &full], vec![]);
+    let behind = ckpt
+        .shape
+        .opacity
+        .then(|| g.node("Gather", "frame.behind", &[&bg, hits], axis0()));
+    student_nodes(g, ckpt, (&o, &d), windows, behind.as_deref())?;
+    let axis1 = g.constant_i64("frame.index_axis", &[1], &[1]);
+    let at = g.node("Unsqueeze", "frame.hit_pixels", &[hits, &axis1], vec![]);
+    let painted = g.node(
+        "ScatterND",
+        "frame.painted",
+        &[&bg, &at, OUTPUT_RGB],
+        vec![],
+    );
+    let image_shape = g.constant_i64("frame.image_shape", &[3], &[h as i64, w as i64, 3]);
+    Ok(g.node("Reshape", "frame.image", &[&painted, &image_shape], vec![]))
+}

@@ -1,0 +1,185 @@
+//! Runs a frame graph (`nldf export --frame`) in tract or onnxruntime: a frame's audio
+//! chunk and a pose in, the frame out, with nothing computed outside the graph. nldf's own
+//! renderer runs the ray graph ([`crate::FrameRenderer`]); this runner is how the tests and
+//! benchmarks hold the frame graph against it, as any other runtime would load it.
+
+use glam::Mat4;
+use nldf_core::image::ImageRgb;
+use nldf_export::FrameModel;
+use nldf_export::contract::{
+    FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS,
+};
+use tract_onnx::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::runtime::BackendKind;
+
+/// What a frame graph computes for one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GraphFrame {
+    /// The frame, `[height, width, 3]`.
+    pub image: ImageRgb,
+    /// The audio windows its front end made, `[att_frames, window, n_features]` flat.
+    pub windows: Vec<f32>,
+}
+
+enum Session {
+    Tract(std::sync::Arc<TypedRunnableModel>),
+    #[cfg(feature = "ort")]
+    Ort(ort::session::Session),
+}
+
+/// A frame graph opened in one runtime.
+pub struct FrameGraph {
+    model: FrameModel,
+    session: Session,
+}
+
+impl std::fmt::Debug for FrameGraph {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FrameGraph")
+            .field("path", &self.model.path)
+            .finish()
+    }
+}
+
+impl FrameGraph {
+    /// Opens `model` in the runtime `kind` with `threads` threads.
+    pub fn open(model: &FrameModel, kind: BackendKind, threads: usize) -> Result<FrameGraph> {
+        let session = match kind {
+            BackendKind::Tract => Session::Tract(open_tract(model)?),
+            BackendKind::Ort => open_ort(model, threads)?,
+        };
+        Ok(FrameGraph {
+            model: model.clone(),
+            session,
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &FrameModel {
+        &self.model
+    }
+
+    /// The frame seen from camera-to-world `c2w` with the audio `chunk`
+    /// (`FrameAudio::chunk`).
+    ///
+    /// # Shapes
+    /// - `chunk`: `[samples]` of the model's `FrameAudio`
+    pub fn render(&mut self, c2w: Mat4, chunk: &[f32]) -> Result<GraphFrame> {
+        if chunk.len() != self.model.audio.samples {
+            return Err(Error::Argument(format!(
+                "a frame's audio holds {} samples, the frame graph takes {}",
+                chunk.len(),
+                self.model.audio.samples
+            )));
+        }
+        // Row-major, as the graph reads it.
+        let pose: Vec<f32> = c2w.transpose().to_cols_array().to_vec();
+        let k = self.model.info.spec.intrinsics;
+        let (image, windows) = match &mut self.session {
+            Session::Tract(plan) => run_tract(plan, chunk, &pose)?,
+            #[cfg(feature = "ort")]
+            Session::Ort(session) => run_ort(session, chunk, &pose)?,
+        };
+        let n_windows = self.model.info.audio.len();
+        if image.len() != k.n_pixels() * 3 || windows.len() != n_windows {
+            return Err(Error::backend(
+                "frame graph",
+                format!(
+                    "outputs hold {} and {} values, expected {} and {n_windows}",
+                    image.len(),
+                    windows.len(),
+                    k.n_pixels() * 3
+                ),
+            ));
+        }
+        Ok(GraphFrame {
+            image: ImageRgb {
+                width: k.width,
+                height: k.height,
+                data: image,
+            },
+            windows,
+        })
+    }
+}
+
+fn open_tract(model: &FrameModel) -> Result<std::sync::Arc<TypedRunnableModel>> {
+    let fail = |e: TractError| Error::backend("tract", format!("{}: {e}", model.path.display()));
+    let mut parsed = tract_onnx::onnx()
+        .model_for_read(&mut &model.bytes[..])
+        .map_err(fail)?;
+    parsed
+        .set_input_names([FRAME_INPUT_AUDIO, FRAME_INPUT_POSE])
+        .and_then(|()| parsed.select_outputs_by_name([FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS]))
+        .map_err(fail)?;
+    let plan = parsed
+        .with_input_fact(0, f32::fact([model.audio.samples]).into())
+        .and_then(|m| m.with_input_fact(1, f32::fact([4, 4]).into()))
+        .and_then(|m| m.into_optimized())
+        .and_then(|m| m.into_runnable())
+        .map_err(fail)?;
+    Ok(plan)
+}
+
+fn run_tract(
+    plan: &std::sync::Arc<TypedRunnableModel>,
+    chunk: &[f32],
+    pose: &[f32],
+) -> Result<(Vec<f32>, Vec<f32>)> {
+    let fail = |e: TractError| Error::backend("tract", e.to_string());
+    let audio = Tensor::from_shape(&[chunk.len()], chunk).map_err(fail)?;
+    let pose = Tensor::from_shape(&[4, 4], pose).map_err(fail)?;
+    let out = plan.run(tvec!(audio.into(), pose.into())).map_err(fail)?;
+    let take = |i: usize| -> Result<Vec<f32>> {
+        let view = out[i].to_plain_array_view::<f32>().map_err(fail)?;
+        Ok(view.iter().copied().collect())
+    };
+    Ok((take(0)?, take(1)?))
+}
+
+#[cfg(feature = "ort")]
+fn open_ort(model: &FrameModel, threads: usize) -> Result<Session> {
+    let env = crate::ort_backend::environment()?;
+    let fail = |e: String| Error::backend("ort", format!("{}: {e}", model.path.display()));
+    let session = ort::session::Session::builder(env)
+        .map_err(|e| fail(e.to_string()))?
+        .with_intra_threads(threads.max(1))
+        .map_err(|e| fail(e.to_string()))?
+        .commit_from_memory(&model.bytes)
+        .map_err(|e| fail(e.to_string()))?;
+    Ok(Session::Ort(session))
+}
+
+#[cfg(not(feature = "ort"))]
+fn open_ort(_model: &FrameModel, _threads: usize) -> Result<Session> {
+    Err(Error::OrtLibrary(
+        "this build has no onnxruntime backend: rebuild with the cargo feature `ort`".into(),
+    ))
+}
+
+#[cfg(feature = "ort")]
+fn run_ort(
+    session: &mut ort::session::Session,
+    chunk: &[f32],
+    pose: &[f32],
+) -> Result<(Vec<f32>, Vec<f32>)> {
+    use ort::value::TensorRef;
+    let fail = |e: ort::Error| Error::backend("ort", e);
+    let inputs = ort::inputs![
+        FRAME_INPUT_AUDIO => TensorRef::from_array_view(([chunk.len()], chunk)).map_err(fail)?,
+        FRAME_INPUT_POSE => TensorRef::from_array_view(([4usize, 4], pose)).map_err(fail)?,
+    ];
+    let outputs = session.run(inputs).map_err(fail)?;
+    let take = |name: &str| -> Result<Vec<f32>> {
+        let value = outputs
+            .get(name)
+            .ok_or_else(|| Error::backend("ort", format!("no output `{name}`")))?;
+        let (_, data) = value
+            .try_extract_tensor::<f32>()
+            .map_err(|e| Error::backend("ort", e))?;
+        Ok(data.to_vec())
+    };
+    Ok((take(FRAME_OUTPUT_IMAGE)?, take(FRAME_OUTPUT_WINDOWS)?))
+}

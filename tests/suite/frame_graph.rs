@@ -1,0 +1,277 @@
+//! The frame graph (`nldf export --frame`) against `nldf render`: for the same audio track
+//! and poses, the frames it computes from audio samples and a pose alone match the frames
+//! nldf's renderer makes with the ray graph within 1/255 per channel, in tract, onnxruntime
+//! and Python onnxruntime, and its front end's windows match nldf's within 1e-4 of the
+//! largest feature. At the track's ends (where nldf clamps the windows), for a camera
+//! that sees no head, for models with and without opacity, at the shipped model's size and at
+//! 28 x 256.
+
+use std::path::Path;
+
+use glam::{Mat4, Vec3};
+use nldf_core::audio::{Waveform, audio_windows, neighbourhood};
+use nldf_core::bounds::Bounds;
+use nldf_core::camera::{Intrinsics, look_at, turn_about};
+use nldf_core::frame_audio::FrameAudio;
+use nldf_core::image::ImageRgb;
+use nldf_core::student_shape::StudentConfig;
+use nldf_export::{WeightType, export_frame, read_frame_model, read_model};
+use nldf_infer::FrameRenderer;
+use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
+use nldf_infer::frame_graph::FrameGraph;
+
+use crate::util::{
+    configs, max_diff, ort_available, python, read_npy, run_python, spec_for, write_npy, write_run,
+    write_run_with,
+};
+
+/// Worst allowed difference per channel between the frame graph's frame and nldf's.
+const IMAGE_TOL: f32 = 1.0 / 255.0;
+/// Worst allowed difference of a front-end feature, relative to the largest (at least 1).
+const FEATURE_TOL: f32 = 1e-4;
+
+/// A voiced, wobbling test signal with a little noise, `n` samples at 16 kHz.
+fn speech_like(n: usize) -> Vec<f32> {
+    (0..n)
+        .map(|i| {
+            let t = i as f32 / 16_000.0;
+            let voice = (2.0 * std::f32::consts::PI * (150.0 + 60.0 * (2.5 * t).sin()) * t).sin();
+            let noise = ((i * 7919 % 1009) as f32 / 1009.0 - 0.5) * 0.08;
+            0.5 * voice * (0.55 + 0.45 * (9.0 * t).sin()) + noise
+        })
+        .collect()
+}
+
+const PYTHON_FRAMES: &str = r#"
+import sys
+import numpy as np, onnxruntime as ort
+path, folder = sys.argv[1], sys.argv[2]
+session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+chunks, poses = np.load(f"{folder}/chunks.npy"), np.load(f"{folder}/poses.npy")
+out = [session.run(["image"], {"audio": c, "pose": p})[0] for c, p in zip(chunks, poses)]
+np.save(f"{folder}/images.npy", np.stack(out))
+"#;
+
+/// The camera of `spec_for`, at `width` x `height` pixels with the same field of view.
+fn camera_at(width: u32, height: u32) -> Intrinsics {
+    let scale = width as f32 / 24.0;
+    Intrinsics {
+        focal: 30.0 * scale,
+        cx: width as f32 / 2.0,
+        cy: height as f32 / 2.0,
+        width,
+        height,
+    }
+}
+
+/// Exports the student of `cfg` (seed `seed`, frames `size`, weights at a trained
+/// network's magnitude when `trained`) as ray and frame graph, renders frames at both ends
+/// and the middle of a track from three poses (one seeing no head) with nldf's renderer,
+/// and holds the frame graph in tract, onnxruntime and Python onnxruntime against them.
+/// Returns the worst image and feature differences.
+fn parity(
+    label: &str,
+    cfg: &StudentConfig,
+    seed: u64,
+    size: Option<(u32, u32)>,
+    trained: bool,
+    python: Option<&Path>,
+) -> (f32, f32) {
+    let mut spec = spec_for(cfg);
+    if let Some((w, h)) = size {
+        spec.intrinsics = camera_at(w, h);
+    }
+    let run = write_run_with(cfg, seed, spec.clone());
+    if trained {
+        run.scale_weights_like_trained(cfg.n_blocks());
+    }
+    let rays_path = run.export(WeightType::F32);
+    let frame_path = run.root.join("frame.onnx");
+    export_frame(&run.student_dir(), &frame_path, WeightType::F32).unwrap();
+    let model = read_frame_model(&frame_path).unwrap();
+
+    let features = spec.features.nldf().unwrap().clone();
+    let wave = Waveform {
+        sample_rate: 16_000,
+        samples: speech_like(16_000 + 7 * 640 + 211),
+    };
+    let windows = audio_windows(&wave, spec.fps, &features).unwrap();
+    let layout = FrameAudio::new(&features, spec.fps, cfg.audio.att_frames).unwrap();
+    assert_eq!(model.audio, layout);
+    let n = windows.n_frames;
+    let default_pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let centre = Bounds::centre(&spec.bounds);
+    let poses = [
+        default_pose,
+        turn_about(centre, 0.5, -0.2) * default_pose,
+        look_at(Vec3::new(0.0, 0.0, 2.5), Vec3::new(0.0, 6.0, 2.5), Vec3::Z),
+    ];
+    let cases: Vec<(usize, Mat4)> = [0, 1, n / 2, n - 2, n - 1]
+        .into_iter()
+        .zip(poses.iter().cycle())
+        .map(|(f, &p)| (f, p))
+        .chain([(n / 2, poses[2]), (3, poses[1])])
+        .collect();
+
+    let ray_model = read_model(&rays_path).unwrap();
+    let options = BackendOptions {
+        batch_size: 4096,
+        threads: 2,
+        spin: true,
+    };
+    let backend = backend_for(&ray_model, BackendKind::Tract, options).unwrap();
+    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let reference: Vec<(ImageRgb, Vec<f32>, usize)> = cases
+        .iter()
+        .map(|&(f, pose)| {
+            let audio = neighbourhood(&windows, f, cfg.audio.att_frames);
+            let frame = renderer.render(pose, &audio).unwrap();
+            (frame.image, audio, frame.head_pixels)
+        })
+        .collect();
+    assert_eq!(reference[5].2, 0, "the camera looking away sees no head");
+    assert!(reference[0].2 > 0, "the default camera sees the head");
+
+    let mut worst = (0.0f32, 0.0f32);
+    let mut runtimes = vec![BackendKind::Tract];
+    if ort_available() {
+        runtimes.push(BackendKind::Ort);
+    }
+    for kind in runtimes {
+        let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
+        for (&(f, pose), (image, audio, _)) in cases.iter().zip(&reference) {
+            let out = graph.render(pose, &layout.chunk(&wave.samples, f)).unwrap();
+            let scale = audio.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let (d_image, d_feat) = (
+                max_diff(&out.image.data, &image.data),
+                max_diff(&out.windows, audio) / scale,
+            );
+            assert!(
+                out.image.data.iter().all(|v| v.is_finite()),
+                "{label}: {} frame {f}: not finite",
+                kind.name()
+            );
+            assert!(
+                d_image <= IMAGE_TOL && d_feat <= FEATURE_TOL,
+                "{label}: {} frame {f}: image {d_image:.2e}, features {d_feat:.2e}",
+                kind.name()
+            );
+            worst = (worst.0.max(d_image), worst.1.max(d_feat));
+        }
+        println!(
+            "{label}: frame graph in {} against nldf render: worst |image diff| {:.2e}, \
+             worst feature diff {:.2e} (relative)",
+            kind.name(),
+            worst.0,
+            worst.1
+        );
+    }
+    if let Some(python) = python {
+        let folder = run.root.join("python_frames");
+        std::fs::create_dir_all(&folder).unwrap();
+        let chunks: Vec<f32> = cases
+            .iter()
+            .flat_map(|&(f, _)| layout.chunk(&wave.samples, f))
+            .collect();
+        let poses: Vec<f32> = cases
+            .iter()
+            .flat_map(|(_, p)| p.transpose().to_cols_array())
+            .collect();
+        let m = cases.len() as u64;
+        write_npy(
+            &folder.join("chunks.npy"),
+            &[m, layout.samples as u64],
+            &chunks,
+        );
+        write_npy(&folder.join("poses.npy"), &[m, 4, 4], &poses);
+        run_python(
+            python,
+            &[
+                "-c",
+                PYTHON_FRAMES,
+                frame_path.to_str().unwrap(),
+                folder.to_str().unwrap(),
+            ],
+        );
+        let (_, images) = read_npy(&folder.join("images.npy"));
+        let per = images.len() / cases.len();
+        let mut d_python = 0.0f32;
+        for (i, (image, _, _)) in reference.iter().enumerate() {
+            d_python = d_python.max(max_diff(&images[i * per..(i + 1) * per], &image.data));
+        }
+        println!("{label}: frame graph in Python onnxruntime: worst |image diff| {d_python:.2e}");
+        assert!(d_python <= IMAGE_TOL, "{label}: python {d_python}");
+        worst.0 = worst.0.max(d_python);
+    }
+    worst
+}
+
+#[test]
+fn frame_graph_matches_nldf_render_for_tiny_students() {
+    let python = python();
+    for (c, cfg) in configs().into_iter().enumerate() {
+        parity(
+            &format!("config {c}"),
+            &cfg,
+            60 + c as u64,
+            None,
+            false,
+            python.as_deref(),
+        );
+    }
+    let mut plain = configs().remove(1);
+    plain.opacity = false;
+    parity("no opacity", &plain, 63, None, false, python.as_deref());
+}
+
+/// The shipped model's shape (the real-time preset) at its 128 x 128 frames, and the
+/// paper's 28 x 256 student on 64 x 48 frames, weights at a trained network's magnitude.
+#[test]
+fn frame_graph_matches_nldf_render_at_production_sizes() {
+    let python = python();
+    let mut realtime = StudentConfig::realtime();
+    realtime.beam.anchor = Some(nldf_core::beam::BeamAnchor {
+        centre: [0.02, 0.05, -0.01],
+        distance: 2.2,
+    });
+    let (d_img, d_feat) = parity(
+        "real-time 16 x 128, 128 x 128",
+        &realtime,
+        70,
+        Some((128, 128)),
+        true,
+        python.as_deref(),
+    );
+    println!("real-time: worst image {d_img:.2e}, features {d_feat:.2e}");
+    let d28 = StudentConfig::paper_d28();
+    let (d_img, d_feat) = parity(
+        "28 x 256, 64 x 48",
+        &d28,
+        71,
+        Some((64, 48)),
+        true,
+        python.as_deref(),
+    );
+    println!("28 x 256: worst image {d_img:.2e}, features {d_feat:.2e}");
+}
+
+/// Each runtime refuses a frame graph where nldf wants a ray graph, and the reverse, with
+/// a line that says which it is.
+#[test]
+fn frame_and_ray_graphs_are_told_apart() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 5);
+    let rays = run.export(WeightType::F32);
+    let frame = run.root.join("frame.onnx");
+    export_frame(&run.student_dir(), &frame, WeightType::F16).unwrap();
+    let err = read_model(&frame).unwrap_err().to_string();
+    assert!(
+        err.contains("frame graph") && err.contains("frame.onnx"),
+        "{err}"
+    );
+    let err = read_frame_model(&rays).unwrap_err().to_string();
+    assert!(
+        err.contains("ray graph") && err.contains("--frame"),
+        "{err}"
+    );
+}
