@@ -275,3 +275,52 @@ fn frame_and_ray_graphs_are_told_apart() {
         "{err}"
     );
 }
+
+/// The shipped frame graph (`models/demo/frame.onnx`) renders what nldf renders with the
+/// shipped ray graph (`models/demo/model.onnx`): the same student, exported twice.
+#[test]
+fn shipped_frame_graph_matches_the_shipped_model() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo");
+    let model = read_frame_model(&root.join("frame.onnx")).unwrap();
+    let ray_model = read_model(&root.join("model.onnx")).unwrap();
+    assert_eq!(model.info.step, ray_model.info.step);
+    assert_eq!(model.info.spec, ray_model.info.spec);
+    let spec = &ray_model.info.spec;
+    let features = spec.features.nldf().unwrap().clone();
+    let wave = Waveform {
+        sample_rate: 16_000,
+        samples: speech_like(16_000 + 3 * 640),
+    };
+    let windows = audio_windows(&wave, spec.fps, &features).unwrap();
+    let options = BackendOptions {
+        batch_size: 4096,
+        threads: 2,
+        spin: true,
+    };
+    let backend = backend_for(&ray_model, BackendKind::Tract, options).unwrap();
+    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let turned = turn_about(spec.bounds.centre(), -0.6, 0.25) * pose;
+    let mut runtimes = vec![BackendKind::Tract];
+    if ort_available() {
+        runtimes.push(BackendKind::Ort);
+    }
+    for kind in runtimes {
+        let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
+        let mut worst = 0.0f32;
+        for (f, c2w) in [(0, pose), (12, turned), (windows.n_frames - 1, pose)] {
+            let audio = neighbourhood(&windows, f, spec.att_frames);
+            let want = renderer.render(c2w, &audio).unwrap();
+            assert!(want.head_pixels > 1000, "the head is in view");
+            let got = graph
+                .render(c2w, &model.audio.chunk(&wave.samples, f))
+                .unwrap();
+            worst = worst.max(max_diff(&got.image.data, &want.image.data));
+        }
+        println!(
+            "shipped model: frame graph in {} against nldf render: worst |image diff| {worst:.2e}",
+            kind.name()
+        );
+        assert!(worst <= IMAGE_TOL, "{}: {worst}", kind.name());
+    }
+}

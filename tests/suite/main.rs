@@ -2,6 +2,7 @@
 
 mod adnerf;
 mod audio;
+mod browser;
 mod dataset;
 mod export;
 mod export_ort;
