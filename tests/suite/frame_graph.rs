@@ -324,3 +324,78 @@ fn shipped_frame_graph_matches_the_shipped_model() {
         assert!(worst <= IMAGE_TOL, "{}: {worst}", kind.name());
     }
 }
+
+/// `examples/frame_graph.py` (at most 40 lines) renders the shipped frame graph from a WAV
+/// in a Python that can import numpy and onnxruntime and nothing else installed (no
+/// site-packages, not even onnx), and its PNG frames are nldf's frames within one 8-bit
+/// level.
+#[test]
+fn python_example_renders_frames_with_numpy_and_onnxruntime_alone() {
+    let Some(python) = python() else { return };
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/frame_graph.py");
+    let text = std::fs::read_to_string(&example).unwrap();
+    assert!(text.lines().count() <= 40, "the example grew past 40 lines");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo");
+    let dir = tempfile::tempdir().unwrap();
+    let site = dir.path().join("site");
+    std::fs::create_dir_all(&site).unwrap();
+    let packages = python
+        .parent()
+        .unwrap()
+        .join("../lib/python3.11/site-packages");
+    for name in ["numpy", "numpy.libs", "onnxruntime"] {
+        let from = packages.join(name);
+        if from.exists() {
+            std::os::unix::fs::symlink(from.canonicalize().unwrap(), site.join(name)).unwrap();
+        }
+    }
+    let wav = dir.path().join("speech.wav");
+    crate::util::write_test_wav(&wav, 1.0);
+    let out = dir.path().join("frames");
+    let script = format!(
+        "import sys, runpy\n\
+         sys.path.insert(0, {site:?})\n\
+         try:\n    import onnx\n    sys.exit('onnx is importable: the environment is not bare')\n\
+         except ImportError:\n    pass\n\
+         sys.argv = ['frame_graph.py', {model:?}, {wav:?}, {out:?}]\n\
+         runpy.run_path({example:?}, run_name='__main__')\n",
+        site = site.to_str().unwrap(),
+        model = root.join("frame.onnx").to_str().unwrap(),
+        wav = wav.to_str().unwrap(),
+        out = out.to_str().unwrap(),
+        example = example.to_str().unwrap(),
+    );
+    let printed = run_python(&python, &["-S", "-c", &script]);
+    assert!(printed.contains("wrote 25 frames"), "{printed}");
+
+    let ray_model = read_model(&root.join("model.onnx")).unwrap();
+    let spec = &ray_model.info.spec;
+    let wave = nldf_core::audio::read_wav(&wav).unwrap();
+    let windows = audio_windows(&wave, spec.fps, spec.features.nldf().unwrap()).unwrap();
+    let options = BackendOptions {
+        batch_size: 4096,
+        threads: 2,
+        spin: true,
+    };
+    let backend = backend_for(&ray_model, BackendKind::Tract, options).unwrap();
+    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let mut worst = 0i32;
+    for f in 0..windows.n_frames {
+        let audio = neighbourhood(&windows, f, spec.att_frames);
+        let want = renderer.render(pose, &audio).unwrap().image.to_rgb8();
+        let got = image::open(out.join(format!("frame_{f:05}.png")))
+            .unwrap()
+            .to_rgb8()
+            .into_raw();
+        let d = want
+            .iter()
+            .zip(&got)
+            .map(|(a, b)| (*a as i32 - *b as i32).abs())
+            .max()
+            .unwrap();
+        worst = worst.max(d);
+    }
+    println!("python example: 25 frames, worst difference from nldf's frames {worst} / 255");
+    assert!(worst <= 1, "{worst}");
+}
