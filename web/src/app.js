@@ -1,0 +1,385 @@
+// The page: an nldf frame graph in onnxruntime-web (WASM, SIMD, threads), driven by a WAV
+// file or the microphone, the head turned by dragging or by the sliders. window.nldf is the
+// hook the tests and the benchmark drive it through.
+import * as ort from '../ort/ort.wasm.min.mjs';
+import { frameModelInfo, turnedPose, chunkFor, liveChunk } from './model.js';
+import { RATE, decodeTo16k, Ring, startMicrophone } from './audio.js';
+
+const $ = (id) => document.getElementById(id);
+const params = new URLSearchParams(location.search);
+const DEG = Math.PI / 180;
+
+const errors = [];
+function showError(message) {
+  errors.push(message);
+  const box = $('error');
+  box.textContent = message;
+  box.hidden = false;
+}
+function clearError() {
+  $('error').hidden = true;
+  $('error').textContent = '';
+}
+window.addEventListener('error', (e) => showError(`page error: ${e.message}`));
+window.addEventListener('unhandledrejection', (e) => showError(`page error: ${e.reason?.message ?? e.reason}`));
+
+// The runtime: WASM with SIMD and 2-4 threads where the page is cross-origin isolated.
+const cores = navigator.hardwareConcurrency || 2;
+const threads = Number(params.get('threads')) || (crossOriginIsolated ? Math.min(4, Math.max(2, cores)) : 1);
+ort.env.wasm.wasmPaths = new URL('../ort/', import.meta.url).href;
+ort.env.wasm.numThreads = threads;
+ort.env.wasm.proxy = false;
+ort.env.logLevel = 'error';
+$('runtime').textContent =
+  `onnxruntime-web ${ort.env.versions?.web ?? ''}, WASM SIMD, ${threads} thread${threads > 1 ? 's' : ''}` +
+  (crossOriginIsolated ? '' : ' (page not cross-origin isolated: one thread)');
+
+const state = {
+  model: null, // { session, info, name }
+  track: null, // { samples, name, frames }
+  frame: 0, // the track's frame shown when not playing
+  yaw: 0,
+  pitch: 0,
+  dirty: true,
+  playback: null, // { ctx, source, start }
+  mic: null, // { ring, stop }
+  lastMicChunk: null,
+  rendering: false,
+  times: [],
+};
+
+// Session runs one at a time: the live loop and the hook share this queue.
+let queue = Promise.resolve();
+function exclusive(fn) {
+  const p = queue.then(fn);
+  queue = p.catch(() => {});
+  return p;
+}
+
+const canvas = $('canvas');
+const ctx2d = canvas.getContext('2d', { willReadFrequently: true });
+
+function pose() {
+  const info = state.model.info;
+  return turnedPose(info.defaultPose, info.centre, state.yaw, state.pitch);
+}
+
+// One frame: the graph's image for `chunk` from the camera turned by yaw/pitch, drawn on the
+// canvas (8 bits, nldf's rounding); returns the canvas's pixels as RGB.
+async function render(chunk, yaw, pitch) {
+  const { session, info } = state.model;
+  const c2w = Float32Array.from(turnedPose(info.defaultPose, info.centre, yaw, pitch));
+  const out = await session.run({
+    audio: new ort.Tensor('float32', chunk, [chunk.length]),
+    pose: new ort.Tensor('float32', c2w, [4, 4]),
+  }, ['image']);
+  const image = out.image.data;
+  const { width, height } = info;
+  if (image.length !== width * height * 3) {
+    throw new Error(`the graph gave ${image.length} values, expected ${width} x ${height} x 3`);
+  }
+  const rgba = new ImageData(width, height);
+  for (let i = 0, n = width * height; i < n; i++) {
+    for (let c = 0; c < 3; c++) {
+      const v = image[3 * i + c];
+      rgba.data[4 * i + c] = Math.round(Math.min(1, Math.max(0, v)) * 255);
+    }
+    rgba.data[4 * i + 3] = 255;
+  }
+  ctx2d.putImageData(rgba, 0, 0);
+  const back = ctx2d.getImageData(0, 0, width, height).data;
+  const rgb = new Uint8ClampedArray(width * height * 3);
+  for (let i = 0, n = width * height; i < n; i++) {
+    rgb[3 * i] = back[4 * i];
+    rgb[3 * i + 1] = back[4 * i + 1];
+    rgb[3 * i + 2] = back[4 * i + 2];
+  }
+  for (const t of Object.values(out)) t.dispose?.();
+  return rgb;
+}
+
+async function loadModel(source, name) {
+  let bytes = source;
+  if (typeof source === 'string') {
+    name ??= source;
+    const res = await fetch(source);
+    if (!res.ok) throw new Error(`${name}: HTTP ${res.status}`);
+    bytes = new Uint8Array(await res.arrayBuffer());
+  } else if (source instanceof ArrayBuffer) {
+    bytes = new Uint8Array(source);
+  }
+  name ??= 'the model';
+  const info = frameModelInfo(bytes, name);
+  let session;
+  try {
+    session = await ort.InferenceSession.create(bytes, {
+      executionProviders: ['wasm'],
+      graphOptimizationLevel: 'all',
+    });
+  } catch (e) {
+    throw new Error(`${name}: onnxruntime-web cannot load it (${e.message ?? e})`);
+  }
+  for (const input of ['audio', 'pose']) {
+    if (!session.inputNames.includes(input)) throw new Error(`${name}: the graph has no "${input}" input`);
+  }
+  if (!session.outputNames.includes('image')) throw new Error(`${name}: the graph has no "image" output`);
+  await exclusive(async () => {
+    await state.model?.session.release();
+    state.model = { session, info, name };
+  });
+  canvas.width = info.width;
+  canvas.height = info.height;
+  $('drop').style.aspectRatio = `${info.width} / ${info.height}`;
+  $('drop').style.height = 'auto';
+  $('model-status').textContent =
+    `${name.split('/').pop()}: ${info.width} x ${info.height}, ${info.fps} fps, ` +
+    `${info.audio.samples} samples (${(info.audio.samples / RATE).toFixed(2)} s) of audio a frame`;
+  clearError();
+  state.dirty = true;
+  if (state.track) setTrack(state.track.samples, state.track.name);
+  return { width: info.width, height: info.height, fps: info.fps, audio: info.audio, threads };
+}
+
+function setTrack(samples, name) {
+  const spf = state.model?.info.audio.samples_per_frame ?? 640;
+  state.track = { samples, name, frames: Math.floor(samples.length / spf) };
+  state.frame = 0;
+  state.dirty = true;
+  $('play').disabled = false;
+  $('audio-status').textContent =
+    `${name}: ${(samples.length / RATE).toFixed(2)} s, ${state.track.frames} frames`;
+}
+
+async function setWav(bytes, name = 'the WAV file') {
+  stopPlayback();
+  const { samples, sourceRate } = await decodeTo16k(bytes instanceof Uint8Array ? bytes : new Uint8Array(bytes), name);
+  setTrack(samples, name);
+  return { samples: samples.length, frames: state.track.frames, sourceRate };
+}
+
+function trackChunk(f) {
+  if (!state.model) throw new Error('no model loaded');
+  if (!state.track) throw new Error('no audio loaded');
+  return chunkFor(state.model.info.audio, state.track.samples, f);
+}
+
+// Playback of the track; the live loop renders the frame at the playing position.
+let audioCtx = null;
+async function play() {
+  if (!state.track) return;
+  stopPlayback();
+  await stopMic();
+  audioCtx ??= new AudioContext();
+  await audioCtx.resume();
+  const { samples } = state.track;
+  const buffer = audioCtx.createBuffer(1, samples.length, RATE);
+  buffer.copyToChannel(samples, 0);
+  const source = audioCtx.createBufferSource();
+  source.buffer = buffer;
+  source.connect(audioCtx.destination);
+  const start = audioCtx.currentTime + 0.05;
+  source.start(start);
+  source.onended = () => {
+    if (state.playback?.source === source) stopPlayback();
+  };
+  state.playback = { source, start };
+  $('play').textContent = 'Stop';
+  $('play').classList.add('on');
+}
+
+function stopPlayback() {
+  const p = state.playback;
+  if (!p) return;
+  state.playback = null;
+  try {
+    p.source.stop();
+  } catch {}
+  $('play').textContent = 'Play';
+  $('play').classList.remove('on');
+  state.dirty = true;
+}
+
+async function startMic() {
+  if (state.mic) return;
+  stopPlayback();
+  const ring = new Ring(RATE * 10);
+  const stop = await startMicrophone(ring, new URL('./capture-worklet.js', import.meta.url).href);
+  state.mic = { ring, stop };
+  $('mic').classList.add('on');
+  $('audio-status').textContent = 'microphone: the head follows the newest samples';
+}
+
+async function stopMic() {
+  const mic = state.mic;
+  if (!mic) return;
+  state.mic = null;
+  $('mic').classList.remove('on');
+  await mic.stop();
+  state.dirty = true;
+  $('audio-status').textContent = state.track ? `${state.track.name}` : 'no audio: the head is silent';
+}
+
+function micChunk() {
+  if (!state.mic) throw new Error('the microphone is off');
+  return liveChunk(state.model.info.audio, state.mic.ring);
+}
+
+// The live loop: the frame the audio is at, whenever the previous one is done.
+function tick() {
+  requestAnimationFrame(tick);
+  if (!state.model || state.rendering) return;
+  let chunk;
+  const info = state.model.info;
+  if (state.playback) {
+    const elapsed = audioCtx.currentTime - state.playback.start - (audioCtx.outputLatency || 0);
+    state.frame = Math.max(0, Math.min(state.track.frames - 1, Math.floor(elapsed * info.fps)));
+    chunk = trackChunk(state.frame);
+  } else if (state.mic) {
+    chunk = micChunk();
+    state.lastMicChunk = chunk;
+  } else if (state.dirty) {
+    chunk = state.track ? trackChunk(state.frame) : new Float32Array(info.audio.samples);
+  } else {
+    return;
+  }
+  state.dirty = false;
+  state.rendering = true;
+  const { yaw, pitch } = state;
+  exclusive(() => render(chunk, yaw, pitch))
+    .then(() => countFrame())
+    .catch((e) => {
+      showError(`rendering failed: ${e.message ?? e}`);
+      stopPlayback();
+    })
+    .finally(() => {
+      state.rendering = false;
+    });
+}
+
+function countFrame() {
+  const now = performance.now();
+  state.times.push(now);
+  while (state.times.length > 1 && now - state.times[0] > 2000) state.times.shift();
+  const n = state.times.length - 1;
+  const fps = n > 0 ? (1000 * n) / (now - state.times[0]) : 0;
+  $('fps').textContent = `${fps.toFixed(1)} fps`;
+}
+
+// The head's pose from the sliders and from dragging on the view.
+function setPose(yawDeg, pitchDeg) {
+  const clamp = (v, el) => Math.min(Number(el.max), Math.max(Number(el.min), v));
+  yawDeg = clamp(yawDeg, $('yaw'));
+  pitchDeg = clamp(pitchDeg, $('pitch'));
+  $('yaw').value = yawDeg;
+  $('pitch').value = pitchDeg;
+  $('yaw-out').textContent = `${Number(yawDeg).toFixed(1)}°`;
+  $('pitch-out').textContent = `${Number(pitchDeg).toFixed(1)}°`;
+  state.yaw = yawDeg * DEG;
+  state.pitch = pitchDeg * DEG;
+  state.dirty = true;
+}
+$('yaw').addEventListener('input', () => setPose(Number($('yaw').value), Number($('pitch').value)));
+$('pitch').addEventListener('input', () => setPose(Number($('yaw').value), Number($('pitch').value)));
+$('reset').addEventListener('click', () => setPose(0, 0));
+
+const view = $('drop');
+let drag = null;
+view.addEventListener('pointerdown', (e) => {
+  drag = { x: e.clientX, y: e.clientY, yaw: Number($('yaw').value), pitch: Number($('pitch').value) };
+  view.setPointerCapture(e.pointerId);
+});
+view.addEventListener('pointermove', (e) => {
+  if (!drag) return;
+  const perPixel = 90 / view.clientWidth;
+  setPose(drag.yaw - (e.clientX - drag.x) * perPixel, drag.pitch - (e.clientY - drag.y) * perPixel);
+});
+const endDrag = () => {
+  drag = null;
+};
+view.addEventListener('pointerup', endDrag);
+view.addEventListener('pointercancel', endDrag);
+
+// Files: picked, or dropped anywhere on the page (.onnx: a model; anything else: audio).
+async function openFile(file) {
+  const bytes = new Uint8Array(await file.arrayBuffer());
+  if (file.name.toLowerCase().endsWith('.onnx')) {
+    await loadModel(bytes, file.name);
+  } else {
+    await setWav(bytes, file.name);
+    if (params.get('autoplay') !== '0') await play();
+  }
+}
+const guarded = (fn) => (...args) => Promise.resolve().then(() => fn(...args)).catch((e) => showError(e.message ?? String(e)));
+$('model-input').addEventListener('change', guarded(async (e) => e.target.files[0] && openFile(e.target.files[0])));
+$('wav-input').addEventListener('change', guarded(async (e) => e.target.files[0] && openFile(e.target.files[0])));
+document.addEventListener('dragover', (e) => {
+  e.preventDefault();
+  view.classList.add('dragover');
+});
+document.addEventListener('dragleave', () => view.classList.remove('dragover'));
+document.addEventListener('drop', guarded(async (e) => {
+  e.preventDefault();
+  view.classList.remove('dragover');
+  const file = e.dataTransfer?.files?.[0];
+  if (file) await openFile(file);
+}));
+$('play').addEventListener('click', guarded(() => (state.playback ? stopPlayback() : play())));
+$('mic').addEventListener('click', guarded(() => (state.mic ? stopMic() : startMic())));
+
+// The hook: deterministic frames for the tests and the benchmark (yaw and pitch in radians).
+const hook = {
+  errors,
+  threads,
+  ortVersion: ort.env.versions?.web,
+  loadModel: (source, name) => loadModel(source, name).catch((e) => {
+    showError(e.message);
+    throw e;
+  }),
+  setWav,
+  chunkFor: (f) => trackChunk(f),
+  renderFrame: (f, yaw = 0, pitch = 0) => exclusive(() => render(trackChunk(f), yaw, pitch)),
+  renderChunk: (chunk, yaw = 0, pitch = 0) => exclusive(() => render(Float32Array.from(chunk), yaw, pitch)),
+  // The microphone's newest chunk rendered: { chunk, rgb }.
+  micFrame: (yaw = 0, pitch = 0) => exclusive(async () => {
+    const chunk = micChunk();
+    state.lastMicChunk = chunk;
+    return { chunk, rgb: await render(chunk, yaw, pitch) };
+  }),
+  lastMicChunk: () => state.lastMicChunk,
+  micSamples: () => state.mic?.ring.count ?? 0,
+  startMic,
+  stopMic,
+  play,
+  stop: stopPlayback,
+  state: () => ({
+    model: state.model?.name ?? null,
+    track: state.track ? { name: state.track.name, frames: state.track.frames } : null,
+    frame: state.frame,
+    playing: !!state.playback,
+    mic: !!state.mic,
+    crossOriginIsolated,
+    threads,
+  }),
+  // Frames per second of `n` frames of the track (or of silence) after `warmup`.
+  bench: (n = 50, warmup = 5) => exclusive(async () => {
+    const info = state.model.info;
+    const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
+    for (let i = 0; i < warmup; i++) await render(chunk(i), 0, 0);
+    const t0 = performance.now();
+    for (let i = 0; i < n; i++) await render(chunk(i), 0.2 * Math.sin(i / 7), 0);
+    const ms = (performance.now() - t0) / n;
+    return { frames: n, ms_per_frame: ms, fps: 1000 / ms };
+  }),
+};
+hook.ready = (async () => {
+  const url = params.get('model') ?? '../models/demo/frame.onnx';
+  if (url === 'none') return;
+  try {
+    await hook.loadModel(new URL(url, location.href).pathname, url.split('/').pop());
+  } catch (e) {
+    $('model-status').textContent = 'no model';
+  }
+})();
+window.nldf = hook;
+setPose(0, 0);
+requestAnimationFrame(tick);
