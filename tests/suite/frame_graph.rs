@@ -399,3 +399,83 @@ fn python_example_renders_frames_with_numpy_and_onnxruntime_alone() {
     println!("python example: 25 frames, worst difference from nldf's frames {worst} / 255");
     assert!(worst <= 1, "{worst}");
 }
+
+/// The fp16 and int8 frame graphs render what nldf renders with the fp16 and int8 ray
+/// graphs (int8: the same calibrated ranges), in tract and onnxruntime, each runtime
+/// against itself.
+#[test]
+fn fp16_and_int8_frame_graphs_match_their_ray_graphs() {
+    use nldf_export::export_frame_int8;
+    use nldf_infer::calibrate::{CalibrationFrame, activation_ranges};
+    let cfg = StudentConfig::realtime();
+    let mut spec = spec_for(&cfg);
+    spec.intrinsics = camera_at(64, 64);
+    let run = write_run_with(&cfg, 77, spec.clone());
+    run.scale_weights_like_trained(cfg.n_blocks());
+    let f32_model = read_model(&run.export(WeightType::F32)).unwrap();
+    let features = spec.features.nldf().unwrap().clone();
+    let wave = Waveform {
+        sample_rate: 16_000,
+        samples: speech_like(16_000),
+    };
+    let windows = audio_windows(&wave, spec.fps, &features).unwrap();
+    let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let calibration: Vec<CalibrationFrame> = [3, 12]
+        .into_iter()
+        .map(|f| {
+            let camera = nldf_core::camera::Camera {
+                intrinsics: spec.intrinsics,
+                c2w: pose,
+            };
+            let rays = nldf_core::rays::head_rays(&camera, &spec.head_range()).rays;
+            CalibrationFrame {
+                origins: rays.origins,
+                directions: rays.directions,
+                audio: neighbourhood(&windows, f, cfg.audio.att_frames),
+            }
+        })
+        .collect();
+    let ranges = activation_ranges(&run.student_dir(), &f32_model.info, &calibration).unwrap();
+    let int8_rays = run.root.join("model_int8.onnx");
+    nldf_export::export_student_int8(&run.student_dir(), &int8_rays, &ranges).unwrap();
+    let int8_frame = run.root.join("frame_int8.onnx");
+    export_frame_int8(&run.student_dir(), &int8_frame, &ranges).unwrap();
+    let fp16_frame = run.root.join("frame_fp16.onnx");
+    export_frame(&run.student_dir(), &fp16_frame, WeightType::F16).unwrap();
+    let pairs = [
+        ("fp16", run.export(WeightType::F16), fp16_frame),
+        ("int8", int8_rays, int8_frame),
+    ];
+    let mut runtimes = vec![BackendKind::Tract];
+    if ort_available() {
+        runtimes.push(BackendKind::Ort);
+    }
+    let layout = FrameAudio::new(&features, spec.fps, cfg.audio.att_frames).unwrap();
+    let turned = turn_about(spec.bounds.centre(), 0.4, 0.1) * pose;
+    for (label, rays_path, frame_path) in &pairs {
+        let model = read_frame_model(frame_path).unwrap();
+        for &kind in &runtimes {
+            let options = BackendOptions {
+                batch_size: 4096,
+                threads: 2,
+                spin: true,
+            };
+            let backend = backend_for(&read_model(rays_path).unwrap(), kind, options).unwrap();
+            let mut renderer = FrameRenderer::new(backend, None).unwrap();
+            let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
+            let mut worst = 0.0f32;
+            for (f, c2w) in [(0, pose), (10, turned), (windows.n_frames - 1, pose)] {
+                let audio = neighbourhood(&windows, f, cfg.audio.att_frames);
+                let want = renderer.render(c2w, &audio).unwrap();
+                let got = graph.render(c2w, &layout.chunk(&wave.samples, f)).unwrap();
+                worst = worst.max(max_diff(&got.image.data, &want.image.data));
+            }
+            println!(
+                "{label}: frame graph against the {label} ray graph in {}: worst |image diff| \
+                 {worst:.2e}",
+                kind.name()
+            );
+            assert!(worst <= IMAGE_TOL, "{label} {}: {worst}", kind.name());
+        }
+    }
+}
