@@ -1,1 +1,236 @@
-//! Placeholder: the browser test lands here.
+//! The page (`web/`) in Debian's headless Chromium against nldf: the frames it draws on its
+//! canvas with onnxruntime-web (WASM, SIMD, 2 threads) from the shipped frame graph and a
+//! WAV picked through its file input are nldf's frames (`FrameRenderer` on the shipped ray
+//! graph) within 2/255 per channel, at both ends and the middle of the track, from the
+//! default pose and a turned one; the microphone (Chromium's fake device playing the WAV)
+//! gives a chunk that is not silent and a frame equal to the Rust frame graph's for that
+//! chunk; a ray graph picked instead is refused on the page; and the page reports no error.
+//! Needs node, /usr/bin/chromium and web/node_modules (`scripts/web_env.sh`): outside CI a
+//! missing one skips, under CI it fails.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use glam::Mat4;
+use nldf_core::audio::neighbourhood;
+use nldf_core::camera::turn_about;
+use nldf_export::{read_frame_model, read_model};
+use nldf_infer::FrameRenderer;
+use nldf_infer::audio::windows_from_wav;
+use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
+use nldf_infer::frame_graph::FrameGraph;
+
+use crate::util::{ort_available, write_test_wav};
+
+/// Worst allowed difference of an 8-bit channel between the page's canvas and nldf.
+const TOL_8BIT: u8 = 2;
+
+/// The turned pose: yaw, pitch in radians.
+const POSES: [(f32, f32); 2] = [(0.0, 0.0), (0.35, -0.15)];
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Whether node, Chromium and the page's npm packages are here; outside CI a missing one
+/// skips (after saying so), under CI it fails.
+fn browser_available() -> bool {
+    let web = repo().join("web");
+    let node = Command::new("node")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    let missing = if !node {
+        Some("node is missing (install Node.js 18 or newer)".to_string())
+    } else if !Path::new("/usr/bin/chromium").exists() {
+        Some("/usr/bin/chromium is missing: run scripts/web_env.sh".to_string())
+    } else if !web.join("node_modules/onnxruntime-web/dist").is_dir()
+        || !web.join("node_modules/playwright-core").is_dir()
+    {
+        Some("web/node_modules is missing: run scripts/web_env.sh".to_string())
+    } else {
+        None
+    };
+    match missing {
+        None => true,
+        Some(msg) => nldf_tests::tool_missing::<()>(msg).is_some(),
+    }
+}
+
+/// The largest difference between two 8-bit images, and how many channels differ at all.
+fn diff_8bit(a: &[u8], b: &[u8]) -> (u8, usize) {
+    assert_eq!(a.len(), b.len(), "image sizes");
+    a.iter().zip(b).fold((0, 0), |(worst, n), (x, y)| {
+        let d = x.abs_diff(*y);
+        (worst.max(d), n + usize::from(d > 0))
+    })
+}
+
+fn read_f32(path: &Path) -> Vec<f32> {
+    std::fs::read(path)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect()
+}
+
+#[test]
+fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
+    if !browser_available() {
+        return;
+    }
+    let root = repo();
+    let tmp = tempfile::tempdir().unwrap();
+    let wav = tmp.path().join("speech.wav");
+    write_test_wav(&wav, 2.0);
+    let out = tmp.path().join("browser");
+
+    let ray_path = root.join("models/demo/model.onnx");
+    let model = read_model(&ray_path).unwrap();
+    let info = &model.info;
+    let windows = windows_from_wav(info, &ray_path, &wav).unwrap();
+    let n = windows.n_frames;
+    let frames = [0, 1, n / 2, n - 2, n - 1];
+    let default_pose = Mat4::from_cols_array_2d(&info.spec.default_pose).transpose();
+    let centre = info.spec.bounds.centre();
+    let pose = |(yaw, pitch): (f32, f32)| turn_about(centre, yaw, pitch) * default_pose;
+
+    let list = |v: &[usize]| {
+        v.iter()
+            .map(|f| f.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let poses = POSES
+        .iter()
+        .map(|(y, p)| format!("{y},{p}"))
+        .collect::<Vec<_>>()
+        .join(";");
+    let run = Command::new("node")
+        .current_dir(&root)
+        .arg("web/test/browser.mjs")
+        .args(["--wav", wav.to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap()])
+        .args(["--frames", &list(&frames)])
+        .args(["--poses", &poses])
+        .args(["--ray-graph", ray_path.to_str().unwrap()])
+        .arg("--mic")
+        .output()
+        .unwrap();
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "web/test/browser.mjs failed:\n{log}");
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("result.json")).unwrap()).unwrap();
+    println!(
+        "{}, onnxruntime-web {}, {} threads, cross-origin isolated: {}",
+        result["chromium"], result["ort_version"], result["threads"], result["crossOriginIsolated"]
+    );
+
+    for key in ["errors", "page_errors", "console_errors"] {
+        let list = result[key].as_array().unwrap();
+        assert!(list.is_empty(), "the page reported {key}: {list:?}");
+    }
+    assert_eq!(result["crossOriginIsolated"], true, "COOP/COEP headers");
+    assert!(result["threads"].as_u64().unwrap() >= 2, "threads");
+    let refused = result["ray_graph_error"].as_str().unwrap_or_default();
+    assert!(
+        refused.contains("ray graph") && refused.contains("--frame"),
+        "a ray graph was not refused with a clear line: {refused:?}"
+    );
+    assert_eq!(
+        result["ray_graph_error_shown"], true,
+        "the error is on the page"
+    );
+    assert_eq!(result["track"]["frames"].as_u64(), Some(n as u64));
+    let (w, h) = (
+        info.spec.intrinsics.width as usize,
+        info.spec.intrinsics.height as usize,
+    );
+    assert_eq!(
+        (result["width"].as_u64(), result["height"].as_u64()),
+        (Some(w as u64), Some(h as u64))
+    );
+
+    // The WAV picked through the file input: nldf's frames.
+    let backend = backend_for(
+        &model,
+        BackendKind::Tract,
+        BackendOptions {
+            batch_size: 4096,
+            threads: 2,
+            spin: true,
+        },
+    )
+    .unwrap();
+    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let drawn = result["frames"].as_array().unwrap();
+    assert_eq!(drawn.len(), frames.len() * POSES.len());
+    let mut worst = 0u8;
+    for entry in drawn {
+        let f = entry["frame"].as_u64().unwrap() as usize;
+        let p = entry["pose"].as_u64().unwrap() as usize;
+        let audio = neighbourhood(&windows, f, info.audio.att_frames);
+        let want = renderer
+            .render(pose(POSES[p]), &audio)
+            .unwrap()
+            .image
+            .to_rgb8();
+        let got = std::fs::read(out.join(entry["file"].as_str().unwrap())).unwrap();
+        assert_eq!(got.len(), w * h * 3, "frame {f} pose {p}: canvas size");
+        let (d, changed) = diff_8bit(&got, &want);
+        assert!(
+            d <= TOL_8BIT,
+            "frame {f}, pose {:?}: the canvas is {d}/255 off nldf's frame ({changed} channels differ)",
+            POSES[p]
+        );
+        worst = worst.max(d);
+    }
+    println!(
+        "{} canvas frames against nldf render: worst {worst}/255",
+        drawn.len()
+    );
+
+    // The microphone: a chunk that is not silent, and the Rust frame graph's frame for it.
+    let frame_model = read_frame_model(&root.join("models/demo/frame.onnx")).unwrap();
+    let chunk = read_f32(&out.join(result["mic"]["chunk"].as_str().unwrap()));
+    assert_eq!(
+        chunk.len(),
+        frame_model.audio.samples,
+        "the microphone chunk"
+    );
+    let live: Vec<f32> = chunk.iter().copied().filter(|v| !v.is_nan()).collect();
+    let rms = (live.iter().map(|v| v * v).sum::<f32>() / live.len().max(1) as f32).sqrt();
+    assert!(
+        live.len() == chunk.len() && rms > 0.05,
+        "the microphone chunk is silent or short: rms {rms}, {} of {} samples",
+        live.len(),
+        chunk.len()
+    );
+    let kind = if ort_available() {
+        BackendKind::Ort
+    } else {
+        BackendKind::Tract
+    };
+    let mut graph = FrameGraph::open(&frame_model, kind, 2).unwrap();
+    let yaw = result["mic"]["yaw"].as_f64().unwrap() as f32;
+    let pitch = result["mic"]["pitch"].as_f64().unwrap() as f32;
+    let want = graph
+        .render(pose((yaw, pitch)), &chunk)
+        .unwrap()
+        .image
+        .to_rgb8();
+    let got = std::fs::read(out.join(result["mic"]["file"].as_str().unwrap())).unwrap();
+    let (d, changed) = diff_8bit(&got, &want);
+    println!(
+        "microphone: rms {rms:.3}, canvas against the frame graph in {}: {d}/255",
+        kind.name()
+    );
+    assert!(
+        d <= TOL_8BIT,
+        "microphone: the canvas is {d}/255 off the frame graph's frame ({changed} channels differ)"
+    );
+}

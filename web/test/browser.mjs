@@ -41,6 +41,12 @@ function parseArgs(argv) {
 }
 
 const args = parseArgs(process.argv.slice(2));
+// A hung browser must not hang the test that runs this.
+const limit = setTimeout(() => {
+  console.error('browser: gave up after 120 s');
+  process.exit(4);
+}, 120_000);
+limit.unref();
 if (!existsSync(args.chromium)) {
   console.error(`browser: ${args.chromium} is missing (run scripts/web_env.sh)`);
   process.exit(3);
