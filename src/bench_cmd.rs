@@ -9,6 +9,7 @@ use clap::Subcommand;
 use nldf_bench::Written;
 use nldf_bench::encoding::EncodingJob;
 use nldf_bench::step::{StudentStepJob, TeacherStepJob};
+use nldf_bench::web::WebBenchJob;
 
 use crate::progress::EventPrinter;
 use crate::train_cmd::TeacherPreset;
@@ -35,9 +36,35 @@ pub enum BenchCommand {
     /// f16 and int8, in onnxruntime and tract, scored on the held-out splits and timed per
     /// whole frame side by side; a table, JSON and a plot with the Pareto front.
     Frontier(crate::frontier_cmd::FrontierArgs),
+    /// Frame graphs (`nldf export --frame`) in headless Chromium with onnxruntime-web
+    /// (WASM, SIMD, threads; web/bench.mjs) beside native onnxruntime and tract, in one
+    /// run: frames per second of each.
+    Web(WebBenchArgs),
     /// The positional encoding's sines and cosines three ways (direct f32, f32
     /// double-angle climb, nldf's f64 climb): time per value and error against f64.
     Encoding(EncodingBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct WebBenchArgs {
+    /// Frame graphs to time (repeat the flag), e.g. one student's fp32, fp16 and int8.
+    #[arg(long = "model", required = true)]
+    pub models: Vec<PathBuf>,
+    /// Timed frames per model and runtime.
+    #[arg(long, default_value_t = 60)]
+    pub frames: usize,
+    /// Threads of every runtime, the browser's WASM threads too.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// The page's folder, whose bench.mjs times the browser (needs scripts/web_env.sh).
+    #[arg(long, default_value = "web")]
+    pub web: PathBuf,
+    /// Time the native runtimes only.
+    #[arg(long)]
+    pub no_browser: bool,
+    /// Folder for web.json and web.md.
+    #[arg(long, default_value = "runs/bench")]
+    pub out: PathBuf,
 }
 
 #[derive(clap::Args, Debug)]
@@ -104,6 +131,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Stream(args) => crate::bench_model_cmd::stream(args),
         BenchCommand::Still(args) => crate::bench_model_cmd::still(args),
         BenchCommand::Encoding(args) => encoding(args),
+        BenchCommand::Web(args) => web(args),
         BenchCommand::Frontier(args) => crate::frontier_cmd::run(args),
     }
 }
@@ -119,6 +147,21 @@ pub fn print_written(written: &Written) {
     for plot in &written.plots {
         println!("wrote {}", plot.display());
     }
+}
+
+fn web(args: WebBenchArgs) -> Result<()> {
+    if args.frames == 0 || args.threads == 0 {
+        anyhow::bail!("--frames and --threads must be positive");
+    }
+    let job = WebBenchJob {
+        models: args.models,
+        frames: args.frames,
+        threads: args.threads,
+        web: (!args.no_browser).then_some(args.web),
+    };
+    let report = job.run(&mut |note| eprintln!("{note}"))?;
+    print_written(&report.write(&args.out)?);
+    Ok(())
 }
 
 fn encoding(args: EncodingBenchArgs) -> Result<()> {

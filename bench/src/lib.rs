@@ -18,6 +18,7 @@ pub mod report;
 pub mod step;
 pub mod still;
 pub mod stream;
+pub mod web;
 
 pub use error::{Error, Result};
 pub use report::Written;

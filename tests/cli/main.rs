@@ -658,6 +658,15 @@ fn bad_models_and_audio_for_render_are_refused() {
             },
             "foreign.onnx",
         ),
+        (
+            "a frame graph where nldf renders from the ray graph",
+            {
+                let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/demo");
+                let bytes = std::fs::read(shipped.join("frame.onnx")).unwrap();
+                write(d, "frame.onnx", &bytes)
+            },
+            "frame graph",
+        ),
     ];
     for (case, model, needle) in models {
         refused(case, &render(&model, &f.wav, &out), &[needle], &[&out]);
