@@ -20,7 +20,7 @@ if ! command -v npm >/dev/null 2>&1; then
   exit 0
 fi
 stamp=web/node_modules/.package-lock.json
-if [ ! -f "$stamp" ] || [ web/package-lock.json -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ web/package-lock.json -nt "$stamp" ] || [ web/package.json -nt "$stamp" ]; then
   # PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD: playwright-core downloads nothing, but make sure.
   (cd web && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error >/dev/null)
 fi
