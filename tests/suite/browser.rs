@@ -146,6 +146,11 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
         "the error is on the page"
     );
     assert_eq!(result["track"]["frames"].as_u64(), Some(n as u64));
+    let drag = &result["drag"];
+    assert!(
+        drag["yaw_deg"].as_f64().unwrap() < -1.0 && drag["pitch_deg"].as_f64().unwrap() > 0.5,
+        "dragging right and up turns the head: {drag}"
+    );
     let (w, h) = (
         info.spec.intrinsics.width as usize,
         info.spec.intrinsics.height as usize,

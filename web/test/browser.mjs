@@ -127,6 +127,20 @@ try {
     }
   }
 
+  // Dragging on the view turns the head: the sliders follow and the canvas is redrawn.
+  const before = await page.evaluate(() => document.getElementById('canvas').toDataURL());
+  const box = await page.locator('#drop').boundingBox();
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(box.x + box.width / 2 + 60, box.y + box.height / 2 - 30, { steps: 4 });
+  await page.mouse.up();
+  await page.waitForFunction((b) => document.getElementById('canvas').toDataURL() !== b, before);
+  result.drag = await page.evaluate(() => ({
+    yaw_deg: Number(document.getElementById('yaw').value),
+    pitch_deg: Number(document.getElementById('pitch').value),
+  }));
+  await page.click('#reset');
+
   if (args.mic) {
     await page.evaluate(() => window.nldf.startMic());
     const need = (await page.evaluate(() => window.nldf.chunkFor(0).length)) + 16000 / 2;
