@@ -74,6 +74,8 @@ const common = {
   chromium: run(opts.chromium, ['--version']),
   ort_web: JSON.parse(readFileSync(path.join(here, 'node_modules/onnxruntime-web/package.json'), 'utf8')).version,
   backend: 'wasm (SIMD, threads)',
+  // onnxruntime-web 1.30 ships only its SIMD + threads WASM build.
+  simd: true,
 };
 
 const server = await startServer(0);
