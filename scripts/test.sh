@@ -6,6 +6,8 @@ cd "$(dirname "$0")/.."
 
 # The Python environment of the ONNX tests (onnx, onnxruntime, numpy in .venv).
 bash scripts/python_env.sh >/dev/null
+# The browser test's Chromium (Debian's, apt, as root) and web/node_modules (npm ci).
+bash scripts/web_env.sh >/dev/null
 
 if cargo nextest --version >/dev/null 2>&1; then
   exec cargo nextest run --workspace --no-fail-fast "$@"
