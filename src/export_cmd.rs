@@ -4,7 +4,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use nldf_export::{WeightType, export_frame, export_student, read_frame_model, read_model};
+use nldf_export::{
+    ExportReport, WeightType, export_frame, export_frame_int8, export_student, export_student_int8,
+    read_frame_model, read_model,
+};
+use nldf_infer::calibrate::calibrated_ranges;
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {
@@ -66,12 +70,15 @@ pub fn run(args: ExportArgs) -> Result<()> {
     };
     let report = match (&args.data, weights) {
         (Some(data), WeightType::Int8) => {
-            let export = if args.frame {
-                nldf_infer::calibrate::export_frame_int8
-            } else {
-                nldf_infer::calibrate::export_int8
+            let export = || -> nldf_infer::Result<ExportReport> {
+                let ranges = calibrated_ranges(&student, data, args.calibration_frames)?;
+                Ok(if args.frame {
+                    export_frame_int8(&student, &out, &ranges)?
+                } else {
+                    export_student_int8(&student, &out, &ranges)?
+                })
             };
-            export(&student, data, args.calibration_frames, &out).with_context(|| {
+            export().with_context(|| {
                 format!(
                     "exporting the student in {} in int8, calibrated on {}",
                     student.display(),

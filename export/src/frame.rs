@@ -26,8 +26,8 @@ use crate::contract::{
 };
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
-use crate::onnx::{DataType, ModelProto, OperatorSetIdProto};
-use crate::student::{ExportReport, model_info, student_nodes, write_model};
+use crate::onnx::{DataType, ModelProto};
+use crate::student::{ExportReport, model_info, model_proto, student_nodes, write_model};
 
 /// Name of the frame graph.
 pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
@@ -128,21 +128,8 @@ fn frame_model(
     );
     let graph = g.finish(FRAME_GRAPH_NAME, &doc);
     let info = model_info(ckpt, &graph);
-    let model = ModelProto {
-        ir_version: Some(contract::IR_VERSION),
-        opset_import: vec![OperatorSetIdProto {
-            domain: Some(String::new()),
-            version: Some(contract::OPSET),
-        }],
-        producer_name: Some(contract::PRODUCER.to_string()),
-        producer_version: Some(env!("CARGO_PKG_VERSION").to_string()),
-        domain: Some(String::new()),
-        model_version: Some(1),
-        doc_string: Some(doc),
-        graph: Some(graph),
-        metadata_props: info.to_frame_metadata(&layout),
-    };
-    Ok((model, info, n_values))
+    let metadata = info.to_frame_metadata(&layout);
+    Ok((model_proto(graph, doc, metadata), info, n_values))
 }
 
 /// The background as 8-bit RGB at the image's size, `[h * w * 3]`.

@@ -241,7 +241,18 @@ fn build(
     let taps = g.taps().to_vec();
     let graph = g.finish(GRAPH_NAME, &doc);
     let info = model_info(ckpt, &graph);
-    let model = ModelProto {
+    let metadata = info.to_metadata();
+    Ok((model_proto(graph, doc, metadata), info, n_values, taps))
+}
+
+/// The model around `graph`: the contract's IR version and opset, nldf as producer, `doc`
+/// and the `metadata` entries.
+pub(crate) fn model_proto(
+    graph: GraphProto,
+    doc: String,
+    metadata: Vec<crate::onnx::StringStringEntryProto>,
+) -> ModelProto {
+    ModelProto {
         ir_version: Some(contract::IR_VERSION),
         opset_import: vec![OperatorSetIdProto {
             domain: Some(String::new()),
@@ -251,11 +262,10 @@ fn build(
         producer_version: Some(env!("CARGO_PKG_VERSION").to_string()),
         domain: Some(String::new()),
         model_version: Some(1),
-        doc_string: Some(doc.clone()),
+        doc_string: Some(doc),
         graph: Some(graph),
-        metadata_props: info.to_metadata(),
-    };
-    Ok((model, info, n_values, taps))
+        metadata_props: metadata,
+    }
 }
 
 /// The student's nodes on rays `(origins, directions)` with the audio neighbourhood

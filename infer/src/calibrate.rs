@@ -188,18 +188,6 @@ pub fn export_int8(
     Ok(export_student_int8(student_dir, out, &ranges)?)
 }
 
-/// [`export_int8`] for the frame graph (`nldf export --frame --int8`): the same products
-/// with the same ranges.
-pub fn export_frame_int8(
-    student_dir: &Path,
-    data: &Path,
-    n_frames: usize,
-    out: &Path,
-) -> Result<ExportReport> {
-    let ranges = calibrated_ranges(student_dir, data, n_frames)?;
-    Ok(nldf_export::export_frame_int8(student_dir, out, &ranges)?)
-}
-
 /// The int8 products' input ranges of the student in `student_dir`, measured on `n_frames`
 /// training frames of the dataset at `data`.
 pub fn calibrated_ranges(

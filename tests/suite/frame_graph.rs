@@ -52,6 +52,16 @@ out = [session.run(["image"], {"audio": c, "pose": p})[0] for c, p in zip(chunks
 np.save(f"{folder}/images.npy", np.stack(out))
 "#;
 
+/// nldf's renderer on the ray graph `model` in the runtime `kind`: the reference frames.
+fn nldf_renderer(model: &nldf_export::ExportedModel, kind: BackendKind) -> FrameRenderer {
+    let options = BackendOptions {
+        batch_size: 4096,
+        threads: 2,
+        spin: true,
+    };
+    FrameRenderer::new(backend_for(model, kind, options).unwrap(), None).unwrap()
+}
+
 /// The camera of `spec_for`, at `width` x `height` pixels with the same field of view.
 fn camera_at(width: u32, height: u32) -> Intrinsics {
     let scale = width as f32 / 24.0;
@@ -114,13 +124,7 @@ fn parity(
         .collect();
 
     let ray_model = read_model(&rays_path).unwrap();
-    let options = BackendOptions {
-        batch_size: 4096,
-        threads: 2,
-        spin: true,
-    };
-    let backend = backend_for(&ray_model, BackendKind::Tract, options).unwrap();
-    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let mut renderer = nldf_renderer(&ray_model, BackendKind::Tract);
     let reference: Vec<(ImageRgb, Vec<f32>, usize)> = cases
         .iter()
         .map(|&(f, pose)| {
@@ -292,13 +296,7 @@ fn shipped_frame_graph_matches_the_shipped_model() {
         samples: speech_like(16_000 + 3 * 640),
     };
     let windows = audio_windows(&wave, spec.fps, &features).unwrap();
-    let options = BackendOptions {
-        batch_size: 4096,
-        threads: 2,
-        spin: true,
-    };
-    let backend = backend_for(&ray_model, BackendKind::Tract, options).unwrap();
-    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let mut renderer = nldf_renderer(&ray_model, BackendKind::Tract);
     let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
     let turned = turn_about(spec.bounds.centre(), -0.6, 0.25) * pose;
     let mut runtimes = vec![BackendKind::Tract];
@@ -372,13 +370,7 @@ fn python_example_renders_frames_with_numpy_and_onnxruntime_alone() {
     let spec = &ray_model.info.spec;
     let wave = nldf_core::audio::read_wav(&wav).unwrap();
     let windows = audio_windows(&wave, spec.fps, spec.features.nldf().unwrap()).unwrap();
-    let options = BackendOptions {
-        batch_size: 4096,
-        threads: 2,
-        spin: true,
-    };
-    let backend = backend_for(&ray_model, BackendKind::Tract, options).unwrap();
-    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let mut renderer = nldf_renderer(&ray_model, BackendKind::Tract);
     let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
     let mut worst = 0i32;
     for f in 0..windows.n_frames {
@@ -455,13 +447,7 @@ fn fp16_and_int8_frame_graphs_match_their_ray_graphs() {
     for (label, rays_path, frame_path) in &pairs {
         let model = read_frame_model(frame_path).unwrap();
         for &kind in &runtimes {
-            let options = BackendOptions {
-                batch_size: 4096,
-                threads: 2,
-                spin: true,
-            };
-            let backend = backend_for(&read_model(rays_path).unwrap(), kind, options).unwrap();
-            let mut renderer = FrameRenderer::new(backend, None).unwrap();
+            let mut renderer = nldf_renderer(&read_model(rays_path).unwrap(), kind);
             let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
             let mut worst = 0.0f32;
             for (f, c2w) in [(0, pose), (10, turned), (windows.n_frames - 1, pose)] {
