@@ -8,7 +8,7 @@ use nldf_export::{
     ExportReport, WeightType, export_frame, export_frame_int8, export_student, export_student_int8,
     read_frame_model, read_model,
 };
-use nldf_infer::calibrate::calibrated_ranges;
+use nldf_infer::quantize::calibrated_ranges;
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {

@@ -16,7 +16,6 @@ pub mod audio;
 pub mod backend;
 #[cfg(feature = "ort")]
 pub mod bench;
-pub mod calibrate;
 pub mod doctor;
 pub mod error;
 pub mod frame;
@@ -26,6 +25,7 @@ pub mod ort_backend;
 pub mod ort_library;
 pub mod output;
 pub mod poses;
+pub mod quantize;
 pub mod runtime;
 pub mod still;
 pub mod stream;

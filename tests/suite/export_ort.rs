@@ -15,7 +15,7 @@ use nldf_core::audio::neighbourhood;
 use nldf_core::rays::Rays;
 use nldf_export::{WeightType, export_student_int8, read_model};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
-use nldf_infer::calibrate::{CalibrationFrame, activation_ranges};
+use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
 use nldf_train::student::StudentConfig;
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.
@@ -304,7 +304,7 @@ fn int8_stays_within_0_3_db_of_fp32_on_a_trained_students_val_and_novel_frames()
     let f32_path = dir.path().join("f32.onnx");
     let int8_path = dir.path().join("int8.onnx");
     nldf_export::export_student(dir.path(), &f32_path, WeightType::F32).unwrap();
-    nldf_infer::calibrate::export_int8(dir.path(), scene, 4, &int8_path).unwrap();
+    nldf_infer::quantize::export_int8(dir.path(), scene, 4, &int8_path).unwrap();
     let renderer = |path: &Path| {
         let model = read_model(path).unwrap();
         let att = model.info.audio.att_frames;

@@ -1,8 +1,9 @@
-//! Calibration of an int8 export: the student's f32 graph with the input of every int8
-//! product as an extra output ([`nldf_export::calibration_model`]) runs in tract on the
-//! rays of training frames, each with its own recorded audio, and the range of every such
-//! input becomes the fixed uint8 step and zero point of its product
-//! ([`nldf_export::export_student_int8`]). Fixed ranges keep a ray's colour independent
+//! Quantization: `nldf export --int8` (for the ray graph and the frame graph) is written
+//! here, beside the runtimes, because calibrating it means running the model. The
+//! student's f32 graph with the input of every int8 product as an extra output
+//! ([`nldf_export::calibration_model`]) runs in tract on the rays of training frames, each
+//! with its own recorded audio, and the range of every such input becomes the fixed uint8
+//! step and zero point of its product ([`nldf_export::export_student_int8`]). Fixed ranges keep a ray's colour independent
 //! of the rays that share its batch, which ranges measured per call would not.
 
 use std::collections::HashMap;
