@@ -66,8 +66,7 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
     let splits: Vec<Split> = report.splits.iter().map(|(s, _)| *s).collect();
     assert_eq!(splits, [Split::Val, Split::Novel, Split::Voice]);
     // The pinned steps are what ran, and the time breakdown names every part.
-    let teacher =
-        nldf_train::teacher_trainer::TeacherRun::open(&out.join("teacher"), false).unwrap();
+    let teacher = nldf_train::teacher_trainer::TeacherModel::open(&out.join("teacher")).unwrap();
     assert_eq!(teacher.step, 12);
     let timing = nldf_train::timing::Timing::open(&out).unwrap();
     let parts: Vec<&str> = timing.parts.iter().map(|p| p.what.as_str()).collect();

@@ -201,7 +201,7 @@ use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
 use nldf_train::data::TrainData;
 use nldf_train::pool::{BeamPool, PoolEntry};
 use nldf_train::student_trainer::StudentRun;
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
 
 fn entry(frame: u32, loss: f32) -> PoolEntry {
     PoolEntry {
@@ -304,7 +304,7 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     // end equal to those rendered up front; the cache is written once the last is done.
     {
         teacher.save().unwrap();
-        let reopened = TeacherRun::open(_teacher_dir.path(), false).unwrap();
+        let reopened = TeacherModel::open(_teacher_dir.path()).unwrap();
         let later = tempfile::tempdir().unwrap();
         let mut cfg = tiny_student_config(150);
         cfg.train.pseudo_per_step = 2;
@@ -387,7 +387,7 @@ fn a_student_resumes_bit_exactly_with_its_pool() {
     let next: Vec<f64> = (0..2)
         .map(|_| run.train_step(&data).unwrap().loss)
         .collect();
-    let mut resumed = StudentRun::open(dir.path(), true).unwrap();
+    let mut resumed = StudentRun::open(dir.path()).unwrap();
     resumed.prepare(&data, None, &mut |_, _| {}).unwrap();
     assert_eq!(resumed.step, 5);
     assert!(!saved_pool.entries.is_empty());

@@ -14,7 +14,7 @@ use nldf_train::data::TrainData;
 use nldf_train::nn::{conv1d, new_varmap};
 use nldf_train::render::composite;
 use nldf_train::sampler::{sample_importance, sample_stratified};
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -209,14 +209,14 @@ fn resuming_from_a_checkpoint_gives_the_identical_next_step() {
     run.save().unwrap();
     let (a1, _) = run.train_step(&data).unwrap();
     let (a2, _) = run.train_step(&data).unwrap();
-    let mut resumed = TeacherRun::open(dir.path(), true).unwrap();
+    let mut resumed = TeacherRun::open(dir.path()).unwrap();
     assert_eq!(resumed.step, 6);
     let (b1, _) = resumed.train_step(&data).unwrap();
     let (b2, _) = resumed.train_step(&data).unwrap();
     assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
     assert_eq!(a2.to_bits(), b2.to_bits(), "{a2} vs {b2}");
     // Without the optimizer state the second step would differ: the check can fail.
-    let mut cold = TeacherRun::open(dir.path(), false).unwrap();
+    let mut cold = TeacherRun::from_model(TeacherModel::open(dir.path()).unwrap()).unwrap();
     cold.train_step(&data).unwrap();
     let (c2, _) = cold.train_step(&data).unwrap();
     assert_ne!(a2.to_bits(), c2.to_bits());
@@ -243,14 +243,14 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
     );
     assert!(log[1].val_psnr.is_some() && log[0].val_psnr.is_none());
     // A stop request leaves a checkpoint that opens at the step it stopped at.
-    let mut run = TeacherRun::open(dir.path(), true).unwrap();
+    let mut run = TeacherRun::open(dir.path()).unwrap();
     run.cfg.train.iters = 30;
     assert!(
         run.train(&data, &AtomicBool::new(true), &mut |_| {})
             .unwrap()
             .is_none()
     );
-    assert_eq!(TeacherRun::open(dir.path(), true).unwrap().step, 12);
+    assert_eq!(TeacherRun::open(dir.path()).unwrap().step, 12);
     for f in [
         "model.safetensors",
         "train_state.safetensors",

@@ -15,8 +15,8 @@ use crate::config::{StudentRunConfig, StudentTrainConfig};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::scores::frame_scores;
-use crate::student_trainer::StudentRun;
-use crate::teacher_trainer::TeacherRun;
+use crate::student_trainer::StudentModel;
+use crate::teacher_trainer::TeacherModel;
 use nldf_core::dataset::Frame;
 use nldf_core::region::Region;
 
@@ -108,7 +108,7 @@ fn hit_rays(data: &TrainData, frame: &Frame) -> usize {
         .len()
 }
 
-impl FrameModel for TeacherRun {
+impl FrameModel for TeacherModel {
     fn label(&self) -> String {
         "teacher".into()
     }
@@ -128,11 +128,11 @@ impl FrameModel for TeacherRun {
         self.cfg.model.macs_per_ray() as f64
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
-        TeacherRun::render_frame(self, data, frame)
+        TeacherModel::render_frame(self, data, frame)
     }
 }
 
-impl FrameModel for StudentRun {
+impl FrameModel for StudentModel {
     fn label(&self) -> String {
         self.dir
             .file_name()
@@ -149,7 +149,7 @@ impl FrameModel for StudentRun {
         self.cfg.model.macs_per_ray() as f64
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
-        StudentRun::render_frame(self, data, frame)
+        StudentModel::render_frame(self, data, frame)
     }
 }
 

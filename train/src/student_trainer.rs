@@ -41,7 +41,7 @@ use crate::run_loop::{TrainingRun, finite_loss, run_fields};
 use crate::scores::{Scores, score_validation_frames};
 use crate::student::{Student, student};
 use crate::targets::{TargetLayout, load_targets, save_targets, teacher_targets, view_targets};
-use crate::teacher_trainer::TeacherRun;
+use crate::teacher_trainer::TeacherModel;
 use crate::views::{
     FrameBeams, View, frame_beams, mouth_surface_points, thin_beams, thin_pseudo_beams,
     training_views, views_fingerprint,
@@ -70,15 +70,110 @@ pub struct StudentStep {
     pub pool_beams: usize,
 }
 
-/// A student being trained: folder, configuration, weights, optimizer, pool and the cached
-/// per-frame beams and teacher targets.
-pub struct StudentRun {
+/// A trained student, for rendering: its folder, configuration and weights, and the step
+/// they were saved at. [`StudentModel::open`] reads nothing of the training state (the
+/// optimizer's moments, the beam pool), so a model renders whether or not its run can
+/// resume.
+pub struct StudentModel {
     pub dir: PathBuf,
     pub cfg: StudentRunConfig,
     pub varmap: VarMap,
     pub student: Student,
-    adam: Adam,
+    /// Steps done.
     pub step: usize,
+    /// Training seconds the checkpoint records, across resumes.
+    pub trained_s: f64,
+}
+
+impl StudentModel {
+    /// Loads the trained student in `dir`: its `config.json` and weights.
+    pub fn open(dir: &Path) -> Result<StudentModel> {
+        let mut model = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
+        let (step, clock) = open_checkpoint(dir, &model.varmap, None)?;
+        (model.step, model.trained_s) = (step, clock.elapsed());
+        Ok(model)
+    }
+
+    /// The network of `cfg` at step 0, weights as the variable builder made them.
+    fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentModel> {
+        cfg.check()?;
+        let (varmap, vb) = new_varmap();
+        let student = student(&cfg.model, vb)?;
+        Ok(StudentModel {
+            dir: dir.to_path_buf(),
+            cfg,
+            varmap,
+            student,
+            step: 0,
+            trained_s: 0.0,
+        })
+    }
+
+    /// Audio codes of frames.
+    ///
+    /// # Shapes
+    /// - returns `[aud_ids.len(), audio_dim]`
+    pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
+        let windows = data.neighbourhoods(aud_ids, self.cfg.model.audio.att_frames)?;
+        Ok(self.student.audio_codes(&windows)?)
+    }
+
+    /// Renders a whole frame (any split): the rays that meet the head's bounds
+    /// ([`head_rays`]) go through the student, the other pixels are the background.
+    pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        let ds = &data.dataset;
+        let code = self.audio_codes(data, &[frame.aud_id])?;
+        self.render_view(&ds.camera(frame), &ds.background, &code, data)
+    }
+
+    /// The image seen by `camera` with one audio code: the student's pixel where the ray
+    /// meets the head's bounds, `background` elsewhere.
+    ///
+    /// # Shapes
+    /// - `code`: `[1, audio_dim]`; `background` is the camera's image size
+    pub fn render_view(
+        &self,
+        camera: &Camera,
+        background: &ImageRgb,
+        code: &Tensor,
+        data: &TrainData,
+    ) -> Result<ImageRgb> {
+        let ds = &data.dataset;
+        let head = head_rays(camera, &data.head_range());
+        let mut image = background.clone();
+        let spec = &self.cfg.model.beam;
+        for (c, chunk) in head.pixels.chunks(RENDER_CHUNK).enumerate() {
+            let lo = c * RENDER_CHUNK;
+            let sub = head.rays.slice(lo..lo + chunk.len());
+            let beams = encode_beams_parallel(&sub, ds.near, ds.far, spec, None);
+            let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
+            let codes = code
+                .broadcast_as((chunk.len(), code.dim(1)?))?
+                .contiguous()?;
+            let out = self.student.mlp.forward_fused(&beams, &codes, false)?;
+            let pixels = if self.cfg.model.opacity {
+                let bg = background.gather(chunk);
+                out.pixels(&Tensor::from_vec(bg, (chunk.len(), 3), &Device::Cpu)?)?
+            } else {
+                out.colour
+            };
+            let pixels: Vec<f32> = pixels.flatten_all()?.to_vec1()?;
+            image.paint(chunk, &pixels);
+        }
+        Ok(image)
+    }
+
+    /// Renders `n` validation frames spread evenly over the split and scores them.
+    pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        score_validation_frames(data, n, &|f| self.render_frame(data, f))
+    }
+}
+
+/// A student being trained: folder, configuration, weights, optimizer, pool and the cached
+/// per-frame beams and teacher targets.
+pub struct StudentRun {
+    pub model: StudentModel,
+    adam: Adam,
     clock: Clock,
     pub pool: BeamPool,
     /// The training frames, then the pseudo views (set by [`StudentRun::prepare`]).
@@ -90,9 +185,22 @@ pub struct StudentRun {
     pub targets: Vec<Vec<f32>>,
     /// The teacher that renders the pseudo views' targets between steps, and the next
     /// view to render ([`StudentRun::prepare_deferred`]).
-    pending: Option<(TeacherRun, usize)>,
+    pending: Option<(TeacherModel, usize)>,
     /// Seconds the last step spent rendering pseudo views' targets, and how many.
     pseudo_time: (f64, usize),
+}
+
+impl std::ops::Deref for StudentRun {
+    type Target = StudentModel;
+    fn deref(&self) -> &StudentModel {
+        &self.model
+    }
+}
+
+impl std::ops::DerefMut for StudentRun {
+    fn deref_mut(&mut self) -> &mut StudentModel {
+        &mut self.model
+    }
 }
 
 /// The timing part of the teacher rendering recorded frames' targets.
@@ -108,7 +216,7 @@ impl StudentRun {
         dir: &Path,
         mut cfg: StudentRunConfig,
         data: &TrainData,
-        teacher: Option<&TeacherRun>,
+        teacher: Option<&TeacherModel>,
     ) -> Result<StudentRun> {
         cfg.model.audio.set_from(&data.dataset);
         if cfg.model.anchor_beams && cfg.model.beam.anchor.is_none() {
@@ -150,25 +258,23 @@ impl StudentRun {
         Ok(run)
     }
 
-    /// Loads the run in `dir` (config, weights, pool and, with `optimizer`, the optimizer
-    /// state).
-    pub fn open(dir: &Path, optimizer: bool) -> Result<StudentRun> {
+    /// Loads the run in `dir` to continue training: config, weights, optimizer state and
+    /// pool. To render, [`StudentModel::open`] reads the weights alone.
+    pub fn open(dir: &Path) -> Result<StudentRun> {
         let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
-        (run.step, run.clock) =
-            open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
+        let (model, adam) = (&mut run.model, &mut run.adam);
+        (model.step, run.clock) = open_checkpoint(dir, &model.varmap, Some(adam))?;
         let pool_path = dir.join(POOL_FILE);
-        if optimizer && pool_path.is_file() {
-            run.pool = load_pool(&pool_path, run.pool.capacity, run.step)?;
+        if pool_path.is_file() {
+            run.pool = load_pool(&pool_path, run.pool.capacity, run.model.step)?;
         }
         Ok(run)
     }
 
     fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentRun> {
-        cfg.check()?;
-        let (varmap, vb) = new_varmap();
-        let student = student(&cfg.model, vb)?;
-        let t = &cfg.train;
-        let vars = sorted_vars(&varmap)?
+        let model = StudentModel::build(dir, cfg)?;
+        let t = &model.cfg.train;
+        let vars = sorted_vars(&model.varmap)?
             .into_iter()
             .map(|(name, var)| (name, var, 1.0))
             .collect();
@@ -182,13 +288,9 @@ impl StudentRun {
         );
         let capacity = t.pool_batches * t.batch_rays;
         Ok(StudentRun {
-            dir: dir.to_path_buf(),
+            model,
             pool: BeamPool::new(capacity),
-            cfg,
-            varmap,
-            student,
             adam,
-            step: 0,
             clock: Clock::resumed(0.0),
             views: Vec::new(),
             beams: Vec::new(),
@@ -205,7 +307,7 @@ impl StudentRun {
     pub fn prepare(
         &mut self,
         data: &TrainData,
-        teacher: Option<&TeacherRun>,
+        teacher: Option<&TeacherModel>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
         if let Some(layout) = self.prepare_cached(data, teacher)? {
@@ -225,7 +327,7 @@ impl StudentRun {
     pub fn prepare_deferred(
         &mut self,
         data: &TrainData,
-        teacher: Option<TeacherRun>,
+        teacher: Option<TeacherModel>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<()> {
         let Some(layout) = self.prepare_cached(data, teacher.as_ref())? else {
@@ -271,7 +373,7 @@ impl StudentRun {
     fn prepare_cached(
         &mut self,
         data: &TrainData,
-        teacher: Option<&TeacherRun>,
+        teacher: Option<&TeacherModel>,
     ) -> Result<Option<TargetLayout>> {
         let teacher_step = teacher.map(|t| t.step);
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
@@ -285,18 +387,14 @@ impl StudentRun {
             _ => None,
         };
         self.beams = frame_beams(data, &self.views, mouth_points.as_deref());
-        thin_pseudo_beams(
-            &self.views,
-            &mut self.beams,
-            self.cfg.train.pseudo_rays,
-            self.cfg.train.seed,
-        );
+        let t = &self.model.cfg.train;
+        thin_pseudo_beams(&self.views, &mut self.beams, t.pseudo_rays, t.seed);
         thin_beams(
             &self.views,
             &mut self.beams,
-            self.cfg.train.recorded_rays,
+            t.recorded_rays,
             true,
-            self.cfg.train.seed ^ 0x7ec0_4de5,
+            t.seed ^ 0x7ec0_4de5,
         );
         self.pending = None;
         let spec =
@@ -369,15 +467,6 @@ impl StudentRun {
     /// The learning rate now ([`StudentTrainConfig::learning_rate`]).
     pub fn learning_rate(&self) -> f64 {
         self.cfg.train.learning_rate(self.step, self.elapsed())
-    }
-
-    /// Audio codes of frames.
-    ///
-    /// # Shapes
-    /// - returns `[aud_ids.len(), audio_dim]`
-    pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
-        let windows = data.neighbourhoods(aud_ids, self.cfg.model.audio.att_frames)?;
-        Ok(self.student.audio_codes(&windows)?)
     }
 
     /// Audio codes of views (each its recorded frame's).
@@ -709,54 +798,9 @@ impl StudentRun {
         })
     }
 
-    /// Renders a whole frame (any split): the rays that meet the head's bounds
-    /// ([`head_rays`]) go through the student, the other pixels are the background.
-    pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
-        let ds = &data.dataset;
-        let code = self.audio_codes(data, &[frame.aud_id])?;
-        self.render_view(&ds.camera(frame), &ds.background, &code, data)
-    }
-
-    /// The image seen by `camera` with one audio code: the student's pixel where the ray
-    /// meets the head's bounds, `background` elsewhere.
-    ///
-    /// # Shapes
-    /// - `code`: `[1, audio_dim]`; `background` is the camera's image size
-    pub fn render_view(
-        &self,
-        camera: &Camera,
-        background: &ImageRgb,
-        code: &Tensor,
-        data: &TrainData,
-    ) -> Result<ImageRgb> {
-        let ds = &data.dataset;
-        let head = head_rays(camera, &data.head_range());
-        let mut image = background.clone();
-        let spec = &self.cfg.model.beam;
-        for (c, chunk) in head.pixels.chunks(RENDER_CHUNK).enumerate() {
-            let lo = c * RENDER_CHUNK;
-            let sub = head.rays.slice(lo..lo + chunk.len());
-            let beams = encode_beams_parallel(&sub, ds.near, ds.far, spec, None);
-            let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
-            let codes = code
-                .broadcast_as((chunk.len(), code.dim(1)?))?
-                .contiguous()?;
-            let out = self.student.mlp.forward_fused(&beams, &codes, false)?;
-            let pixels = if self.cfg.model.opacity {
-                let bg = background.gather(chunk);
-                out.pixels(&Tensor::from_vec(bg, (chunk.len(), 3), &Device::Cpu)?)?
-            } else {
-                out.colour
-            };
-            let pixels: Vec<f32> = pixels.flatten_all()?.to_vec1()?;
-            image.paint(chunk, &pixels);
-        }
-        Ok(image)
-    }
-
     /// Renders `n` validation frames spread evenly over the split and scores them.
     pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        score_validation_frames(data, n, &|f| self.render_frame(data, f))
+        self.model.validation_scores(data, n)
     }
 
     /// Writes the checkpoint: config, pool, optimizer state and weights.

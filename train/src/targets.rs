@@ -13,7 +13,7 @@ use nldf_core::rays::Rays;
 use crate::checkpoint::{load_tensors, save_tensors};
 use crate::data::TrainData;
 use crate::error::Result;
-use crate::teacher_trainer::TeacherRun;
+use crate::teacher_trainer::TeacherModel;
 use crate::views::{FrameBeams, View};
 
 /// What the teacher renders per ray for the student: `segments` Eq. 5 colours and, with
@@ -37,7 +37,7 @@ impl TargetLayout {
 /// The teacher's targets of every hit pixel of every view (`[n_pixels, layout.width()]`
 /// flat per view). `progress(done, total)` is called per view.
 pub fn teacher_targets(
-    teacher: &TeacherRun,
+    teacher: &TeacherModel,
     data: &TrainData,
     views: &[View],
     beams: &[FrameBeams],
@@ -55,7 +55,7 @@ pub fn teacher_targets(
 /// The teacher's targets of one view's hit pixels, with the view's recorded audio code
 /// (`[fb.pixels.len(), layout.width()]` flat).
 pub fn view_targets(
-    teacher: &TeacherRun,
+    teacher: &TeacherModel,
     data: &TrainData,
     view: &View,
     fb: &FrameBeams,

@@ -36,18 +36,129 @@ use nldf_core::run_files::CONFIG_FILE;
 /// skipping: far beyond any scene's cameras, so every ray's samples span `[near, far]`.
 const NO_SKIP_REACH: f32 = 1e4;
 
-/// A teacher being trained: its folder, configuration, weights and optimizer.
-pub struct TeacherRun {
+/// A trained teacher, for rendering: its folder, configuration and weights, and the step
+/// they were saved at. [`TeacherModel::open`] reads nothing of the training state (the
+/// optimizer's moments), so a model renders whether or not its run can resume.
+pub struct TeacherModel {
     pub dir: PathBuf,
     pub cfg: TeacherRunConfig,
     pub varmap: VarMap,
     pub teacher: Teacher,
-    adam: Adam,
     /// Steps done.
     pub step: usize,
+    /// Training seconds the checkpoint records, across resumes.
+    pub trained_s: f64,
+}
+
+impl TeacherModel {
+    /// Loads the trained teacher in `dir`: its `config.json` and weights.
+    pub fn open(dir: &Path) -> Result<TeacherModel> {
+        let mut model = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
+        let (step, clock) = open_checkpoint(dir, &model.varmap, None)?;
+        (model.step, model.trained_s) = (step, clock.elapsed());
+        Ok(model)
+    }
+
+    /// The network of `cfg` at step 0, weights as the variable builder made them.
+    fn build(dir: &Path, cfg: TeacherRunConfig) -> Result<TeacherModel> {
+        cfg.check()?;
+        let (varmap, vb) = new_varmap();
+        let teacher = teacher(&cfg.model, vb)?;
+        Ok(TeacherModel {
+            dir: dir.to_path_buf(),
+            cfg,
+            varmap,
+            teacher,
+            step: 0,
+            trained_s: 0.0,
+        })
+    }
+
+    fn attention_on(&self) -> bool {
+        self.step >= self.cfg.train.att_start
+    }
+
+    /// Audio codes of `frames` (indices into the dataset's audio windows).
+    ///
+    /// # Shapes
+    /// - returns `[frames.len(), audio_dim]`
+    pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
+        let windows = data.neighbourhoods(aud_ids, self.cfg.model.audio.att_frames)?;
+        Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
+    }
+
+    /// Renders a whole frame of the dataset (any split).
+    pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        self.render_frame_with(data, frame, true, true)
+    }
+
+    /// Renders a whole frame with the two savings of [`TeacherModel::render_frame`] each
+    /// optional: `skip` samples only inside the head's bounds (off: every ray is sampled
+    /// over its whole `[near, far]` span, as AD-NeRF renders), `early_stop` leaves a ray
+    /// once its transmittance falls below `min_transmittance` (off: every sample is
+    /// evaluated).
+    pub fn render_frame_with(
+        &self,
+        data: &TrainData,
+        frame: &Frame,
+        skip: bool,
+        early_stop: bool,
+    ) -> Result<ImageRgb> {
+        let ds = &data.dataset;
+        let rays = rays_for_image(&ds.camera(frame));
+        let codes = self.audio_codes(data, &[frame.aud_id])?;
+        let bg = &ds.background.data;
+        let mut range = data.head_range();
+        if !skip {
+            // A box holding every point within `far` of any camera.
+            let reach = Vec3::splat(NO_SKIP_REACH);
+            range.bounds = Bounds {
+                lo: -reach,
+                hi: reach,
+            };
+        }
+        let min_transmittance = if early_stop {
+            self.teacher.cfg.min_transmittance
+        } else {
+            0.0
+        };
+        let colors = self
+            .teacher
+            .render_eval(&rays, bg, &codes, &range, min_transmittance)?;
+        Ok(ImageRgb {
+            width: ds.intrinsics.width,
+            height: ds.intrinsics.height,
+            data: colors,
+        })
+    }
+
+    /// Renders `n` validation frames spread evenly over the split and scores them.
+    pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
+        score_validation_frames(data, n, &|f| self.render_frame(data, f))
+    }
+}
+
+/// A teacher being trained: the model, its optimizer and its training clock. It derefs to
+/// its [`TeacherModel`], which renders.
+pub struct TeacherRun {
+    pub model: TeacherModel,
+    adam: Adam,
     /// Rays of the last training step that hit the head's bounds.
     pub last_hit_rays: usize,
     clock: Clock,
+}
+
+impl std::ops::Deref for TeacherRun {
+    type Target = TeacherModel;
+    fn deref(&self) -> &TeacherModel {
+        &self.model
+    }
+}
+
+impl std::ops::DerefMut for TeacherRun {
+    fn deref_mut(&mut self) -> &mut TeacherModel {
+        &mut self.model
+    }
 }
 
 /// One step's rays with their targets.
@@ -77,31 +188,31 @@ impl TeacherRun {
         Ok(run)
     }
 
-    /// Loads the run in `dir` (its `config.json`, weights and, with `optimizer`, the
-    /// optimizer state) to continue training or to render.
-    pub fn open(dir: &Path, optimizer: bool) -> Result<TeacherRun> {
+    /// Loads the run in `dir` to continue training: its `config.json`, weights and
+    /// optimizer state. To render, [`TeacherModel::open`] reads the weights alone.
+    pub fn open(dir: &Path) -> Result<TeacherRun> {
         let mut run = Self::build(dir, read_config(&dir.join(CONFIG_FILE))?)?;
-        (run.step, run.clock) =
-            open_checkpoint(dir, &run.varmap, optimizer.then_some(&mut run.adam))?;
+        let (model, adam) = (&mut run.model, &mut run.adam);
+        (model.step, run.clock) = open_checkpoint(dir, &model.varmap, Some(adam))?;
         Ok(run)
     }
 
     /// A run at step 0 with the network of `cfg` (weights as the variable builder made
     /// them) and a fresh optimizer.
     fn build(dir: &Path, cfg: TeacherRunConfig) -> Result<TeacherRun> {
-        cfg.check()?;
-        let (varmap, vb) = new_varmap();
-        let teacher = teacher(&cfg.model, vb)?;
-        let adam = new_adam(&varmap, &cfg)?;
+        Self::from_model(TeacherModel::build(dir, cfg)?)
+    }
+
+    /// A run that trains on from `model`'s weights and step with a fresh optimizer (its
+    /// moments at zero), its clock going on from the model's training time.
+    pub fn from_model(model: TeacherModel) -> Result<TeacherRun> {
+        let adam = new_adam(&model.varmap, &model.cfg)?;
+        let clock = Clock::resumed(model.trained_s);
         Ok(TeacherRun {
-            dir: dir.to_path_buf(),
-            cfg,
-            varmap,
-            teacher,
+            model,
             adam,
-            step: 0,
             last_hit_rays: 0,
-            clock: Clock::resumed(0.0),
+            clock,
         })
     }
 
@@ -121,19 +232,6 @@ impl TeacherRun {
             self.elapsed(),
             t.time_budget_s,
         )
-    }
-
-    fn attention_on(&self) -> bool {
-        self.step >= self.cfg.train.att_start
-    }
-
-    /// Audio codes of `frames` (indices into the dataset's audio windows).
-    ///
-    /// # Shapes
-    /// - returns `[frames.len(), audio_dim]`
-    pub fn audio_codes(&self, data: &TrainData, aud_ids: &[usize]) -> Result<Tensor> {
-        let windows = data.neighbourhoods(aud_ids, self.cfg.model.audio.att_frames)?;
-        Ok(self.teacher.audio.forward(&windows, self.attention_on())?)
     }
 
     /// The random stream of the current step's batch.
@@ -251,54 +349,9 @@ impl TeacherRun {
         Ok((value, psnr_from_mse(value)))
     }
 
-    /// Renders a whole frame of the dataset (any split).
-    pub fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
-        self.render_frame_with(data, frame, true, true)
-    }
-
-    /// Renders a whole frame with the two savings of [`TeacherRun::render_frame`] each
-    /// optional: `skip` samples only inside the head's bounds (off: every ray is sampled
-    /// over its whole `[near, far]` span, as AD-NeRF renders), `early_stop` leaves a ray
-    /// once its transmittance falls below `min_transmittance` (off: every sample is
-    /// evaluated).
-    pub fn render_frame_with(
-        &self,
-        data: &TrainData,
-        frame: &Frame,
-        skip: bool,
-        early_stop: bool,
-    ) -> Result<ImageRgb> {
-        let ds = &data.dataset;
-        let rays = rays_for_image(&ds.camera(frame));
-        let codes = self.audio_codes(data, &[frame.aud_id])?;
-        let bg = &ds.background.data;
-        let mut range = data.head_range();
-        if !skip {
-            // A box holding every point within `far` of any camera.
-            let reach = Vec3::splat(NO_SKIP_REACH);
-            range.bounds = Bounds {
-                lo: -reach,
-                hi: reach,
-            };
-        }
-        let min_transmittance = if early_stop {
-            self.teacher.cfg.min_transmittance
-        } else {
-            0.0
-        };
-        let colors = self
-            .teacher
-            .render_eval(&rays, bg, &codes, &range, min_transmittance)?;
-        Ok(ImageRgb {
-            width: ds.intrinsics.width,
-            height: ds.intrinsics.height,
-            data: colors,
-        })
-    }
-
     /// Renders `n` validation frames spread evenly over the split and scores them.
     pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        score_validation_frames(data, n, &|f| self.render_frame(data, f))
+        self.model.validation_scores(data, n)
     }
 
     /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.

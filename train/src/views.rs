@@ -237,7 +237,7 @@ pub fn projected_pixels(camera: &Camera, points: &[Vec3]) -> std::collections::H
 ///
 /// [`Teacher::surface_points`]: crate::teacher::Teacher::surface_points
 pub fn mouth_surface_points(
-    teacher: &crate::teacher_trainer::TeacherRun,
+    teacher: &crate::teacher_trainer::TeacherModel,
     data: &TrainData,
 ) -> crate::Result<Vec<Vec<Vec3>>> {
     let ds = &data.dataset;

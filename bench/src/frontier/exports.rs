@@ -8,7 +8,7 @@ use nldf_export::WeightType;
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
 use nldf_train::eval::{FrameModel, student_short_name};
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::student_trainer::StudentRun;
+use nldf_train::student_trainer::StudentModel;
 
 use super::points::OnnxPoint;
 use super::{PRECISIONS, precision_name};
@@ -31,7 +31,7 @@ pub(crate) struct Export {
 /// calibrated on `calibration_frames` training frames of `data`. A student whose weights do
 /// not fit half precision has no f16 point (a note says so).
 pub(crate) fn export_all(
-    students: &[StudentRun],
+    students: &[StudentModel],
     data: &Path,
     calibration_frames: usize,
     dir: &Path,

@@ -13,7 +13,7 @@ use nldf_export::WeightType;
 use nldf_infer::{BackendKind, FrameRenderer};
 use nldf_train::data::TrainData;
 use nldf_train::eval::FrameModel;
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::teacher_trainer::TeacherModel;
 
 use super::precision_name;
 
@@ -102,7 +102,7 @@ impl FrameModel for OnnxPoint {
 
 /// The teacher in candle with its savings on or off, its whole frames timed.
 pub(crate) struct Timed<'a> {
-    pub(crate) run: &'a TeacherRun,
+    pub(crate) run: &'a TeacherModel,
     /// Sample only inside the head's bounds.
     skip: bool,
     /// Leave a ray once its transmittance is spent.
@@ -111,7 +111,7 @@ pub(crate) struct Timed<'a> {
 }
 
 impl<'a> Timed<'a> {
-    pub(crate) fn new(run: &'a TeacherRun, skip: bool, early_stop: bool) -> Timed<'a> {
+    pub(crate) fn new(run: &'a TeacherModel, skip: bool, early_stop: bool) -> Timed<'a> {
         Timed {
             run,
             skip,

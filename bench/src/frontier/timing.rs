@@ -62,7 +62,7 @@ pub(crate) fn time_adnerf_setting(
     };
     let scratch = temp_dir()?;
     let run = TeacherRun::create(scratch.path(), cfg, data)?;
-    let timed = Timed::new(&run, false, false);
+    let timed = Timed::new(&run.model, false, false);
     let frames = data.dataset.frames(Split::Val);
     on_event(&JobEvent::Note(format!(
         "timing AD-NeRF's setting on {n} frames after an untimed one (seeded weights)"

@@ -18,8 +18,8 @@ use crate::eval::FrameModel;
 use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::{JobEvent, OnEvent};
 use crate::student::StudentConfig;
-use crate::student_trainer::StudentRun;
-use crate::teacher_trainer::TeacherRun;
+use crate::student_trainer::StudentModel;
+use crate::teacher_trainer::TeacherModel;
 
 /// What `nldf ablate` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,7 +77,7 @@ type Variant = (String, String, StudentJob);
 /// A checked ablation: the teacher and the data are loaded, the variants listed.
 pub struct AblationPlan {
     job: AblationJob,
-    teacher: TeacherRun,
+    teacher: TeacherModel,
     /// The teacher's training minutes, as its checkpoint records them.
     teacher_minutes: f64,
     data: TrainData,
@@ -96,9 +96,9 @@ impl AblationJob {
             ));
         }
         let dir = teacher_dir(&self.run);
-        let teacher = TeacherRun::open(&dir, false)
+        let teacher = TeacherModel::open(&dir)
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
-        let teacher_minutes = teacher.elapsed() / 60.0;
+        let teacher_minutes = teacher.trained_s / 60.0;
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
         let data = TrainData::open_with(&self.data, false, &audio)?;
         let base = |name: String, model: &StudentConfig, distill: bool, pool: bool| StudentJob {
@@ -177,14 +177,14 @@ impl AblationPlan {
                 share_targets(&self.job.run, &dir)?;
             }
             job.plan(on_event)?.run(stop, on_event)?;
-            let run = StudentRun::open(&dir, false)?;
+            let run = StudentModel::open(&dir)?;
             let s = run.validation_scores(&self.data, n_val)?;
             Ok(AblationRow {
                 table: table.into(),
                 variant: label.into(),
                 folder: dir,
                 steps: run.step,
-                minutes: run.elapsed() / 60.0,
+                minutes: run.trained_s / 60.0,
                 psnr: s.psnr,
                 ssim: s.ssim,
                 head_psnr: s.head_psnr,
@@ -226,7 +226,7 @@ impl AblationPlan {
 
 fn write_reports(
     run: &Path,
-    teacher: &TeacherRun,
+    teacher: &TeacherModel,
     teacher_minutes: f64,
     rows: Vec<AblationRow>,
 ) -> Result<AblationReport> {

@@ -10,8 +10,8 @@ use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::eval::{Evaluation, FrameModel, eval_models};
 use crate::job::{JobEvent, OnEvent, audio_note, mouth_note};
-use crate::student_trainer::StudentRun;
-use crate::teacher_trainer::TeacherRun;
+use crate::student_trainer::StudentModel;
+use crate::teacher_trainer::TeacherModel;
 
 /// What `nldf eval` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,9 +30,9 @@ pub struct EvalJob {
 /// A checked evaluation: every model and the data loaded.
 pub struct EvalPlan {
     /// The run's teacher.
-    pub teacher: TeacherRun,
+    pub teacher: TeacherModel,
     /// Every student folder of the run, in name order.
-    pub students: Vec<StudentRun>,
+    pub students: Vec<StudentModel>,
     /// The dataset with the teacher's audio features.
     pub data: TrainData,
     /// The split rendered.
@@ -53,7 +53,7 @@ impl EvalJob {
             .clone()
             .unwrap_or_else(|| self.run.join("eval").join(name));
         let dir = teacher_dir(&self.run);
-        let teacher = TeacherRun::open(&dir, false)
+        let teacher = TeacherModel::open(&dir)
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
         let mut dirs: Vec<PathBuf> = std::fs::read_dir(&self.run)
             .map_err(|e| Error::io(&self.run, e))?
@@ -64,7 +64,7 @@ impl EvalJob {
         let students = dirs
             .iter()
             .map(|dir| {
-                StudentRun::open(dir, false)
+                StudentModel::open(dir)
                     .map_err(|e| e.context(format!("loading the student from {}", dir.display())))
             })
             .collect::<Result<Vec<_>>>()?;

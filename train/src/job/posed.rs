@@ -22,8 +22,8 @@ use crate::eval::{EvalReport, FrameModel, eval_models};
 use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::{JobEvent, OnEvent};
 use crate::student::StudentConfig;
-use crate::student_trainer::StudentRun;
-use crate::teacher_trainer::TeacherRun;
+use crate::student_trainer::StudentModel;
+use crate::teacher_trainer::TeacherModel;
 
 /// What `nldf ablate --posed` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,9 +95,9 @@ impl PosedJob {
             )));
         }
         let dir = teacher_dir(&self.run);
-        let teacher = TeacherRun::open(&dir, false)
+        let teacher = TeacherModel::open(&dir)
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
-        let teacher_minutes = teacher.elapsed() / 60.0;
+        let teacher_minutes = teacher.trained_s / 60.0;
         let audio = AudioChoice::Matching(teacher.cfg.model.audio.features.clone());
         // Every split is loaded before hours of training start, and scored from here.
         let held_out = SPLITS
@@ -142,7 +142,7 @@ impl PosedJob {
                 false,
             ),
         ];
-        let mut students: Vec<(String, StudentRun, bool)> = Vec::new();
+        let mut students: Vec<(String, StudentModel, bool)> = Vec::new();
         for (label, job, distilled) in &variants {
             let dir = job.dir();
             let minutes = if *distilled {
@@ -150,7 +150,7 @@ impl PosedJob {
             } else {
                 let longest = students
                     .iter()
-                    .map(|(_, s, _)| s.elapsed() / 60.0)
+                    .map(|(_, s, _)| s.trained_s / 60.0)
                     .fold(self.minutes, f64::max);
                 Some(teacher_minutes + longest)
             };
@@ -166,7 +166,7 @@ impl PosedJob {
                     "stopped; run the same command again to resume".into(),
                 ));
             }
-            let run = StudentRun::open(&dir, false)?;
+            let run = StudentModel::open(&dir)?;
             // Labelled from what the run was trained with (a reused run keeps its own).
             let t = &run.cfg.train;
             let label = if t.pseudo_frames == 0 {
@@ -221,7 +221,7 @@ impl PosedJob {
             scores: scores_of(&reports[0]),
         }];
         for (k, (label, run, distilled)) in students.iter().enumerate() {
-            let own = run.elapsed() / 60.0;
+            let own = run.trained_s / 60.0;
             rows.push(PosedRow {
                 variant: format!(
                     "{} ({}x{})",

@@ -15,7 +15,7 @@ use crate::job::{JobEvent, OnEvent, check_resume, load_data, train_stage, wrote}
 use crate::scores::Scores;
 use crate::student::StudentConfig;
 use crate::student_trainer::{RECORDED_TARGETS_PART, StudentRun};
-use crate::teacher_trainer::TeacherRun;
+use crate::teacher_trainer::TeacherModel;
 use crate::timing::Timing;
 
 /// Where a new student's configuration comes from.
@@ -89,7 +89,7 @@ pub struct StudentPlan {
     /// The dataset with the teacher's audio features, its training frames decoded.
     pub data: TrainData,
     /// The teacher to distil from, when the run folder has one.
-    pub teacher: Option<TeacherRun>,
+    pub teacher: Option<TeacherModel>,
 }
 
 impl StudentJob {
@@ -105,7 +105,7 @@ impl StudentJob {
         let teacher_dir = teacher_dir(&self.run);
         check_resume(&dir, "student", self.resume)?;
         let teacher = if has_checkpoint(&teacher_dir) {
-            Some(TeacherRun::open(&teacher_dir, false)?)
+            Some(TeacherModel::open(&teacher_dir)?)
         } else {
             None
         };
@@ -114,7 +114,7 @@ impl StudentJob {
             .as_ref()
             .map(|t| AudioChoice::Matching(t.cfg.model.audio.features.clone()));
         let (mut run, data) = if self.resume {
-            let mut run = StudentRun::open(&dir, true)?;
+            let mut run = StudentRun::open(&dir)?;
             if let Some(n) = self.iters {
                 run.cfg.train.iters = n;
             }

@@ -58,7 +58,7 @@ impl TeacherJob {
         check_resume(&dir, "teacher", self.resume)?;
         let (mut run, data) = if self.resume {
             // The checkpoint's config says which audio features the run reads.
-            let mut run = TeacherRun::open(&dir, true)?;
+            let mut run = TeacherRun::open(&dir)?;
             if let Some(n) = self.iters {
                 run.cfg.train.iters = n;
             }
