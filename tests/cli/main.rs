@@ -1036,6 +1036,13 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
         serde_json::from_str(&std::fs::read_to_string(out.join("frontier.json")).unwrap()).unwrap();
     assert!(json["machine"]["commit"].is_string(), "{}", json["machine"]);
     let points = json["points"].as_array().unwrap();
+    // The head-region plot exists exactly when the points were scored with a head mask.
+    let has_head = points.iter().any(|p| {
+        p["scores"]
+            .as_array()
+            .is_some_and(|s| s.iter().any(|s| s["head_psnr"].is_number()))
+    });
+    assert_eq!(out.join("frontier_head.png").is_file(), has_head);
     // The teacher, its two variants, then every export in ort and tract.
     let exports = points.iter().filter(|p| p["file"].is_string()).count();
     assert!(

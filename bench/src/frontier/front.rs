@@ -127,6 +127,14 @@ impl Point {
             .find(|s| s.split == split)
             .map(|s| s.psnr)
     }
+
+    /// Its head-region PSNR on `split`, where it was scored there with a head mask.
+    pub fn head_psnr(&self, split: &str) -> Option<f64> {
+        self.scores
+            .iter()
+            .find(|s| s.split == split)
+            .and_then(|s| s.head_psnr)
+    }
 }
 
 /// The scores of an evaluation report.
@@ -148,15 +156,25 @@ pub fn mark_front(table: &mut [Point]) {
         .iter()
         .map(|p| (p.ms_2_threads, p.psnr("val").unwrap_or(f64::NAN)))
         .collect();
-    for (i, p) in table.iter_mut().enumerate() {
-        let (t, q) = keys[i];
-        p.on_front = t.is_finite()
-            && q.is_finite()
-            && !keys
-                .iter()
-                .enumerate()
-                .any(|(j, &(t2, q2))| j != i && t2 <= t && q2 >= q && (t2 < t || q2 > q));
+    for (p, on) in table.iter_mut().zip(pareto(&keys)) {
+        p.on_front = on;
     }
+}
+
+/// For each `(time, quality)`: whether it is finite and no other pair is at least as fast
+/// and as good, and strictly better in one.
+fn pareto(keys: &[(f64, f64)]) -> Vec<bool> {
+    keys.iter()
+        .enumerate()
+        .map(|(i, &(t, q))| {
+            t.is_finite()
+                && q.is_finite()
+                && !keys
+                    .iter()
+                    .enumerate()
+                    .any(|(j, &(t2, q2))| j != i && t2 <= t && q2 >= q && (t2 < t || q2 > q))
+        })
+        .collect()
 }
 
 /// The fastest export within 1 dB of the teacher on each split, and its speed-up over the
@@ -216,6 +234,25 @@ pub(crate) fn dots_of(table: &[Point]) -> Vec<FrontierDot> {
         .collect()
 }
 
+/// [`dots_of`] with the `val` head-region PSNR as the quality and the front taken on it;
+/// points scored without a head mask are left out.
+pub(crate) fn head_dots_of(table: &[Point]) -> Vec<FrontierDot> {
+    let keys: Vec<(f64, f64)> = table
+        .iter()
+        .map(|p| (p.ms_2_threads, p.head_psnr("val").unwrap_or(f64::NAN)))
+        .collect();
+    dots_of(table)
+        .into_iter()
+        .zip(keys.iter().zip(pareto(&keys)))
+        .map(|(dot, (&(_, q), on))| FrontierDot {
+            psnr: q,
+            on_front: on,
+            ..dot
+        })
+        .filter(|d| d.psnr.is_finite())
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -265,6 +302,35 @@ mod tests {
             .map(|p| p.model.as_str())
             .collect();
         assert_eq!(front, ["teacher", "a", "c", "d"]);
+    }
+
+    /// The head-region plot takes its front on head PSNR: a point the whole frame ranks
+    /// behind can lead there, and a point scored without a head mask is left out.
+    #[test]
+    fn the_head_plot_has_a_front_of_its_own() {
+        let with_head = |model: &str, ms: f64, whole: f64, head: Option<f64>| {
+            let mut p = point(model, ms, whole);
+            p.scores[0].head_psnr = head;
+            p
+        };
+        let mut table = vec![
+            with_head("a", 100.0, 36.0, Some(29.0)),
+            with_head("b", 100.0, 35.0, Some(30.0)),
+            with_head("c", 50.0, 30.0, None),
+        ];
+        mark_front(&mut table);
+        let whole: Vec<&str> = table
+            .iter()
+            .filter(|p| p.on_front)
+            .map(|p| p.model.as_str())
+            .collect();
+        assert_eq!(whole, ["a", "c"]);
+        let head = head_dots_of(&table);
+        let names: Vec<(&str, f64, bool)> = head
+            .iter()
+            .map(|d| (d.name.as_str(), d.psnr, d.on_front))
+            .collect();
+        assert_eq!(names, [("a", 29.0, false), ("b", 30.0, true)]);
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The frontier's report: `frontier.json` (machine, settings, points, speed-ups),
-//! `frontier.md` (the tables) and `frontier.png` (PSNR against time on a log axis, the
-//! Pareto front marked), with `frontier_{size}.png` for the higher resolution pass.
+//! `frontier.md` (the tables), `frontier.png` (PSNR against time on a log axis, the Pareto
+//! front marked), `frontier_head.png` (the same with head-region PSNR and its own front) and
+//! `frontier_{size}.png` for the higher resolution pass.
 
 use std::path::{Path, PathBuf};
 
@@ -10,7 +11,7 @@ use nldf_train::plot::plot_frontier;
 use serde::Serialize;
 
 use super::THREADS;
-use super::front::{Point, SpeedUp, dots_of};
+use super::front::{Point, SpeedUp, dots_of, head_dots_of};
 use crate::error::Result;
 use crate::report::Written;
 
@@ -91,6 +92,19 @@ impl FrontierReport {
             ),
             &dots_of(&self.points),
         )?;
+        let head = head_dots_of(&self.points);
+        if !head.is_empty() {
+            let path = out.join("frontier_head.png");
+            plot_frontier(
+                &path,
+                &format!(
+                    "val head-region PSNR against time per frame, {} threads, {}",
+                    THREADS, self.machine.cpu
+                ),
+                &head,
+            )?;
+            pngs.insert(0, path);
+        }
         Ok(Written {
             markdown: md,
             json: json_path,
