@@ -73,23 +73,40 @@ const HULL_VIEWS: usize = 24;
 /// The head's bounds for a dataset: `scene.json`'s `head_bounds` when present, otherwise the
 /// box of the visual hull of the head masks (`parsing/`, or each frame's `face_rect` when
 /// there are none) over up to 24 training frames, sampled on a 40^3 grid spanning the
-/// cameras' [near, far] range, grown by one grid cell.
+/// cameras' [near, far] range, grown by one grid cell. A `scene.json` that is not JSON, or
+/// whose `head_bounds` is not two finite corners with `lo < hi`, is refused by name rather
+/// than passed over.
 pub fn dataset_bounds(ds: &Dataset) -> Result<Bounds> {
     let scene = ds.root.join(SCENE_FILE);
     if scene.is_file() {
         let text = std::fs::read_to_string(&scene).map_err(|e| crate::Error::io(&scene, e))?;
-        #[derive(Deserialize)]
-        struct HeadBounds {
-            head_bounds: [[f32; 3]; 2],
-        }
-        if let Ok(h) = serde_json::from_str::<HeadBounds>(&text) {
-            let (lo, hi) = (Vec3::from(h.head_bounds[0]), Vec3::from(h.head_bounds[1]));
-            if lo.is_finite() && hi.is_finite() && hi.cmpgt(lo).all() {
-                return Ok(Bounds { lo, hi });
-            }
+        if let Some(bounds) = scene_bounds(&text).map_err(|e| crate::Error::invalid(&scene, e))? {
+            return Ok(bounds);
         }
     }
     visual_hull_bounds(ds)
+}
+
+/// `head_bounds` of a `scene.json`'s text: `None` when the key is absent, an error when the
+/// text is not a JSON object or the key does not hold two finite corners with `lo < hi`.
+fn scene_bounds(text: &str) -> std::result::Result<Option<Bounds>, String> {
+    let value: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
+    let Some(object) = value.as_object() else {
+        return Err("not a JSON object".into());
+    };
+    let Some(corners) = object.get("head_bounds") else {
+        return Ok(None);
+    };
+    let [lo, hi] = serde_json::from_value::<[[f32; 3]; 2]>(corners.clone())
+        .map_err(|e| format!("`head_bounds` must be two [x, y, z] corners: {e}"))?;
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    if !(lo.is_finite() && hi.is_finite() && hi.cmpgt(lo).all()) {
+        return Err(format!(
+            "`head_bounds` must be finite with lo < hi on every axis, got {lo} and {hi}"
+        ));
+    }
+    Ok(Some(Bounds { lo, hi }))
 }
 
 /// The visual-hull box of [`dataset_bounds`].
@@ -166,4 +183,30 @@ pub fn visual_hull_bounds(ds: &Dataset) -> Result<Bounds> {
         lo: hull_lo - cell,
         hi: hull_hi + cell,
     })
+}
+
+#[cfg(test)]
+mod scene_tests {
+    use super::*;
+
+    #[test]
+    fn scene_json_head_bounds_are_read_or_refused_never_passed_over() {
+        let good = r#"{"seed": 0, "head_bounds": [[-1, -2, -3], [1, 2, 3]]}"#;
+        let b = scene_bounds(good).unwrap().unwrap();
+        assert_eq!(
+            (b.lo, b.hi),
+            (Vec3::new(-1.0, -2.0, -3.0), Vec3::new(1.0, 2.0, 3.0))
+        );
+        assert_eq!(scene_bounds(r#"{"seed": 0}"#).unwrap(), None);
+        for bad in [
+            "{ nope",
+            "[1, 2]",
+            r#"{"head_bounds": "big"}"#,
+            r#"{"head_bounds": [[0, 0, 0]]}"#,
+            r#"{"head_bounds": [[1, 0, 0], [0, 1, 1]]}"#,
+            r#"{"head_bounds": [[0, 0, 0], [1e39, 1, 1]]}"#,
+        ] {
+            assert!(scene_bounds(bad).is_err(), "{bad} was passed over");
+        }
+    }
 }

@@ -308,6 +308,13 @@ fn bad_transforms_files_are_refused() {
             "transforms_train.json",
         ),
         (
+            "a scene.json whose head bounds are not two corners",
+            Box::new(|d: &Path| {
+                std::fs::write(d.join("scene.json"), r#"{"head_bounds": "big"}"#).unwrap()
+            }),
+            "scene.json",
+        ),
+        (
             "a huge face_rect",
             Box::new(|d: &Path| {
                 edit_json(&d.join("transforms_train.json"), |v| {
