@@ -74,7 +74,7 @@ impl Point {
             gmac_per_frame: r.macs_per_frame / 1e9,
             ms_2_threads: 1e3 * times.taking_turns,
             ms_back_to_back: 1e3 * times.back_to_back,
-            ms_1_thread: times.one_thread.map(|s| 1e3 * s),
+            ms_1_thread: times.one_thread.filter(|s| s.is_finite()).map(|s| 1e3 * s),
             scores,
             ..Point::default()
         }
