@@ -49,16 +49,17 @@ impl FrameAudio {
         let spv = per_frame.round();
         if !(fps.is_finite() && fps > 0.0) || (per_frame - spv).abs() > 1e-6 || spv < 1.0 {
             return Err(Error::Argument(format!(
-                "a frame graph needs a whole number of samples per video frame: {} Hz at \
-                 {fps} fps gives {per_frame}",
+                "a video frame must span a whole number of samples: {} Hz at {fps} fps gives \
+                 {per_frame:.2}",
                 cfg.sample_rate
             )));
         }
         let spv = spv as usize;
         if !spv.is_multiple_of(cfg.hop) || att_frames == 0 {
             return Err(Error::Argument(format!(
-                "a frame graph needs a whole number of feature frames per video frame: \
-                 {spv} samples per frame, hop {}",
+                "a video frame must span a whole number of feature frames and the \
+                 neighbourhood at least one frame: {spv} samples per frame, hop {}, \
+                 att_frames {att_frames}",
                 cfg.hop
             )));
         }

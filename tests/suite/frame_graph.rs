@@ -465,3 +465,31 @@ fn fp16_and_int8_frame_graphs_match_their_ray_graphs() {
         }
     }
 }
+
+/// A student trained on another front end's features, or at a frame rate that does not
+/// divide the audio into whole frames, cannot become a frame graph: the export says why,
+/// and writes nothing.
+#[test]
+fn a_frame_graph_needs_nldf_features_and_whole_frames() {
+    let cfg = StudentConfig::tiny();
+    let mut foreign = spec_for(&cfg);
+    foreign.features = nldf_core::audio::FeatureSource::Foreign {
+        description: "DeepSpeech logits".into(),
+        n_features: cfg.audio.n_features,
+        window: cfg.audio.window,
+    };
+    let mut odd_rate = spec_for(&cfg);
+    odd_rate.fps = 30.0;
+    for (spec, needle) in [(foreign, "DeepSpeech"), (odd_rate, "30 fps")] {
+        let run = write_run_with(&cfg, 9, spec);
+        let out = run.root.join("frame.onnx");
+        let err = export_frame(&run.student_dir(), &out, WeightType::F32)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("frame graph: ") && err.contains(needle),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
+}
