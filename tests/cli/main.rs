@@ -928,6 +928,12 @@ fn command_line_misuse_is_refused() {
             vec![out.clone()],
         ),
         (
+            "a demo scene of 8 pixels",
+            args(&["demo", "--out", &o, "--size", "8"]),
+            vec!["--size", "8"],
+            vec![out.clone()],
+        ),
+        (
             "features to a file that is not .npy",
             args(&["features", "--audio", &wav, "--out", &s(&d.join("aud.txt"))]),
             vec!["--out"],
