@@ -370,6 +370,10 @@ pub struct StudentTrainConfig {
     /// the teacher's depth (off: the source frame's mouth pixels as they are, which miss
     /// the mouth once the head turns).
     pub project_mouth: bool,
+    /// The teacher's accumulated weight below which a target counts as empty (opacity 0,
+    /// no colour), so that the student is not taught the teacher's faint haze far from the
+    /// head; 0 (the default) keeps every target as the teacher renders it.
+    pub opacity_floor: f32,
     /// Adam learning rate at step 0 (R2L: 5e-4).
     pub lr: f64,
     /// Steps over which the learning rate decays by 10x.
@@ -491,6 +495,7 @@ impl Default for StudentTrainConfig {
             mouth_fraction: 0.1,
             mouth_weight: 1.0,
             project_mouth: true,
+            opacity_floor: 0.0,
             lr: 5e-4,
             lr_decay_steps: 3000,
             lr_hold_steps: 0,
@@ -535,6 +540,7 @@ impl RunConfig for StudentRunConfig {
         check_shared_train!(t);
         in_range("train.lambda", t.lambda, 0.0, 1e6)?;
         in_range("train.mouth_weight", t.mouth_weight, 0.0, 1e3)?;
+        in_range("train.opacity_floor", t.opacity_floor, 0.0, 1.0)?;
         in_range("train.hard_ratio", t.hard_ratio, 0.0, 1.0)?;
         in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;

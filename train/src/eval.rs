@@ -64,6 +64,9 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     if t.distill && t.lambda != defaults.lambda {
         recipe.push(format!("lambda {}", t.lambda));
     }
+    if t.distill && m.opacity && t.opacity_floor != defaults.opacity_floor {
+        recipe.push(format!("opacity floor {}", t.opacity_floor));
+    }
     if t.mouth_fraction != defaults.mouth_fraction {
         recipe.push(format!("mouth {}", t.mouth_fraction));
     }
@@ -507,7 +510,9 @@ mod tests {
         let mut pixels = base.clone();
         pixels.train.distill = false;
         pixels.train.lambda = 0.0;
-        let names: Vec<String> = [&base, &lambda, &fixed, &pixels]
+        let mut floored = base.clone();
+        floored.train.opacity_floor = 0.05;
+        let names: Vec<String> = [&base, &lambda, &fixed, &pixels, &floored]
             .iter()
             .map(|c| student_name(c))
             .collect();
@@ -515,6 +520,7 @@ mod tests {
         assert!(names[2].ends_with(", beams unanchored"), "{}", names[2]);
         // Without distillation lambda weighs nothing, so it is not named.
         assert_eq!(names[3], "student 16x128 (K = 8), pixels only");
+        assert!(names[4].ends_with(", opacity floor 0.05"), "{}", names[4]);
         for (i, a) in names.iter().enumerate() {
             for b in &names[i + 1..] {
                 assert_ne!(a, b);

@@ -676,6 +676,8 @@ impl StudentRun {
         let layout = self.target_layout();
         let width = layout.width();
         let opacity = layout.opacity;
+        let floor = self.cfg.train.opacity_floor;
+        let empty = vec![0.0f32; width];
         let mut rays = Rays::with_capacity(n);
         let mut gt = Vec::with_capacity(3 * n);
         let mut bg = Vec::with_capacity(if opacity { 3 * n } else { 0 });
@@ -695,7 +697,11 @@ impl StudentRun {
             }
             let target = if distill {
                 let p = b.pixel as usize;
-                let target = &self.targets[fi][width * p..width * (p + 1)];
+                let mut target = &self.targets[fi][width * p..width * (p + 1)];
+                if opacity && target[3 * m] < floor {
+                    // An empty target: no colour, nothing covering the background.
+                    target = &empty[..];
+                }
                 tgt.extend_from_slice(&target[..3 * m]);
                 if opacity {
                     tgt_alpha.push(target[3 * m]);
