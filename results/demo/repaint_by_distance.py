@@ -1,15 +1,18 @@
 # Where a model changes the background: the share of the pixels outside the head that differ
 # from bc.png by more than 1.5/255, by distance from the head mask, over a run's val renders.
-# Usage: python repaint_by_distance.py RUN  (needs numpy, scipy, pillow)
+# Usage: python repaint_by_distance.py RUN [STUDENT [EVAL]]  (needs numpy, scipy, pillow);
+# STUDENT is the student's folder (default student), EVAL the evaluation folder (RUN/eval).
 import numpy as np, glob, os, sys
 from PIL import Image
 from scipy import ndimage
 root = sys.argv[1]
+label = sys.argv[2] if len(sys.argv) > 2 else "student"
+ev = sys.argv[3] if len(sys.argv) > 3 else f"{root}/eval"
 bg = np.asarray(Image.open(f"{root}/data/bc.png").convert("RGB")).astype(np.float32)
 H, W = bg.shape[:2]
-ids = sorted(int(os.path.basename(p)[:-4]) for p in glob.glob(f"{root}/eval/val/student/*.png"))
-hist = {"teacher": np.zeros(12), "student": np.zeros(12)}
-mag = {"teacher": [], "student": []}
+ids = sorted(int(os.path.basename(p)[:-4]) for p in glob.glob(f"{ev}/val/{label}/*.png"))
+hist = {"teacher": np.zeros(12), label: np.zeros(12)}
+mag = {"teacher": [], label: []}
 total_out = 0
 for i in ids:
     par = np.asarray(Image.open(f"{root}/data/parsing/{i}.png").convert("RGB")).astype(int)
@@ -21,7 +24,7 @@ for i in ids:
     out = ~head
     total_out += out.sum()
     for m in hist:
-        img = np.asarray(Image.open(f"{root}/eval/val/{m}/{i}.png").convert("RGB")).astype(np.float32)
+        img = np.asarray(Image.open(f"{ev}/val/{m}/{i}.png").convert("RGB")).astype(np.float32)
         diff = np.abs(img - bg).max(-1)
         changed = (diff > 1.5) & out
         d = np.clip(dist[changed], 0, 11.99).astype(int)
