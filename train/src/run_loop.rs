@@ -69,8 +69,8 @@ pub trait TrainingRun {
 }
 
 /// Implements the [`TrainingRun`] methods that every run answers from the same fields (its
-/// `dir`, `step` and `cfg.train` schedule) and from its own `elapsed`, `learning_rate`,
-/// `validation_scores` and `save` methods.
+/// `dir`, `step` and `cfg.train` schedule), from its model's `validation_scores` and from
+/// its own `elapsed`, `learning_rate` and `save` methods.
 macro_rules! run_fields {
     ($run:ty) => {
         fn dir(&self) -> &std::path::Path {
@@ -108,7 +108,7 @@ macro_rules! run_fields {
             data: &$crate::data::TrainData,
             n: usize,
         ) -> $crate::Result<$crate::scores::Scores> {
-            <$run>::validation_scores(self, data, n)
+            self.model.validation_scores(data, n)
         }
 
         fn save(&self) -> $crate::Result<()> {

@@ -81,7 +81,8 @@ pub struct StudentModel {
     pub student: Student,
     /// Steps done.
     pub step: usize,
-    /// Training seconds the checkpoint records, across resumes.
+    /// Training seconds the checkpoint it was opened from records, across resumes (0 for
+    /// a new model; a run's own clock is its `elapsed()`).
     pub trained_s: f64,
 }
 
@@ -802,11 +803,6 @@ impl StudentRun {
             per_ray: per_ray.to_vec1()?,
             main_mse,
         })
-    }
-
-    /// Renders `n` validation frames spread evenly over the split and scores them.
-    pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        self.model.validation_scores(data, n)
     }
 
     /// Writes the checkpoint: config, pool, optimizer state and weights.

@@ -46,7 +46,8 @@ pub struct TeacherModel {
     pub teacher: Teacher,
     /// Steps done.
     pub step: usize,
-    /// Training seconds the checkpoint records, across resumes.
+    /// Training seconds the checkpoint it was opened from records, across resumes (0 for
+    /// a new model; a run's own clock is its `elapsed()`).
     pub trained_s: f64,
 }
 
@@ -347,11 +348,6 @@ impl TeacherRun {
         self.adam.step(&grads, lr)?;
         self.step += 1;
         Ok((value, psnr_from_mse(value)))
-    }
-
-    /// Renders `n` validation frames spread evenly over the split and scores them.
-    pub fn validation_scores(&self, data: &TrainData, n: usize) -> Result<Scores> {
-        self.model.validation_scores(data, n)
     }
 
     /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.
