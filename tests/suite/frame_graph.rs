@@ -21,7 +21,7 @@ use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
 
 use crate::util::{
-    configs, max_diff, ort_available, python, read_npy, run_python, spec_for, write_npy, write_run,
+    configs, max_diff, python, read_npy, run_python, runtimes, spec_for, write_npy, write_run,
     write_run_with,
 };
 
@@ -137,10 +137,7 @@ fn parity(
     assert!(reference[0].2 > 0, "the default camera sees the head");
 
     let mut worst = (0.0f32, 0.0f32);
-    let mut runtimes = vec![BackendKind::Tract];
-    if ort_available() {
-        runtimes.push(BackendKind::Ort);
-    }
+    let runtimes = runtimes();
     for kind in runtimes {
         let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
         for (&(f, pose), (image, audio, _)) in cases.iter().zip(&reference) {
@@ -299,10 +296,7 @@ fn shipped_frame_graph_matches_the_shipped_model() {
     let mut renderer = nldf_renderer(&ray_model, BackendKind::Tract);
     let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
     let turned = turn_about(spec.bounds.centre(), -0.6, 0.25) * pose;
-    let mut runtimes = vec![BackendKind::Tract];
-    if ort_available() {
-        runtimes.push(BackendKind::Ort);
-    }
+    let runtimes = runtimes();
     for kind in runtimes {
         let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
         let mut worst = 0.0f32;
@@ -438,10 +432,7 @@ fn fp16_and_int8_frame_graphs_match_their_ray_graphs() {
         ("fp16", run.export(WeightType::F16), fp16_frame),
         ("int8", int8_rays, int8_frame),
     ];
-    let mut runtimes = vec![BackendKind::Tract];
-    if ort_available() {
-        runtimes.push(BackendKind::Ort);
-    }
+    let runtimes = runtimes();
     let layout = FrameAudio::new(&features, spec.fps, cfg.audio.att_frames).unwrap();
     let turned = turn_about(spec.bounds.centre(), 0.4, 0.1) * pose;
     for (label, rays_path, frame_path) in &pairs {

@@ -13,7 +13,7 @@ use nldf_infer::frame::FrameRenderer;
 use nldf_infer::poses::default_track;
 use sha2::{Digest, Sha256};
 
-use crate::util::{ort_available, write_test_wav};
+use crate::util::{runtimes, write_test_wav};
 
 fn shipped() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo")
@@ -65,10 +65,7 @@ fn the_shipped_model_matches_its_card_and_renders_finite_frames() {
     let info = &model.info;
     let windows = windows_from_wav(info, &path, &wav).unwrap();
     let track = default_track(info, 3);
-    let mut kinds = vec![BackendKind::Tract];
-    if ort_available() {
-        kinds.push(BackendKind::Ort);
-    }
+    let kinds = runtimes();
     let mut frames = Vec::new();
     for kind in kinds {
         let backend = backend_for(&model, kind, BackendOptions::default()).unwrap();

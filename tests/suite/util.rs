@@ -396,6 +396,16 @@ pub(crate) fn candle_frame(
 
 /// Whether the onnxruntime library can be found; outside CI a missing one skips (after
 /// saying so), under CI it fails.
+/// The runtimes a test holds against each other: tract, and onnxruntime where its library
+/// is here (under CI a missing one fails, see [`ort_available`]).
+pub(crate) fn runtimes() -> Vec<nldf_infer::BackendKind> {
+    let mut kinds = vec![nldf_infer::BackendKind::Tract];
+    if ort_available() {
+        kinds.push(nldf_infer::BackendKind::Ort);
+    }
+    kinds
+}
+
 pub(crate) fn ort_available() -> bool {
     match find_ort_library() {
         Ok(_) => true,
