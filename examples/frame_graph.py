@@ -10,6 +10,7 @@ session = ort.InferenceSession(model, providers=["CPUExecutionProvider"])
 meta = session.get_modelmeta().custom_metadata_map
 audio = json.loads(meta["nldf.frame_audio"])  # which samples one frame reads
 pose = np.array(json.loads(meta["nldf.default_pose"]), np.float32)  # camera to world
+keep = np.ones((int(meta["nldf.image_height"]), int(meta["nldf.image_width"])), bool)  # render all
 with wave.open(wav) as w:
     if w.getsampwidth() != 2:
         sys.exit(f"{wav}: 16-bit PCM WAV expected")
@@ -33,7 +34,7 @@ def write_png(path, rgb):
 
 out.mkdir(parents=True, exist_ok=True)
 for f in range(n // step):
-    start = size + f * step + offset
-    (image,) = session.run(["image"], {"audio": track[start : start + size], "pose": pose})
+    chunk = track[size + f * step + offset :][:size]
+    (image,) = session.run(["image"], {"audio": chunk, "pose": pose, "keep": keep})
     write_png(out / f"frame_{f:05d}.png", (np.clip(image, 0, 1) * 255).round().astype(np.uint8))
 print(f"wrote {n // step} frames to {out}")

@@ -101,9 +101,10 @@ pub const FORMAT: &str = "nldf-student";
 
 /// Value of [`keys::FORMAT`] that marks a frame graph (`nldf export --frame`): the same
 /// student and metadata, with the rays, the head-bounds test, the audio front end and the
-/// compositing inside the graph. Its inputs are [`FRAME_INPUT_AUDIO`] and
-/// [`FRAME_INPUT_POSE`], its output [`FRAME_OUTPUT_IMAGE`]; [`keys::FRAME_AUDIO`] says
-/// which samples the audio input holds.
+/// compositing inside the graph. Its inputs are [`FRAME_INPUT_AUDIO`],
+/// [`FRAME_INPUT_POSE`] and [`FRAME_INPUT_KEEP`], its outputs [`FRAME_OUTPUT_IMAGE`],
+/// [`FRAME_OUTPUT_WINDOWS`] and [`FRAME_OUTPUT_RAYS`]; [`keys::FRAME_AUDIO`] says which
+/// samples the audio input holds.
 pub const FRAME_FORMAT: &str = "nldf-frame";
 /// The frame's audio, f32 `[samples]` at 16 kHz (`nldf_core::frame_audio::FrameAudio`):
 /// NaN where the span lies outside the track.
@@ -111,11 +112,18 @@ pub const FRAME_INPUT_AUDIO: &str = "audio";
 /// The camera-to-world matrix, f32 `[4, 4]`, row-major (OpenGL axes, as
 /// [`keys::DEFAULT_POSE`]).
 pub const FRAME_INPUT_POSE: &str = "pose";
+/// The pixels to render, bool `[height, width]`, row-major: a ray goes through the student
+/// only where it meets the head and its pixel is kept; every other pixel shows the
+/// background. All true renders the whole frame; a caller that keeps a frame's other pixels
+/// from an earlier one (skipping still pixels) marks only those it wants.
+pub const FRAME_INPUT_KEEP: &str = "keep";
 /// The frame, f32 `[height, width, 3]` in [0, 1], the background composited in.
 pub const FRAME_OUTPUT_IMAGE: &str = "image";
 /// The audio windows the graph's front end made, f32 `[att_frames, window, n_features]`
 /// (what the ray graph's `audio` input takes), for checking a front end against nldf's.
 pub const FRAME_OUTPUT_WINDOWS: &str = "audio_windows";
+/// How many rays went through the student (met the head and were kept), int64 `[1]`.
+pub const FRAME_OUTPUT_RAYS: &str = "n_rays";
 /// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change
 /// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]; 3: [`keys::OPACITY`],
 /// with the background input and opacity output of a model that has one; 4:

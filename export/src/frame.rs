@@ -8,10 +8,14 @@
 //!    the input marks samples off it with NaN (`nldf_core::frame_audio::FrameAudio`);
 //! 2. the camera rays of AD-NeRF's `get_rays` from the intrinsics, as glam computes them;
 //! 3. the head-bounds test of `nldf_core::bounds::Bounds::intersect`, and only the rays that
-//!    meet the head go on (NonZero, Gather);
+//!    meet the head and whose pixel the `keep` input marks go on (And, NonZero, Gather): a
+//!    caller that already has a frame's other pixels (`nldf_infer::still`'s skipping) sends
+//!    only the ones it wants through the student;
 //! 4. the student ([`crate::student`]);
 //! 5. the composite: the student's colours scattered into the background image (ScatterND),
-//!    through its opacity when it has one.
+//!    through its opacity when it has one. A pixel not kept shows the background, as one
+//!    whose ray misses the head does; the `n_rays` output counts the rays that went through
+//!    the student.
 //!
 //! The ray graph stays what nldf's own renderer and streaming run.
 
@@ -22,7 +26,8 @@ use nldf_core::frame_audio::FrameAudio;
 
 use crate::checkpoint::StudentCheckpoint;
 use crate::contract::{
-    self, FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS, OUTPUT_RGB,
+    self, FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE,
+    FRAME_OUTPUT_RAYS, FRAME_OUTPUT_WINDOWS, OUTPUT_RGB,
 };
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
@@ -97,12 +102,18 @@ fn frame_model(
         DataType::Float,
         &[Dim::Fixed(4), Dim::Fixed(4)],
     );
+    let keep = g.input(
+        FRAME_INPUT_KEEP,
+        DataType::Bool,
+        &[Dim::Fixed(h), Dim::Fixed(w)],
+    );
     let windows = front_end(&mut g, &layout, &cfg, &audio);
     let rays = camera_rays(&mut g, ckpt, &pose);
-    let hits = head_hits(&mut g, ckpt, &rays);
+    let (hits, n_rays) = head_hits(&mut g, ckpt, &rays, &keep);
     let image = composite_frame(&mut g, ckpt, &rays, &hits, &windows, &background, (h, w))?;
     g.node("Identity", FRAME_OUTPUT_IMAGE, &[&image], vec![]);
     g.node("Identity", FRAME_OUTPUT_WINDOWS, &[&windows], vec![]);
+    g.node("Identity", FRAME_OUTPUT_RAYS, &[&n_rays], vec![]);
     g.output(
         FRAME_OUTPUT_IMAGE,
         DataType::Float,
@@ -117,13 +128,15 @@ fn frame_model(
             Dim::Fixed(s.audio.n_features),
         ],
     );
+    g.output(FRAME_OUTPUT_RAYS, DataType::Int64, &[Dim::Fixed(1)]);
     let n_values = g.n_initializer_values();
     let doc = format!(
         "NLDF frame graph: input {FRAME_INPUT_AUDIO} [{}] (16 kHz samples from frame f's \
          sample f * {} + {}; NaN off the track), {FRAME_INPUT_POSE} [4, 4] (camera to world, \
-         row-major); output {FRAME_OUTPUT_IMAGE} [{h}, {w}, 3] in [0, 1]. Inside: log-mel \
-         front end, rays, head-bounds test, student ({} x {}), composite over the \
-         background.",
+         row-major), {FRAME_INPUT_KEEP} bool [{h}, {w}] (pixels to render; the rest show the \
+         background); output {FRAME_OUTPUT_IMAGE} [{h}, {w}, 3] in [0, 1], \
+         {FRAME_OUTPUT_RAYS} [1] (rays through the student). Inside: log-mel front end, rays, \
+         head-bounds test and keep, student ({} x {}), composite over the background.",
         layout.samples, layout.samples_per_frame, layout.offset, s.depth, s.width
     );
     let graph = g.finish(FRAME_GRAPH_NAME, &doc);
@@ -346,8 +359,17 @@ fn camera_rays(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, pose: &str) -> (S
 }
 
 /// The pixels whose rays meet the head's bounds within `[near, far]`
-/// (`Bounds::intersect`'s slab test, axis by axis): `[n_hit]` int64 indices, row-major.
-fn head_hits(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, (o, d): &(String, String)) -> String {
+/// (`Bounds::intersect`'s slab test, axis by axis) and that `keep` marks: their `[n_hit]`
+/// int64 indices, row-major, and how many there are, int64 `[1]`.
+///
+/// # Shapes
+/// - `keep`: bool `[h, w]`
+fn head_hits(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    (o, d): &(String, String),
+    keep: &str,
+) -> (String, String) {
     let spec = &ckpt.spec;
     let lo = g.constant_f32("bounds.lo", &[1, 3], &spec.bounds.lo.to_array());
     let hi = g.constant_f32("bounds.hi", &[1, 3], &spec.bounds.hi.to_array());
@@ -398,9 +420,27 @@ fn head_hits(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, (o, d): &(String, S
     let t0 = g.node("Max", "bounds.t0", &[&t0, &near], vec![]);
     let t1 = g.node("Min", "bounds.t1", &[&t1, &far], vec![]);
     let hit = g.node("Greater", "bounds.hit", &[&t1, &t0], vec![]);
+    let flat = g.constant_i64("keep.flat_shape", &[1], &[-1]);
+    let keep = g.node("Reshape", "keep.pixels", &[keep, &flat], vec![]);
+    let hit = g.node("And", "keep.hit", &[&hit, &keep], vec![]);
     let hits = g.node("NonZero", "bounds.hits_2d", &[&hit], vec![]);
     let flat = g.constant_i64("bounds.hits_shape", &[1], &[-1]);
-    g.node("Reshape", "bounds.hits", &[&hits, &flat], vec![])
+    // Counted from the mask, not from the indices' shape, which a runtime may hold
+    // symbolically.
+    let ones = g.node(
+        "Cast",
+        "keep.hit_count",
+        &[&hit],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let n_hit = g.node(
+        "ReduceSum",
+        "keep.n_rays",
+        &[&ones],
+        vec![attr_int("keepdims", 1)],
+    );
+    let hits = g.node("Reshape", "bounds.hits", &[&hits, &flat], vec![]);
+    (hits, n_hit)
 }
 
 /// The student on the rays `hits` selects, scattered into the background image.

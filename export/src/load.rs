@@ -10,9 +10,9 @@ use prost::Message;
 use nldf_core::frame_audio::FrameAudio;
 
 use crate::contract::{
-    self, FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS,
-    INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS, MetadataError, ModelInfo, OUTPUT_RGB,
-    OUTPUT_SEGMENTS,
+    self, FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE,
+    FRAME_OUTPUT_RAYS, FRAME_OUTPUT_WINDOWS, INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS,
+    MetadataError, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
 };
 use crate::error::{Error, Result};
 use crate::onnx::{DataType, ModelProto};
@@ -66,8 +66,8 @@ pub fn read_frame_model(path: &Path) -> Result<FrameModel> {
         path,
         &proto,
         &info,
-        &[FRAME_INPUT_AUDIO, FRAME_INPUT_POSE],
-        &[FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS],
+        &[FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_INPUT_KEEP],
+        &[FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS, FRAME_OUTPUT_RAYS],
     )?;
     Ok(FrameModel {
         path: path.to_path_buf(),

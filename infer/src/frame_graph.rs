@@ -1,5 +1,7 @@
 //! Runs a frame graph (`nldf export --frame`) in tract or onnxruntime: a frame's audio
-//! chunk and a pose in, the frame out, with nothing computed outside the graph. nldf's own
+//! chunk and a pose in, the frame out, with nothing computed outside the graph. Every pixel
+//! is kept ([`FrameGraph::render`]) unless the caller names the ones to render
+//! ([`FrameGraph::render_kept`]). nldf's own
 //! renderer runs the ray graph ([`crate::FrameRenderer`]); this runner is how the tests and
 //! benchmarks hold the frame graph against it, as any other runtime would load it.
 
@@ -7,7 +9,8 @@ use glam::Mat4;
 use nldf_core::image::ImageRgb;
 use nldf_export::FrameModel;
 use nldf_export::contract::{
-    FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS,
+    FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_RAYS,
+    FRAME_OUTPUT_WINDOWS,
 };
 use tract_onnx::prelude::*;
 
@@ -21,6 +24,8 @@ pub struct GraphFrame {
     pub image: ImageRgb,
     /// The audio windows its front end made, `[att_frames, window, n_features]` flat.
     pub windows: Vec<f32>,
+    /// Rays that went through the student: those that meet the head, of the kept pixels.
+    pub n_rays: usize,
 }
 
 enum Session {
@@ -33,6 +38,8 @@ enum Session {
 pub struct FrameGraph {
     model: FrameModel,
     session: Session,
+    /// Every pixel kept, `[height * width]`.
+    all: Vec<bool>,
 }
 
 impl std::fmt::Debug for FrameGraph {
@@ -53,6 +60,7 @@ impl FrameGraph {
         Ok(FrameGraph {
             model: model.clone(),
             session,
+            all: vec![true; model.info.spec.intrinsics.n_pixels()],
         })
     }
 
@@ -62,11 +70,24 @@ impl FrameGraph {
     }
 
     /// The frame seen from camera-to-world `c2w` with the audio `chunk`
-    /// (`FrameAudio::chunk`).
+    /// (`FrameAudio::chunk`), every pixel rendered.
     ///
     /// # Shapes
     /// - `chunk`: `[samples]` of the model's `FrameAudio`
     pub fn render(&mut self, c2w: Mat4, chunk: &[f32]) -> Result<GraphFrame> {
+        let all = std::mem::take(&mut self.all);
+        let frame = self.render_kept(c2w, chunk, &all);
+        self.all = all;
+        frame
+    }
+
+    /// [`FrameGraph::render`] with only the pixels `keep` marks rendered: a pixel not kept
+    /// shows the background, as one whose ray misses the head does.
+    ///
+    /// # Shapes
+    /// - `chunk`: `[samples]` of the model's `FrameAudio`
+    /// - `keep`: `[height * width]`, row-major
+    pub fn render_kept(&mut self, c2w: Mat4, chunk: &[f32], keep: &[bool]) -> Result<GraphFrame> {
         if chunk.len() != self.model.audio.samples {
             return Err(Error::Argument(format!(
                 "a frame's audio holds {} samples, the frame graph takes {}",
@@ -74,13 +95,22 @@ impl FrameGraph {
                 self.model.audio.samples
             )));
         }
+        let k = self.model.info.spec.intrinsics;
+        if keep.len() != k.n_pixels() {
+            return Err(Error::Argument(format!(
+                "the pixels to keep are {}, the frame has {} x {}",
+                keep.len(),
+                k.width,
+                k.height
+            )));
+        }
         // Row-major, as the graph reads it.
         let pose: Vec<f32> = c2w.transpose().to_cols_array().to_vec();
-        let k = self.model.info.spec.intrinsics;
-        let (image, windows) = match &mut self.session {
-            Session::Tract(plan) => run_tract(plan, chunk, &pose)?,
+        let shape = [k.height as usize, k.width as usize];
+        let (image, windows, n_rays) = match &mut self.session {
+            Session::Tract(plan) => run_tract(plan, chunk, &pose, (shape, keep))?,
             #[cfg(feature = "ort")]
-            Session::Ort(session) => run_ort(session, chunk, &pose)?,
+            Session::Ort(session) => run_ort(session, chunk, &pose, (shape, keep))?,
         };
         let n_windows = self.model.info.audio.len();
         if image.len() != k.n_pixels() * 3 || windows.len() != n_windows {
@@ -101,6 +131,7 @@ impl FrameGraph {
                 data: image,
             },
             windows,
+            n_rays,
         })
     }
 }
@@ -111,32 +142,66 @@ fn open_tract(model: &FrameModel) -> Result<std::sync::Arc<TypedRunnableModel>> 
         .model_for_read(&mut &model.bytes[..])
         .map_err(fail)?;
     parsed
-        .set_input_names([FRAME_INPUT_AUDIO, FRAME_INPUT_POSE])
-        .and_then(|()| parsed.select_outputs_by_name([FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS]))
+        .set_input_names([FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_INPUT_KEEP])
+        .and_then(|()| {
+            parsed.select_outputs_by_name([
+                FRAME_OUTPUT_IMAGE,
+                FRAME_OUTPUT_WINDOWS,
+                FRAME_OUTPUT_RAYS,
+            ])
+        })
         .map_err(fail)?;
+    let k = model.info.spec.intrinsics;
     let plan = parsed
         .with_input_fact(0, f32::fact([model.audio.samples]).into())
         .and_then(|m| m.with_input_fact(1, f32::fact([4, 4]).into()))
+        .and_then(|m| {
+            m.with_input_fact(2, bool::fact([k.height as usize, k.width as usize]).into())
+        })
         .and_then(|m| m.into_optimized())
         .and_then(|m| m.into_runnable())
         .map_err(fail)?;
     Ok(plan)
 }
 
+/// The image, the windows and the ray count.
+type Outputs = (Vec<f32>, Vec<f32>, usize);
+
+/// The `keep` input: its `[height, width]` and values.
+type Keep<'a> = ([usize; 2], &'a [bool]);
+
 fn run_tract(
     plan: &std::sync::Arc<TypedRunnableModel>,
     chunk: &[f32],
     pose: &[f32],
-) -> Result<(Vec<f32>, Vec<f32>)> {
+    (shape, keep): Keep,
+) -> Result<Outputs> {
     let fail = |e: TractError| Error::backend("tract", e.to_string());
     let audio = Tensor::from_shape(&[chunk.len()], chunk).map_err(fail)?;
     let pose = Tensor::from_shape(&[4, 4], pose).map_err(fail)?;
-    let out = plan.run(tvec!(audio.into(), pose.into())).map_err(fail)?;
+    let keep = Tensor::from_shape(&shape, keep).map_err(fail)?;
+    let out = plan
+        .run(tvec!(audio.into(), pose.into(), keep.into()))
+        .map_err(fail)?;
     let take = |i: usize| -> Result<Vec<f32>> {
         let view = out[i].to_plain_array_view::<f32>().map_err(fail)?;
         Ok(view.iter().copied().collect())
     };
-    Ok((take(0)?, take(1)?))
+    // tract may hand the count back as a (concrete) dimension.
+    let n_rays = out[2].cast_to::<i64>().map_err(fail)?;
+    let n_rays = n_rays.to_plain_array_view::<i64>().map_err(fail)?;
+    Ok((take(0)?, take(1)?, ray_count(n_rays.iter().copied())?))
+}
+
+/// The `n_rays` output's one value.
+fn ray_count(mut values: impl Iterator<Item = i64>) -> Result<usize> {
+    match (values.next(), values.next()) {
+        (Some(n), None) if n >= 0 => Ok(n as usize),
+        _ => Err(Error::backend(
+            "frame graph",
+            format!("`{FRAME_OUTPUT_RAYS}` is not one count"),
+        )),
+    }
 }
 
 #[cfg(feature = "ort")]
@@ -164,22 +229,31 @@ fn run_ort(
     session: &mut ort::session::Session,
     chunk: &[f32],
     pose: &[f32],
-) -> Result<(Vec<f32>, Vec<f32>)> {
+    (shape, keep): Keep,
+) -> Result<Outputs> {
     use ort::value::TensorRef;
     let fail = |e: ort::Error| Error::backend("ort", e);
     let inputs = ort::inputs![
         FRAME_INPUT_AUDIO => TensorRef::from_array_view(([chunk.len()], chunk)).map_err(fail)?,
         FRAME_INPUT_POSE => TensorRef::from_array_view(([4usize, 4], pose)).map_err(fail)?,
+        FRAME_INPUT_KEEP => TensorRef::from_array_view((shape, keep)).map_err(fail)?,
     ];
     let outputs = session.run(inputs).map_err(fail)?;
-    let take = |name: &str| -> Result<Vec<f32>> {
-        let value = outputs
+    let output = |name: &str| {
+        outputs
             .get(name)
-            .ok_or_else(|| Error::backend("ort", format!("no output `{name}`")))?;
-        let (_, data) = value
-            .try_extract_tensor::<f32>()
-            .map_err(|e| Error::backend("ort", e))?;
+            .ok_or_else(|| Error::backend("ort", format!("no output `{name}`")))
+    };
+    let take = |name: &str| -> Result<Vec<f32>> {
+        let (_, data) = output(name)?.try_extract_tensor::<f32>().map_err(fail)?;
         Ok(data.to_vec())
     };
-    Ok((take(FRAME_OUTPUT_IMAGE)?, take(FRAME_OUTPUT_WINDOWS)?))
+    let (_, n_rays) = output(FRAME_OUTPUT_RAYS)?
+        .try_extract_tensor::<i64>()
+        .map_err(fail)?;
+    Ok((
+        take(FRAME_OUTPUT_IMAGE)?,
+        take(FRAME_OUTPUT_WINDOWS)?,
+        ray_count(n_rays.iter().copied())?,
+    ))
 }

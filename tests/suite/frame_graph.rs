@@ -4,7 +4,8 @@
 //! and Python onnxruntime, and its front end's windows match nldf's within 1e-4 of the
 //! largest feature. At the track's ends (where nldf clamps the windows), for a camera
 //! that sees no head, for models with and without opacity, at the shipped model's size and at
-//! 28 x 256.
+//! 28 x 256. With a `keep` mask, the kept pixels are the whole frame's and the others the
+//! background, and only the kept head rays go through the student.
 
 use std::path::Path;
 
@@ -47,8 +48,9 @@ import sys
 import numpy as np, onnxruntime as ort
 path, folder = sys.argv[1], sys.argv[2]
 session = ort.InferenceSession(path, providers=["CPUExecutionProvider"])
+keep = np.ones([i.shape for i in session.get_inputs() if i.name == "keep"][0], bool)
 chunks, poses = np.load(f"{folder}/chunks.npy"), np.load(f"{folder}/poses.npy")
-out = [session.run(["image"], {"audio": c, "pose": p})[0] for c, p in zip(chunks, poses)]
+out = [session.run(["image"], {"audio": c, "pose": p, "keep": keep})[0] for c, p in zip(chunks, poses)]
 np.save(f"{folder}/images.npy", np.stack(out))
 "#;
 
@@ -482,5 +484,87 @@ fn a_frame_graph_needs_nldf_features_and_whole_frames() {
             "{err}"
         );
         assert!(!out.exists());
+    }
+}
+
+/// The `keep` input: with a random half of the pixels kept, each runtime renders the whole
+/// frame's colours (within [`IMAGE_TOL`]) at the kept pixels and the background at the
+/// others, and `n_rays` says that only the kept pixels' head rays went through the student;
+/// with none kept, the frame is the background and no ray runs. In f32 and f16.
+#[test]
+fn a_keep_mask_renders_the_kept_pixels_and_the_background_elsewhere() {
+    use rand::{Rng, SeedableRng};
+    let cfg = configs().remove(0);
+    let mut spec = spec_for(&cfg);
+    spec.intrinsics = camera_at(32, 32);
+    let run = write_run_with(&cfg, 81, spec.clone());
+    let features = spec.features.nldf().unwrap().clone();
+    let layout = FrameAudio::new(&features, spec.fps, cfg.audio.att_frames).unwrap();
+    let samples = speech_like(16_000);
+    let default_pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let poses = [
+        default_pose,
+        turn_about(spec.bounds.centre(), -0.4, 0.15) * default_pose,
+    ];
+    let n_pixels = spec.intrinsics.n_pixels();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(81);
+    let half: Vec<bool> = (0..n_pixels).map(|_| rng.random_bool(0.5)).collect();
+    let none = vec![false; n_pixels];
+    for weights in [WeightType::F32, WeightType::F16] {
+        let path = run.root.join(format!("frame_{weights:?}.onnx"));
+        export_frame(&run.student_dir(), &path, weights).unwrap();
+        let model = read_frame_model(&path).unwrap();
+        let background = nldf_infer::frame::background_at(&model.info, 32, 32).unwrap();
+        for kind in runtimes() {
+            let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
+            let label = format!("{weights:?} in {}", kind.name());
+            let (mut worst_kept, mut worst_other) = (0.0f32, 0.0f32);
+            for (i, &pose) in poses.iter().enumerate() {
+                let camera = nldf_core::camera::Camera {
+                    intrinsics: spec.intrinsics,
+                    c2w: pose,
+                };
+                let head = nldf_core::rays::head_rays(&camera, &spec.head_range()).pixels;
+                let chunk = layout.chunk(&samples, 4 + 9 * i);
+                let full = graph.render(pose, &chunk).unwrap();
+                let kept = graph.render_kept(pose, &chunk, &half).unwrap();
+                let empty = graph.render_kept(pose, &chunk, &none).unwrap();
+                // Head pixels whose colour is not the background's, kept and not kept: the
+                // check below can tell the two apart there.
+                let differs = |p: usize| {
+                    (0..3).any(|c| {
+                        (full.image.data[3 * p + c] - background.data[3 * p + c]).abs() > 0.05
+                    })
+                };
+                let telling: Vec<usize> = head.iter().copied().filter(|&p| differs(p)).collect();
+                assert!(
+                    telling.iter().any(|&p| half[p]) && telling.iter().any(|&p| !half[p]),
+                    "{label}: the head shows on kept and other pixels"
+                );
+                for (p, &kept_here) in half.iter().enumerate() {
+                    let px = |img: &ImageRgb| img.data[3 * p..3 * p + 3].to_vec();
+                    let got = px(&kept.image);
+                    if kept_here {
+                        worst_kept = worst_kept.max(max_diff(&got, &px(&full.image)));
+                    } else {
+                        worst_other = worst_other.max(max_diff(&got, &px(&background)));
+                    }
+                }
+                assert!(worst_kept <= IMAGE_TOL, "{label}: kept pixels {worst_kept}");
+                assert!(worst_other <= 1e-6, "{label}: other pixels {worst_other}");
+                assert_eq!(full.n_rays, head.len(), "{label}: every head ray runs");
+                let kept_head = head.iter().filter(|&&p| half[p]).count();
+                assert_eq!(kept.n_rays, kept_head, "{label}: only kept head rays run");
+                assert_eq!(empty.n_rays, 0, "{label}: nothing kept, nothing runs");
+                assert!(
+                    max_diff(&empty.image.data, &background.data) <= 1e-6,
+                    "{label}: nothing kept is the background"
+                );
+            }
+            println!(
+                "keep mask, {label}: kept pixels against the whole frame {worst_kept:.2e}, \
+                 the others against the background {worst_other:.2e}"
+            );
+        }
     }
 }
