@@ -2,7 +2,13 @@
 //! canvas with onnxruntime-web (WASM, SIMD, 2 threads) from the shipped frame graph and a
 //! WAV picked through its file input are nldf's frames (`FrameRenderer` on the shipped ray
 //! graph) within 2/255 per channel, at both ends and the middle of the track, from the
-//! default pose and a turned one; the microphone (Chromium's fake device playing the WAV)
+//! default pose and a turned one, with still-pixel skipping off; with it on, over the WAV at
+//! the default pose, the page makes its full, probed and partial frames where nldf's
+//! `StillSkipper` (`nldf render --skip-still`) makes them, a skipped frame's re-rendered
+//! pixels are nldf's full frame's within 2/255 and its others the page's last full frame's
+//! exactly, and the skipped frames stray from nldf's full frames no further than nldf's own
+//! skipping does on the same clip (worst channel within 2/255 of nldf's worst, PSNR within
+//! 0.5 dB); the microphone (Chromium's fake device playing the WAV)
 //! gives a chunk that is not silent and a frame equal to the Rust frame graph's for that
 //! chunk; a ray graph picked instead is refused on the page; and the page reports no error.
 //! Needs node, /usr/bin/chromium and web/node_modules (`scripts/web_env.sh`): outside CI a
@@ -19,6 +25,7 @@ use nldf_infer::FrameRenderer;
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
+use nldf_infer::still::{FrameKind, SkipConfig, StillSkipper, probe_frames};
 
 use crate::util::{ort_available, write_test_wav};
 
@@ -113,6 +120,7 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
         .args(["--out", out.to_str().unwrap()])
         .args(["--frames", &list(&frames)])
         .args(["--poses", &poses])
+        .args(["--skip-frames", &n.to_string()])
         .args(["--ray-graph", ray_path.to_str().unwrap()])
         .arg("--mic")
         .output()
@@ -199,6 +207,8 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
         drawn.len()
     );
 
+    check_skipping(&result, &out, &model, &windows, &mut renderer);
+
     // The microphone: a chunk that is not silent, and the Rust frame graph's frame for it.
     let frame_model = read_frame_model(&root.join("models/demo/frame.onnx")).unwrap();
     let chunk = read_f32(&out.join(result["mic"]["chunk"].as_str().unwrap()));
@@ -237,5 +247,123 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
     assert!(
         d <= TOL_8BIT,
         "microphone: the canvas is {d}/255 off the frame graph's frame ({changed} channels differ)"
+    );
+}
+
+/// PSNR of 8-bit images' summed squared error over `values` channels; infinite for 0.
+fn psnr_8bit(sq: f64, values: usize) -> f64 {
+    let mse = sq / values.max(1) as f64 / (255.0 * 255.0);
+    if mse > 0.0 {
+        -10.0 * mse.log10()
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The page's frames with skipping on (`result["skip"]`: the track's frames in order at the
+/// default pose from a fresh skipper) against nldf's full frames (`renderer`) and nldf's
+/// own skipping on the same clip.
+fn check_skipping(
+    result: &serde_json::Value,
+    out: &Path,
+    model: &nldf_export::ExportedModel,
+    windows: &nldf_core::audio::AudioWindows,
+    renderer: &mut FrameRenderer,
+) {
+    let info = &model.info;
+    let att = info.audio.att_frames;
+    let pose = Mat4::from_cols_array_2d(&info.spec.default_pose).transpose();
+    let config = SkipConfig::default();
+    let probes = probe_frames(windows.n_frames, config.probes)
+        .into_iter()
+        .map(|f| neighbourhood(windows, f, att))
+        .collect();
+    let mut skipper = StillSkipper::new(config, probes).unwrap();
+    let options = BackendOptions {
+        batch_size: 4096,
+        threads: 2,
+        spin: true,
+    };
+    let backend = backend_for(model, BackendKind::Tract, options).unwrap();
+    let mut skipping = FrameRenderer::new(backend, None).unwrap();
+    let frames = result["skip"]
+        .as_array()
+        .expect("the page's skipping frames");
+    assert_eq!(frames.len(), windows.n_frames, "skipping frames");
+    let mut last_full: Option<Vec<u8>> = None;
+    let (mut worst_kept, mut skipped, mut values) = (0u8, 0usize, 0usize);
+    let (mut page_sq, mut page_worst, mut nldf_sq, mut nldf_worst) = (0f64, 0u8, 0f64, 0u8);
+    let (mut page_rays, mut nldf_rays) = (0usize, 0usize);
+    for (f, entry) in frames.iter().enumerate() {
+        let audio = neighbourhood(windows, f, att);
+        let full = renderer.render(pose, &audio).unwrap().image.to_rgb8();
+        let nldf = skipper.render(&mut skipping, pose, &audio).unwrap();
+        let kind = entry["kind"].as_str().unwrap_or_default();
+        let want_kind = match nldf.kind {
+            FrameKind::Full => "full",
+            FrameKind::Probed => "probed",
+            FrameKind::Partial => "partial",
+        };
+        assert_eq!(kind, want_kind, "frame {f}: how the page made it");
+        let got = std::fs::read(out.join(entry["file"].as_str().unwrap())).unwrap();
+        assert_eq!(got.len(), full.len(), "frame {f}: canvas size");
+        if kind == "full" {
+            let (d, _) = diff_8bit(&got, &full);
+            assert!(d <= TOL_8BIT, "frame {f}: a full frame {d}/255 off nldf's");
+            last_full = Some(got.clone());
+        } else {
+            let keep = std::fs::read(out.join(entry["keep"].as_str().unwrap())).unwrap();
+            assert_eq!(keep.len() * 3, got.len(), "frame {f}: mask size");
+            let base = last_full
+                .as_ref()
+                .expect("a full frame before a skipped one");
+            for (p, &k) in keep.iter().enumerate() {
+                let px = 3 * p..3 * p + 3;
+                if k != 0 {
+                    worst_kept = worst_kept.max(diff_8bit(&got[px.clone()], &full[px]).0);
+                } else {
+                    assert_eq!(
+                        got[px.clone()],
+                        base[px],
+                        "frame {f}: pixel {p} is not re-rendered but differs from the page's \
+                         last full frame"
+                    );
+                }
+            }
+            skipped += 1;
+            page_rays += entry["n_rays"].as_u64().unwrap() as usize;
+            nldf_rays += nldf.frame.head_pixels;
+        }
+        let nldf_rgb8 = nldf.frame.image.to_rgb8();
+        for (x, (a, b)) in got.iter().zip(&nldf_rgb8).enumerate() {
+            let (dp, dn) = (a.abs_diff(full[x]), b.abs_diff(full[x]));
+            page_sq += (dp as f64).powi(2);
+            nldf_sq += (dn as f64).powi(2);
+            page_worst = page_worst.max(dp);
+            nldf_worst = nldf_worst.max(dn);
+        }
+        values += full.len();
+    }
+    let (page_psnr, nldf_psnr) = (psnr_8bit(page_sq, values), psnr_8bit(nldf_sq, values));
+    println!(
+        "skipping, {} frames ({skipped} skipped; re-rendered rays {page_rays} on the page, \
+         {nldf_rays} in nldf): re-rendered pixels against nldf's full frames {worst_kept}/255; \
+         against the full frames, page {page_psnr:.2} dB (worst {page_worst}/255), nldf's \
+         --skip-still {nldf_psnr:.2} dB (worst {nldf_worst}/255)",
+        frames.len()
+    );
+    assert!(
+        skipped >= frames.len() / 2,
+        "the page skipped {skipped} frames"
+    );
+    assert!(
+        worst_kept <= TOL_8BIT,
+        "re-rendered pixels {worst_kept}/255 off nldf's full frames"
+    );
+    assert!(
+        page_worst <= nldf_worst + TOL_8BIT && page_psnr >= nldf_psnr - 0.5,
+        "the page's skipping strays further from the full frames than nldf's: \
+         {page_psnr:.2} dB (worst {page_worst}/255) against {nldf_psnr:.2} dB \
+         (worst {nldf_worst}/255)"
     );
 }

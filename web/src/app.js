@@ -1,9 +1,11 @@
 // The page: an nldf frame graph in onnxruntime-web (WASM, SIMD, threads), driven by a WAV
-// file or the microphone, the head turned by dragging or by the sliders. window.nldf is the
-// hook the tests and the benchmark drive it through.
+// file or the microphone, the head turned by dragging or by the sliders. A WAV's frames skip
+// still pixels (./still.js) unless the box is unticked; the microphone's are always full.
+// window.nldf is the hook the tests and the benchmark drive it through.
 import * as ort from '../ort/ort.wasm.min.mjs';
 import { frameModelInfo, turnedPose, chunkFor, liveChunk } from './model.js';
 import { RATE, decodeTo16k, Ring, startMicrophone } from './audio.js';
+import { SKIP_CONFIG, StillSkipper, probeFrames } from './still.js';
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -35,7 +37,7 @@ $('runtime').textContent =
   (crossOriginIsolated ? '' : ' (page not cross-origin isolated: one thread)');
 
 const state = {
-  model: null, // { session, info, name }
+  model: null, // { session, info, name, all (every pixel kept), skipper }
   track: null, // { samples, name, frames }
   frame: 0, // the track's frame shown when not playing
   yaw: 0,
@@ -45,7 +47,8 @@ const state = {
   mic: null, // { ring, stop }
   lastMicChunk: null,
   rendering: false,
-  times: [],
+  times: [], // { at, nRays, headRays } of the frames drawn in the last 2 s
+  last: null, // the last frame: { kind, nRays, headRays, keep }
 };
 
 // Session runs one at a time: the live loop and the hook share this queue.
@@ -64,20 +67,48 @@ function pose() {
   return turnedPose(info.defaultPose, info.centre, state.yaw, state.pitch);
 }
 
-// One frame: the graph's image for `chunk` from the camera turned by yaw/pitch, drawn on the
-// canvas (8 bits, nldf's rounding); returns the canvas's pixels as RGB.
-async function render(chunk, yaw, pitch) {
-  const { session, info } = state.model;
-  const c2w = Float32Array.from(turnedPose(info.defaultPose, info.centre, yaw, pitch));
+// The graph's frame for `chunk` from camera-to-world `c2w` (row-major), only the pixels
+// `keep` marks (a 0/1 mask, row-major; null: every pixel) rendered: { image, nRays }.
+async function runGraph(chunk, c2w, keep) {
+  const { session, info, all } = state.model;
+  const { width, height } = info;
   const out = await session.run({
     audio: new ort.Tensor('float32', chunk, [chunk.length]),
-    pose: new ort.Tensor('float32', c2w, [4, 4]),
-  }, ['image']);
+    pose: new ort.Tensor('float32', Float32Array.from(c2w), [4, 4]),
+    keep: new ort.Tensor('bool', keep ?? all, [height, width]),
+  }, ['image', 'n_rays']);
   const image = out.image.data;
-  const { width, height } = info;
+  const nRays = Number(out.n_rays.data[0]);
+  for (const t of Object.values(out)) t.dispose?.();
   if (image.length !== width * height * 3) {
     throw new Error(`the graph gave ${image.length} values, expected ${width} x ${height} x 3`);
   }
+  return { image, nRays };
+}
+
+const skipping = () => $('skip').checked;
+const probeChunks = () => probeFrames(state.track.frames, SKIP_CONFIG.probes).map((f) => trackChunk(f));
+
+// One frame: the graph's frame for `chunk` from the camera turned by yaw/pitch (with `skip`,
+// the track's frame through the still-pixel skipper), drawn on the canvas; returns the
+// canvas's pixels as RGB.
+async function render(chunk, yaw, pitch, skip = false) {
+  const info = state.model.info;
+  const c2w = turnedPose(info.defaultPose, info.centre, yaw, pitch);
+  let frame;
+  if (skip && state.track) {
+    frame = await state.model.skipper.render(runGraph, c2w, chunk, probeChunks);
+  } else {
+    const out = await runGraph(chunk, c2w, null);
+    frame = { image: out.image, kind: 'full', nRays: out.nRays, headRays: out.nRays, keep: null };
+  }
+  state.last = frame;
+  return draw(frame.image);
+}
+
+// Draws a frame on the canvas (8 bits, nldf's rounding); returns the canvas's pixels as RGB.
+function draw(image) {
+  const { width, height } = state.model.info;
   const rgba = new ImageData(width, height);
   for (let i = 0, n = width * height; i < n; i++) {
     for (let c = 0; c < 3; c++) {
@@ -94,7 +125,6 @@ async function render(chunk, yaw, pitch) {
     rgb[3 * i + 1] = back[4 * i + 1];
     rgb[3 * i + 2] = back[4 * i + 2];
   }
-  for (const t of Object.values(out)) t.dispose?.();
   return rgb;
 }
 
@@ -119,13 +149,18 @@ async function loadModel(source, name) {
   } catch (e) {
     throw new Error(`${name}: onnxruntime-web cannot load it (${e.message ?? e})`);
   }
-  for (const input of ['audio', 'pose']) {
-    if (!session.inputNames.includes(input)) throw new Error(`${name}: the graph has no "${input}" input`);
+  const missing = ['audio', 'pose', 'keep'].filter((i) => !session.inputNames.includes(i))
+    .map((i) => `"${i}" input`)
+    .concat(['image', 'n_rays'].filter((o) => !session.outputNames.includes(o)).map((o) => `"${o}" output`));
+  if (missing.length) {
+    await session.release();
+    throw new Error(`${name}: the graph has no ${missing.join(' or ')} (an older export? run nldf export --frame again)`);
   }
-  if (!session.outputNames.includes('image')) throw new Error(`${name}: the graph has no "image" output`);
+  const all = new Uint8Array(info.width * info.height).fill(1);
+  const skipper = new StillSkipper(info.width, info.height);
   await exclusive(async () => {
     await state.model?.session.release();
-    state.model = { session, info, name };
+    state.model = { session, info, name, all, skipper };
   });
   canvas.width = info.width;
   canvas.height = info.height;
@@ -143,6 +178,7 @@ async function loadModel(source, name) {
 function setTrack(samples, name) {
   const spf = state.model?.info.audio.samples_per_frame ?? 640;
   state.track = { samples, name, frames: Math.floor(samples.length / spf) };
+  state.model?.skipper.reset();
   state.frame = 0;
   state.dirty = true;
   $('play').disabled = false;
@@ -229,23 +265,26 @@ function tick() {
   requestAnimationFrame(tick);
   if (!state.model || state.rendering) return;
   let chunk;
+  let skip = false;
   const info = state.model.info;
   if (state.playback) {
     const elapsed = audioCtx.currentTime - state.playback.start - (audioCtx.outputLatency || 0);
     state.frame = Math.max(0, Math.min(state.track.frames - 1, Math.floor(elapsed * info.fps)));
     chunk = trackChunk(state.frame);
+    skip = skipping();
   } else if (state.mic) {
     chunk = micChunk();
     state.lastMicChunk = chunk;
   } else if (state.dirty) {
     chunk = state.track ? trackChunk(state.frame) : new Float32Array(info.audio.samples);
+    skip = skipping();
   } else {
     return;
   }
   state.dirty = false;
   state.rendering = true;
   const { yaw, pitch } = state;
-  exclusive(() => render(chunk, yaw, pitch))
+  exclusive(() => render(chunk, yaw, pitch, skip))
     .then(() => countFrame())
     .catch((e) => {
       showError(`rendering failed: ${e.message ?? e}`);
@@ -256,13 +295,18 @@ function tick() {
     });
 }
 
+// Frames per second and the share of the head's rays re-rendered, over the last 2 s.
 function countFrame() {
   const now = performance.now();
-  state.times.push(now);
-  while (state.times.length > 1 && now - state.times[0] > 2000) state.times.shift();
+  const { nRays, headRays } = state.last;
+  state.times.push({ at: now, nRays, headRays });
+  while (state.times.length > 1 && now - state.times[0].at > 2000) state.times.shift();
   const n = state.times.length - 1;
-  const fps = n > 0 ? (1000 * n) / (now - state.times[0]) : 0;
+  const fps = n > 0 ? (1000 * n) / (now - state.times[0].at) : 0;
+  const rays = state.times.reduce((s, t) => s + t.nRays, 0);
+  const head = state.times.reduce((s, t) => s + t.headRays, 0);
   $('fps').textContent = `${fps.toFixed(1)} fps`;
+  $('rays').textContent = head > 0 ? `${Math.round((100 * rays) / head)} % of rays` : 'no head rays';
 }
 
 // The head's pose from the sliders and from dragging on the view.
@@ -324,6 +368,10 @@ document.addEventListener('drop', guarded(async (e) => {
   if (file) await openFile(file);
 }));
 $('play').addEventListener('click', guarded(() => (state.playback ? stopPlayback() : play())));
+$('skip').addEventListener('change', () => {
+  state.model?.skipper.reset();
+  state.dirty = true;
+});
 $('mic').addEventListener('click', guarded(() => (state.mic ? stopMic() : startMic())));
 
 // The hook: deterministic frames for the tests and the benchmark (yaw and pitch in radians).
@@ -337,7 +385,14 @@ const hook = {
   }),
   setWav,
   chunkFor: (f) => trackChunk(f),
-  renderFrame: (f, yaw = 0, pitch = 0) => exclusive(() => render(trackChunk(f), yaw, pitch)),
+  // The track's frame f, through the still-pixel skipper while its box is ticked.
+  renderFrame: (f, yaw = 0, pitch = 0) => exclusive(() => render(trackChunk(f), yaw, pitch, skipping())),
+  // How the last frame was made: { kind ('full', 'probed', 'partial'), nRays, headRays,
+  // keep (the mask of a skipped frame, else null) }.
+  lastFrame: () => {
+    const { kind, nRays, headRays, keep } = state.last ?? {};
+    return { kind, nRays, headRays, keep: keep ? Uint8Array.from(keep) : null };
+  },
   renderChunk: (chunk, yaw = 0, pitch = 0) => exclusive(() => render(Float32Array.from(chunk), yaw, pitch)),
   // The microphone's newest chunk rendered: { chunk, rgb }.
   micFrame: (yaw = 0, pitch = 0) => exclusive(async () => {
@@ -345,6 +400,8 @@ const hook = {
     state.lastMicChunk = chunk;
     return { chunk, rgb: await render(chunk, yaw, pitch) };
   }),
+  // A fresh skipper: the next skipped frame is a full one.
+  resetSkipper: () => exclusive(() => state.model.skipper.reset()),
   lastMicChunk: () => state.lastMicChunk,
   micSamples: () => state.mic?.ring.count ?? 0,
   startMic,
@@ -359,27 +416,39 @@ const hook = {
     mic: !!state.mic,
     crossOriginIsolated,
     threads,
+    // The live loop has nothing left to draw.
+    idle: !state.dirty && !state.rendering,
   }),
   // Frames per second of `n` frames of the track (or of silence) after `warmup`: the whole
-  // frame (graph, 8 bits, canvas), or the graph's run alone when `draw` is false.
-  bench: (n = 50, warmup = 5, draw = true) => exclusive(async () => {
+  // frame (graph, 8 bits, canvas), or the graph's run alone when `draw` is false; full
+  // frames with the head turning a little, or with `skip` the track's frames at the default
+  // pose through a fresh still-pixel skipper (its full and probed frames included), with the
+  // share of the head's rays re-rendered.
+  bench: (n = 50, warmup = 5, draw = true, skip = false) => exclusive(async () => {
     const info = state.model.info;
+    if (skip && !state.track) throw new Error('skipping needs a track');
     const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
+    const pose = (yaw) => turnedPose(info.defaultPose, info.centre, yaw, 0);
+    const skipper = state.model.skipper;
+    let rays = 0;
+    let head = 0;
     const once = async (f, yaw) => {
-      if (draw) return render(chunk(f), yaw, 0);
-      const c2w = Float32Array.from(turnedPose(info.defaultPose, info.centre, yaw, 0));
-      const c = chunk(f);
-      const out = await state.model.session.run({
-        audio: new ort.Tensor('float32', c, [c.length]),
-        pose: new ort.Tensor('float32', c2w, [4, 4]),
-      }, ['image']);
-      for (const t of Object.values(out)) t.dispose?.();
+      const frame = skip
+        ? await skipper.render(runGraph, pose(0), chunk(f), probeChunks)
+        : await runGraph(chunk(f), pose(yaw), null);
+      rays += frame.nRays;
+      head += frame.headRays ?? frame.nRays;
+      if (draw) draw(frame.image);
     };
     for (let i = 0; i < warmup; i++) await once(i, 0);
+    skipper.reset();
+    rays = 0;
+    head = 0;
     const t0 = performance.now();
-    for (let i = 0; i < n; i++) await once(i, 0.2 * Math.sin(i / 7));
+    for (let i = 0; i < n; i++) await once(i, skip ? 0 : 0.2 * Math.sin(i / 7));
     const ms = (performance.now() - t0) / n;
-    return { frames: n, ms_per_frame: ms, fps: 1000 / ms };
+    skipper.reset();
+    return { frames: n, ms_per_frame: ms, fps: 1000 / ms, ray_share: head > 0 ? rays / head : null };
   }),
 };
 hook.ready = (async () => {

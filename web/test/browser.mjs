@@ -1,13 +1,17 @@
 // Drives the page in Debian's headless Chromium (playwright-core, no downloaded browser):
 // loads the frame graph, feeds a WAV through the file input and through the fake
-// microphone, renders the requested frames at the requested poses, and writes what the
+// microphone, renders the requested frames at the requested poses with still-pixel skipping
+// off, then the track's first frames at the default pose with it on, and writes what the
 // canvas showed to an output folder for the Rust test to compare with nldf.
 //
 // node web/test/browser.mjs --wav WAV --out DIR [--frames 0,1,25] [--poses 0,0;0.3,-0.1]
-//   [--model URL] [--mic] [--ray-graph PATH] [--screenshot PNG] [--chromium PATH]
+//   [--skip-frames N] [--model URL] [--mic] [--ray-graph PATH] [--screenshot PNG]
+//   [--chromium PATH]
 //
-// DIR gets frame_<f>_<p>.rgb (raw RGB u8, pose number p), mic.f32 (the chunk the page used,
-// raw little-endian f32) and mic.rgb, and result.json: sizes, files, page and console errors.
+// DIR gets frame_<f>_<p>.rgb (raw RGB u8, pose number p), skip_<f>.rgb and, for a skipped
+// frame, skip_<f>.keep (the page's mask, one byte a pixel), mic.f32 (the chunk the page
+// used, raw little-endian f32) and mic.rgb, and result.json: sizes, files, how each skipping
+// frame was made, page and console errors.
 import { chromium } from 'playwright-core';
 import { execFileSync } from 'node:child_process';
 import { mkdtempSync, mkdirSync, rmSync, writeFileSync, existsSync } from 'node:fs';
@@ -16,7 +20,7 @@ import path from 'node:path';
 import { startServer } from '../serve.mjs';
 
 function parseArgs(argv) {
-  const args = { frames: [0], poses: [[0, 0]], model: '/models/demo/frame.onnx', chromium: '/usr/bin/chromium', mic: false };
+  const args = { frames: [0], poses: [[0, 0]], skipFrames: 0, model: '/models/demo/frame.onnx', chromium: '/usr/bin/chromium', mic: false };
   for (let i = 0; i < argv.length; i++) {
     const key = argv[i];
     const value = () => {
@@ -27,6 +31,7 @@ function parseArgs(argv) {
     else if (key === '--out') args.out = path.resolve(value());
     else if (key === '--frames') args.frames = value().split(',').map(Number);
     else if (key === '--poses') args.poses = value().split(';').map((p) => p.split(',').map(Number));
+    else if (key === '--skip-frames') args.skipFrames = Number(value());
     else if (key === '--model') args.model = value();
     else if (key === '--mic') args.mic = true;
     else if (key === '--ray-graph') args.rayGraph = path.resolve(value());
@@ -36,6 +41,7 @@ function parseArgs(argv) {
   }
   if (!args.wav || !args.out) throw new Error('usage: browser.mjs --wav WAV --out DIR [options]');
   if (args.frames.some((f) => !Number.isInteger(f) || f < 0)) throw new Error('--frames: frame numbers are whole numbers');
+  if (!Number.isInteger(args.skipFrames) || args.skipFrames < 0) throw new Error('--skip-frames: a whole number');
   if (args.poses.some((p) => p.length !== 2 || p.some((v) => !Number.isFinite(v)))) throw new Error('--poses: yaw,pitch in radians, separated by ;');
   return args;
 }
@@ -43,9 +49,9 @@ function parseArgs(argv) {
 const args = parseArgs(process.argv.slice(2));
 // A hung browser must not hang the test that runs this.
 const limit = setTimeout(() => {
-  console.error('browser: gave up after 120 s');
+  console.error('browser: gave up after 240 s');
   process.exit(4);
-}, 120_000);
+}, 240_000);
 limit.unref();
 if (!existsSync(args.chromium)) {
   console.error(`browser: ${args.chromium} is missing (run scripts/web_env.sh)`);
@@ -113,6 +119,8 @@ try {
   Object.assign(result, meta);
 
   const b64 = (rgb) => Buffer.from(rgb, 'base64');
+  // Full frames: skipping off.
+  await page.uncheck('#skip');
   for (const [p, [yaw, pitch]] of args.poses.entries()) {
     for (const f of args.frames) {
       const rgb = await page.evaluate(async ([f, yaw, pitch]) => {
@@ -140,6 +148,34 @@ try {
     pitch_deg: Number(document.getElementById('pitch').value),
   }));
   await page.click('#reset');
+
+  // Skipping on, at the default pose: frames 0 .. N-1 from a fresh skipper, once the live
+  // loop has drawn what the box's change asked for.
+  if (args.skipFrames > 0) {
+    await page.check('#skip');
+    await page.waitForFunction(() => window.nldf.state().idle);
+    await page.evaluate(() => window.nldf.resetSkipper());
+    result.skip = [];
+    for (let f = 0; f < args.skipFrames; f++) {
+      const out = await page.evaluate(async (f) => {
+        const enc = (bytes) => {
+          let s = '';
+          for (let i = 0; i < bytes.length; i += 0x8000) s += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+          return btoa(s);
+        };
+        const rgb = await window.nldf.renderFrame(f, 0, 0);
+        const last = window.nldf.lastFrame();
+        return { rgb: enc(rgb), kind: last.kind, n_rays: last.nRays, head_rays: last.headRays, keep: last.keep && enc(last.keep) };
+      }, f);
+      const entry = { frame: f, kind: out.kind, n_rays: out.n_rays, head_rays: out.head_rays, file: `skip_${f}.rgb` };
+      writeFileSync(path.join(args.out, entry.file), b64(out.rgb));
+      if (out.keep) {
+        entry.keep = `skip_${f}.keep`;
+        writeFileSync(path.join(args.out, entry.keep), b64(out.keep));
+      }
+      result.skip.push(entry);
+    }
+  }
 
   if (args.mic) {
     await page.evaluate(() => window.nldf.startMic());
