@@ -38,7 +38,8 @@ pub enum BenchCommand {
     Frontier(crate::frontier_cmd::FrontierArgs),
     /// Frame graphs (`nldf export --frame`) in headless Chromium with onnxruntime-web
     /// (WASM, SIMD, threads; web/bench.mjs) beside native onnxruntime and tract, in one
-    /// run: frames per second of each.
+    /// run: frames per second of each, full frames and skipping still pixels (the page's,
+    /// and with --ray-model nldf's `--skip-still` in onnxruntime).
     Web(WebBenchArgs),
     /// The positional encoding's sines and cosines three ways (direct f32, f32
     /// double-angle climb, nldf's f64 climb): time per value and error against f64.
@@ -50,6 +51,10 @@ pub struct WebBenchArgs {
     /// Frame graphs to time (repeat the flag), e.g. one student's fp32, fp16 and int8.
     #[arg(long = "model", required = true)]
     pub models: Vec<PathBuf>,
+    /// The same students' ray graphs (`nldf export`), one per --model in the same order,
+    /// timed in onnxruntime skipping still pixels as `nldf render --skip-still` does.
+    #[arg(long = "ray-model")]
+    pub ray_models: Vec<PathBuf>,
     /// Timed frames per model and runtime.
     #[arg(long, default_value_t = 60)]
     pub frames: usize,
@@ -153,8 +158,16 @@ fn web(args: WebBenchArgs) -> Result<()> {
     if args.frames == 0 || args.threads == 0 {
         anyhow::bail!("--frames and --threads must be positive");
     }
+    if !(args.ray_models.is_empty() || args.ray_models.len() == args.models.len()) {
+        anyhow::bail!(
+            "{} --ray-model for {} --model: give one per --model, in the same order, or none",
+            args.ray_models.len(),
+            args.models.len()
+        );
+    }
     let job = WebBenchJob {
         models: args.models,
+        ray_models: args.ray_models,
         frames: args.frames,
         threads: args.threads,
         web: (!args.no_browser).then_some(args.web),

@@ -1,7 +1,10 @@
 // Frames per second of nldf frame graphs in headless Chromium (onnxruntime-web, WASM SIMD,
-// threads), one JSON line per model.
-// node web/bench.mjs [--frames 50] [--warmup 5] [--threads 2] MODEL.onnx...
-// (default model: models/demo/frame.onnx). Needs scripts/web_env.sh.
+// threads), one JSON line per model: full frames with the head turning, and frames skipping
+// still pixels at the default pose (skip_fps, and skip_ray_share: the share of the head's
+// rays re-rendered).
+// node web/bench.mjs [--frames 50] [--warmup 5] [--threads 2] [--wav WAV] MODEL.onnx...
+// (default model: models/demo/frame.onnx; default track: a 4 s voiced test signal).
+// Needs scripts/web_env.sh.
 import { chromium } from 'playwright-core';
 import { execFileSync } from 'node:child_process';
 import { existsSync, mkdtempSync, readFileSync, rmSync, statSync } from 'node:fs';
@@ -20,11 +23,12 @@ for (let i = 0; i < argv.length; i++) {
     if (!Number.isInteger(v) || v < 0) throw new Error(`${a} needs a whole number`);
     opts[a.slice(2)] = v;
   } else if (a === '--chromium') opts.chromium = argv[++i];
+  else if (a === '--wav') opts.wav = path.resolve(argv[++i]);
   else if (a.startsWith('--')) throw new Error(`unknown argument ${a}`);
   else opts.models.push(path.resolve(a));
 }
 if (opts.models.length === 0) opts.models.push(path.join(here, '..', 'models', 'demo', 'frame.onnx'));
-for (const m of opts.models) {
+for (const m of opts.wav ? [...opts.models, opts.wav] : opts.models) {
   if (!existsSync(m)) {
     console.error(`bench: ${m} is missing`);
     process.exit(2);
@@ -96,7 +100,8 @@ try {
   page.on('pageerror', (e) => errors.push(e.message));
   await page.route('**/bench/*', (route) => {
     const name = new URL(route.request().url()).pathname.split('/').pop();
-    const body = name === 'track.wav' ? testWav() : readFileSync(opts.models[Number(name.split('.')[0])]);
+    const track = () => (opts.wav ? readFileSync(opts.wav) : testWav());
+    const body = name === 'track.wav' ? track() : readFileSync(opts.models[Number(name.split('.')[0])]);
     return route.fulfill({ status: 200, body, contentType: 'application/octet-stream' });
   });
   await page.goto(`${base}/?model=none&autoplay=0&threads=${opts.threads}`);
@@ -111,6 +116,7 @@ try {
     const info = await page.evaluate((url) => window.nldf.loadModel(url, url), `/bench/${i}.onnx`);
     const frame = await page.evaluate(([n, w]) => window.nldf.bench(n, w, true), [opts.frames, opts.warmup]);
     const graph = await page.evaluate(([n, w]) => window.nldf.bench(n, w, false), [opts.frames, opts.warmup]);
+    const skip = await page.evaluate(([n, w]) => window.nldf.bench(n, w, true, true), [opts.frames, opts.warmup]);
     console.log(JSON.stringify({
       model: path.relative(process.cwd(), model),
       bytes: statSync(model).size,
@@ -122,6 +128,9 @@ try {
       fps: Number(frame.fps.toFixed(2)),
       ms_per_frame: Number(frame.ms_per_frame.toFixed(2)),
       graph_fps: Number(graph.fps.toFixed(2)),
+      track: opts.wav ? path.basename(opts.wav) : 'test signal, 4 s',
+      skip_fps: Number(skip.fps.toFixed(2)),
+      skip_ray_share: Number(skip.ray_share.toFixed(4)),
     }));
   }
   if (errors.length) throw new Error(`page errors: ${errors.join('; ')}`);

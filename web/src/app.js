@@ -420,11 +420,11 @@ const hook = {
     idle: !state.dirty && !state.rendering,
   }),
   // Frames per second of `n` frames of the track (or of silence) after `warmup`: the whole
-  // frame (graph, 8 bits, canvas), or the graph's run alone when `draw` is false; full
+  // frame (graph, 8 bits, canvas), or the graph's run alone when `toCanvas` is false; full
   // frames with the head turning a little, or with `skip` the track's frames at the default
   // pose through a fresh still-pixel skipper (its full and probed frames included), with the
   // share of the head's rays re-rendered.
-  bench: (n = 50, warmup = 5, draw = true, skip = false) => exclusive(async () => {
+  bench: (n = 50, warmup = 5, toCanvas = true, skip = false) => exclusive(async () => {
     const info = state.model.info;
     if (skip && !state.track) throw new Error('skipping needs a track');
     const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
@@ -438,7 +438,7 @@ const hook = {
         : await runGraph(chunk(f), pose(yaw), null);
       rays += frame.nRays;
       head += frame.headRays ?? frame.nRays;
-      if (draw) draw(frame.image);
+      if (toCanvas) draw(frame.image);
     };
     for (let i = 0; i < warmup; i++) await once(i, 0);
     skipper.reset();
