@@ -96,7 +96,7 @@ impl WebBenchJob {
             )));
         }
         let machine = Machine::here();
-        let dir = tempfile::tempdir().map_err(|e| Error::io("a temporary folder", e))?;
+        let dir = crate::error::temp_dir()?;
         let wav = dir.path().join("voice.wav");
         // Whole frames at 25 fps, at least 4 s: the skipping probes spread over the clip.
         let track_samples = 640 * (self.frames + WARM_UP).max(100);
@@ -124,7 +124,10 @@ impl WebBenchJob {
             let ray_model = self.ray_models.get(i).cloned();
             let ort_skip = match &ray_model {
                 Some(rays) => {
-                    let track = native_skip(rays, &wav, self.threads, self.frames, skip)?;
+                    let track =
+                        native_skip(rays, &wav, self.threads, self.frames, skip).map_err(|e| {
+                            e.context(format!("{}: skipping still pixels", rays.display()))
+                        })?;
                     note(&format!(
                         "{}: onnxruntime skipping still pixels {:.1} frames/s, {:.1} % of rays",
                         rays.display(),
