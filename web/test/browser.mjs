@@ -78,7 +78,7 @@ try {
   context = await chromium.launchPersistentContext(profile, {
     executablePath: args.chromium,
     headless: true,
-    viewport: { width: 900, height: 560 },
+    viewport: { width: 900, height: 640 },
     args: [
       '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
       '--disable-background-networking', '--disable-component-update', '--disable-sync',
