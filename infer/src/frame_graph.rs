@@ -1,9 +1,9 @@
 //! Runs a frame graph (`nldf export --frame`) in tract or onnxruntime: a frame's audio
 //! chunk and a pose in, the frame out, with nothing computed outside the graph. Every pixel
-//! is kept ([`FrameGraph::render`]) unless the caller names the ones to render
-//! ([`FrameGraph::render_kept`]). nldf's own
-//! renderer runs the ray graph ([`crate::FrameRenderer`]); this runner is how the tests and
-//! benchmarks hold the frame graph against it, as any other runtime would load it.
+//! is rendered ([`FrameGraph::render`]) unless the caller names the ones to keep
+//! ([`FrameGraph::render_kept`]). nldf's own renderer runs the ray graph
+//! ([`crate::FrameRenderer`]); this runner is how the tests and benchmarks hold the frame
+//! graph against it, as any other runtime would load it.
 
 use glam::Mat4;
 use nldf_core::image::ImageRgb;
