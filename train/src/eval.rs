@@ -35,7 +35,7 @@ pub trait FrameModel {
 
 /// A student's name from its config: the network's shape, then its recipe where it is not
 /// the default one (pixels only, pseudo views and their share, the segment term's lambda,
-/// mouth rays, no pool, beams not anchored), so that students trained differently never
+/// mouth rays, the learning rate, no pool, beams not anchored), so that students trained differently never
 /// print alike.
 pub fn student_name(cfg: &StudentRunConfig) -> String {
     let (m, t) = (&cfg.model, &cfg.train);
@@ -69,6 +69,9 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     }
     if t.mouth_fraction != defaults.mouth_fraction {
         recipe.push(format!("mouth {}", t.mouth_fraction));
+    }
+    if t.lr != defaults.lr {
+        recipe.push(format!("lr {}", t.lr));
     }
     if !t.pool {
         recipe.push("no pool".into());
@@ -512,7 +515,9 @@ mod tests {
         pixels.train.lambda = 0.0;
         let mut floored = base.clone();
         floored.train.opacity_floor = 0.05;
-        let names: Vec<String> = [&base, &lambda, &fixed, &pixels, &floored]
+        let mut faster = base.clone();
+        faster.train.lr = 1e-3;
+        let names: Vec<String> = [&base, &lambda, &fixed, &pixels, &floored, &faster]
             .iter()
             .map(|c| student_name(c))
             .collect();
@@ -521,6 +526,7 @@ mod tests {
         // Without distillation lambda weighs nothing, so it is not named.
         assert_eq!(names[3], "student 16x128 (K = 8), pixels only");
         assert!(names[4].ends_with(", opacity floor 0.05"), "{}", names[4]);
+        assert!(names[5].ends_with(", lr 0.001"), "{}", names[5]);
         for (i, a) in names.iter().enumerate() {
             for b in &names[i + 1..] {
                 assert_ne!(a, b);
