@@ -398,6 +398,81 @@ fn a_student_resumes_bit_exactly_with_its_pool() {
     assert_eq!(next, again);
 }
 
+/// Weight averaging: a run with `ema_decay` trains exactly as one without it, and ends on the
+/// moving average of the weights from the step the learning rate starts to decay, worked
+/// here from the plain run's weights step by step.
+#[test]
+fn a_student_with_weight_averaging_ends_on_the_average_of_its_decaying_steps() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let weights = |run: &StudentRun| -> Vec<f32> {
+        nldf_train::nn::sorted_vars(&run.model.varmap)
+            .unwrap()
+            .iter()
+            .flat_map(|(_, v)| {
+                v.as_tensor()
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1::<f32>()
+                    .unwrap()
+            })
+            .collect()
+    };
+    let mut cfg = tiny_student_config(8);
+    cfg.train.distill = false;
+    cfg.train.lr_hold_steps = 4;
+    cfg.train.lr_decay_steps = 4;
+    let plain_dir = tempfile::tempdir().unwrap();
+    let mut plain = StudentRun::create(plain_dir.path(), cfg.clone(), &data, None).unwrap();
+    plain.prepare(&data, None, &mut |_, _| {}).unwrap();
+    let mut expected: Option<Vec<f32>> = None;
+    let decay = 0.75f32;
+    for step in 1..=8 {
+        plain.train_step(&data).unwrap();
+        if step > 4 {
+            let w = weights(&plain);
+            expected = Some(match expected {
+                None => w,
+                Some(a) => a
+                    .iter()
+                    .zip(&w)
+                    .map(|(a, w)| decay * a + (1.0 - decay) * w)
+                    .collect(),
+            });
+        }
+    }
+    let expected = expected.unwrap();
+    cfg.train.ema_decay = decay as f64;
+    let dir = tempfile::tempdir().unwrap();
+    let mut averaged = StudentRun::create(dir.path(), cfg, &data, None).unwrap();
+    averaged.prepare(&data, None, &mut |_, _| {}).unwrap();
+    for _ in 0..7 {
+        averaged.train_step(&data).unwrap();
+    }
+    // Until the last step the weights are the plain run's.
+    let before_last = weights(&averaged);
+    averaged.train_step(&data).unwrap();
+    let last = weights(&averaged);
+    let worst = expected
+        .iter()
+        .zip(&last)
+        .map(|(e, w)| (e - w).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst < 1e-6,
+        "the last weights are {worst} from the average"
+    );
+    let moved = weights(&plain)
+        .iter()
+        .zip(&last)
+        .map(|(p, w)| (p - w).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        moved > 1e-5,
+        "the average equals the last step's weights ({moved})"
+    );
+    assert_ne!(before_last, last);
+}
+
 /// Eq. 9 with opacity, on numbers worked by hand: the pixel term, lambda times the
 /// segment term and lambda times the opacity's divergence, KL(0.5 | 0.9) =
 /// 0.5 ln(0.5 / 0.9) + 0.5 ln(0.5 / 0.1), each per ray; and the divergence is 0 where

@@ -374,6 +374,12 @@ pub struct StudentTrainConfig {
     /// no colour), so that the student is not taught the teacher's faint haze far from the
     /// head; 0 (the default) keeps every target as the teacher renders it.
     pub opacity_floor: f32,
+    /// Weight averaging: from the step the learning rate starts to decay, keep an
+    /// exponential moving average of the weights with this decay per step (0, the default:
+    /// none; 0.998 averages over about the last 500 steps), and end the run on it: the
+    /// last validation, the last checkpoint and every export use the average. A run resumed
+    /// mid-way starts its average again at the resumed step.
+    pub ema_decay: f64,
     /// Adam learning rate at step 0 (R2L: 5e-4).
     pub lr: f64,
     /// Steps over which the learning rate decays by 10x.
@@ -496,6 +502,7 @@ impl Default for StudentTrainConfig {
             mouth_weight: 1.0,
             project_mouth: true,
             opacity_floor: 0.0,
+            ema_decay: 0.0,
             lr: 5e-4,
             lr_decay_steps: 3000,
             lr_hold_steps: 0,
@@ -541,6 +548,7 @@ impl RunConfig for StudentRunConfig {
         in_range("train.lambda", t.lambda, 0.0, 1e6)?;
         in_range("train.mouth_weight", t.mouth_weight, 0.0, 1e3)?;
         in_range("train.opacity_floor", t.opacity_floor, 0.0, 1.0)?;
+        in_range("train.ema_decay", t.ema_decay, 0.0, 0.999999)?;
         in_range("train.hard_ratio", t.hard_ratio, 0.0, 1.0)?;
         in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;

@@ -35,7 +35,7 @@ pub trait FrameModel {
 
 /// A student's name from its config: the network's shape, then its recipe where it is not
 /// the default one (pixels only, pseudo views and their share, the segment term's lambda,
-/// mouth rays, the learning rate, no pool, beams not anchored), so that students trained differently never
+/// mouth rays, the learning rate, weight averaging, no pool, beams not anchored), so that students trained differently never
 /// print alike.
 pub fn student_name(cfg: &StudentRunConfig) -> String {
     let (m, t) = (&cfg.model, &cfg.train);
@@ -72,6 +72,9 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     }
     if t.lr != defaults.lr {
         recipe.push(format!("lr {}", t.lr));
+    }
+    if t.ema_decay != defaults.ema_decay {
+        recipe.push(format!("weights averaged at {}", t.ema_decay));
     }
     if !t.pool {
         recipe.push("no pool".into());
@@ -517,16 +520,25 @@ mod tests {
         floored.train.opacity_floor = 0.05;
         let mut faster = base.clone();
         faster.train.lr = 1e-3;
-        let names: Vec<String> = [&base, &lambda, &fixed, &pixels, &floored, &faster]
-            .iter()
-            .map(|c| student_name(c))
-            .collect();
+        let mut averaged = base.clone();
+        averaged.train.ema_decay = 0.998;
+        let names: Vec<String> = [
+            &base, &lambda, &fixed, &pixels, &floored, &faster, &averaged,
+        ]
+        .iter()
+        .map(|c| student_name(c))
+        .collect();
         assert!(names[1].ends_with(", lambda 0"), "{}", names[1]);
         assert!(names[2].ends_with(", beams unanchored"), "{}", names[2]);
         // Without distillation lambda weighs nothing, so it is not named.
         assert_eq!(names[3], "student 16x128 (K = 8), pixels only");
         assert!(names[4].ends_with(", opacity floor 0.05"), "{}", names[4]);
         assert!(names[5].ends_with(", lr 0.001"), "{}", names[5]);
+        assert!(
+            names[6].ends_with(", weights averaged at 0.998"),
+            "{}",
+            names[6]
+        );
         for (i, a) in names.iter().enumerate() {
             for b in &names[i + 1..] {
                 assert_ne!(a, b);

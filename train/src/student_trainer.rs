@@ -189,6 +189,9 @@ pub struct StudentRun {
     pending: Option<(TeacherModel, usize)>,
     /// Seconds the last step spent rendering pseudo views' targets, and how many.
     pseudo_time: (f64, usize),
+    /// The moving average of the weights (`ema_decay`), in `sorted_vars` order, once the
+    /// learning rate decays.
+    average: Option<Vec<Tensor>>,
 }
 
 impl std::ops::Deref for StudentRun {
@@ -298,6 +301,7 @@ impl StudentRun {
             targets: Vec::new(),
             pending: None,
             pseudo_time: (0.0, 0),
+            average: None,
         })
     }
 
@@ -594,6 +598,7 @@ impl StudentRun {
             0
         };
         self.step += 1;
+        self.update_average()?;
         let step = StudentStep {
             loss: out.loss,
             psnr: psnr_from_mse(out.main_mse),
@@ -803,6 +808,38 @@ impl StudentRun {
             per_ray: per_ray.to_vec1()?,
             main_mse,
         })
+    }
+
+    /// Folds this step's weights into the moving average once the learning rate decays
+    /// (`ema_decay` > 0), and on the run's last step puts the average in the weights'
+    /// place: `w_avg <- d w_avg + (1 - d) w`, started at the weights themselves.
+    fn update_average(&mut self) -> Result<()> {
+        let (decay, hold, iters) = {
+            let t = &self.cfg.train;
+            (t.ema_decay, t.lr_hold_steps, t.iters)
+        };
+        if decay <= 0.0 || self.step <= hold {
+            return Ok(());
+        }
+        let vars = sorted_vars(&self.model.varmap)?;
+        let average = match self.average.take() {
+            None => vars
+                .iter()
+                .map(|(_, v)| v.as_tensor().copy())
+                .collect::<candle_core::Result<Vec<_>>>()?,
+            Some(avg) => avg
+                .iter()
+                .zip(&vars)
+                .map(|(a, (_, v))| (a * decay)? + (v.as_tensor() * (1.0 - decay))?)
+                .collect::<candle_core::Result<Vec<_>>>()?,
+        };
+        if self.step == iters {
+            for (a, (_, v)) in average.iter().zip(&vars) {
+                v.set(a)?;
+            }
+        }
+        self.average = Some(average);
+        Ok(())
     }
 
     /// Writes the checkpoint: config, pool, optimizer state and weights.
