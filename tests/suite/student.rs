@@ -473,6 +473,50 @@ fn a_student_with_weight_averaging_ends_on_the_average_of_its_decaying_steps() {
     assert_ne!(before_last, last);
 }
 
+/// `audio_lr_scale` 0 keeps the audio encoder as it started (a distilled student's is its
+/// teacher's) while the rest of the network learns; at 1 the encoder learns too.
+#[test]
+fn a_student_can_keep_its_audio_encoder_fixed() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let split = |run: &StudentRun| -> (Vec<f32>, Vec<f32>) {
+        let (mut audio, mut rest) = (Vec::new(), Vec::new());
+        for (name, v) in nldf_train::nn::sorted_vars(&run.model.varmap).unwrap() {
+            let values = v
+                .as_tensor()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap();
+            if name.starts_with("audio.") {
+                audio.extend(values);
+            } else {
+                rest.extend(values);
+            }
+        }
+        (audio, rest)
+    };
+    for (scale, audio_moves) in [(0.0, false), (1.0, true)] {
+        let mut cfg = tiny_student_config(3);
+        cfg.train.distill = false;
+        cfg.train.audio_lr_scale = scale;
+        let dir = tempfile::tempdir().unwrap();
+        let mut run = StudentRun::create(dir.path(), cfg, &data, None).unwrap();
+        run.prepare(&data, None, &mut |_, _| {}).unwrap();
+        let (audio0, rest0) = split(&run);
+        assert!(!audio0.is_empty());
+        for _ in 0..3 {
+            run.train_step(&data).unwrap();
+        }
+        let (audio1, rest1) = split(&run);
+        assert_ne!(rest0, rest1, "the network did not learn");
+        assert_eq!(
+            audio0 != audio1,
+            audio_moves,
+            "audio encoder at scale {scale}"
+        );
+    }
+}
+
 /// Eq. 9 with opacity, on numbers worked by hand: the pixel term, lambda times the
 /// segment term and lambda times the opacity's divergence, KL(0.5 | 0.9) =
 /// 0.5 ln(0.5 / 0.9) + 0.5 ln(0.5 / 0.1), each per ray; and the divergence is 0 where

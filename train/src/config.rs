@@ -380,6 +380,10 @@ pub struct StudentTrainConfig {
     /// last validation, the last checkpoint and every export use the average. A run resumed
     /// mid-way starts its average again at the resumed step.
     pub ema_decay: f64,
+    /// The audio encoder's learning rate as a factor of the rest's: a distilled student
+    /// starts from its teacher's encoder, and 0 keeps that encoder as it is (1, the
+    /// default: trained with the rest).
+    pub audio_lr_scale: f64,
     /// Adam learning rate at step 0 (R2L: 5e-4).
     pub lr: f64,
     /// Steps over which the learning rate decays by 10x.
@@ -503,6 +507,7 @@ impl Default for StudentTrainConfig {
             project_mouth: true,
             opacity_floor: 0.0,
             ema_decay: 0.0,
+            audio_lr_scale: 1.0,
             lr: 5e-4,
             lr_decay_steps: 3000,
             lr_hold_steps: 0,
@@ -549,6 +554,7 @@ impl RunConfig for StudentRunConfig {
         in_range("train.mouth_weight", t.mouth_weight, 0.0, 1e3)?;
         in_range("train.opacity_floor", t.opacity_floor, 0.0, 1.0)?;
         in_range("train.ema_decay", t.ema_decay, 0.0, 0.999999)?;
+        in_range("train.audio_lr_scale", t.audio_lr_scale, 0.0, 100.0)?;
         in_range("train.hard_ratio", t.hard_ratio, 0.0, 1.0)?;
         in_range("train.pool_batches", t.pool_batches, 1, 1024)?;
         in_range("train.pseudo_frames", t.pseudo_frames, 0, 1 << 16)?;

@@ -76,6 +76,9 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     if t.ema_decay != defaults.ema_decay {
         recipe.push(format!("weights averaged at {}", t.ema_decay));
     }
+    if t.audio_lr_scale != defaults.audio_lr_scale {
+        recipe.push(format!("audio encoder at {}x the rate", t.audio_lr_scale));
+    }
     if !t.pool {
         recipe.push("no pool".into());
     }

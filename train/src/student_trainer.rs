@@ -280,7 +280,14 @@ impl StudentRun {
         let t = &model.cfg.train;
         let vars = sorted_vars(&model.varmap)?
             .into_iter()
-            .map(|(name, var)| (name, var, 1.0))
+            .map(|(name, var)| {
+                let scale = if name.starts_with("audio.") {
+                    t.audio_lr_scale
+                } else {
+                    1.0
+                };
+                (name, var, scale)
+            })
             .collect();
         let adam = Adam::new(
             vars,
