@@ -93,6 +93,18 @@ pub fn sorted_vars(varmap: &VarMap) -> Result<Vec<(String, Var)>> {
     Ok(vars)
 }
 
+/// The variables of `varmap` sorted by name, each with its learning-rate scale for
+/// [`crate::adam::Adam::new`]: `scale` where the name starts with `prefix`, 1 elsewhere.
+pub fn scaled_vars(varmap: &VarMap, prefix: &str, scale: f64) -> Result<Vec<(String, Var, f64)>> {
+    Ok(sorted_vars(varmap)?
+        .into_iter()
+        .map(|(name, var)| {
+            let s = if name.starts_with(prefix) { scale } else { 1.0 };
+            (name, var, s)
+        })
+        .collect())
+}
+
 /// A 1-D convolution computed as patches times a matrix (im2col), with candle's `Conv1d`
 /// weight layout (`weight` `[out, in, k]`, `bias` `[out]`). candle 0.11's own `conv1d`
 /// backward underflows for strided convolutions over short inputs (AudioNet's 2 -> 1 step);

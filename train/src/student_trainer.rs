@@ -34,7 +34,7 @@ use crate::config::{RunConfig, StudentRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::loss::{RayLosses, TeacherTargets, distillation_loss};
-use crate::nn::{init_seeded, new_varmap, sorted_vars};
+use crate::nn::{init_seeded, new_varmap, scaled_vars, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
 use crate::pool::{load_pool, save_pool};
 use crate::run_loop::{TrainingRun, finite_loss, run_fields};
@@ -278,17 +278,7 @@ impl StudentRun {
     fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentRun> {
         let model = StudentModel::build(dir, cfg)?;
         let t = &model.cfg.train;
-        let vars = sorted_vars(&model.varmap)?
-            .into_iter()
-            .map(|(name, var)| {
-                let scale = if name.starts_with("audio.") {
-                    t.audio_lr_scale
-                } else {
-                    1.0
-                };
-                (name, var, scale)
-            })
-            .collect();
+        let vars = scaled_vars(&model.varmap, "audio.", t.audio_lr_scale)?;
         let adam = Adam::new(
             vars,
             AdamParams {

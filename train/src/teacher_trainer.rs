@@ -24,7 +24,7 @@ use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint
 use crate::config::{RunConfig, TeacherRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::nn::{init_seeded, new_varmap, sorted_vars};
+use crate::nn::{init_seeded, new_varmap, scaled_vars};
 use crate::run_loop::{Event, TrainingRun, finite_loss, run_fields, train_loop};
 use crate::scores::{Scores, score_validation_frames};
 use crate::teacher::{Teacher, teacher};
@@ -390,17 +390,7 @@ impl TrainingRun for TeacherRun {
 
 fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
     let t = &cfg.train;
-    let vars = sorted_vars(varmap)?
-        .into_iter()
-        .map(|(name, var)| {
-            let scale = if name.starts_with("audio.att.") {
-                t.att_lr_scale
-            } else {
-                1.0
-            };
-            (name, var, scale)
-        })
-        .collect();
+    let vars = scaled_vars(varmap, "audio.att.", t.att_lr_scale)?;
     Ok(Adam::new(
         vars,
         AdamParams {
