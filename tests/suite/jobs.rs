@@ -6,7 +6,8 @@ use std::sync::atomic::AtomicBool;
 
 use nldf_core::dataset::Split;
 use nldf_core::run_files::{
-    ONNX_FILE, POOL_FILE, STATE_FILE, STUDENT_FILES, TARGETS_FILE, TEACHER_FILES,
+    CONFIG_FILE, MODEL_FILE, ONNX_FILE, POOL_FILE, STATE_FILE, STUDENT_FILES, TARGETS_FILE,
+    TEACHER_FILES,
 };
 use nldf_core::synth::SynthConfig;
 use nldf_train::config::TeacherConfig;
@@ -15,6 +16,7 @@ use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::demo::DemoJob;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::job::posed::PosedJob;
+use nldf_train::job::student::{StudentJob, StudentSource};
 use nldf_train::student::StudentConfig;
 
 /// `nldf demo`'s default job with its sizes and budgets shrunk; its recipe (which stages
@@ -118,6 +120,34 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
             .iter()
             .any(|e| matches!(e, JobEvent::TrainingEnds { stage, .. } if stage == "student"))
     );
+
+    // The student's saved configuration is its whole recipe: trained again from
+    // `student/config.json` alone, beside the demo's, it ends with the same weights.
+    StudentJob {
+        data: out.join("data"),
+        run: out.clone(),
+        name: "again".into(),
+        source: StudentSource::File(out.join("student").join(CONFIG_FILE)),
+        iters: None,
+        minutes: None,
+        resume: false,
+    }
+    .plan(&mut |_| {})
+    .unwrap()
+    .run(&stop, &mut |_| {})
+    .unwrap();
+    let weights = |dir: &str| {
+        candle_core::safetensors::load(out.join(dir).join(MODEL_FILE), &candle_core::Device::Cpu)
+            .unwrap()
+    };
+    let (demo, again) = (weights("student"), weights("again"));
+    assert_eq!(demo.len(), again.len());
+    for (name, w) in &demo {
+        let a: Vec<f32> = w.flatten_all().unwrap().to_vec1().unwrap();
+        let b: Vec<f32> = again[name].flatten_all().unwrap().to_vec1().unwrap();
+        assert!(a == b, "{name} differs when trained again from config.json");
+    }
+    std::fs::remove_dir_all(out.join("again")).unwrap();
 
     // A second demo into the same folder reuses the scene and resumes the spent stages.
     let mut again = Vec::new();

@@ -2,7 +2,7 @@
 //! configuration file, or a resumed one; the teacher's targets are made (or read from their
 //! cache) before the first step.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use nldf_core::dataset::AudioChoice;
@@ -33,6 +33,36 @@ pub enum StudentSource {
     },
     /// A `{"model": ..., "train": ...}` file, read strictly.
     File(PathBuf),
+    /// A configuration made in code (the demo's recipe). Everything a run is built from
+    /// (the optimizer's groups, the pool's size) is set before the run exists, so the
+    /// run's `config.json` trains the same student again.
+    Config(Box<StudentRunConfig>),
+}
+
+impl StudentSource {
+    /// The configuration this source gives, before a job's step count is applied, and
+    /// the file it was read from.
+    pub fn config(&self) -> Result<(StudentRunConfig, Option<&Path>)> {
+        Ok(match self {
+            StudentSource::File(path) => (read_config::<StudentRunConfig>(path)?, Some(path)),
+            StudentSource::Settings {
+                model,
+                distill,
+                pool,
+                pseudo,
+            } => {
+                let mut cfg = StudentRunConfig {
+                    model: model.clone(),
+                    ..StudentRunConfig::default()
+                };
+                cfg.train.distill = *distill;
+                cfg.train.pool = *pool;
+                pseudo.apply(&mut cfg.train);
+                (cfg, None)
+            }
+            StudentSource::Config(cfg) => ((**cfg).clone(), None),
+        })
+    }
 }
 
 /// Pseudo-view settings that replace [`StudentTrainConfig`]'s defaults where given.
@@ -145,29 +175,12 @@ impl StudentJob {
 
     /// The checked configuration of a new student.
     fn new_config(&self) -> Result<StudentRunConfig> {
-        let (mut cfg, file) = match &self.source {
-            StudentSource::File(path) => (read_config::<StudentRunConfig>(path)?, Some(path)),
-            StudentSource::Settings {
-                model,
-                distill,
-                pool,
-                pseudo,
-            } => {
-                let mut cfg = StudentRunConfig {
-                    model: model.clone(),
-                    ..StudentRunConfig::default()
-                };
-                cfg.train.distill = *distill;
-                cfg.train.pool = *pool;
-                pseudo.apply(&mut cfg.train);
-                (cfg, None)
-            }
-        };
+        let (mut cfg, file) = self.source.config()?;
         if let Some(n) = self.iters {
             cfg.train.iters = n;
             cfg.train.lr_decay_steps = n;
         }
-        check_config(&cfg, file.map(PathBuf::as_path))?;
+        check_config(&cfg, file)?;
         Ok(cfg)
     }
 }
