@@ -28,6 +28,10 @@ pub struct ExportArgs {
     /// (docs/frame-graph.md). nldf's own commands render from the ray graph.
     #[arg(long)]
     pub frame: bool,
+    /// With --frame: a learned upsampler of the run (its folder inside RUN, e.g.
+    /// `upsampler`) goes into the frame graph; the student runs on its coarse grid.
+    #[arg(long, requires = "frame", conflicts_with = "int8")]
+    pub upsampler: Option<String>,
     /// Store the weights in half precision (cast back to f32 in the graph): half the size.
     #[arg(long, conflicts_with = "int8")]
     pub fp16: bool,
@@ -85,6 +89,19 @@ pub fn run(args: ExportArgs) -> Result<()> {
                     data.display()
                 )
             })?
+        }
+        _ if args.upsampler.is_some() => {
+            let name = args.upsampler.as_deref().unwrap_or_default();
+            let dir = args.run.join(name);
+            nldf_export::export_frame_upsampled(&student, &dir, &out, weights).with_context(
+                || {
+                    format!(
+                        "exporting the student in {} with the upsampler in {} as a frame graph",
+                        student.display(),
+                        dir.display()
+                    )
+                },
+            )?
         }
         _ if args.frame => export_frame(&student, &out, weights).with_context(|| {
             format!(

@@ -18,6 +18,37 @@ pub enum TrainCommand {
     Teacher(TeacherArgs),
     /// Distil the light-field student from a trained teacher (RUN/teacher) into RUN/student.
     Student(StudentArgs),
+    /// Train a learned upsampler over a trained student (RUN/<student>): the student
+    /// evaluates one ray per `factor x factor` block and a small CNN makes the full-size
+    /// frame from its features, learned from the recorded frames and the teacher's renders
+    /// of pseudo views. Goes to RUN/<name>; `nldf eval` scores it beside the student.
+    Upsampler(UpsamplerArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct UpsamplerArgs {
+    /// Dataset folder the student was trained on (the output size is its frames').
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run folder holding RUN/teacher and the student.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The student's folder inside RUN.
+    #[arg(long, default_value = "student")]
+    pub student: String,
+    /// Folder of the upsampler inside RUN.
+    #[arg(long, default_value = "upsampler")]
+    pub name: String,
+    /// Output pixels per coarse ray along each side: 2, 4 or 8.
+    #[arg(long, default_value_t = 4)]
+    pub factor: usize,
+    /// JSON configuration ({"model": {...}, "train": {...}}; missing fields take the
+    /// defaults; overrides --factor).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Training steps (overrides the configuration).
+    #[arg(long)]
+    pub iters: Option<usize>,
 }
 
 /// Student depths of the paper's Table 3 (width 256), plus a tiny one for smoke runs.
@@ -192,6 +223,7 @@ pub fn run(cmd: TrainCommand) -> Result<()> {
     match cmd {
         TrainCommand::Teacher(args) => run_teacher(args),
         TrainCommand::Student(args) => run_student(args),
+        TrainCommand::Upsampler(args) => run_upsampler(args),
     }
 }
 
@@ -262,5 +294,67 @@ fn run_teacher(args: TeacherArgs) -> Result<()> {
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);
     args.job().plan(&mut show)?.run(&stop, &mut show)?;
+    Ok(())
+}
+
+/// Runs `nldf train upsampler`.
+fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
+    use anyhow::Context;
+    use nldf_train::upsampler_trainer::{UpsamplerRunConfig, train_upsampler};
+    let mut cfg: UpsamplerRunConfig = match &args.config {
+        Some(path) => nldf_train::config::read_config(path)?,
+        None => UpsamplerRunConfig {
+            model: nldf_core::upsampler_shape::UpsamplerConfig::with_factor(args.factor),
+            ..UpsamplerRunConfig::default()
+        },
+    };
+    if cfg.student.is_empty() {
+        cfg.student = args.student.clone();
+    }
+    if let Some(iters) = args.iters {
+        cfg.train.iters = iters;
+    }
+    cfg.check()?;
+    let student_dir = args.run.join(&cfg.student);
+    let student_cfg: nldf_train::config::StudentRunConfig =
+        nldf_train::config::read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
+            .with_context(|| format!("reading the student in {}", student_dir.display()))?;
+    let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
+    eprintln!("loading {}", args.data.display());
+    let data = nldf_train::data::TrainData::open_with(&args.data, true, &audio)?;
+    let dir = args.run.join(&args.name);
+    eprintln!(
+        "upsampler x{} over {} into {}: coarse features and the teacher's crops first",
+        cfg.model.factor,
+        student_dir.display(),
+        dir.display()
+    );
+    let iters = cfg.train.iters as u64;
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let report = train_upsampler(&dir, &args.run, cfg, &data, &mut |step, loss| {
+        let bar = bar.get_or_insert_with(|| crate::progress::progress_bar(iters, "upsampler"));
+        bar.set_position(step as u64);
+        if step % 25 == 0 {
+            bar.set_message(format!(
+                "upsampler, PSNR {:.2}",
+                nldf_core::metrics::psnr_from_mse(loss)
+            ));
+        }
+    })?;
+    if let Some(bar) = bar {
+        bar.finish();
+    }
+    println!(
+        "upsampler: {} steps in {:.1} s after {:.1} s of preparation ({} recorded views, {} \
+         teacher crops), final loss {:.3e}; weights in {}",
+        report.steps,
+        report.train_s,
+        report.prepare_s,
+        report.recorded_views,
+        report.pseudo_crops,
+        report.final_loss,
+        dir.display()
+    );
+    nldf_core::files::write_json(&dir.join("report.json"), &report)?;
     Ok(())
 }

@@ -157,6 +157,37 @@ impl ImageRgb {
         }
     }
 
+    /// The image `factor` times smaller on each side, each pixel the mean of its `factor x
+    /// factor` block (sides not divisible by `factor` lose their last pixels). `factor` 1
+    /// (or 0) is a copy.
+    pub fn downscaled(&self, factor: u32) -> ImageRgb {
+        if factor <= 1 {
+            return self.clone();
+        }
+        let (w, f) = (self.width as usize, factor as usize);
+        let (ow, oh) = (w / f, self.height as usize / f);
+        let mut data = vec![0.0f32; 3 * ow * oh];
+        let scale = 1.0 / (f * f) as f32;
+        for y in 0..oh {
+            for x in 0..ow {
+                for c in 0..3 {
+                    let mut sum = 0.0f32;
+                    for j in y * f..(y + 1) * f {
+                        for i in x * f..(x + 1) * f {
+                            sum += self.data[3 * (j * w + i) + c];
+                        }
+                    }
+                    data[3 * (y * ow + x) + c] = sum * scale;
+                }
+            }
+        }
+        ImageRgb {
+            width: ow as u32,
+            height: oh as u32,
+            data,
+        }
+    }
+
     /// 8-bit RGB bytes, rounded.
     pub fn to_rgb8(&self) -> Vec<u8> {
         self.data.iter().map(|&v| to_u8(v)).collect()

@@ -33,5 +33,6 @@ pub mod run_files;
 pub mod stats;
 pub mod student_shape;
 pub mod synth;
+pub mod upsampler_shape;
 
 pub use error::{Error, Result};

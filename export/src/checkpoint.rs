@@ -154,17 +154,27 @@ fn read_weights(path: &Path) -> Result<(HashMap<String, Weight>, u64)> {
 }
 
 /// The f32 tensors of safetensors `bytes` and the `step` of their metadata (0 when
-/// absent), refusing non-finite weights; `path` names the bytes in errors.
+/// absent), refusing non-finite weights and another kind than a student's; `path` names the
+/// bytes in errors.
 pub fn parse_weights(path: &Path, bytes: &[u8]) -> Result<(HashMap<String, Weight>, u64)> {
+    parse_weights_of(path, bytes, "student")
+}
+
+/// [`parse_weights`] for checkpoints of kind `expected` (`student`, `upsampler`).
+pub fn parse_weights_of(
+    path: &Path,
+    bytes: &[u8],
+    expected: &str,
+) -> Result<(HashMap<String, Weight>, u64)> {
     let (_, meta) = safetensors::SafeTensors::read_metadata(bytes)
         .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
     let metadata = meta.metadata().clone().unwrap_or_default();
     if let Some(kind) = metadata.get("kind")
-        && kind != "student"
+        && kind != expected
     {
         return Err(Error::invalid(
             path,
-            format!("holds a {kind}, not a student"),
+            format!("holds a {kind}, not a {expected}"),
         ));
     }
     let step = match metadata.get("step") {

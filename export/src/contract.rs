@@ -194,6 +194,10 @@ pub mod keys {
     /// frame `f` takes the `samples` samples from `f * samples_per_frame + offset` of the
     /// 16 kHz track, NaN where they lie outside it.
     pub const FRAME_AUDIO: &str = "nldf.frame_audio";
+    /// A frame graph's learned upsampler: output pixels per coarse ray along each side
+    /// (plain integer; absent or 1 without one). Its `keep` input is then the coarse grid's,
+    /// `[height / factor, width / factor]`.
+    pub const FRAME_UPSAMPLE: &str = "nldf.frame_upsample";
     /// The background as base64 of an 8-bit RGB PNG (plain string). Written last.
     pub const BACKGROUND_PNG: &str = "nldf.background_png";
 }

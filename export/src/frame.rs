@@ -33,6 +33,9 @@ use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::onnx::{DataType, ModelProto};
 use crate::student::{ExportReport, model_info, model_proto, student_nodes, write_model};
+use crate::upsample::{UpsamplerCheckpoint, upsampled_image};
+use nldf_core::camera::Intrinsics;
+use nldf_core::upsampler_shape::coarse_intrinsics;
 
 /// Name of the frame graph.
 pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
@@ -50,7 +53,38 @@ pub fn export_frame(student_dir: &Path, out: &Path, weights: WeightType) -> Resu
     }
     let ckpt = StudentCheckpoint::open(student_dir)?;
     crate::student::check_f16_range(&ckpt, student_dir, weights)?;
-    let (model, report_info, n_values) = frame_model(&ckpt, GraphBuilder::new(weights))?;
+    let (model, report_info, n_values) = frame_model(&ckpt, None, GraphBuilder::new(weights))?;
+    write_model(&model, report_info, n_values, out)
+}
+
+/// Exports the student in `student_dir` with the learned upsampler in `upsampler_dir` as a
+/// frame graph to `out` (written atomically): the student runs on the upsampler's coarse
+/// grid and the CNN makes the full-size frame ([`crate::upsample`]).
+pub fn export_frame_upsampled(
+    student_dir: &Path,
+    upsampler_dir: &Path,
+    out: &Path,
+    weights: WeightType,
+) -> Result<ExportReport> {
+    if weights == WeightType::Int8 {
+        return Err(Error::Frame(
+            "an upsampled frame graph is exported in f32 or f16 (int8 is for the ray graph's \
+             products, measured without the upsampler)"
+                .into(),
+        ));
+    }
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    let up = UpsamplerCheckpoint::open(upsampler_dir)?;
+    if student_dir.file_name().and_then(|n| n.to_str()) != Some(up.student.as_str()) {
+        return Err(Error::Frame(format!(
+            "the upsampler in {} was trained over the student `{}`, not {}",
+            upsampler_dir.display(),
+            up.student,
+            student_dir.display()
+        )));
+    }
+    crate::student::check_f16_range(&ckpt, student_dir, weights)?;
+    let (model, report_info, n_values) = frame_model(&ckpt, Some(&up), GraphBuilder::new(weights))?;
     write_model(&model, report_info, n_values, out)
 }
 
@@ -62,7 +96,7 @@ pub fn export_frame_int8(
     ranges: &ActivationRanges,
 ) -> Result<ExportReport> {
     let ckpt = StudentCheckpoint::open(student_dir)?;
-    let (model, info, n_values) = frame_model(&ckpt, GraphBuilder::int8(ranges.clone()))?;
+    let (model, info, n_values) = frame_model(&ckpt, None, GraphBuilder::int8(ranges.clone()))?;
     write_model(&model, info, n_values, out)
 }
 
@@ -70,6 +104,7 @@ pub fn export_frame_int8(
 /// initializers hold.
 fn frame_model(
     ckpt: &StudentCheckpoint,
+    up: Option<&UpsamplerCheckpoint>,
     mut g: GraphBuilder,
 ) -> Result<(ModelProto, contract::ModelInfo, usize)> {
     let spec = &ckpt.spec;
@@ -91,6 +126,10 @@ fn frame_model(
     let k = spec.intrinsics;
     let (h, w) = (k.height as usize, k.width as usize);
     let background = background_rgb8(ckpt, w, h)?;
+    // The rays the student sees: every pixel's, or the upsampler's coarse grid's.
+    let factor = up.map_or(1, |u| u.shape.factor);
+    let grid = coarse_intrinsics(&k, factor).map_err(|e| Error::Frame(e.to_string()))?;
+    let (hc, wc) = (grid.height as usize, grid.width as usize);
 
     let audio = g.input(
         FRAME_INPUT_AUDIO,
@@ -105,12 +144,20 @@ fn frame_model(
     let keep = g.input(
         FRAME_INPUT_KEEP,
         DataType::Bool,
-        &[Dim::Fixed(h), Dim::Fixed(w)],
+        &[Dim::Fixed(hc), Dim::Fixed(wc)],
     );
     let windows = front_end(&mut g, &layout, &cfg, &audio);
-    let rays = camera_rays(&mut g, ckpt, &pose);
-    let (hits, n_rays) = head_hits(&mut g, ckpt, &rays, &keep);
-    let image = composite_frame(&mut g, ckpt, &rays, &hits, &windows, &background, (h, w))?;
+    let rays = camera_rays(&mut g, &grid, &pose);
+    let (hits, hit, n_rays) = head_hits(&mut g, ckpt, &rays, &keep);
+    let image = match up {
+        None => composite_frame(&mut g, ckpt, &rays, &hits, &windows, &background, (h, w))?,
+        Some(up) => {
+            let bg = background_nodes(&mut g, &background, (h, w));
+            let (o, d) = hit_rays(&mut g, &rays, &hits);
+            student_nodes(&mut g, ckpt, (&o, &d), &windows, None)?;
+            upsampled_image(&mut g, ckpt, up, (&hits, &hit, &n_rays), &bg, (hc, wc))?
+        }
+    };
     g.node("Identity", FRAME_OUTPUT_IMAGE, &[&image], vec![]);
     g.node("Identity", FRAME_OUTPUT_WINDOWS, &[&windows], vec![]);
     g.node("Identity", FRAME_OUTPUT_RAYS, &[&n_rays], vec![]);
@@ -136,12 +183,35 @@ fn frame_model(
          row-major), {FRAME_INPUT_KEEP} bool [{h}, {w}] (pixels to render; the rest show the \
          background); output {FRAME_OUTPUT_IMAGE} [{h}, {w}, 3] in [0, 1], \
          {FRAME_OUTPUT_RAYS} [1] (rays through the student). Inside: log-mel front end, rays, \
-         head-bounds test and keep, student ({} x {}), composite over the background.",
-        layout.samples, layout.samples_per_frame, layout.offset, s.depth, s.width
+         head-bounds test and keep, student ({} x {}), composite over the background.{}",
+        layout.samples,
+        layout.samples_per_frame,
+        layout.offset,
+        s.depth,
+        s.width,
+        match up {
+            None => String::new(),
+            Some(u) => format!(
+                " With a learned upsampler x{factor}: {FRAME_INPUT_KEEP} is the coarse grid's \
+                 [{hc}, {wc}], the student runs on the coarse rays that meet the head and a CNN \
+                 ({:?} channels) makes the frame on their box.",
+                u.shape.channels
+            ),
+        }
     );
     let graph = g.finish(FRAME_GRAPH_NAME, &doc);
     let info = model_info(ckpt, &graph);
-    let metadata = info.to_frame_metadata(&layout);
+    let mut metadata = info.to_frame_metadata(&layout);
+    if factor > 1 {
+        let at = metadata.len().saturating_sub(1);
+        metadata.insert(
+            at,
+            crate::onnx::StringStringEntryProto {
+                key: Some(crate::contract::keys::FRAME_UPSAMPLE.to_string()),
+                value: Some(factor.to_string()),
+            },
+        );
+    }
     Ok((model_proto(graph, doc, metadata), info, n_values))
 }
 
@@ -319,8 +389,7 @@ fn front_end(
 /// The camera's rays through every pixel, row by row: `(origin [1, 3], directions
 /// [h w, 3])`, `d = (c0 x_i + c1 y_j) + c2 (-1)` with the rotation's columns `c` and
 /// AD-NeRF's `x_i = (i - cx) / f`, `y_j = -(j - cy) / f`, added in glam's order.
-fn camera_rays(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, pose: &str) -> (String, String) {
-    let k = ckpt.spec.intrinsics;
+fn camera_rays(g: &mut GraphBuilder, k: &Intrinsics, pose: &str) -> (String, String) {
     let xs: Vec<f32> = (0..k.width)
         .map(|i| k.camera_direction(i as f32, 0.0).x)
         .collect();
@@ -360,7 +429,7 @@ fn camera_rays(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, pose: &str) -> (S
 
 /// The pixels whose rays meet the head's bounds within `[near, far]`
 /// (`Bounds::intersect`'s slab test, axis by axis) and that `keep` marks: their `[n_hit]`
-/// int64 indices, row-major, and how many there are, int64 `[1]`.
+/// int64 indices, row-major, their bool mask `[h w]`, and how many there are, int64 `[1]`.
 ///
 /// # Shapes
 /// - `keep`: bool `[h, w]`
@@ -369,7 +438,7 @@ fn head_hits(
     ckpt: &StudentCheckpoint,
     (o, d): &(String, String),
     keep: &str,
-) -> (String, String) {
+) -> (String, String, String) {
     let spec = &ckpt.spec;
     let lo = g.constant_f32("bounds.lo", &[1, 3], &spec.bounds.lo.to_array());
     let hi = g.constant_f32("bounds.hi", &[1, 3], &spec.bounds.hi.to_array());
@@ -440,7 +509,37 @@ fn head_hits(
         vec![attr_int("keepdims", 1)],
     );
     let hits = g.node("Reshape", "bounds.hits", &[&hits, &flat], vec![]);
-    (hits, n_hit)
+    (hits, hit, n_hit)
+}
+
+/// The rays `hits` selects: origins and directions `[n_hit, 3]`.
+fn hit_rays(
+    g: &mut GraphBuilder,
+    (origin, directions): &(String, String),
+    hits: &str,
+) -> (String, String) {
+    let d = g.node(
+        "Gather",
+        "frame.directions",
+        &[directions, hits],
+        vec![attr_int("axis", 0)],
+    );
+    let shape = g.node("Shape", "frame.ray_shape", &[&d], vec![]);
+    let o = g.node("Expand", "frame.origins", &[origin, &shape], vec![]);
+    (o, d)
+}
+
+/// The background image as floats in [0, 1], `[h w, 3]`.
+fn background_nodes(g: &mut GraphBuilder, background: &[u8], (h, w): (usize, usize)) -> String {
+    let bg = g.constant_u8("frame.background_rgb8", &[h * w, 3], background);
+    let bg = g.node(
+        "Cast",
+        "frame.background_raw",
+        &[&bg],
+        vec![attr_int("to", DataType::Float as i64)],
+    );
+    let full = g.constant_f32("frame.full_scale", &[], &[255.0]);
+    g.node("Div", "frame.background", &[&bg, &full], vec![])
 }
 
 /// The student on the rays `hits` selects, scattered into the background image.
@@ -452,25 +551,15 @@ fn head_hits(
 fn composite_frame(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
-    (origin, directions): &(String, String),
+    rays: &(String, String),
     hits: &str,
     windows: &str,
     background: &[u8],
     (h, w): (usize, usize),
 ) -> Result<String> {
     let axis0 = || vec![attr_int("axis", 0)];
-    let d = g.node("Gather", "frame.directions", &[directions, hits], axis0());
-    let shape = g.node("Shape", "frame.ray_shape", &[&d], vec![]);
-    let o = g.node("Expand", "frame.origins", &[origin, &shape], vec![]);
-    let bg = g.constant_u8("frame.background_rgb8", &[h * w, 3], background);
-    let bg = g.node(
-        "Cast",
-        "frame.background_raw",
-        &[&bg],
-        vec![attr_int("to", DataType::Float as i64)],
-    );
-    let full = g.constant_f32("frame.full_scale", &[], &[255.0]);
-    let bg = g.node("Div", "frame.background", &[&bg, &full], vec![]);
+    let (o, d) = hit_rays(g, rays, hits);
+    let bg = background_nodes(g, background, (h, w));
     let behind = ckpt
         .shape
         .opacity

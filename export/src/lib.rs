@@ -16,9 +16,10 @@ pub mod graph;
 pub mod load;
 pub mod onnx;
 pub mod student;
+pub mod upsample;
 
 pub use error::{Error, Result};
-pub use frame::{export_frame, export_frame_int8};
+pub use frame::{export_frame, export_frame_int8, export_frame_upsampled};
 pub use graph::{ActivationRanges, Tap, WeightType};
 pub use load::{ExportedModel, FrameModel, read_frame_model, read_model};
 pub use student::{ExportReport, calibration_model, export_student, export_student_int8};

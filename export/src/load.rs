@@ -54,6 +54,19 @@ pub struct FrameModel {
     pub info: ModelInfo,
     /// Which samples its audio input holds.
     pub audio: FrameAudio,
+    /// Output pixels per coarse ray along each side with a learned upsampler (1 without):
+    /// the `keep` input is the coarse grid's.
+    pub upsample: usize,
+}
+
+impl FrameModel {
+    /// The `[height, width]` of the `keep` input: the image's, or the upsampler's coarse
+    /// grid's.
+    pub fn keep_shape(&self) -> [usize; 2] {
+        let k = self.info.spec.intrinsics;
+        let r = self.upsample.max(1);
+        [k.height as usize / r, k.width as usize / r]
+    }
 }
 
 /// Reads and checks the frame graph at `path`, as [`read_model`] reads a ray graph.
@@ -69,11 +82,33 @@ pub fn read_frame_model(path: &Path) -> Result<FrameModel> {
         &[FRAME_INPUT_AUDIO, FRAME_INPUT_POSE, FRAME_INPUT_KEEP],
         &[FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_WINDOWS, FRAME_OUTPUT_RAYS],
     )?;
+    let upsample = match proto
+        .metadata_props
+        .iter()
+        .find(|p| p.key.as_deref() == Some(crate::contract::keys::FRAME_UPSAMPLE))
+        .and_then(|p| p.value.as_deref())
+    {
+        None => 1,
+        Some(v) => v
+            .parse::<usize>()
+            .ok()
+            .filter(|r| matches!(r, 1 | 2 | 4 | 8))
+            .ok_or_else(|| {
+                Error::corrupt(
+                    path,
+                    format!(
+                        "`{}` is {v:?}, not 1, 2, 4 or 8",
+                        crate::contract::keys::FRAME_UPSAMPLE
+                    ),
+                )
+            })?,
+    };
     Ok(FrameModel {
         path: path.to_path_buf(),
         bytes,
         info,
         audio,
+        upsample,
     })
 }
 

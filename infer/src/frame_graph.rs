@@ -60,7 +60,7 @@ impl FrameGraph {
         Ok(FrameGraph {
             model: model.clone(),
             session,
-            all: vec![true; model.info.spec.intrinsics.n_pixels()],
+            all: vec![true; model.keep_shape()[0] * model.keep_shape()[1]],
         })
     }
 
@@ -96,17 +96,17 @@ impl FrameGraph {
             )));
         }
         let k = self.model.info.spec.intrinsics;
-        if keep.len() != k.n_pixels() {
+        let shape = self.model.keep_shape();
+        if keep.len() != shape[0] * shape[1] {
             return Err(Error::Argument(format!(
-                "the pixels to keep are {}, the frame has {} x {}",
+                "the pixels to keep are {}, the frame graph takes {} x {}",
                 keep.len(),
-                k.width,
-                k.height
+                shape[1],
+                shape[0]
             )));
         }
         // Row-major, as the graph reads it.
         let pose: Vec<f32> = c2w.transpose().to_cols_array().to_vec();
-        let shape = [k.height as usize, k.width as usize];
         let (image, windows, n_rays) = match &mut self.session {
             Session::Tract(plan) => run_tract(plan, chunk, &pose, (shape, keep))?,
             #[cfg(feature = "ort")]
@@ -151,13 +151,10 @@ fn open_tract(model: &FrameModel) -> Result<std::sync::Arc<TypedRunnableModel>> 
             ])
         })
         .map_err(fail)?;
-    let k = model.info.spec.intrinsics;
     let plan = parsed
         .with_input_fact(0, f32::fact([model.audio.samples]).into())
         .and_then(|m| m.with_input_fact(1, f32::fact([4, 4]).into()))
-        .and_then(|m| {
-            m.with_input_fact(2, bool::fact([k.height as usize, k.width as usize]).into())
-        })
+        .and_then(|m| m.with_input_fact(2, bool::fact(model.keep_shape()).into()))
         .and_then(|m| m.into_optimized())
         .and_then(|m| m.into_runnable())
         .map_err(fail)?;

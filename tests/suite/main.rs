@@ -23,4 +23,5 @@ mod synth;
 mod synth_head;
 mod teacher;
 mod trust;
+mod upsampler;
 mod util;

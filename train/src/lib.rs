@@ -36,6 +36,8 @@ pub mod targets;
 pub mod teacher;
 pub mod teacher_trainer;
 pub mod timing;
+pub mod upsampler;
+pub mod upsampler_trainer;
 pub mod views;
 
 pub use error::{Error, Result};

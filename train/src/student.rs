@@ -153,13 +153,23 @@ impl ResidualMlp {
     /// # Shapes
     /// - `beams`: `[n_rays, beam_dim]` encoded beams; `codes`: `[n_rays, audio_dim]`
     pub fn forward(&self, beams: &Tensor, codes: &Tensor) -> Result<LightOut> {
+        Ok(self.forward_hidden(beams, codes)?.1)
+    }
+
+    /// [`ResidualMlp::forward`] with the last hidden layer, the features the learned
+    /// upsampler reads.
+    ///
+    /// # Shapes
+    /// - returns the hidden layer `[n_rays, width]` and the outputs
+    pub fn forward_hidden(&self, beams: &Tensor, codes: &Tensor) -> Result<(Tensor, LightOut)> {
         let x = Tensor::cat(&[beams, codes], D::Minus1)?;
         let mut h = self.input.forward(&x)?.relu()?;
         for block in &self.body {
             let y = block.fc2.forward(&block.fc1.forward(&h)?.relu()?)?;
             h = (h + y)?.relu()?;
         }
-        LightOut::from_raw(&self.output.forward(&h)?, self.segments, self.opacity)
+        let out = LightOut::from_raw(&self.output.forward(&h)?, self.segments, self.opacity)?;
+        Ok((h, out))
     }
 }
 

@@ -1,5 +1,5 @@
-//! The evaluation job: the run's teacher and every student beside it render the frames of a
-//! split, scored against the ground truth (see [`crate::eval`]).
+//! The evaluation job: the run's teacher and every student and upsampler beside it render
+//! the frames of a split, scored against the ground truth (see [`crate::eval`]).
 
 use std::path::PathBuf;
 
@@ -12,6 +12,7 @@ use crate::eval::{Evaluation, FrameModel, eval_models};
 use crate::job::{JobEvent, OnEvent, audio_note, mouth_note};
 use crate::student_trainer::StudentModel;
 use crate::teacher_trainer::TeacherModel;
+use crate::upsampler_trainer::{CoarseBilinear, UpsampledModel};
 
 /// What `nldf eval` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,6 +34,9 @@ pub struct EvalPlan {
     pub teacher: TeacherModel,
     /// Every student folder of the run, in name order.
     pub students: Vec<StudentModel>,
+    /// Every upsampler folder of the run, in name order, each followed in the tables by its
+    /// student on the same coarse grid upscaled bilinearly.
+    pub upsamplers: Vec<(UpsampledModel, CoarseBilinear)>,
     /// The dataset with the teacher's audio features.
     pub data: TrainData,
     /// The split rendered.
@@ -61,6 +65,23 @@ impl EvalJob {
             .filter(|p| p.join(RENDER_SPEC_FILE).is_file() && has_checkpoint(p))
             .collect();
         dirs.sort();
+        let mut up_dirs: Vec<PathBuf> = std::fs::read_dir(&self.run)
+            .map_err(|e| Error::io(&self.run, e))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| UpsampledModel::is_upsampler(p))
+            .collect();
+        up_dirs.sort();
+        let upsamplers = up_dirs
+            .iter()
+            .map(|dir| {
+                let up = UpsampledModel::open(dir, &self.run).map_err(|e| {
+                    e.context(format!("loading the upsampler from {}", dir.display()))
+                })?;
+                let student = StudentModel::open(&self.run.join(&up.cfg.student))?;
+                let factor = up.cfg.model.factor;
+                Ok((up, CoarseBilinear { student, factor }))
+            })
+            .collect::<Result<Vec<_>>>()?;
         let students = dirs
             .iter()
             .map(|dir| {
@@ -75,6 +96,7 @@ impl EvalJob {
         Ok(EvalPlan {
             teacher,
             students,
+            upsamplers,
             data,
             split: self.split,
             frames: self.frames,
@@ -88,6 +110,10 @@ impl EvalPlan {
     pub fn models(&self) -> Vec<&dyn FrameModel> {
         let mut models: Vec<&dyn FrameModel> = vec![&self.teacher];
         models.extend(self.students.iter().map(|s| s as &dyn FrameModel));
+        for (up, bilinear) in &self.upsamplers {
+            models.push(up);
+            models.push(bilinear);
+        }
         models
     }
 

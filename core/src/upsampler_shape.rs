@@ -1,0 +1,212 @@
+//! The learned upsampler's shape and the geometry every stage shares (after MobileR2L): the
+//! student evaluates the rays of a coarse grid, one ray per `factor x factor` block of output
+//! pixels ([`coarse_intrinsics`]), and a small CNN turns the grid's features into the
+//! full-size image, on the head's bounding box only ([`coarse_box`]). The trainer saves the
+//! shape as `model` in the upsampler's `config.json`; the exporter and the renderers read it
+//! back from there.
+
+use serde::{Deserialize, Serialize};
+
+use crate::camera::Intrinsics;
+use crate::checks::in_range;
+use crate::error::{Error, Result};
+
+/// A logit that no trained opacity reaches: the opacity channel of a coarse ray that misses
+/// the head's bounds (it was not evaluated; `sigmoid(-MISS_LOGIT)` is 0 in f32).
+pub const MISS_LOGIT: f32 = -30.0;
+
+/// The upsampler's shape.
+///
+/// Input, per coarse ray: the student's last hidden layer (`width` values, zero for a ray
+/// that misses the head) and its premultiplied colour and opacity logit (`[0, 0, 0,
+/// MISS_LOGIT]` for a miss). The network:
+///
+/// ```text
+/// reduce:    1x1 conv, width -> channels[0], relu
+/// stage s:   3x3 conv, channels[s] -> 4 channels[s + 1], depth-to-space x2 (DCR), relu
+/// head:      3x3 conv, channels[last] -> 4
+/// output:    head + nearest-upsampled [colour, logit]  ->  colour c, opacity sigmoid(logit)
+/// pixel:     c + (1 - opacity) background
+/// ```
+///
+/// with `log2(factor)` stages, every 3x3 convolution zero-padded by 1 at the box's edge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct UpsamplerConfig {
+    /// Output pixels per coarse ray along each side: 2, 4 or 8 (the coarse grid is 1/2, 1/4
+    /// or 1/8 of the output's side).
+    pub factor: usize,
+    /// Channels after the 1x1 reduction, then after each x2 stage (`log2(factor) + 1`
+    /// values).
+    pub channels: Vec<usize>,
+    /// Coarse rays added around the head's hits on each side of the box the CNN runs on,
+    /// so that its edge (zero padding) lies on background.
+    pub margin: usize,
+}
+
+impl Default for UpsamplerConfig {
+    fn default() -> Self {
+        UpsamplerConfig {
+            factor: 4,
+            channels: vec![32, 16, 16],
+            margin: 2,
+        }
+    }
+}
+
+impl UpsamplerConfig {
+    /// A default shape for `factor`: 32 channels after the reduction, 16 after each stage.
+    pub fn with_factor(factor: usize) -> UpsamplerConfig {
+        let stages = factor.max(1).trailing_zeros() as usize;
+        let mut channels = vec![32];
+        channels.extend(std::iter::repeat_n(16, stages));
+        UpsamplerConfig {
+            factor,
+            channels,
+            ..UpsamplerConfig::default()
+        }
+    }
+
+    /// Number of x2 stages, `log2(factor)`.
+    pub fn stages(&self) -> usize {
+        self.factor.trailing_zeros() as usize
+    }
+
+    /// Checks the shape; `at` prefixes the keys (`model`).
+    pub fn check(&self, at: &str) -> Result<()> {
+        if !matches!(self.factor, 2 | 4 | 8) {
+            return Err(Error::Argument(format!(
+                "`{at}.factor` must be 2, 4 or 8, got {}",
+                self.factor
+            )));
+        }
+        if self.channels.len() != self.stages() + 1 {
+            return Err(Error::Argument(format!(
+                "`{at}.channels` must hold {} values for factor {} (after the reduction, then \
+                 after each x2 stage), got {}",
+                self.stages() + 1,
+                self.factor,
+                self.channels.len()
+            )));
+        }
+        for (i, &c) in self.channels.iter().enumerate() {
+            in_range(&format!("{at}.channels[{i}]"), c, 1, 256)?;
+        }
+        in_range(&format!("{at}.margin"), self.margin, 0, 64)
+    }
+
+    /// Multiply-adds of the CNN per output pixel inside the box, for an input of `width`
+    /// features (the reduction and each stage run on fewer pixels than the output).
+    pub fn macs_per_pixel(&self, width: usize) -> f64 {
+        let r2 = (self.factor * self.factor) as f64;
+        let mut macs = (width * self.channels[0]) as f64 / r2;
+        let mut side = self.factor;
+        for s in 0..self.stages() {
+            let pixels = 1.0 / (side * side) as f64;
+            macs += pixels * (9 * self.channels[s] * 4 * self.channels[s + 1]) as f64;
+            side /= 2;
+        }
+        macs + (9 * self.channels[self.stages()] * 4) as f64
+    }
+}
+
+/// The coarse grid's intrinsics for an output of intrinsics `k`: one ray per `factor x
+/// factor` block, through the block's centre (pixel `r I + (r - 1) / 2` of the output in
+/// AD-NeRF's integer pixel convention), so `f' = f / r` and `c' = (c - (r - 1) / 2) / r`.
+/// The output's sides must be multiples of `factor`.
+pub fn coarse_intrinsics(k: &Intrinsics, factor: usize) -> Result<Intrinsics> {
+    let r = factor as u32;
+    if factor == 0 || k.width % r != 0 || k.height % r != 0 {
+        return Err(Error::Argument(format!(
+            "an upsampler of factor {factor} needs image sides that are multiples of it, \
+             the images are {} x {}",
+            k.width, k.height
+        )));
+    }
+    let half = (factor as f32 - 1.0) / 2.0;
+    Ok(Intrinsics {
+        focal: k.focal / factor as f32,
+        cx: (k.cx - half) / factor as f32,
+        cy: (k.cy - half) / factor as f32,
+        width: k.width / r,
+        height: k.height / r,
+    })
+}
+
+/// The coarse box the CNN runs on, `(row0, row1, col0, col1)` (ends excluded): the rows and
+/// columns holding a hit in `hits` (`[height, width]`, row-major), widened by `margin` on
+/// each side within the grid. A grid without hits gives the 1 x 1 box at the origin (the
+/// renderers then show the background alone).
+pub fn coarse_box(hits: &[bool], width: usize, margin: usize) -> (usize, usize, usize, usize) {
+    let height = hits.len() / width.max(1);
+    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+    for j in 0..height {
+        for i in 0..width {
+            if hits[j * width + i] {
+                r0 = r0.min(j);
+                r1 = r1.max(j + 1);
+                c0 = c0.min(i);
+                c1 = c1.max(i + 1);
+            }
+        }
+    }
+    if r1 == 0 {
+        return (0, 1, 0, 1);
+    }
+    (
+        r0.saturating_sub(margin),
+        (r1 + margin).min(height),
+        c0.saturating_sub(margin),
+        (c1 + margin).min(width),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coarse_rays_pass_through_block_centres() {
+        let k = Intrinsics {
+            focal: 512.0,
+            cx: 256.0,
+            cy: 250.0,
+            width: 512,
+            height: 512,
+        };
+        let c = coarse_intrinsics(&k, 4).expect("multiple of 4");
+        assert_eq!((c.width, c.height), (128, 128));
+        for (ci, cj) in [(0.0f32, 0.0f32), (17.0, 93.0), (127.0, 127.0)] {
+            let fine = k.camera_direction(4.0 * ci + 1.5, 4.0 * cj + 1.5);
+            let coarse = c.camera_direction(ci, cj);
+            assert!(
+                (fine - coarse).abs().max_element() < 1e-6,
+                "{fine} vs {coarse}"
+            );
+        }
+        assert!(coarse_intrinsics(&k.resized(510, 512), 4).is_err());
+    }
+
+    #[test]
+    fn box_holds_the_hits_and_margin() {
+        let (w, h) = (10, 8);
+        let mut hits = vec![false; w * h];
+        assert_eq!(coarse_box(&hits, w, 2), (0, 1, 0, 1));
+        hits[3 * w + 4] = true;
+        hits[5 * w + 7] = true;
+        assert_eq!(coarse_box(&hits, w, 0), (3, 6, 4, 8));
+        assert_eq!(coarse_box(&hits, w, 2), (1, 8, 2, 10));
+    }
+
+    #[test]
+    fn shapes_are_checked() {
+        assert!(UpsamplerConfig::default().check("model").is_ok());
+        assert!(UpsamplerConfig::with_factor(8).check("model").is_ok());
+        let mut bad = UpsamplerConfig::with_factor(4);
+        bad.factor = 3;
+        assert!(bad.check("model").is_err());
+        let mut bad = UpsamplerConfig::with_factor(4);
+        bad.channels.pop();
+        assert!(bad.check("model").is_err());
+    }
+}

@@ -1,0 +1,378 @@
+//! The learned upsampler in the frame graph: the student runs on the coarse grid's rays
+//! that meet the head, its last hidden layer, colour and opacity logit are scattered into a
+//! canvas of the grid, the CNN runs on the box around the hits, and its pixels are
+//! composited over the background inside the box, as `nldf_train::upsampler` renders:
+//!
+//! ```text
+//! canvas [hc wc, width + 4]     misses: zeros, then [0, 0, 0, MISS_LOGIT]
+//! box    rows/cols holding a hit, widened by the margin (1 x 1 at the origin without hits)
+//! x      Slice(canvas) -> [1, width + 4, bh, bw]
+//! reduce Conv 1x1, Relu; stages: Conv 3x3, depth-to-space 2 (DCR), Relu; head: Conv 3x3
+//! out    head + nearest(colour, logit) (Concat of r^2 copies, depth-to-space r)
+//!
+//! The box is cut by index lists (NonZero, then Gather), not by a Slice of computed bounds:
+//! tract sizes a NonZero's output when the graph runs, a Slice of computed bounds not.
+//! pixel  c + (1 - sigmoid(logit)) background; the background alone without hits
+//! ```
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
+use nldf_core::upsampler_shape::{MISS_LOGIT, UpsamplerConfig};
+
+use crate::checkpoint::{StudentCheckpoint, Weight, parse_weights_of};
+use crate::contract::OUTPUT_RGB;
+use crate::error::{Error, Result};
+use crate::graph::{GraphBuilder, attr_int, attr_ints};
+use crate::onnx::DataType;
+
+/// An upsampler folder, read and checked.
+#[derive(Debug, Clone)]
+pub struct UpsamplerCheckpoint {
+    pub dir: PathBuf,
+    pub shape: UpsamplerConfig,
+    /// The student's folder name in the run.
+    pub student: String,
+    pub step: u64,
+    weights: HashMap<String, Weight>,
+}
+
+impl UpsamplerCheckpoint {
+    /// Reads `dir` (`config.json`: `model` and `student`; `model.safetensors`).
+    pub fn open(dir: &Path) -> Result<UpsamplerCheckpoint> {
+        let config_path = dir.join(CONFIG_FILE);
+        let config: serde_json::Value = nldf_core::files::read_json(&config_path)?;
+        let bad = |what: String| Error::invalid(&config_path, what);
+        let model = config
+            .get("model")
+            .ok_or_else(|| bad("has no `model` field (not an upsampler config?)".into()))?;
+        let shape: UpsamplerConfig = serde_json::from_value(model.clone())
+            .map_err(|e| bad(format!("`model` is not an upsampler config: {e}")))?;
+        shape.check("model").map_err(|e| bad(e.to_string()))?;
+        let student = config
+            .get("student")
+            .and_then(|s| s.as_str())
+            .ok_or_else(|| bad("has no `student` folder name (not an upsampler config?)".into()))?
+            .to_string();
+        let path = dir.join(MODEL_FILE);
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let (weights, step) = parse_weights_of(&path, &bytes, "upsampler")?;
+        Ok(UpsamplerCheckpoint {
+            dir: dir.to_path_buf(),
+            shape,
+            student,
+            step,
+            weights,
+        })
+    }
+
+    /// The weight `name`, checked to have shape `shape`.
+    fn weight(&self, name: &str, shape: &[usize]) -> Result<&[f32]> {
+        let path = self.dir.join(MODEL_FILE);
+        let w = self
+            .weights
+            .get(name)
+            .ok_or_else(|| Error::invalid(&path, format!("lacks weight `{name}`")))?;
+        if w.shape != shape {
+            return Err(Error::invalid(
+                &path,
+                format!(
+                    "weight `{name}` has shape {:?}, {CONFIG_FILE} says {shape:?}",
+                    w.shape
+                ),
+            ));
+        }
+        Ok(&w.data)
+    }
+}
+
+/// A convolution of the checkpoint's `name` (`[c_out, c_in, k, k]`), zero-padded by `k /
+/// 2`.
+fn conv(
+    g: &mut GraphBuilder,
+    up: &UpsamplerCheckpoint,
+    name: &str,
+    x: &str,
+    (c_in, c_out, k): (usize, usize, usize),
+) -> Result<String> {
+    let w = up.weight(&format!("{name}.weight"), &[c_out, c_in, k, k])?;
+    let b = up.weight(&format!("{name}.bias"), &[c_out])?;
+    let w = g.weight(&format!("up.{name}.weight"), &[c_out, c_in, k, k], w);
+    let b = g.weight(&format!("up.{name}.bias"), &[c_out], b);
+    let p = (k / 2) as i64;
+    Ok(g.node(
+        "Conv",
+        &format!("up.{name}"),
+        &[x, &w, &b],
+        vec![
+            attr_ints("kernel_shape", &[k as i64, k as i64]),
+            attr_ints("pads", &[p, p, p, p]),
+        ],
+    ))
+}
+
+/// The first and one-past-last index of a true entry of `any` (int64 `[n]`, 0 or 1),
+/// widened by `margin` within `[0, n)`: int64 `[1]` each.
+fn span(g: &mut GraphBuilder, name: &str, any: &str, n: usize, margin: usize) -> (String, String) {
+    let up: Vec<i64> = (1..=n as i64).collect();
+    let down: Vec<i64> = (0..n as i64).map(|i| n as i64 - i).collect();
+    let up = g.constant_i64(&format!("{name}.rank_up"), &[n], &up);
+    let down = g.constant_i64(&format!("{name}.rank_down"), &[n], &down);
+    let keep = || vec![attr_int("keepdims", 1)];
+    let last = g.node("Mul", &format!("{name}.last_each"), &[any, &up], vec![]);
+    let end = g.node("ReduceMax", &format!("{name}.end_raw"), &[&last], keep());
+    let first = g.node("Mul", &format!("{name}.first_each"), &[any, &down], vec![]);
+    let first = g.node(
+        "ReduceMax",
+        &format!("{name}.first_rank"),
+        &[&first],
+        keep(),
+    );
+    let n_c = g.constant_i64(&format!("{name}.n"), &[1], &[n as i64]);
+    let start = g.node("Sub", &format!("{name}.start_raw"), &[&n_c, &first], vec![]);
+    let m = g.constant_i64(&format!("{name}.margin"), &[1], &[margin as i64]);
+    let zero = g.constant_i64(&format!("{name}.zero"), &[1], &[0]);
+    let start = g.node("Sub", &format!("{name}.start_wide"), &[&start, &m], vec![]);
+    let start = g.node("Max", &format!("{name}.start"), &[&start, &zero], vec![]);
+    let end = g.node("Add", &format!("{name}.end_wide"), &[&end, &m], vec![]);
+    let end = g.node("Min", &format!("{name}.end"), &[&end, &n_c], vec![]);
+    (start, end)
+}
+
+/// The indices `[k]` of `0..n` within `[start r, end r)` (`start`, `end`: int64 `[1]`).
+fn index_range(
+    g: &mut GraphBuilder,
+    name: &str,
+    n: usize,
+    start: &str,
+    end: &str,
+    r: usize,
+) -> String {
+    let all: Vec<i64> = (0..n as i64).collect();
+    let all = g.constant_i64(&format!("{name}.all"), &[n], &all);
+    let (start, end) = if r > 1 {
+        let rr = g.constant_i64(&format!("{name}.factor"), &[1], &[r as i64]);
+        (
+            g.node("Mul", &format!("{name}.start"), &[start, &rr], vec![]),
+            g.node("Mul", &format!("{name}.end"), &[end, &rr], vec![]),
+        )
+    } else {
+        (start.to_string(), end.to_string())
+    };
+    let before = g.node("Less", &format!("{name}.before"), &[&all, &start], vec![]);
+    let from = g.node("Not", &format!("{name}.from"), &[&before], vec![]);
+    let to = g.node("Less", &format!("{name}.to"), &[&all, &end], vec![]);
+    let inside = g.node("And", &format!("{name}.inside"), &[&from, &to], vec![]);
+    let at = g.node("NonZero", &format!("{name}.at"), &[&inside], vec![]);
+    let flat = g.constant_i64(&format!("{name}.flat"), &[1], &[-1]);
+    g.node("Reshape", name, &[&at, &flat], vec![])
+}
+
+/// The upsampled frame: the student's hidden layer, colour and logit on the coarse rays
+/// `hits` (of the `[hc, wc]` grid, with `hit` its bool mask `[hc wc]` and `n_hit` their
+/// count), through the CNN on their box, composited over `background` (float `[H W, 3]`).
+///
+/// The student's nodes must already be in `g` (run on the hits without a background, so
+/// that `OUTPUT_RGB` is its premultiplied colour).
+///
+/// # Shapes
+/// - returns the image `[H, W, 3]`
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn upsampled_image(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    (hits, hit, n_hit): (&str, &str, &str),
+    background: &str,
+    (hc, wc): (usize, usize),
+) -> Result<String> {
+    let s = &ckpt.shape;
+    let cfg = &up.shape;
+    let (width, r) = (s.width, cfg.factor);
+    let channels = width + 4;
+    let (h, w) = (hc * r, wc * r);
+    if !s.opacity {
+        return Err(Error::Frame(
+            "the upsampler needs a student with opacity (its logit is an input)".into(),
+        ));
+    }
+    let hidden = if s.n_blocks() == 0 {
+        "mlp.input.act".to_string()
+    } else {
+        format!("mlp.body.{}.act", s.n_blocks() - 1)
+    };
+    // The rows of the canvas: hidden, colour, logit.
+    let rows = g.node(
+        "Concat",
+        "up.rows",
+        &[&hidden, OUTPUT_RGB, "mlp.opacity_logit"],
+        vec![attr_int("axis", 1)],
+    );
+    let mut miss = vec![0.0f32; channels];
+    miss[channels - 1] = MISS_LOGIT;
+    let miss = g.constant_f32("up.miss_row", &[1, channels], &miss);
+    let canvas_shape = g.constant_i64(
+        "up.canvas_shape",
+        &[2],
+        &[(hc * wc) as i64, channels as i64],
+    );
+    let canvas = g.node("Expand", "up.canvas_empty", &[&miss, &canvas_shape], vec![]);
+    let axis1 = g.constant_i64("up.index_axis", &[1], &[1]);
+    let at = g.node("Unsqueeze", "up.hit_rows", &[hits, &axis1], vec![]);
+    let canvas = g.node(
+        "ScatterND",
+        "up.canvas_flat",
+        &[&canvas, &at, &rows],
+        vec![],
+    );
+    let grid_shape = g.constant_i64(
+        "up.grid_shape",
+        &[3],
+        &[hc as i64, wc as i64, channels as i64],
+    );
+    let canvas = g.node("Reshape", "up.canvas", &[&canvas, &grid_shape], vec![]);
+
+    // The box.
+    let mask_shape = g.constant_i64("up.mask_shape", &[2], &[hc as i64, wc as i64]);
+    let mask = g.node("Reshape", "up.mask", &[hit, &mask_shape], vec![]);
+    let mask = g.node(
+        "Cast",
+        "up.mask_i64",
+        &[&mask],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let reduce = |axis: i64| vec![attr_ints("axes", &[axis]), attr_int("keepdims", 0)];
+    let row_any = g.node("ReduceMax", "up.row_any", &[&mask], reduce(1));
+    let col_any = g.node("ReduceMax", "up.col_any", &[&mask], reduce(0));
+    let (r0, r1) = span(g, "up.box_rows", &row_any, hc, cfg.margin);
+    let (c0, c1) = span(g, "up.box_cols", &col_any, wc, cfg.margin);
+    let zero = g.constant_i64("up.count_zero", &[1], &[0]);
+    let one_i = g.constant_i64("up.count_one", &[1], &[1]);
+    let any = g.node("Greater", "up.any_hit", &[n_hit, &zero], vec![]);
+    // Without hits, the 1 x 1 box at the origin (its pixels are then the background).
+    let r0 = g.node("Where", "up.row0", &[&any, &r0, &zero], vec![]);
+    let r1 = g.node("Where", "up.row1", &[&any, &r1, &one_i], vec![]);
+    let c0 = g.node("Where", "up.col0", &[&any, &c0, &zero], vec![]);
+    let c1 = g.node("Where", "up.col1", &[&any, &c1, &one_i], vec![]);
+    // The box by index lists (NonZero, Gather) rather than a Slice of computed bounds:
+    // runtimes size a NonZero's output when it runs, a Slice's not always.
+    let rows = index_range(g, "up.box_rows", hc, &r0, &r1, 1);
+    let cols = index_range(g, "up.box_cols", wc, &c0, &c1, 1);
+    let x = g.node(
+        "Gather",
+        "up.box_band",
+        &[&canvas, &rows],
+        vec![attr_int("axis", 0)],
+    );
+    let x = g.node("Gather", "up.box", &[&x, &cols], vec![attr_int("axis", 1)]);
+    let x = g.node(
+        "Transpose",
+        "up.box_chw",
+        &[&x],
+        vec![attr_ints("perm", &[2, 0, 1])],
+    );
+    let axis0 = g.constant_i64("up.batch_axis", &[1], &[0]);
+    let x = g.node("Unsqueeze", "up.input", &[&x, &axis0], vec![]);
+
+    // The CNN.
+    let c = &cfg.channels;
+    let mut y = conv(g, up, "reduce", &x, (channels, c[0], 1))?;
+    y = g.node("Relu", "up.reduce.act", &[&y], vec![]);
+    for st in 0..cfg.stages() {
+        let name = format!("stages.{st}");
+        y = conv(g, up, &name, &y, (c[st], 4 * c[st + 1], 3))?;
+        y = depth_to_space(g, &format!("up.{name}.shuffle"), &y, 2);
+        y = g.node("Relu", &format!("up.{name}.act"), &[&y], vec![]);
+    }
+    let head = conv(g, up, "head", &y, (c[cfg.stages()], 4, 3))?;
+    let lo = g.constant_i64("up.base_start", &[1], &[width as i64]);
+    let hi = g.constant_i64("up.base_end", &[1], &[channels as i64]);
+    let base = g.node("Slice", "up.base", &[&x, &lo, &hi, &axis1], vec![]);
+    // Nearest upsampling: r^2 copies of each channel, then depth-to-space.
+    let copies: Vec<&str> = std::iter::repeat_n(base.as_str(), r * r).collect();
+    let base = g.node(
+        "Concat",
+        "up.base_copies",
+        &copies,
+        vec![attr_int("axis", 1)],
+    );
+    let base = depth_to_space(g, "up.base_nearest", &base, r);
+    let out = g.node("Add", "up.output", &[&head, &base], vec![]);
+    let out = g.node("Squeeze", "up.output_chw", &[&out, &axis0], vec![]);
+    let out = g.node(
+        "Transpose",
+        "up.output_hwc",
+        &[&out],
+        vec![attr_ints("perm", &[1, 2, 0])],
+    );
+
+    // The box's pixels and their places in the image.
+    let rows_px = index_range(g, "up.pixel_rows", h, &r0, &r1, r);
+    let cols_px = index_range(g, "up.pixel_cols", w, &c0, &c1, r);
+    let image_shape = g.constant_i64("up.image_shape", &[3], &[h as i64, w as i64, 3]);
+    let bg = g.node(
+        "Reshape",
+        "up.background_image",
+        &[background, &image_shape],
+        vec![],
+    );
+    let bg_box = g.node(
+        "Gather",
+        "up.background_band",
+        &[&bg, &rows_px],
+        vec![attr_int("axis", 0)],
+    );
+    let bg_box = g.node(
+        "Gather",
+        "up.background_box",
+        &[&bg_box, &cols_px],
+        vec![attr_int("axis", 1)],
+    );
+    let axis2 = g.constant_i64("up.channel_axis", &[1], &[2]);
+    let slice = |g: &mut GraphBuilder, name: &str, from: i64, to: i64| {
+        let a = g.constant_i64(&format!("{name}.start"), &[1], &[from]);
+        let b = g.constant_i64(&format!("{name}.end"), &[1], &[to]);
+        g.node("Slice", name, &[&out, &a, &b, &axis2], vec![])
+    };
+    let colour = slice(g, "up.colour", 0, 3);
+    let logit = slice(g, "up.logit", 3, 4);
+    let alpha = g.node("Sigmoid", "up.opacity", &[&logit], vec![]);
+    let one = g.constant_f32("up.one", &[1], &[1.0]);
+    let clear = g.node("Sub", "up.clear", &[&one, &alpha], vec![]);
+    let behind = g.node("Mul", "up.behind", &[&clear, &bg_box], vec![]);
+    let pixels = g.node("Add", "up.pixels_raw", &[&colour, &behind], vec![]);
+    let pixels = g.node("Where", "up.pixels", &[&any, &pixels, &bg_box], vec![]);
+
+    // Indices `[bh, bw, 2]` of the box's pixels.
+    let axes12 = g.constant_i64("up.axes12", &[2], &[1, 2]);
+    let axes02 = g.constant_i64("up.axes02", &[2], &[0, 2]);
+    let rows_b = g.node("Unsqueeze", "up.rows_col", &[&rows_px, &axes12], vec![]);
+    let cols_b = g.node("Unsqueeze", "up.cols_row", &[&cols_px, &axes02], vec![]);
+    let zero_r = g.node("Mul", "up.rows_zero", &[&rows_b, &zero], vec![]);
+    let zero_c = g.node("Mul", "up.cols_zero", &[&cols_b, &zero], vec![]);
+    let rows_b = g.node("Add", "up.rows_grid", &[&rows_b, &zero_c], vec![]);
+    let cols_b = g.node("Add", "up.cols_grid", &[&cols_b, &zero_r], vec![]);
+    let index = g.node(
+        "Concat",
+        "up.pixel_index",
+        &[&rows_b, &cols_b],
+        vec![attr_int("axis", 2)],
+    );
+    Ok(g.node("ScatterND", "frame.image", &[&bg, &index, &pixels], vec![]))
+}
+
+/// ONNX's DepthToSpace in its DCR order (`[1, r r c, h, w]` to `[1, c, h r, w r]`):
+/// output channel `c` at offset `(i, j)` of each block takes input channel `(i r + j) c_count
+/// + c`, as `nldf_train::upsampler::depth_to_space` computes it.
+fn depth_to_space(g: &mut GraphBuilder, name: &str, x: &str, r: usize) -> String {
+    g.node(
+        "DepthToSpace",
+        name,
+        &[x],
+        vec![
+            attr_int("blocksize", r as i64),
+            crate::graph::attr_string("mode", "DCR"),
+        ],
+    )
+}

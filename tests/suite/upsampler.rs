@@ -1,0 +1,204 @@
+//! The learned upsampler (`nldf train upsampler`, `nldf export --frame --upsampler`): the
+//! frame graph with the upsampler inside matches candle's reference renderer
+//! (`nldf_train::upsampler::render_upsampled`) within 1e-4 of the largest output value, in
+//! tract and onnxruntime, for a tiny student and at production size (the real-time student,
+//! 256 x 256 and 512 x 512 frames, x4), with a camera that sees no head among the poses.
+
+use glam::{Mat4, Vec3};
+use nldf_core::audio::{Waveform, audio_windows, neighbourhood};
+use nldf_core::bounds::{Bounds, HeadRange};
+use nldf_core::camera::{Camera, Intrinsics, look_at, turn_about};
+use nldf_core::frame_audio::FrameAudio;
+use nldf_core::image::ImageRgb;
+use nldf_core::student_shape::StudentConfig;
+use nldf_core::upsampler_shape::UpsamplerConfig;
+use nldf_export::{WeightType, export_frame_upsampled, read_frame_model};
+use nldf_infer::frame_graph::FrameGraph;
+use nldf_train::checkpoint::{save_tensors, weights};
+use nldf_train::nn::{init_seeded, new_varmap};
+use nldf_train::upsampler::{Upsampler, render_upsampled, upsampler};
+
+use crate::util::{configs, max_diff, runtimes, spec_for, write_run_with};
+
+/// The issue's parity bar: within 1e-4 of the largest output value.
+const REL_TOL: f32 = 1e-4;
+
+/// The camera of `spec_for` at `width` x `height` pixels with the same field of view.
+fn camera_at(width: u32, height: u32) -> Intrinsics {
+    let scale = width as f32 / 24.0;
+    Intrinsics {
+        focal: 30.0 * scale,
+        cx: width as f32 / 2.0,
+        cy: height as f32 / 2.0,
+        width,
+        height,
+    }
+}
+
+/// A seeded upsampler of `cfg` over a student `width` wide, written to `dir` as the trainer
+/// leaves it (config.json naming the student, weights with the step).
+fn write_upsampler(
+    dir: &std::path::Path,
+    cfg: &UpsamplerConfig,
+    width: usize,
+    seed: u64,
+) -> Upsampler {
+    std::fs::create_dir_all(dir).unwrap();
+    let (varmap, vb) = new_varmap();
+    let up = upsampler(cfg, width, vb).unwrap();
+    init_seeded(&varmap, seed).unwrap();
+    let metadata = std::collections::HashMap::from([
+        ("step".to_string(), "5".to_string()),
+        ("kind".to_string(), "upsampler".to_string()),
+    ]);
+    save_tensors(
+        &dir.join("model.safetensors"),
+        &weights(&varmap).unwrap(),
+        metadata,
+    )
+    .unwrap();
+    let config = serde_json::json!({ "model": cfg, "student": "student" });
+    std::fs::write(dir.join("config.json"), config.to_string()).unwrap();
+    up
+}
+
+/// Exports the student of `cfg` with a seeded upsampler of factor `factor` as a frame graph
+/// at `size`, renders frames of a speech-like track from three poses (one seeing no head)
+/// with candle's reference and with the graph in every runtime; returns the worst
+/// difference relative to the largest output value, and asserts it is within the bar.
+fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), seed: u64) -> f32 {
+    let mut spec = spec_for(cfg);
+    spec.intrinsics = camera_at(size.0, size.1);
+    let run = write_run_with(cfg, seed, spec.clone());
+    if cfg.width >= 64 {
+        run.scale_weights_like_trained(cfg.n_blocks());
+    }
+    let student = &run.student;
+    let up_cfg = UpsamplerConfig::with_factor(factor);
+    let up_dir = run.root.join("upsampler");
+    let up = write_upsampler(&up_dir, &up_cfg, cfg.width, seed + 1000);
+    let frame_path = run.root.join("frame_up.onnx");
+    export_frame_upsampled(&run.student_dir(), &up_dir, &frame_path, WeightType::F32).unwrap();
+    let model = read_frame_model(&frame_path).unwrap();
+    assert_eq!(model.upsample, factor);
+
+    let features = spec.features.nldf().unwrap().clone();
+    let samples: Vec<f32> = (0..16_000 + 5 * 640)
+        .map(|i| {
+            let t = i as f32 / 16_000.0;
+            0.5 * (2.0 * std::f32::consts::PI * (150.0 + 60.0 * (2.5 * t).sin()) * t).sin()
+        })
+        .collect();
+    let wave = Waveform {
+        sample_rate: 16_000,
+        samples,
+    };
+    let windows = audio_windows(&wave, spec.fps, &features).unwrap();
+    let layout = FrameAudio::new(&features, spec.fps, cfg.audio.att_frames).unwrap();
+    let default_pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let centre = Bounds::centre(&spec.bounds);
+    let poses = [
+        default_pose,
+        turn_about(centre, 0.6, -0.25) * default_pose,
+        look_at(Vec3::new(0.0, 0.0, 2.5), Vec3::new(0.0, 6.0, 2.5), Vec3::Z),
+    ];
+    let n = windows.n_frames;
+    let cases = [(1usize, poses[0]), (n / 2, poses[1]), (n - 1, poses[2])];
+    let background = ImageRgb::load(&run.student_dir().join("background.png")).unwrap();
+    let range = HeadRange {
+        bounds: spec.bounds,
+        near: spec.near,
+        far: spec.far,
+    };
+    let reference: Vec<ImageRgb> = cases
+        .iter()
+        .map(|&(f, pose)| {
+            let audio = neighbourhood(&windows, f, cfg.audio.att_frames);
+            let shape = (
+                1,
+                cfg.audio.att_frames,
+                cfg.audio.window,
+                cfg.audio.n_features,
+            );
+            let audio =
+                candle_core::Tensor::from_vec(audio, shape, &candle_core::Device::Cpu).unwrap();
+            let code = student.audio_codes(&audio).unwrap();
+            let camera = Camera {
+                intrinsics: spec.intrinsics,
+                c2w: pose,
+            };
+            render_upsampled(student, &up, &camera, &background, &code, &range)
+                .unwrap()
+                .0
+        })
+        .collect();
+    assert_eq!(
+        reference[2], background,
+        "the camera looking away shows the background"
+    );
+    assert!(
+        max_diff(&reference[0].data, &background.data) > 0.05,
+        "{label}: the default camera sees the head"
+    );
+    let mut worst = 0.0f32;
+    for kind in runtimes() {
+        let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
+        for (&(f, pose), image) in cases.iter().zip(&reference) {
+            let out = graph.render(pose, &layout.chunk(&wave.samples, f)).unwrap();
+            let scale = image.data.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let d = max_diff(&out.image.data, &image.data) / scale;
+            assert!(
+                out.image.data.iter().all(|v| v.is_finite()),
+                "{label}: {} frame {f}: not finite",
+                kind.name()
+            );
+            assert!(
+                d <= REL_TOL,
+                "{label}: {} frame {f}: worst difference {d:.2e} of the largest output",
+                kind.name()
+            );
+            worst = worst.max(d);
+        }
+        println!(
+            "{label}: upsampled frame graph in {} against candle: worst difference {worst:.2e} \
+             of the largest output",
+            kind.name()
+        );
+    }
+    worst
+}
+
+#[test]
+fn upsampled_frame_graph_matches_candle_for_a_tiny_student() {
+    let cfg = configs().remove(1);
+    assert!(cfg.opacity);
+    for factor in [2, 4, 8] {
+        parity(
+            &format!("tiny x{factor}"),
+            &cfg,
+            factor,
+            (48, 32),
+            80 + factor as u64,
+        );
+    }
+}
+
+/// The shipped student's shape (the real-time preset) at 256 x 256 and 512 x 512, x4.
+#[test]
+fn upsampled_frame_graph_matches_candle_at_production_size() {
+    let mut realtime = StudentConfig::realtime();
+    realtime.beam.anchor = Some(nldf_core::beam::BeamAnchor {
+        centre: [0.02, 0.05, -0.01],
+        distance: 2.2,
+    });
+    for size in [256, 512] {
+        let d = parity(
+            &format!("real-time 16 x 128, {size} x {size}, x4"),
+            &realtime,
+            4,
+            (size, size),
+            90,
+        );
+        println!("{size}: worst {d:.2e}");
+    }
+}

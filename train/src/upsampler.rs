@@ -1,0 +1,296 @@
+//! The learned upsampler (after MobileR2L): the student evaluates one ray per `r x r` block
+//! of output pixels, on the coarse grid of
+//! [`nldf_core::upsampler_shape::coarse_intrinsics`], and a small CNN turns the grid's
+//! features into the full-size image on the head's bounding box
+//! ([`nldf_core::upsampler_shape::coarse_box`]); every pixel outside the box is the
+//! background. The network's shape is [`UpsamplerConfig`]'s; this file holds the candle
+//! layers and the reference renderer that the exported graph must match.
+
+use candle_core::{D, DType, Device, Module, Result, Tensor};
+use candle_nn::{Conv2d, Conv2dConfig, Init, VarBuilder};
+use nldf_core::beam::encode_beams_parallel;
+use nldf_core::bounds::HeadRange;
+use nldf_core::camera::Camera;
+use nldf_core::image::ImageRgb;
+use nldf_core::rays::head_rays;
+pub use nldf_core::upsampler_shape::UpsamplerConfig;
+use nldf_core::upsampler_shape::{MISS_LOGIT, coarse_box, coarse_intrinsics};
+
+use crate::student::Student;
+
+/// Rays per student pass when rendering a coarse grid.
+const GRID_CHUNK: usize = 8192;
+
+/// The CNN: `reduce` (1x1), `stages.{s}` (3x3, then depth-to-space x2), `head` (3x3).
+/// These are the checkpoint's tensor names, which the exporter reads.
+#[derive(Debug, Clone)]
+pub struct Upsampler {
+    pub cfg: UpsamplerConfig,
+    /// Width of the student's hidden layer, the input's feature channels (4 more follow:
+    /// the colour and the opacity logit).
+    pub width: usize,
+    reduce: Conv2d,
+    stages: Vec<Conv2d>,
+    head: Conv2d,
+}
+
+/// A convolution of `k x k` kernels, zero-padded by `k / 2`, its weights drawn as candle's
+/// `conv2d` draws them, or all zero with `zero` (the head starts as the identity on the
+/// upsampled colour).
+fn conv(c_in: usize, c_out: usize, k: usize, zero: bool, vb: VarBuilder) -> Result<Conv2d> {
+    let bound = 1.0 / ((c_in * k * k) as f64).sqrt();
+    let init = if zero {
+        Init::Const(0.0)
+    } else {
+        Init::Uniform {
+            lo: -bound,
+            up: bound,
+        }
+    };
+    let weight = vb.get_with_hints((c_out, c_in, k, k), "weight", init)?;
+    let bias = vb.get_with_hints(c_out, "bias", Init::Const(0.0))?;
+    let cfg = Conv2dConfig {
+        padding: k / 2,
+        ..Conv2dConfig::default()
+    };
+    Ok(Conv2d::new(weight, Some(bias), cfg))
+}
+
+/// Builds an [`Upsampler`] for `cfg` over a student whose hidden layer is `width` wide.
+pub fn upsampler(cfg: &UpsamplerConfig, width: usize, vb: VarBuilder) -> Result<Upsampler> {
+    let c = &cfg.channels;
+    let reduce = conv(width + 4, c[0], 1, false, vb.pp("reduce"))?;
+    let stages = (0..cfg.stages())
+        .map(|s| conv(c[s], 4 * c[s + 1], 3, false, vb.pp("stages").pp(s)))
+        .collect::<Result<Vec<_>>>()?;
+    let head = conv(c[cfg.stages()], 4, 3, true, vb.pp("head"))?;
+    Ok(Upsampler {
+        cfg: cfg.clone(),
+        width,
+        reduce,
+        stages,
+        head,
+    })
+}
+
+/// ONNX's DepthToSpace in its default DCR order: output channel `c` at offset `(i, j)` of
+/// each `r x r` block comes from input channel `(i r + j) C + c`.
+///
+/// # Shapes
+/// - `x`: `[n, r r c, h, w]`; returns `[n, c, h r, w r]`
+pub fn depth_to_space(x: &Tensor, r: usize) -> Result<Tensor> {
+    let (n, rrc, h, w) = x.dims4()?;
+    let c = rrc / (r * r);
+    x.reshape(vec![n, r, r, c, h, w])?
+        .permute(vec![0, 3, 4, 1, 5, 2])?
+        .reshape((n, c, h * r, w * r))
+}
+
+impl Upsampler {
+    /// The full-size colour (premultiplied) and opacity logit of a coarse box.
+    ///
+    /// # Shapes
+    /// - `grid`: `[n, width + 4, h, w]`: the hidden layer, then colour and logit
+    /// - returns `[n, 4, h r, w r]`
+    pub fn forward(&self, grid: &Tensor) -> Result<Tensor> {
+        let base = grid.narrow(1, self.width, 4)?;
+        let mut x = self.reduce.forward(grid)?.relu()?;
+        for stage in &self.stages {
+            x = depth_to_space(&stage.forward(&x)?, 2)?.relu()?;
+        }
+        let r = self.cfg.factor;
+        let (_, _, h, w) = base.dims4()?;
+        let up = base.upsample_nearest2d(h * r, w * r)?;
+        self.head.forward(&x)? + up
+    }
+
+    /// The pixels of [`Upsampler::forward`]'s output over `background`: `c + (1 -
+    /// sigmoid(logit)) background`.
+    ///
+    /// # Shapes
+    /// - `out`: `[n, 4, H, W]`; `background`: `[n, 3, H, W]`; returns `[n, 3, H, W]`
+    pub fn composite(out: &Tensor, background: &Tensor) -> Result<Tensor> {
+        let colour = out.narrow(1, 0, 3)?;
+        let alpha = candle_nn::ops::sigmoid(&out.narrow(1, 3, 1)?)?;
+        colour + alpha.affine(-1.0, 1.0)?.broadcast_mul(background)?
+    }
+}
+
+/// The student's features on a coarse grid's box.
+#[derive(Debug, Clone)]
+pub struct CoarseBox {
+    /// The box in coarse rays, `(row0, row1, col0, col1)`, ends excluded.
+    pub rows: (usize, usize),
+    pub cols: (usize, usize),
+    /// Whether any coarse ray meets the head's bounds.
+    pub any_hit: bool,
+    /// Coarse rays evaluated by the student.
+    pub n_rays: usize,
+    /// `[1, width + 4, rows, cols]`: hidden layer, colour, logit; a miss is zeros and
+    /// [`MISS_LOGIT`].
+    pub grid: Tensor,
+}
+
+/// The student's hidden layer, colour and logit on the coarse grid of `camera` (the output
+/// camera) for the upsampler of `factor` and `margin`, on the box around the coarse rays
+/// that meet the head; the other rays are not evaluated.
+///
+/// # Shapes
+/// - `code`: `[1, audio_dim]`
+pub fn coarse_box_features(
+    student: &Student,
+    camera: &Camera,
+    code: &Tensor,
+    range: &HeadRange,
+    (factor, margin): (usize, usize),
+) -> crate::Result<CoarseBox> {
+    let k = coarse_intrinsics(&camera.intrinsics, factor)?;
+    let coarse = Camera {
+        intrinsics: k,
+        c2w: camera.c2w,
+    };
+    let (hc, wc) = (k.height as usize, k.width as usize);
+    let head = head_rays(&coarse, range);
+    let mut hits = vec![false; hc * wc];
+    for &p in &head.pixels {
+        hits[p] = true;
+    }
+    let (r0, r1, c0, c1) = coarse_box(&hits, wc, margin);
+    let (bh, bw) = (r1 - r0, c1 - c0);
+    let width = student.cfg.width;
+    let channels = width + 4;
+    // Channel-last canvas of the box, one row of `channels` per coarse ray.
+    let mut canvas = vec![0.0f32; bh * bw * channels];
+    for p in 0..bh * bw {
+        canvas[p * channels + width + 3] = MISS_LOGIT;
+    }
+    let spec = &student.cfg.beam;
+    for (c, chunk) in head.pixels.chunks(GRID_CHUNK).enumerate() {
+        let lo = c * GRID_CHUNK;
+        let sub = head.rays.slice(lo..lo + chunk.len());
+        let beams = encode_beams_parallel(&sub, range.near, range.far, spec, None);
+        let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
+        let codes = code
+            .broadcast_as((chunk.len(), code.dim(1)?))?
+            .contiguous()?;
+        let (hidden, out) = student.mlp.forward_hidden(&beams, &codes)?;
+        let logit = match &out.logit {
+            Some(l) => l.clone(),
+            None => Tensor::full(-MISS_LOGIT, (chunk.len(), 1), &Device::Cpu)?,
+        };
+        let row = Tensor::cat(&[&hidden, &out.colour, &logit], D::Minus1)?;
+        let row: Vec<Vec<f32>> = row.to_vec2()?;
+        for (&p, values) in chunk.iter().zip(row) {
+            let (j, i) = (p / wc - r0, p % wc - c0);
+            let at = (j * bw + i) * channels;
+            canvas[at..at + channels].copy_from_slice(&values);
+        }
+    }
+    let grid = Tensor::from_vec(canvas, (1, bh, bw, channels), &Device::Cpu)?
+        .permute((0, 3, 1, 2))?
+        .contiguous()?;
+    Ok(CoarseBox {
+        rows: (r0, r1),
+        cols: (c0, c1),
+        any_hit: !head.pixels.is_empty(),
+        n_rays: head.pixels.len(),
+        grid,
+    })
+}
+
+/// `[1, 3, h, w]` of the image's pixels in rows `rows` and columns `cols`.
+pub fn image_box(image: &ImageRgb, rows: (usize, usize), cols: (usize, usize)) -> Result<Tensor> {
+    let w = image.width as usize;
+    let (bh, bw) = (rows.1 - rows.0, cols.1 - cols.0);
+    let mut out = Vec::with_capacity(3 * bh * bw);
+    for c in 0..3 {
+        for j in rows.0..rows.1 {
+            for i in cols.0..cols.1 {
+                out.push(image.data[3 * (j * w + i) + c]);
+            }
+        }
+    }
+    Tensor::from_vec(out, (1, 3, bh, bw), &Device::Cpu)
+}
+
+/// Renders the frame seen by `camera` with one audio code: the student on the coarse grid's
+/// box, the upsampler on it, composited over `background`; every pixel outside the box (and
+/// the whole frame when no coarse ray meets the head) is the background.
+///
+/// # Shapes
+/// - `code`: `[1, audio_dim]`; `background` is the camera's image size
+pub fn render_upsampled(
+    student: &Student,
+    up: &Upsampler,
+    camera: &Camera,
+    background: &ImageRgb,
+    code: &Tensor,
+    range: &HeadRange,
+) -> crate::Result<(ImageRgb, usize)> {
+    let r = up.cfg.factor;
+    let coarse = coarse_box_features(student, camera, code, range, (r, up.cfg.margin))?;
+    let mut image = background.clone();
+    if !coarse.any_hit {
+        return Ok((image, 0));
+    }
+    let rows = (coarse.rows.0 * r, coarse.rows.1 * r);
+    let cols = (coarse.cols.0 * r, coarse.cols.1 * r);
+    let bg = image_box(background, rows, cols)?;
+    let out = up.forward(&coarse.grid)?;
+    let pixels = Upsampler::composite(&out, &bg)?.squeeze(0)?;
+    let pixels: Vec<Vec<Vec<f32>>> = pixels.to_dtype(DType::F32)?.to_vec3()?;
+    let w = image.width as usize;
+    for (c, plane) in pixels.iter().enumerate() {
+        for (y, line) in plane.iter().enumerate() {
+            for (x, &v) in line.iter().enumerate() {
+                image.data[3 * ((rows.0 + y) * w + cols.0 + x) + c] = v;
+            }
+        }
+    }
+    Ok((image, coarse.n_rays))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::new_varmap;
+
+    #[test]
+    fn depth_to_space_follows_onnx_dcr() {
+        // [1, 8, 1, 2] with r = 2, C = 2: out[c, i, 2 x + j] = in[(2 i + j) 2 + c, 0, x].
+        let values: Vec<f32> = (0..16).map(|v| v as f32).collect();
+        let x = Tensor::from_vec(values, (1, 8, 1, 2), &Device::Cpu).unwrap();
+        let y = depth_to_space(&x, 2).unwrap();
+        assert_eq!(y.dims(), &[1, 2, 2, 4]);
+        let y: Vec<Vec<Vec<f32>>> = y.squeeze(0).unwrap().to_vec3().unwrap();
+        for c in 0..2 {
+            for i in 0..2 {
+                for xx in 0..2 {
+                    for j in 0..2 {
+                        let channel = (2 * i + j) * 2 + c;
+                        assert_eq!(y[c][i][2 * xx + j], (channel * 2 + xx) as f32);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_fresh_upsampler_repeats_the_coarse_colour() {
+        let cfg = UpsamplerConfig::with_factor(4);
+        let (_varmap, vb) = new_varmap();
+        let up = upsampler(&cfg, 6, vb).unwrap();
+        let grid = Tensor::randn(0f32, 1.0, (1, 10, 3, 5), &Device::Cpu).unwrap();
+        let out = up.forward(&grid).unwrap();
+        assert_eq!(out.dims(), &[1, 4, 12, 20]);
+        let out: Vec<Vec<Vec<f32>>> = out.squeeze(0).unwrap().to_vec3().unwrap();
+        let g: Vec<Vec<Vec<f32>>> = grid.squeeze(0).unwrap().to_vec3().unwrap();
+        for c in 0..4 {
+            for y in 0..12 {
+                for x in 0..20 {
+                    assert_eq!(out[c][y][x], g[6 + c][y / 4][x / 4]);
+                }
+            }
+        }
+    }
+}
