@@ -36,6 +36,11 @@ pub enum BenchCommand {
     /// f16 and int8, in onnxruntime and tract, scored on the held-out splits and timed per
     /// whole frame side by side; a table, JSON and a plot with the Pareto front.
     Frontier(crate::frontier_cmd::FrontierArgs),
+    /// The frontier's rows for a run with a learned upsampler (`nldf train upsampler`), at
+    /// the run's size: the student on every pixel (native rays), on the coarse grid
+    /// upscaled bilinearly, and the upsampled frame graph, in f32 and f16, with the teacher;
+    /// scored on the held-out splits (head PSNR and SSIM) and timed per whole frame.
+    Upsampler(UpsamplerBenchArgs),
     /// Frame graphs (`nldf export --frame`) in headless Chromium with onnxruntime-web
     /// (WASM, SIMD, threads; web/bench.mjs) beside native onnxruntime and tract, in one
     /// run: frames per second of each, full frames and skipping still pixels (the page's,
@@ -44,6 +49,59 @@ pub enum BenchCommand {
     /// The positional encoding's sines and cosines three ways (direct f32, f32
     /// double-angle climb, nldf's f64 climb): time per value and error against f64.
     Encoding(EncodingBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct UpsamplerBenchArgs {
+    /// Run folder with the teacher, the student and the upsampler.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The data the run was trained on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// The upsampler's folder in the run.
+    #[arg(long, default_value = "upsampler")]
+    pub upsampler: String,
+    /// At most this many frames of each split, spread evenly.
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Splits to score (repeat the flag) [default: val, novel, voice].
+    #[arg(long = "split", value_enum)]
+    pub splits: Vec<crate::eval_cmd::SplitArg>,
+    /// Leave the teacher out (seconds a frame at 512).
+    #[arg(long)]
+    pub no_teacher: bool,
+    /// Rays per network call of the ray graphs.
+    #[arg(long, default_value_t = 4096)]
+    pub batch: usize,
+    /// Output folder (default RUN/bench_upsampler).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+fn upsampler(args: UpsamplerBenchArgs) -> Result<()> {
+    use nldf_bench::frontier::upsampled::{UpsamplerBench, default_out};
+    use nldf_core::dataset::Split;
+    let splits: Vec<Split> = if args.splits.is_empty() {
+        vec![Split::Val, Split::Novel, Split::Voice]
+    } else {
+        args.splits.iter().map(|&s| s.into()).collect()
+    };
+    let job = UpsamplerBench {
+        out: args.out.clone().unwrap_or_else(|| default_out(&args.run)),
+        run: args.run,
+        data: args.data,
+        upsampler: args.upsampler,
+        frames: args.frames,
+        splits,
+        teacher: !args.no_teacher,
+        batch: args.batch,
+    };
+    let mut printer = EventPrinter::default();
+    let mut show = |e: &nldf_train::job::JobEvent| printer.show(e);
+    let (_, written) = job.run(&mut show)?;
+    print_written(&written);
+    Ok(())
 }
 
 #[derive(clap::Args, Debug)]
@@ -138,6 +196,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Encoding(args) => encoding(args),
         BenchCommand::Web(args) => web(args),
         BenchCommand::Frontier(args) => crate::frontier_cmd::run(args),
+        BenchCommand::Upsampler(args) => upsampler(args),
     }
 }
 

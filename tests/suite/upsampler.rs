@@ -202,3 +202,130 @@ fn upsampled_frame_graph_matches_candle_at_production_size() {
         println!("{size}: worst {d:.2e}");
     }
 }
+
+/// A tiny demo's run gains an upsampler through the library job: it trains (its loss falls),
+/// `nldf eval`'s job scores it beside the student and its bilinear baseline, and its frame
+/// graph renders a recorded frame as candle does.
+#[test]
+fn a_tiny_upsampler_trains_scores_and_exports() {
+    use nldf_train::upsampler_trainer::{
+        UpsamplerRunConfig, UpsamplerTrainConfig, train_upsampler,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let defaults = nldf_train::job::demo::DemoJob::defaults(out.clone());
+    let demo = nldf_train::job::demo::DemoJob {
+        scene: nldf_core::synth::SynthConfig {
+            seconds: 2.0,
+            size: 32,
+            supersample: 1,
+            ..defaults.scene.clone()
+        },
+        teacher: nldf_train::config::TeacherConfig::tiny(),
+        teacher_iters: 12,
+        student: StudentConfig::tiny(),
+        student_iters: 20,
+        pseudo: nldf_train::job::student::PseudoSettings {
+            frames: Some(4),
+            rays: Some(64),
+            ..defaults.pseudo
+        },
+        ..defaults
+    };
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    demo.run(&stop, &mut |_| {}).unwrap().unwrap();
+    let student_cfg: nldf_train::config::StudentRunConfig =
+        nldf_train::config::read_config(&out.join("student").join("config.json")).unwrap();
+    let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
+    let data = nldf_train::data::TrainData::open_with(&out.join("data"), true, &audio).unwrap();
+    let cfg = UpsamplerRunConfig {
+        model: UpsamplerConfig {
+            factor: 2,
+            channels: vec![8, 8],
+            margin: 1,
+        },
+        student: "student".into(),
+        train: UpsamplerTrainConfig {
+            iters: 80,
+            batch: 4,
+            crop: 4,
+            halo: 1,
+            pseudo_views: 4,
+            log_every: 10,
+            ..UpsamplerTrainConfig::default()
+        },
+    };
+    let up_dir = out.join("upsampler");
+    let report = train_upsampler(&up_dir, &out, cfg.clone(), &data, &mut |_, _| {}).unwrap();
+    assert_eq!(report.steps, 80);
+    assert!(
+        report.recorded_views > 0 && report.pseudo_crops > 0,
+        "{report:?}"
+    );
+    // The same upsampler before its first step (the coarse colour repeated) scores lower.
+    let fresh = UpsamplerRunConfig {
+        train: UpsamplerTrainConfig {
+            iters: 0,
+            ..cfg.train.clone()
+        },
+        ..cfg.clone()
+    };
+    train_upsampler(
+        &out.join("upsampler_fresh"),
+        &out,
+        fresh,
+        &data,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let plan = nldf_train::job::eval::EvalJob {
+        run: out.clone(),
+        data: out.join("data"),
+        split: nldf_core::dataset::Split::Train,
+        frames: Some(4),
+        out: Some(out.join("eval_up")),
+    }
+    .plan(&mut |_| {})
+    .unwrap();
+    let evaluation = plan.run(&mut |_| {}).unwrap();
+    let labels: Vec<&str> = evaluation.models.iter().map(|m| m.label.as_str()).collect();
+    assert_eq!(
+        labels,
+        [
+            "teacher",
+            "student",
+            "upsampler",
+            "student_bilinear_x2",
+            "upsampler_fresh"
+        ]
+    );
+    let head = |label: &str| {
+        let m = evaluation.models.iter().find(|m| m.label == label).unwrap();
+        let v = m.head_psnr.unwrap();
+        assert!(v.is_finite(), "{label}: {v}");
+        v
+    };
+    assert!(
+        head("upsampler") > head("upsampler_fresh") + 0.1,
+        "trained {:.2} dB, fresh {:.2} dB",
+        head("upsampler"),
+        head("upsampler_fresh")
+    );
+
+    let frame_path = out.join("frame_up.onnx");
+    export_frame_upsampled(&out.join("student"), &up_dir, &frame_path, WeightType::F32).unwrap();
+    // The upsampler belongs to its student: the same student under another name is refused.
+    let other = out.join("student_b");
+    std::fs::create_dir_all(&other).unwrap();
+    for entry in std::fs::read_dir(out.join("student")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_file() {
+            std::fs::copy(&path, other.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    let err = export_frame_upsampled(&other, &up_dir, &out.join("x.onnx"), WeightType::F32)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("trained over the student `student`"), "{err}");
+    assert!(!out.join("x.onnx").exists());
+}

@@ -227,7 +227,7 @@ pub struct CoarseBilinear {
 
 impl FrameModel for CoarseBilinear {
     fn label(&self) -> String {
-        format!("bilinear_x{}", self.factor)
+        format!("{}_bilinear_x{}", self.student.label(), self.factor)
     }
     fn describe(&self) -> String {
         format!(

@@ -23,6 +23,7 @@ mod hires;
 mod points;
 pub mod report;
 mod timing;
+pub mod upsampled;
 
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};

@@ -36,7 +36,7 @@ pub struct EvalPlan {
     pub students: Vec<StudentModel>,
     /// Every upsampler folder of the run, in name order, each followed in the tables by its
     /// student on the same coarse grid upscaled bilinearly.
-    pub upsamplers: Vec<(UpsampledModel, CoarseBilinear)>,
+    pub upsamplers: Vec<(UpsampledModel, Option<CoarseBilinear>)>,
     /// The dataset with the teacher's audio features.
     pub data: TrainData,
     /// The split rendered.
@@ -71,17 +71,23 @@ impl EvalJob {
             .filter(|p| UpsampledModel::is_upsampler(p))
             .collect();
         up_dirs.sort();
-        let upsamplers = up_dirs
-            .iter()
-            .map(|dir| {
-                let up = UpsampledModel::open(dir, &self.run).map_err(|e| {
-                    e.context(format!("loading the upsampler from {}", dir.display()))
-                })?;
+        let mut upsamplers: Vec<(UpsampledModel, Option<CoarseBilinear>)> = Vec::new();
+        for dir in &up_dirs {
+            let up = UpsampledModel::open(dir, &self.run)
+                .map_err(|e| e.context(format!("loading the upsampler from {}", dir.display())))?;
+            let factor = up.cfg.model.factor;
+            // One bilinear baseline per student and factor.
+            let seen = upsamplers
+                .iter()
+                .any(|(u, _)| u.cfg.student == up.cfg.student && u.cfg.model.factor == factor);
+            let bilinear = if seen {
+                None
+            } else {
                 let student = StudentModel::open(&self.run.join(&up.cfg.student))?;
-                let factor = up.cfg.model.factor;
-                Ok((up, CoarseBilinear { student, factor }))
-            })
-            .collect::<Result<Vec<_>>>()?;
+                Some(CoarseBilinear { student, factor })
+            };
+            upsamplers.push((up, bilinear));
+        }
         let students = dirs
             .iter()
             .map(|dir| {
@@ -112,7 +118,9 @@ impl EvalPlan {
         models.extend(self.students.iter().map(|s| s as &dyn FrameModel));
         for (up, bilinear) in &self.upsamplers {
             models.push(up);
-            models.push(bilinear);
+            if let Some(b) = bilinear {
+                models.push(b);
+            }
         }
         models
     }

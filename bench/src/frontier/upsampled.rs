@@ -1,0 +1,420 @@
+//! `nldf bench upsampler`: the frontier's rows for a run with a learned upsampler, at the
+//! run's own size (256 or 512). The same held-out frames are rendered, taking turns frame
+//! by frame, by the student's ray graph on every pixel ("native rays"), by the ray graph on
+//! the upsampler's coarse grid upscaled bilinearly ("bilinear"), by the frame graph with the
+//! upsampler inside, each in f32 and f16 (the upsampled frame graph in onnxruntime and
+//! tract), and by the teacher in candle; each is scored (PSNR and SSIM on the whole frame and
+//! in the head, mouth PSNR) and timed per whole frame with 2 threads (median).
+//! `upsampler.json` and `upsampler.md` hold the rows with the machine, commit and settings.
+
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nldf_core::audio::{Waveform, read_wav};
+use nldf_core::dataset::{AUDIO_WAV, Frame, Split, VOICE_DIR};
+use nldf_core::image::ImageRgb;
+use nldf_core::stats::median;
+use nldf_export::{FrameModel as FrameGraphModel, WeightType};
+use nldf_infer::BackendKind;
+use nldf_infer::frame_graph::FrameGraph;
+use nldf_train::bench::Machine;
+use nldf_train::data::TrainData;
+use nldf_train::eval::{EvalReport, FrameModel};
+use nldf_train::job::eval::EvalJob;
+use nldf_train::job::{JobEvent, OnEvent};
+use serde::Serialize;
+
+use super::exports::{Export, open_point};
+use super::front::{SplitScore, score};
+use super::points::Timed;
+use super::{THREADS, eval_counted, precision_name};
+use crate::error::{Error, Result, create_dir};
+use crate::report::{Written, machine_cell, write_bench_files};
+
+/// What `nldf bench upsampler` was asked to do.
+#[derive(Debug, Clone)]
+pub struct UpsamplerBench {
+    /// The run: its teacher, the upsampler `upsampler` and the student it reads.
+    pub run: PathBuf,
+    /// The data the run was trained on (its size is the output's).
+    pub data: PathBuf,
+    /// The upsampler's folder in the run.
+    pub upsampler: String,
+    pub out: PathBuf,
+    /// At most this many frames of each split.
+    pub frames: Option<usize>,
+    pub splits: Vec<Split>,
+    /// Render the teacher too (slow at 512: seconds a frame).
+    pub teacher: bool,
+    /// Rays per network call of the ray graphs.
+    pub batch: usize,
+}
+
+/// One way of rendering.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpsamplerRow {
+    /// `teacher`, `native rays`, `bilinear` or `upsampler`.
+    pub way: String,
+    pub precision: String,
+    pub runtime: String,
+    /// Output frames' side, and the side of the grid the network evaluates.
+    pub size: u32,
+    pub grid: u32,
+    /// Median seconds a whole frame, 2 threads, taking turns frame by frame.
+    pub s_per_frame: f64,
+    pub fps: f64,
+    pub scores: Vec<SplitScore>,
+}
+
+/// The benchmark's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpsamplerBenchReport {
+    pub machine: Machine,
+    pub run: String,
+    pub upsampler: String,
+    pub factor: usize,
+    pub frames: Option<usize>,
+    pub threads: usize,
+    pub rows: Vec<UpsamplerRow>,
+}
+
+/// The frame graph with the upsampler in one runtime, timing its frames.
+struct UpsampledPoint {
+    label: String,
+    precision: WeightType,
+    kind: BackendKind,
+    step: usize,
+    graph: RefCell<FrameGraph>,
+    model: FrameGraphModel,
+    /// The split being rendered (its track is the voice split's own) and its 16 kHz track.
+    split: std::cell::Cell<Split>,
+    wave: RefCell<Option<(Split, Waveform)>>,
+    seconds: RefCell<Vec<f64>>,
+}
+
+impl UpsampledPoint {
+    fn samples(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<Vec<f32>> {
+        let root = &data.dataset.root;
+        let split = self.split.get();
+        let mut wave = self.wave.borrow_mut();
+        if wave.as_ref().map(|(s, _)| *s) != Some(split) {
+            let path = if split == Split::Voice {
+                root.join(VOICE_DIR).join(AUDIO_WAV)
+            } else {
+                root.join(AUDIO_WAV)
+            };
+            *wave = Some((split, read_wav(&path)?));
+        }
+        let samples = &wave
+            .as_ref()
+            .map(|(_, w)| w.samples.as_slice())
+            .unwrap_or(&[]);
+        Ok(self.model.audio.chunk(samples, frame.aud_id))
+    }
+}
+
+impl FrameModel for UpsampledPoint {
+    fn label(&self) -> String {
+        self.label.clone()
+    }
+    fn describe(&self) -> String {
+        format!(
+            "upsampler x{} {} {}",
+            self.model.upsample,
+            precision_name(self.precision),
+            self.kind.name()
+        )
+    }
+    fn step(&self) -> usize {
+        self.step
+    }
+    fn macs_per_ray(&self) -> f64 {
+        0.0
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<ImageRgb> {
+        let chunk = self.samples(data, frame)?;
+        let started = Instant::now();
+        let out = self
+            .graph
+            .borrow_mut()
+            .render(frame.c2w, &chunk)
+            .map_err(|e| {
+                nldf_train::error::Error::Config(format!("{}: {e}", self.model.path.display()))
+            })?;
+        self.seconds
+            .borrow_mut()
+            .push(started.elapsed().as_secs_f64());
+        Ok(out.image)
+    }
+}
+
+impl UpsamplerBench {
+    /// Exports, renders, scores and times; writes `upsampler.json` and `upsampler.md`.
+    pub fn run(&self, on_event: OnEvent) -> Result<(UpsamplerBenchReport, Written)> {
+        nldf_infer::ort_library::OrtSearch::from_env()
+            .find()
+            .map_err(|e| Error::from(e).context("bench upsampler runs onnxruntime"))?;
+        let machine = Machine::here();
+        let first = self.eval_job(self.splits.first().copied().unwrap_or(Split::Val));
+        let plan = first.plan(&mut *on_event)?;
+        let (up, _) = plan
+            .upsamplers
+            .iter()
+            .find(|(u, _)| u.label() == self.upsampler)
+            .ok_or_else(|| {
+                Error::Missing(format!(
+                    "{} has no trained upsampler `{}`",
+                    self.run.display(),
+                    self.upsampler
+                ))
+            })?;
+        let factor = up.cfg.model.factor;
+        let student = &up.student;
+        let size = plan.data.dataset.intrinsics.width;
+        let models_dir = self.out.join("models");
+        create_dir(&models_dir)?;
+        let mut exports = Vec::new();
+        let mut graphs = Vec::new();
+        for w in [WeightType::F32, WeightType::F16] {
+            let p = precision_name(w);
+            let path = models_dir.join(format!("{}.{p}.onnx", student.label()));
+            nldf_export::export_student(&student.dir, &path, w)?;
+            exports.push(Export {
+                student: student.label(),
+                describe: student.describe(),
+                short: nldf_train::eval::student_short_name(&student.cfg),
+                step: student.step,
+                macs_per_ray: student.macs_per_ray(),
+                precision: w,
+                path,
+            });
+            let frame = models_dir.join(format!("{}.frame.{p}.onnx", self.upsampler));
+            nldf_export::export_frame_upsampled(&student.dir, &up.dir, &frame, w)?;
+            graphs.push((w, nldf_export::read_frame_model(&frame)?));
+            on_event(&JobEvent::Note(format!(
+                "exported the student's ray graph and the upsampled frame graph in {p}"
+            )));
+        }
+        // The ways of rendering, in the tables' order.
+        let mut native = Vec::new();
+        let mut bilinear = Vec::new();
+        for e in &exports {
+            native.push(open_point(
+                e,
+                BackendKind::Ort,
+                THREADS,
+                self.batch,
+                None,
+                1,
+            )?);
+            bilinear.push(open_point(
+                e,
+                BackendKind::Ort,
+                THREADS,
+                self.batch,
+                Some(size),
+                factor as u32,
+            )?);
+        }
+        let mut upsampled = Vec::new();
+        for (w, model) in &graphs {
+            for kind in [BackendKind::Ort, BackendKind::Tract] {
+                upsampled.push(UpsampledPoint {
+                    label: format!("{}.{}.{}", self.upsampler, precision_name(*w), kind.name()),
+                    precision: *w,
+                    kind,
+                    step: up.step,
+                    graph: RefCell::new(FrameGraph::open(model, kind, THREADS)?),
+                    model: model.clone(),
+                    split: std::cell::Cell::new(Split::Val),
+                    wave: RefCell::new(None),
+                    seconds: RefCell::new(Vec::new()),
+                });
+            }
+        }
+        let teacher = Timed::new(&plan.teacher, true, true);
+        let mut reports: Vec<Vec<EvalReport>> = Vec::new();
+        for &split in &self.splits {
+            let other;
+            let data = if split == first.split {
+                &plan.data
+            } else {
+                other = self.eval_job(split).plan(&mut *on_event)?;
+                &other.data
+            };
+            let mut models: Vec<&dyn FrameModel> = Vec::new();
+            if self.teacher {
+                models.push(&teacher);
+            }
+            for p in native.iter().chain(&bilinear) {
+                models.push(p);
+            }
+            for p in &upsampled {
+                p.split.set(split);
+                models.push(p);
+            }
+            let n = self
+                .frames
+                .unwrap_or(usize::MAX)
+                .min(data.dataset.frames(split).len());
+            on_event(&JobEvent::Note(format!(
+                "{}: {n} frames x {} ways of rendering",
+                split.name(),
+                models.len()
+            )));
+            let out = self.out.join(split.name());
+            let evaluation =
+                eval_counted(&models, data, split, self.frames, &out, n, &mut *on_event)?;
+            reports.push(evaluation.models);
+        }
+        let scores_of = |label: &str| -> Vec<SplitScore> {
+            reports
+                .iter()
+                .filter_map(|rs| rs.iter().find(|r| r.label == label).map(score))
+                .collect()
+        };
+        let timed = |s: &RefCell<Vec<f64>>| median(&s.borrow());
+        let grid = size / factor as u32;
+        let mut rows = Vec::new();
+        let mut row =
+            |way: &str, precision: &str, runtime: &str, grid: u32, label: String, s: f64| {
+                rows.push(UpsamplerRow {
+                    way: way.into(),
+                    precision: precision.into(),
+                    runtime: runtime.into(),
+                    size,
+                    grid,
+                    s_per_frame: s,
+                    fps: if s > 0.0 { 1.0 / s } else { f64::NAN },
+                    scores: scores_of(&label),
+                });
+            };
+        if self.teacher {
+            row(
+                "teacher",
+                "fp32",
+                "candle",
+                size,
+                teacher.label(),
+                timed(&teacher.seconds),
+            );
+        }
+        for p in &native {
+            let s = timed(&p.seconds);
+            row(
+                "native rays",
+                precision_name(p.precision),
+                p.kind.name(),
+                size,
+                p.label(),
+                s,
+            );
+        }
+        for p in &bilinear {
+            let s = timed(&p.seconds);
+            row(
+                "bilinear",
+                precision_name(p.precision),
+                p.kind.name(),
+                grid,
+                p.label(),
+                s,
+            );
+        }
+        for p in &upsampled {
+            let s = timed(&p.seconds);
+            row(
+                "upsampler",
+                precision_name(p.precision),
+                p.kind.name(),
+                grid,
+                p.label(),
+                s,
+            );
+        }
+        let report = UpsamplerBenchReport {
+            machine,
+            run: self.run.display().to_string(),
+            upsampler: self.upsampler.clone(),
+            factor,
+            frames: self.frames,
+            threads: THREADS,
+            rows,
+        };
+        let markdown = markdown(&report, &self.splits);
+        let written = write_bench_files(&self.out, "upsampler", &report, markdown)?;
+        Ok((report, written))
+    }
+
+    fn eval_job(&self, split: Split) -> EvalJob {
+        EvalJob {
+            run: self.run.clone(),
+            data: self.data.clone(),
+            split,
+            frames: self.frames,
+            out: None,
+        }
+    }
+}
+
+/// The report as Markdown: one row per way of rendering, head PSNR / SSIM per split.
+fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
+    let mut md = format!(
+        "# Learned upsampler x{} against native rays and bilinear\n\n\
+         Run `{}`, upsampler `{}`; {} threads; {} frames a split; {}.\n\
+         Times: median seconds a whole frame, the ways of rendering taking turns frame by \
+         frame. Scores: head-region PSNR (dB) / head SSIM, then whole-frame PSNR.\n\n",
+        r.factor,
+        r.run,
+        r.upsampler,
+        r.threads,
+        r.frames.map_or("all".to_string(), |n| n.to_string()),
+        machine_cell(&r.machine),
+    );
+    md.push_str("| way | precision | runtime | size | grid | ms / frame | frames/s |");
+    for s in splits {
+        md.push_str(&format!(
+            " {} head PSNR / SSIM | {} whole |",
+            s.name(),
+            s.name()
+        ));
+    }
+    md.push_str("\n| --- | --- | --- | --- | --- | --- | --- |");
+    for _ in splits {
+        md.push_str(" --- | --- |");
+    }
+    md.push('\n');
+    let f2 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    let f3 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
+    for row in &r.rows {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {:.1} | {:.1} |",
+            row.way,
+            row.precision,
+            row.runtime,
+            row.size,
+            row.grid,
+            1000.0 * row.s_per_frame,
+            row.fps
+        ));
+        for s in splits {
+            match row.scores.iter().find(|x| x.split == s.name()) {
+                Some(x) => md.push_str(&format!(
+                    " {} / {} | {:.2} |",
+                    f2(x.head_psnr),
+                    f3(x.head_ssim),
+                    x.psnr
+                )),
+                None => md.push_str(" - | - |"),
+            }
+        }
+        md.push('\n');
+    }
+    md
+}
+
+/// The default output folder: `RUN/bench_upsampler`.
+pub fn default_out(run: &Path) -> PathBuf {
+    run.join("bench_upsampler")
+}
