@@ -25,7 +25,7 @@ pub const MISS_LOGIT: f32 = -30.0;
 /// reduce:    1x1 conv, width -> channels[0], relu
 /// stage s:   3x3 conv, channels[s] -> 4 channels[s + 1], depth-to-space x2 (DCR), relu
 /// head:      3x3 conv, channels[last] -> 4
-/// output:    head + nearest-upsampled [colour, logit]  ->  colour c, opacity sigmoid(logit)
+/// output:    head + bilinear-upsampled [colour, logit]  ->  colour c, opacity sigmoid(logit)
 /// pixel:     c + (1 - opacity) background
 /// ```
 ///

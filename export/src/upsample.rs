@@ -8,7 +8,7 @@
 //! box    rows/cols holding a hit, widened by the margin (1 x 1 at the origin without hits)
 //! x      Slice(canvas) -> [1, width + 4, bh, bw]
 //! reduce Conv 1x1, Relu; stages: Conv 3x3, depth-to-space 2 (DCR), Relu; head: Conv 3x3
-//! out    head + nearest(colour, logit) (Concat of r^2 copies, depth-to-space r)
+//! out    head + bilinear(colour, logit) (ConvTranspose: stride r, kernel 2r, pads r/2)
 //!
 //! The box is cut by index lists (NonZero, then Gather), not by a Slice of computed bounds:
 //! tract sizes a NonZero's output when the graph runs, a Slice of computed bounds not.
@@ -289,15 +289,7 @@ pub(crate) fn upsampled_image(
     let lo = g.constant_i64("up.base_start", &[1], &[width as i64]);
     let hi = g.constant_i64("up.base_end", &[1], &[channels as i64]);
     let base = g.node("Slice", "up.base", &[&x, &lo, &hi, &axis1], vec![]);
-    // Nearest upsampling: r^2 copies of each channel, then depth-to-space.
-    let copies: Vec<&str> = std::iter::repeat_n(base.as_str(), r * r).collect();
-    let base = g.node(
-        "Concat",
-        "up.base_copies",
-        &copies,
-        vec![attr_int("axis", 1)],
-    );
-    let base = depth_to_space(g, "up.base_nearest", &base, r);
+    let base = bilinear_up(g, "up.base_bilinear", &base, 4, r);
     let out = g.node("Add", "up.output", &[&head, &base], vec![]);
     let out = g.node("Squeeze", "up.output_chw", &[&out, &axis0], vec![]);
     let out = g.node(
@@ -360,6 +352,38 @@ pub(crate) fn upsampled_image(
         vec![attr_int("axis", 2)],
     );
     Ok(g.node("ScatterND", "frame.image", &[&bg, &index, &pixels], vec![]))
+}
+
+/// Bilinear upsampling by `r` of the `c` channels of `x` as
+/// `nldf_train::upsampler::bilinear_up` computes it: a ConvTranspose of stride `r`, kernel `2
+/// r` and pads `r / 2` whose kernel is the outer product of `1 - |i - (2 r - 1) / 2| / r`
+/// on each channel's diagonal.
+fn bilinear_up(g: &mut GraphBuilder, name: &str, x: &str, c: usize, r: usize) -> String {
+    let k = 2 * r;
+    let centre = (k - 1) as f32 / 2.0;
+    let taps: Vec<f32> = (0..k)
+        .map(|i| 1.0 - (i as f32 - centre).abs() / r as f32)
+        .collect();
+    let mut w = vec![0.0f32; c * c * k * k];
+    for ch in 0..c {
+        for i in 0..k {
+            for j in 0..k {
+                w[((ch * c + ch) * k + i) * k + j] = taps[i] * taps[j];
+            }
+        }
+    }
+    let w = g.constant_f32(&format!("{name}.kernel"), &[c, c, k, k], &w);
+    let (r, p) = (r as i64, (r / 2) as i64);
+    g.node(
+        "ConvTranspose",
+        name,
+        &[x, &w],
+        vec![
+            attr_ints("kernel_shape", &[2 * r, 2 * r]),
+            attr_ints("strides", &[r, r]),
+            attr_ints("pads", &[p, p, p, p]),
+        ],
+    )
 }
 
 /// ONNX's DepthToSpace in its DCR order (`[1, r r c, h, w]` to `[1, c, h r, w r]`):

@@ -86,6 +86,37 @@ pub fn depth_to_space(x: &Tensor, r: usize) -> Result<Tensor> {
         .reshape((n, c, h * r, w * r))
 }
 
+/// The 1-D weights of bilinear upsampling by `r` (even) as a transposed convolution of
+/// stride `r`, kernel `2 r` and padding `r / 2`: `1 - |i - (2 r - 1) / 2| / r`.
+pub fn bilinear_taps(r: usize) -> Vec<f32> {
+    let centre = (2 * r - 1) as f32 / 2.0;
+    (0..2 * r)
+        .map(|i| 1.0 - (i as f32 - centre).abs() / r as f32)
+        .collect()
+}
+
+/// Bilinear upsampling by `r` of each channel, as the transposed convolution of
+/// [`bilinear_taps`] (zero beyond the edges): output pixel `x` interpolates the inputs at
+/// `(x + 0.5) / r - 0.5`.
+///
+/// # Shapes
+/// - `x`: `[n, c, h, w]`; returns `[n, c, h r, w r]`
+pub fn bilinear_up(x: &Tensor, r: usize) -> Result<Tensor> {
+    let c = x.dim(1)?;
+    let taps = bilinear_taps(r);
+    let k = taps.len();
+    let mut w = vec![0.0f32; c * c * k * k];
+    for ch in 0..c {
+        for i in 0..k {
+            for j in 0..k {
+                w[((ch * c + ch) * k + i) * k + j] = taps[i] * taps[j];
+            }
+        }
+    }
+    let w = Tensor::from_vec(w, (c, c, k, k), x.device())?;
+    x.conv_transpose2d(&w, r / 2, 0, r, 1)
+}
+
 impl Upsampler {
     /// The full-size colour (premultiplied) and opacity logit of a coarse box.
     ///
@@ -98,9 +129,7 @@ impl Upsampler {
         for stage in &self.stages {
             x = depth_to_space(&stage.forward(&x)?, 2)?.relu()?;
         }
-        let r = self.cfg.factor;
-        let (_, _, h, w) = base.dims4()?;
-        let up = base.upsample_nearest2d(h * r, w * r)?;
+        let up = bilinear_up(&base, self.cfg.factor)?;
         self.head.forward(&x)? + up
     }
 
@@ -276,7 +305,7 @@ mod tests {
     }
 
     #[test]
-    fn a_fresh_upsampler_repeats_the_coarse_colour() {
+    fn a_fresh_upsampler_upsamples_the_coarse_colour_bilinearly() {
         let cfg = UpsamplerConfig::with_factor(4);
         let (_varmap, vb) = new_varmap();
         let up = upsampler(&cfg, 6, vb).unwrap();
@@ -285,10 +314,18 @@ mod tests {
         assert_eq!(out.dims(), &[1, 4, 12, 20]);
         let out: Vec<Vec<Vec<f32>>> = out.squeeze(0).unwrap().to_vec3().unwrap();
         let g: Vec<Vec<Vec<f32>>> = grid.squeeze(0).unwrap().to_vec3().unwrap();
+        // Inside (every tap on the grid): bilinear between coarse centres.
         for c in 0..4 {
-            for y in 0..12 {
-                for x in 0..20 {
-                    assert_eq!(out[c][y][x], g[6 + c][y / 4][x / 4]);
+            for y in 2..10 {
+                for x in 2..18 {
+                    let (u, v) = ((x as f32 + 0.5) / 4.0 - 0.5, (y as f32 + 0.5) / 4.0 - 0.5);
+                    let (i0, j0) = (u.floor() as usize, v.floor() as usize);
+                    let (tx, ty) = (u - i0 as f32, v - j0 as f32);
+                    let at = |i: usize, j: usize| g[6 + c][j][i];
+                    let top = at(i0, j0) * (1.0 - tx) + at(i0 + 1, j0) * tx;
+                    let bottom = at(i0, j0 + 1) * (1.0 - tx) + at(i0 + 1, j0 + 1) * tx;
+                    let want = top * (1.0 - ty) + bottom * ty;
+                    assert!((out[c][y][x] - want).abs() < 1e-5, "{c} {y} {x}");
                 }
             }
         }

@@ -60,6 +60,9 @@ pub struct UpsamplerTrainConfig {
     pub pseudo_crops: usize,
     /// Share of each step's crops taken from pseudo views.
     pub pseudo_fraction: f64,
+    /// Share of the recorded crops centred near a pixel of the frame's mouth region (its
+    /// parsing or region labels), whose detail is small and moves with the audio.
+    pub mouth_fraction: f64,
     /// Steps between rows of `log.csv`.
     pub log_every: usize,
 }
@@ -77,6 +80,7 @@ impl Default for UpsamplerTrainConfig {
             pseudo_views: 150,
             pseudo_crops: 2,
             pseudo_fraction: 0.5,
+            mouth_fraction: 0.3,
             log_every: 25,
         }
     }
@@ -113,6 +117,7 @@ impl UpsamplerRunConfig {
         range("pseudo_views", t.pseudo_views <= 1 << 16)?;
         range("pseudo_crops", (1..=64).contains(&t.pseudo_crops))?;
         range("pseudo_fraction", (0.0..=1.0).contains(&t.pseudo_fraction))?;
+        range("mouth_fraction", (0.0..=1.0).contains(&t.mouth_fraction))?;
         range("log_every", t.log_every >= 1)?;
         if self.student.is_empty() {
             return Err(Error::Config(
@@ -412,7 +417,8 @@ pub fn train_upsampler(
                 crops.push(pseudo[rng.random_range(0..pseudo.len())].clone());
             } else {
                 let v = &recorded[rng.random_range(0..recorded.len())];
-                crops.push(recorded_crop(v, data, &mut rng, side, t.halo, t.crop, r)?);
+                let mouth = rng.random::<f64>() < t.mouth_fraction;
+                crops.push(recorded_crop(v, data, &mut rng, mouth, &t, r)?);
             }
         }
         let grid = Tensor::stack(&crops.iter().map(|c| &c.grid).collect::<Vec<_>>(), 0)?;
@@ -463,22 +469,38 @@ pub fn train_upsampler(
     })
 }
 
-/// A random crop of a recorded view, its target from the frame itself.
+/// A random crop of a recorded view, its target from the frame itself; with `mouth`, one
+/// whose loss-counted centre holds a random pixel of the frame's mouth region (when it has
+/// one).
 fn recorded_crop(
     v: &RecordedView,
     data: &TrainData,
     rng: &mut ChaCha8Rng,
-    side: usize,
-    halo: usize,
-    crop: usize,
+    mouth: bool,
+    t: &UpsamplerTrainConfig,
     r: usize,
 ) -> Result<Crop> {
+    let (halo, crop) = (t.halo, t.crop);
+    let side = crop + 2 * halo;
     let c = &v.coarse;
     let (bh, bw) = (c.rows.1 - c.rows.0, c.cols.1 - c.cols.0);
-    let (y, x) = (
-        rng.random_range(0..=bh - side),
-        rng.random_range(0..=bw - side),
-    );
+    let mouth_pixels = &data.mouth_pixels[v.image];
+    let (y, x) = if mouth && !mouth_pixels.is_empty() {
+        let (i, j) = mouth_pixels[rng.random_range(0..mouth_pixels.len())];
+        // The crop's top-left so that coarse ray (i / r, j / r) falls in its centre.
+        let mut place = |at: usize, lo: usize, n: usize| -> usize {
+            let shift = rng.random_range(0..crop);
+            at.saturating_sub(lo + halo + shift).min(n - side)
+        };
+        let y = place(j as usize / r, c.rows.0, bh);
+        let x = place(i as usize / r, c.cols.0, bw);
+        (y, x)
+    } else {
+        (
+            rng.random_range(0..=bh - side),
+            rng.random_range(0..=bw - side),
+        )
+    };
     let grid = c.grid.narrow(2, y, side)?.narrow(3, x, side)?.squeeze(0)?;
     let row0 = (c.rows.0 + y + halo) * r;
     let col0 = (c.cols.0 + x + halo) * r;
