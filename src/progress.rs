@@ -126,7 +126,7 @@ pub fn stop_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
 }
 
 /// Makes Ctrl-C set [`stop_flag`] (once per process).
-fn arm_ctrl_c() {
+pub fn arm_ctrl_c() {
     use std::sync::OnceLock;
     use std::sync::atomic::Ordering;
     static ARMED: OnceLock<()> = OnceLock::new();

@@ -331,7 +331,9 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     );
     let iters = cfg.train.iters as u64;
     let mut bar: Option<indicatif::ProgressBar> = None;
-    let report = train_upsampler(&dir, &args.run, cfg, &data, &mut |step, loss| {
+    let stop = stop_flag();
+    crate::progress::arm_ctrl_c();
+    let report = train_upsampler(&dir, &args.run, cfg, &data, &stop, &mut |step, loss| {
         let bar = bar.get_or_insert_with(|| crate::progress::progress_bar(iters, "upsampler"));
         bar.set_position(step as u64);
         if step % 25 == 0 {
@@ -343,6 +345,12 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     })?;
     if let Some(bar) = bar {
         bar.finish();
+    }
+    if report.steps < iters as usize {
+        eprintln!(
+            "stopped after {} of {iters} steps; the checkpoint holds them",
+            report.steps
+        );
     }
     println!(
         "upsampler: {} steps in {:.1} s after {:.1} s of preparation ({} recorded views, {} \

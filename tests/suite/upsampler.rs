@@ -256,7 +256,7 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
         },
     };
     let up_dir = out.join("upsampler");
-    let report = train_upsampler(&up_dir, &out, cfg.clone(), &data, &mut |_, _| {}).unwrap();
+    let report = train_upsampler(&up_dir, &out, cfg.clone(), &data, &stop, &mut |_, _| {}).unwrap();
     assert_eq!(report.steps, 80);
     assert!(
         report.recorded_views > 0 && report.pseudo_crops > 0,
@@ -275,9 +275,24 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
         &out,
         fresh,
         &data,
+        &stop,
         &mut |_, _| {},
     )
     .unwrap();
+    // Ctrl-C (the stop flag) ends training with a checkpoint of the steps done.
+    let stopped = std::sync::atomic::AtomicBool::new(true);
+    let dir_stopped = dir.path().join("stopped");
+    let report = train_upsampler(
+        &dir_stopped,
+        &out,
+        cfg.clone(),
+        &data,
+        &stopped,
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(report.steps, 0);
+    assert!(dir_stopped.join("model.safetensors").is_file());
     let plan = nldf_train::job::eval::EvalJob {
         run: out.clone(),
         data: out.join("data"),

@@ -292,12 +292,14 @@ pub struct UpsamplerReport {
 
 /// Trains a new upsampler into `dir` over the student `cfg.student` of `run` and the
 /// teacher `RUN/teacher`, on `data` (the data the student was trained on). `on_step` sees
-/// each step and its loss.
+/// each step and its loss. When `stop` is set (Ctrl-C) it checkpoints the steps done and
+/// returns.
 pub fn train_upsampler(
     dir: &Path,
     run: &Path,
     cfg: UpsamplerRunConfig,
     data: &TrainData,
+    stop: &std::sync::atomic::AtomicBool,
     on_step: &mut dyn FnMut(usize, f64),
 ) -> Result<UpsamplerReport> {
     let mut model = UpsampledModel::build(dir, run, cfg)?;
@@ -410,7 +412,11 @@ pub fn train_upsampler(
     };
     let mut last_loss = f64::NAN;
     let train_started = std::time::Instant::now();
+    let mut done = 0;
     for step in 1..=t.iters {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            break;
+        }
         let mut crops = Vec::with_capacity(t.batch);
         for b in 0..t.batch {
             if b < n_pseudo_step {
@@ -446,13 +452,14 @@ pub fn train_upsampler(
             log.row(step, clock.elapsed(), last_loss, psnr, lr, px_per_s, None)?;
         }
         on_step(step, last_loss);
+        done = step;
     }
     let train_s = train_started.elapsed().as_secs_f64();
-    model.step = t.iters;
+    model.step = done;
     save_checkpoint(&CheckpointParts {
         dir,
         kind: "upsampler",
-        step: t.iters,
+        step: done,
         elapsed: clock.elapsed(),
         varmap: &model.varmap,
         adam: &adam,
@@ -460,7 +467,7 @@ pub fn train_upsampler(
     })?;
     debug_assert!(dir.join(MODEL_FILE).is_file());
     Ok(UpsamplerReport {
-        steps: t.iters,
+        steps: done,
         prepare_s,
         train_s,
         final_loss: last_loss,
