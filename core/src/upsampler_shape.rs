@@ -25,7 +25,8 @@ pub const MISS_LOGIT: f32 = -30.0;
 /// reduce:    1x1 conv, width -> channels[0], relu
 /// stage s:   3x3 conv, channels[s] -> 4 channels[s + 1], depth-to-space x2 (DCR), relu
 /// head:      3x3 conv, channels[last] -> 4
-/// output:    head + bilinear-upsampled [colour, logit]  ->  colour c, opacity sigmoid(logit)
+/// output:    [c, l] = bilinear(colour, logit) + [sigmoid(bilinear(logit)) head_c, head_l]
+///            ->  colour c, opacity sigmoid(l)
 /// pixel:     c + (1 - opacity) background
 /// ```
 ///

@@ -8,7 +8,8 @@
 //! box    rows/cols holding a hit, widened by the margin (1 x 1 at the origin without hits)
 //! x      Slice(canvas) -> [1, width + 4, bh, bw]
 //! reduce Conv 1x1, Relu; stages: Conv 3x3, depth-to-space 2 (DCR), Relu; head: Conv 3x3
-//! out    head + bilinear(colour, logit) (ConvTranspose: stride r, kernel 2r, pads r/2)
+//! base   bilinear(colour, logit) (ConvTranspose: stride r, kernel 2r, pads r/2)
+//! out    colour: base + sigmoid(base logit) head colour; logit: base + head
 //!
 //! The box is cut by index lists (NonZero, then Gather), not by a Slice of computed bounds:
 //! tract sizes a NonZero's output when the graph runs, a Slice of computed bounds not.
@@ -290,7 +291,31 @@ pub(crate) fn upsampled_image(
     let hi = g.constant_i64("up.base_end", &[1], &[channels as i64]);
     let base = g.node("Slice", "up.base", &[&x, &lo, &hi, &axis1], vec![]);
     let base = bilinear_up(g, "up.base_bilinear", &base, 4, r);
-    let out = g.node("Add", "up.output", &[&head, &base], vec![]);
+    let part = |g: &mut GraphBuilder, name: &str, x: &str, from: i64, to: i64| {
+        let a = g.constant_i64(&format!("{name}.start"), &[1], &[from]);
+        let b = g.constant_i64(&format!("{name}.end"), &[1], &[to]);
+        g.node("Slice", name, &[x, &a, &b, &axis1], vec![])
+    };
+    let base_colour = part(g, "up.base_colour", &base, 0, 3);
+    let base_logit = part(g, "up.base_logit", &base, 3, 4);
+    let head_colour = part(g, "up.head_colour", &head, 0, 3);
+    let head_logit = part(g, "up.head_logit", &head, 3, 4);
+    // The colour's correction gated by the upsampled opacity.
+    let gate = g.node("Sigmoid", "up.gate", &[&base_logit], vec![]);
+    let gated = g.node(
+        "Mul",
+        "up.head_colour_gated",
+        &[&head_colour, &gate],
+        vec![],
+    );
+    let colour = g.node("Add", "up.colour_out", &[&base_colour, &gated], vec![]);
+    let logit = g.node("Add", "up.logit_out", &[&base_logit, &head_logit], vec![]);
+    let out = g.node(
+        "Concat",
+        "up.output",
+        &[&colour, &logit],
+        vec![attr_int("axis", 1)],
+    );
     let out = g.node("Squeeze", "up.output_chw", &[&out, &axis0], vec![]);
     let out = g.node(
         "Transpose",

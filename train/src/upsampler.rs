@@ -118,7 +118,9 @@ pub fn bilinear_up(x: &Tensor, r: usize) -> Result<Tensor> {
 }
 
 impl Upsampler {
-    /// The full-size colour (premultiplied) and opacity logit of a coarse box.
+    /// The full-size colour (premultiplied) and opacity logit of a coarse box: the bilinearly
+    /// upsampled colour and logit plus the CNN's corrections, the colour's times the upsampled
+    /// opacity.
     ///
     /// # Shapes
     /// - `grid`: `[n, width + 4, h, w]`: the hidden layer, then colour and logit
@@ -130,7 +132,14 @@ impl Upsampler {
             x = depth_to_space(&stage.forward(&x)?, 2)?.relu()?;
         }
         let up = bilinear_up(&base, self.cfg.factor)?;
-        self.head.forward(&x)? + up
+        let head = self.head.forward(&x)?;
+        // The colour's correction is gated by the upsampled opacity: where the student
+        // sees no head, the CNN cannot paint over the background.
+        let up_logit = up.narrow(1, 3, 1)?;
+        let gate = candle_nn::ops::sigmoid(&up_logit)?;
+        let colour = (up.narrow(1, 0, 3)? + head.narrow(1, 0, 3)?.broadcast_mul(&gate)?)?;
+        let logit = (up_logit + head.narrow(1, 3, 1)?)?;
+        Tensor::cat(&[colour, logit], 1)
     }
 
     /// The pixels of [`Upsampler::forward`]'s output over `background`: `c + (1 -
