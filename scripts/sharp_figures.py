@@ -1,10 +1,13 @@
-"""The 512 x 512 figures of docs/sharp.md from `nldf eval` outputs (PIL only).
+"""The 512 x 512 figures of docs/sharp.md from `nldf bench upsampler`'s renders (PIL only).
 
-usage: sharp_figures.py EVAL512 DATA512 EVAL128 OUT_GRID OUT_STRIP
+usage: sharp_figures.py BENCH512 DATA512 EVAL128 OUT_GRID OUT_STRIP
 
-EVAL512: folder with val/, novel/, voice/ evaluations of a 512 run (teacher, student,
-upsampler); DATA512: its dataset; EVAL128: the 128 x 128 run's evaluations of the same
-scene (same frames), whose student is shown upscaled 4x bilinearly.
+BENCH512: `nldf bench upsampler`'s output folder for a 512 run (val/, novel/, voice/ with
+the teacher's, the native rays', the upsampler's and the bilinear renders); DATA512: its
+dataset; EVAL128: the 128 x 128 run's evaluations of the same scene (`nldf eval`, same
+frames), whose student is shown upscaled 4x bilinearly. The grid: one frame of each split,
+the head at full size; the strip: the mouth over eight voice frames, ground truth, the
+upsampler and the 128 model upscaled, top to bottom.
 """
 import json
 import sys
@@ -45,9 +48,9 @@ def titled(tiles, titles, pad=4, head=22):
 columns = [
     ("truth", "ground truth 512"),
     ("teacher", "teacher 512"),
-    ("student", "student, rays at 512"),
-    ("upsampler", "student 128 grid + upsampler"),
-    ("student_bilinear_x4", "student 128 grid, bilinear"),
+    ("student.fp32.ort", "student, rays at 512"),
+    ("upsampler.fp32.ort", "student 128 grid + upsampler"),
+    ("student.fp32.ort.up4", "student 128 grid, bilinear"),
     ("128", "shipped 128 model, bilinear"),
 ]
 picks = [("val", 4), ("novel", 2), ("voice", 5)]
@@ -61,7 +64,7 @@ titled(rows, [t for _, t in columns]).save(out_grid)
 MOUTH = (176, 304, 336, 400)
 frames = ids("voice")[:8]
 strip = []
-for label in ["truth", "upsampler", "128"]:
+for label in ["truth", "upsampler.fp32.ort", "128"]:
     strip.append([load("voice", label, i).crop(MOUTH) for i in frames])
 titled(strip, [f"voice frame {i}" for i in frames]).save(out_strip)
 print("wrote", out_grid, out_strip)

@@ -7,6 +7,7 @@ use glam::Mat4;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
+use nldf_core::upsampler_shape::coarse_intrinsics;
 use nldf_export::contract::ModelInfo;
 
 use crate::error::{Error, Result};
@@ -77,6 +78,29 @@ impl FrameRenderer {
     /// A renderer at the model's own size (`size` `None`) or with the longer side `size`.
     pub fn new(backend: Box<dyn Backend>, size: Option<u32>) -> Result<FrameRenderer> {
         let intrinsics = intrinsics_at(backend.info(), size)?;
+        let background = background_at(backend.info(), intrinsics.width, intrinsics.height)?;
+        Ok(FrameRenderer {
+            backend,
+            intrinsics,
+            background,
+            skip_rays: true,
+        })
+    }
+
+    /// A renderer of frames `factor` times smaller than `size` (the longer side), to be
+    /// upscaled bilinearly by `factor`: one ray through the centre of each `factor x factor`
+    /// block of the `size` frame ([`coarse_intrinsics`]), so that the upscaled frame lines up
+    /// with the full-size one. (The model's intrinsics scaled by `1 / factor` would put each
+    /// ray at its block's corner instead, shifting the upscaled frame by `(factor - 1) / 2`
+    /// pixels.)
+    pub fn for_upscaling(
+        backend: Box<dyn Backend>,
+        size: u32,
+        factor: u32,
+    ) -> Result<FrameRenderer> {
+        let full = intrinsics_at(backend.info(), Some(size))?;
+        let intrinsics = coarse_intrinsics(&full, factor.max(1) as usize)
+            .map_err(|e| Error::Argument(e.to_string()))?;
         let background = background_at(backend.info(), intrinsics.width, intrinsics.height)?;
         Ok(FrameRenderer {
             backend,

@@ -344,3 +344,35 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
     assert!(err.contains("trained over the student `student`"), "{err}");
     assert!(!out.join("x.onnx").exists());
 }
+
+/// The bilinear baseline's coarse frame casts one ray through the centre of each block of the
+/// full-size frame, so that its upscaled frame lines up with the full-size one: its rays are
+/// the full-size frame's rays through the blocks' centres.
+#[test]
+fn frames_for_upscaling_cast_rays_through_block_centres() {
+    let cfg = configs().remove(1);
+    let mut spec = spec_for(&cfg);
+    spec.intrinsics = camera_at(48, 32);
+    let run = write_run_with(&cfg, 95, spec.clone());
+    let model = nldf_export::read_model(&run.export(WeightType::F32)).unwrap();
+    let options = nldf_infer::backend::BackendOptions {
+        batch_size: 256,
+        threads: 1,
+        spin: false,
+    };
+    let backend =
+        nldf_infer::backend::backend_for(&model, nldf_infer::backend::BackendKind::Tract, options)
+            .unwrap();
+    let renderer = nldf_infer::FrameRenderer::for_upscaling(backend, 96, 4).unwrap();
+    let k = renderer.intrinsics();
+    assert_eq!((k.width, k.height), (24, 16));
+    let full = nldf_infer::frame::intrinsics_at(&model.info, Some(96)).unwrap();
+    for (i, j) in [(0u32, 0u32), (7, 3), (23, 15)] {
+        let coarse = k.camera_direction(i as f32, j as f32);
+        let fine = full.camera_direction(4.0 * i as f32 + 1.5, 4.0 * j as f32 + 1.5);
+        assert!(
+            (coarse - fine).abs().max_element() < 1e-6,
+            "{coarse} vs {fine}"
+        );
+    }
+}

@@ -78,7 +78,7 @@ pub(crate) fn export_all(
 }
 
 /// `e` in `kind`, rendering frames of `size` (`None`: the model's own), each `upscale` times
-/// smaller and then upscaled.
+/// smaller (a ray through the centre of each `upscale x upscale` block) and then upscaled.
 pub(crate) fn open_point(
     e: &Export,
     kind: BackendKind,
@@ -99,7 +99,10 @@ pub(crate) fn open_point(
             spin: false,
         },
     )?;
-    let size = size.map(|s| s / upscale.max(1));
+    let renderer = match size {
+        Some(size) if upscale > 1 => FrameRenderer::for_upscaling(backend, size, upscale)?,
+        _ => FrameRenderer::new(backend, size)?,
+    };
     Ok(OnnxPoint {
         student: e.student.clone(),
         describe: e.describe.clone(),
@@ -109,7 +112,7 @@ pub(crate) fn open_point(
         step: e.step,
         macs_per_ray: e.macs_per_ray,
         path: e.path.clone(),
-        renderer: RefCell::new(FrameRenderer::new(backend, size)?),
+        renderer: RefCell::new(renderer),
         upscale: upscale.max(1),
         seconds: RefCell::new(Vec::new()),
     })
