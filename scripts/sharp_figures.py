@@ -1,6 +1,6 @@
 """The 512 x 512 figures of docs/sharp.md from `nldf bench upsampler`'s renders (PIL only).
 
-usage: sharp_figures.py BENCH512 DATA512 EVAL128 OUT_GRID OUT_STRIP
+usage: sharp_figures.py BENCH512 DATA512 EVAL128 OUT_GRID OUT_STRIP (PNG; docs/ holds them as JPEG, quality 90)
 
 BENCH512: `nldf bench upsampler`'s output folder for a 512 run (val/, novel/, voice/ with
 the teacher's, the native rays', the upsampler's and the bilinear renders); DATA512: its
