@@ -117,7 +117,7 @@ impl UpsamplerConfig {
 /// The output's sides must be multiples of `factor`.
 pub fn coarse_intrinsics(k: &Intrinsics, factor: usize) -> Result<Intrinsics> {
     let r = factor as u32;
-    if factor == 0 || k.width % r != 0 || k.height % r != 0 {
+    if factor == 0 || !k.width.is_multiple_of(r) || !k.height.is_multiple_of(r) {
         return Err(Error::Argument(format!(
             "an upsampler of factor {factor} needs image sides that are multiples of it, \
              the images are {} x {}",

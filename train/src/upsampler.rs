@@ -294,6 +294,7 @@ mod tests {
     use crate::nn::new_varmap;
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // indices are the formula under test
     fn depth_to_space_follows_onnx_dcr() {
         // [1, 8, 1, 2] with r = 2, C = 2: out[c, i, 2 x + j] = in[(2 i + j) 2 + c, 0, x].
         let values: Vec<f32> = (0..16).map(|v| v as f32).collect();
@@ -314,6 +315,7 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::needless_range_loop)] // indices are the formula under test
     fn a_fresh_upsampler_upsamples_the_coarse_colour_bilinearly() {
         let cfg = UpsamplerConfig::with_factor(4);
         let (_varmap, vb) = new_varmap();
