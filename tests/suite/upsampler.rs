@@ -262,6 +262,23 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
         report.recorded_views > 0 && report.pseudo_crops > 0,
         "{report:?}"
     );
+    // Its seed fixes it: trained again, the weights are the same to the bit.
+    let again = dir.path().join("again");
+    train_upsampler(&again, &out, cfg.clone(), &data, &stop, &mut |_, _| {}).unwrap();
+    let weights = |d: &std::path::Path| {
+        candle_core::safetensors::load(d.join("model.safetensors"), &candle_core::Device::Cpu)
+            .unwrap()
+    };
+    let (first, second) = (weights(&up_dir), weights(&again));
+    assert_eq!(first.len(), second.len());
+    for (name, w) in &first {
+        let a: Vec<f32> = w.flatten_all().unwrap().to_vec1().unwrap();
+        let b: Vec<f32> = second[name].flatten_all().unwrap().to_vec1().unwrap();
+        assert!(
+            a == b,
+            "{name} differs when trained again with the same seed"
+        );
+    }
     // The same upsampler before its first step (the coarse colour repeated) scores lower.
     let fresh = UpsamplerRunConfig {
         train: UpsamplerTrainConfig {

@@ -73,6 +73,27 @@ pub fn upsampler(cfg: &UpsamplerConfig, width: usize, vb: VarBuilder) -> Result<
     })
 }
 
+/// Sets the upsampler's weights in `varmap` to seeded values, in name order: every
+/// convolution's weights uniform in `±1 / sqrt(fan_in)` (as [`upsampler`] draws them from
+/// candle's own, unseeded generator), except the head's, which stay zero, as do the biases.
+/// Training calls it so that a run's seed fixes its result.
+pub fn init_upsampler_seeded(varmap: &candle_nn::VarMap, seed: u64) -> Result<()> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    for (name, var) in crate::nn::sorted_vars(varmap)? {
+        if !name.ends_with(".weight") || name.starts_with("head.") {
+            continue;
+        }
+        let fan_in: usize = var.dims().iter().skip(1).product();
+        let bound = 1.0 / (fan_in.max(1) as f32).sqrt();
+        let values: Vec<f32> = (0..var.elem_count())
+            .map(|_| rng.random_range(-bound..bound))
+            .collect();
+        var.set(&Tensor::from_vec(values, var.shape(), var.device())?)?;
+    }
+    Ok(())
+}
+
 /// ONNX's DepthToSpace in its default DCR order: output channel `c` at offset `(i, j)` of
 /// each `r x r` block comes from input channel `(i r + j) C + c`.
 ///

@@ -303,6 +303,7 @@ pub fn train_upsampler(
     on_step: &mut dyn FnMut(usize, f64),
 ) -> Result<UpsamplerReport> {
     let mut model = UpsampledModel::build(dir, run, cfg)?;
+    crate::upsampler::init_upsampler_seeded(&model.varmap, model.cfg.train.seed)?;
     let teacher = TeacherModel::open(&nldf_core::run_files::teacher_dir(run))?;
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     save_json(&dir.join(CONFIG_FILE), &model.cfg)?;
