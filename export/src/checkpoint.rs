@@ -129,22 +129,31 @@ impl StudentCheckpoint {
 
     /// The weight `name`, checked to have shape `shape`.
     pub fn weight(&self, name: &str, shape: &[usize]) -> Result<&[f32]> {
-        let path = self.dir.join(MODEL_FILE);
-        let w = self
-            .weights
-            .get(name)
-            .ok_or_else(|| Error::invalid(&path, format!("lacks weight `{name}`")))?;
-        if w.shape != shape {
-            return Err(Error::invalid(
-                &path,
-                format!(
-                    "weight `{name}` has shape {:?}, {} says {:?}",
-                    w.shape, CONFIG_FILE, shape
-                ),
-            ));
-        }
-        Ok(&w.data)
+        checked_weight(&self.weights, &self.dir, name, shape)
     }
+}
+
+/// The weight `name` of the checkpoint in `dir`, checked to have shape `shape`.
+pub(crate) fn checked_weight<'a>(
+    weights: &'a HashMap<String, Weight>,
+    dir: &Path,
+    name: &str,
+    shape: &[usize],
+) -> Result<&'a [f32]> {
+    let path = dir.join(MODEL_FILE);
+    let w = weights
+        .get(name)
+        .ok_or_else(|| Error::invalid(&path, format!("lacks weight `{name}`")))?;
+    if w.shape != shape {
+        return Err(Error::invalid(
+            &path,
+            format!(
+                "weight `{name}` has shape {:?}, {} says {:?}",
+                w.shape, CONFIG_FILE, shape
+            ),
+        ));
+    }
+    Ok(&w.data)
 }
 
 /// The f32 tensors of a safetensors file and the `step` of its metadata (0 when absent).

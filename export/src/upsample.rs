@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
 use nldf_core::upsampler_shape::{MISS_LOGIT, UpsamplerConfig};
 
-use crate::checkpoint::{StudentCheckpoint, Weight, parse_weights_of};
+use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
 use crate::contract::OUTPUT_RGB;
 use crate::error::{Error, Result};
 use crate::graph::{GraphBuilder, attr_int, attr_ints};
@@ -70,21 +70,7 @@ impl UpsamplerCheckpoint {
 
     /// The weight `name`, checked to have shape `shape`.
     fn weight(&self, name: &str, shape: &[usize]) -> Result<&[f32]> {
-        let path = self.dir.join(MODEL_FILE);
-        let w = self
-            .weights
-            .get(name)
-            .ok_or_else(|| Error::invalid(&path, format!("lacks weight `{name}`")))?;
-        if w.shape != shape {
-            return Err(Error::invalid(
-                &path,
-                format!(
-                    "weight `{name}` has shape {:?}, {CONFIG_FILE} says {shape:?}",
-                    w.shape
-                ),
-            ));
-        }
-        Ok(&w.data)
+        checked_weight(&self.weights, &self.dir, name, shape)
     }
 }
 

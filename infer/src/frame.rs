@@ -78,6 +78,11 @@ impl FrameRenderer {
     /// A renderer at the model's own size (`size` `None`) or with the longer side `size`.
     pub fn new(backend: Box<dyn Backend>, size: Option<u32>) -> Result<FrameRenderer> {
         let intrinsics = intrinsics_at(backend.info(), size)?;
+        Self::with_intrinsics(backend, intrinsics)
+    }
+
+    /// A renderer of frames seen with `intrinsics`, the background resized to them.
+    fn with_intrinsics(backend: Box<dyn Backend>, intrinsics: Intrinsics) -> Result<FrameRenderer> {
         let background = background_at(backend.info(), intrinsics.width, intrinsics.height)?;
         Ok(FrameRenderer {
             backend,
@@ -101,13 +106,7 @@ impl FrameRenderer {
         let full = intrinsics_at(backend.info(), Some(size))?;
         let intrinsics = coarse_intrinsics(&full, factor.max(1) as usize)
             .map_err(|e| Error::Argument(e.to_string()))?;
-        let background = background_at(backend.info(), intrinsics.width, intrinsics.height)?;
-        Ok(FrameRenderer {
-            backend,
-            intrinsics,
-            background,
-            skip_rays: true,
-        })
+        Self::with_intrinsics(backend, intrinsics)
     }
 
     /// The model's metadata.

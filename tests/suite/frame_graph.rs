@@ -12,7 +12,7 @@ use std::path::Path;
 use glam::{Mat4, Vec3};
 use nldf_core::audio::{Waveform, audio_windows, neighbourhood};
 use nldf_core::bounds::Bounds;
-use nldf_core::camera::{Intrinsics, look_at, turn_about};
+use nldf_core::camera::{look_at, turn_about};
 use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
 use nldf_core::student_shape::StudentConfig;
@@ -22,8 +22,8 @@ use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
 
 use crate::util::{
-    configs, max_diff, python, read_npy, run_python, runtimes, spec_for, write_npy, write_run,
-    write_run_with,
+    camera_at, configs, max_diff, python, read_npy, run_python, runtimes, spec_for, write_npy,
+    write_run, write_run_with,
 };
 
 /// Worst allowed difference per channel between the frame graph's frame and nldf's.
@@ -62,18 +62,6 @@ fn nldf_renderer(model: &nldf_export::ExportedModel, kind: BackendKind) -> Frame
         spin: true,
     };
     FrameRenderer::new(backend_for(model, kind, options).unwrap(), None).unwrap()
-}
-
-/// The camera of `spec_for`, at `width` x `height` pixels with the same field of view.
-fn camera_at(width: u32, height: u32) -> Intrinsics {
-    let scale = width as f32 / 24.0;
-    Intrinsics {
-        focal: 30.0 * scale,
-        cx: width as f32 / 2.0,
-        cy: height as f32 / 2.0,
-        width,
-        height,
-    }
 }
 
 /// Exports the student of `cfg` (seed `seed`, frames `size`, weights at a trained

@@ -7,7 +7,7 @@
 use glam::{Mat4, Vec3};
 use nldf_core::audio::{Waveform, audio_windows, neighbourhood};
 use nldf_core::bounds::{Bounds, HeadRange};
-use nldf_core::camera::{Camera, Intrinsics, look_at, turn_about};
+use nldf_core::camera::{Camera, look_at, turn_about};
 use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
 use nldf_core::student_shape::StudentConfig;
@@ -18,22 +18,10 @@ use nldf_train::checkpoint::{save_tensors, weights};
 use nldf_train::nn::{init_seeded, new_varmap};
 use nldf_train::upsampler::{Upsampler, render_upsampled, upsampler};
 
-use crate::util::{configs, max_diff, runtimes, spec_for, write_run_with};
+use crate::util::{camera_at, configs, max_diff, runtimes, spec_for, write_run_with};
 
 /// The parity bar: within 1e-4 of the largest output value.
 const REL_TOL: f32 = 1e-4;
-
-/// The camera of `spec_for` at `width` x `height` pixels with the same field of view.
-fn camera_at(width: u32, height: u32) -> Intrinsics {
-    let scale = width as f32 / 24.0;
-    Intrinsics {
-        focal: 30.0 * scale,
-        cx: width as f32 / 2.0,
-        cy: height as f32 / 2.0,
-        width,
-        height,
-    }
-}
 
 /// A seeded upsampler of `cfg` over a student `width` wide, written to `dir` as the trainer
 /// leaves it (config.json naming the student, weights with the step).

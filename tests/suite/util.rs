@@ -101,6 +101,18 @@ impl Run {
     }
 }
 
+/// The camera of `spec_for` at `width` x `height` pixels with the same field of view.
+pub(crate) fn camera_at(width: u32, height: u32) -> Intrinsics {
+    let scale = width as f32 / 24.0;
+    Intrinsics {
+        focal: 30.0 * scale,
+        cx: width as f32 / 2.0,
+        cy: height as f32 / 2.0,
+        width,
+        height,
+    }
+}
+
 /// A 24 x 18 camera looking at a head in [-0.5, 0.5]^3 from about 2.2 away.
 pub(crate) fn spec_for(cfg: &StudentConfig) -> RenderSpec {
     let c2w = look_at(Vec3::new(0.3, 0.2, 2.2), Vec3::ZERO, Vec3::Y);

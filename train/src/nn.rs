@@ -66,13 +66,18 @@ pub fn init_seeded(varmap: &VarMap, seed: u64) -> Result<()> {
                 .unwrap_or(1),
             None => var.dims().iter().skip(1).product::<usize>(),
         };
-        let bound = 1.0 / (fan_in.max(1) as f32).sqrt();
-        let values: Vec<f32> = (0..var.elem_count())
-            .map(|_| rng.random_range(-bound..bound))
-            .collect();
-        var.set(&Tensor::from_vec(values, var.shape(), var.device())?)?;
+        set_uniform(var, fan_in, &mut rng)?;
     }
     Ok(())
+}
+
+/// Sets `var` to values drawn from `rng`, uniform in `±1 / sqrt(fan_in)`.
+pub fn set_uniform(var: &Var, fan_in: usize, rng: &mut ChaCha8Rng) -> Result<()> {
+    let bound = 1.0 / (fan_in.max(1) as f32).sqrt();
+    let values: Vec<f32> = (0..var.elem_count())
+        .map(|_| rng.random_range(-bound..bound))
+        .collect();
+    var.set(&Tensor::from_vec(values, var.shape(), var.device())?)
 }
 
 /// A fresh variable map and a builder over it (f32, CPU).

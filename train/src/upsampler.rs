@@ -78,18 +78,14 @@ pub fn upsampler(cfg: &UpsamplerConfig, width: usize, vb: VarBuilder) -> Result<
 /// candle's own, unseeded generator), except the head's, which stay zero, as do the biases.
 /// Training calls it so that a run's seed fixes its result.
 pub fn init_upsampler_seeded(varmap: &candle_nn::VarMap, seed: u64) -> Result<()> {
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     for (name, var) in crate::nn::sorted_vars(varmap)? {
         if !name.ends_with(".weight") || name.starts_with("head.") {
             continue;
         }
         let fan_in: usize = var.dims().iter().skip(1).product();
-        let bound = 1.0 / (fan_in.max(1) as f32).sqrt();
-        let values: Vec<f32> = (0..var.elem_count())
-            .map(|_| rng.random_range(-bound..bound))
-            .collect();
-        var.set(&Tensor::from_vec(values, var.shape(), var.device())?)?;
+        crate::nn::set_uniform(&var, fan_in, &mut rng)?;
     }
     Ok(())
 }
