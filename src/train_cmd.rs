@@ -363,6 +363,5 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
         report.final_loss,
         dir.display()
     );
-    nldf_core::files::write_json(&dir.join("report.json"), &report)?;
     Ok(())
 }

@@ -111,6 +111,28 @@ impl UpsamplerConfig {
     }
 }
 
+/// The kernel of bilinear upsampling by `r` (even) of `c` channels as a transposed
+/// convolution of stride `r`, kernel `2 r` and padding `r / 2`, `[c, c, 2 r, 2 r]`: on each
+/// channel's diagonal the outer product of `1 - |i - (2 r - 1) / 2| / r`, zero elsewhere.
+/// Output pixel `x` then interpolates the inputs at `(x + 0.5) / r - 0.5` (zero beyond the
+/// edges). The trainer and the exported graph both upsample with it.
+pub fn bilinear_kernel(c: usize, r: usize) -> Vec<f32> {
+    let k = 2 * r;
+    let centre = (k - 1) as f32 / 2.0;
+    let taps: Vec<f32> = (0..k)
+        .map(|i| 1.0 - (i as f32 - centre).abs() / r as f32)
+        .collect();
+    let mut w = vec![0.0f32; c * c * k * k];
+    for ch in 0..c {
+        for (i, ti) in taps.iter().enumerate() {
+            for (j, tj) in taps.iter().enumerate() {
+                w[((ch * c + ch) * k + i) * k + j] = ti * tj;
+            }
+        }
+    }
+    w
+}
+
 /// The coarse grid's intrinsics for an output of intrinsics `k`: one ray per `factor x
 /// factor` block, through the block's centre (pixel `r I + (r - 1) / 2` of the output in
 /// AD-NeRF's integer pixel convention), so `f' = f / r` and `c' = (c - (r - 1) / 2) / r`.

@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
-use nldf_core::upsampler_shape::{MISS_LOGIT, UpsamplerConfig};
+use nldf_core::upsampler_shape::{MISS_LOGIT, UpsamplerConfig, bilinear_kernel};
 
 use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
 use crate::contract::OUTPUT_RGB;
@@ -125,6 +125,19 @@ fn span(g: &mut GraphBuilder, name: &str, any: &str, n: usize, margin: usize) ->
     let end = g.node("Add", &format!("{name}.end_wide"), &[&end, &m], vec![]);
     let end = g.node("Min", &format!("{name}.end"), &[&end, &n_c], vec![]);
     (start, end)
+}
+
+/// Entries `from..to` of `x` along the axis `axis` names (an int64 `[1]` constant).
+fn channels_of(
+    g: &mut GraphBuilder,
+    name: &str,
+    x: &str,
+    axis: &str,
+    (from, to): (i64, i64),
+) -> String {
+    let a = g.constant_i64(&format!("{name}.start"), &[1], &[from]);
+    let b = g.constant_i64(&format!("{name}.end"), &[1], &[to]);
+    g.node("Slice", name, &[x, &a, &b, axis], vec![])
 }
 
 /// The indices `[k]` of `0..n` within `[start r, end r)` (`start`, `end`: int64 `[1]`).
@@ -273,19 +286,12 @@ pub(crate) fn upsampled_image(
         y = g.node("Relu", &format!("up.{name}.act"), &[&y], vec![]);
     }
     let head = conv(g, up, "head", &y, (c[cfg.stages()], 4, 3))?;
-    let lo = g.constant_i64("up.base_start", &[1], &[width as i64]);
-    let hi = g.constant_i64("up.base_end", &[1], &[channels as i64]);
-    let base = g.node("Slice", "up.base", &[&x, &lo, &hi, &axis1], vec![]);
+    let base = channels_of(g, "up.base", &x, &axis1, (width as i64, channels as i64));
     let base = bilinear_up(g, "up.base_bilinear", &base, 4, r);
-    let part = |g: &mut GraphBuilder, name: &str, x: &str, from: i64, to: i64| {
-        let a = g.constant_i64(&format!("{name}.start"), &[1], &[from]);
-        let b = g.constant_i64(&format!("{name}.end"), &[1], &[to]);
-        g.node("Slice", name, &[x, &a, &b, &axis1], vec![])
-    };
-    let base_colour = part(g, "up.base_colour", &base, 0, 3);
-    let base_logit = part(g, "up.base_logit", &base, 3, 4);
-    let head_colour = part(g, "up.head_colour", &head, 0, 3);
-    let head_logit = part(g, "up.head_logit", &head, 3, 4);
+    let base_colour = channels_of(g, "up.base_colour", &base, &axis1, (0, 3));
+    let base_logit = channels_of(g, "up.base_logit", &base, &axis1, (3, 4));
+    let head_colour = channels_of(g, "up.head_colour", &head, &axis1, (0, 3));
+    let head_logit = channels_of(g, "up.head_logit", &head, &axis1, (3, 4));
     // The colour's correction gated by the upsampled opacity.
     let gate = g.node("Sigmoid", "up.gate", &[&base_logit], vec![]);
     let gated = g.node(
@@ -333,13 +339,8 @@ pub(crate) fn upsampled_image(
         vec![attr_int("axis", 1)],
     );
     let axis2 = g.constant_i64("up.channel_axis", &[1], &[2]);
-    let slice = |g: &mut GraphBuilder, name: &str, from: i64, to: i64| {
-        let a = g.constant_i64(&format!("{name}.start"), &[1], &[from]);
-        let b = g.constant_i64(&format!("{name}.end"), &[1], &[to]);
-        g.node("Slice", name, &[&out, &a, &b, &axis2], vec![])
-    };
-    let colour = slice(g, "up.colour", 0, 3);
-    let logit = slice(g, "up.logit", 3, 4);
+    let colour = channels_of(g, "up.colour", &out, &axis2, (0, 3));
+    let logit = channels_of(g, "up.logit", &out, &axis2, (3, 4));
     let alpha = g.node("Sigmoid", "up.opacity", &[&logit], vec![]);
     let one = g.constant_f32("up.one", &[1], &[1.0]);
     let clear = g.node("Sub", "up.clear", &[&one, &alpha], vec![]);
@@ -367,22 +368,10 @@ pub(crate) fn upsampled_image(
 
 /// Bilinear upsampling by `r` of the `c` channels of `x` as
 /// `nldf_train::upsampler::bilinear_up` computes it: a ConvTranspose of stride `r`, kernel `2
-/// r` and pads `r / 2` whose kernel is the outer product of `1 - |i - (2 r - 1) / 2| / r`
-/// on each channel's diagonal.
+/// r` and pads `r / 2` with [`bilinear_kernel`].
 fn bilinear_up(g: &mut GraphBuilder, name: &str, x: &str, c: usize, r: usize) -> String {
     let k = 2 * r;
-    let centre = (k - 1) as f32 / 2.0;
-    let taps: Vec<f32> = (0..k)
-        .map(|i| 1.0 - (i as f32 - centre).abs() / r as f32)
-        .collect();
-    let mut w = vec![0.0f32; c * c * k * k];
-    for ch in 0..c {
-        for i in 0..k {
-            for j in 0..k {
-                w[((ch * c + ch) * k + i) * k + j] = taps[i] * taps[j];
-            }
-        }
-    }
+    let w = bilinear_kernel(c, r);
     let w = g.constant_f32(&format!("{name}.kernel"), &[c, c, k, k], &w);
     let (r, p) = (r as i64, (r / 2) as i64);
     g.node(

@@ -14,7 +14,7 @@ use nldf_core::camera::Camera;
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::head_rays;
 pub use nldf_core::upsampler_shape::UpsamplerConfig;
-use nldf_core::upsampler_shape::{MISS_LOGIT, coarse_box, coarse_intrinsics};
+use nldf_core::upsampler_shape::{MISS_LOGIT, bilinear_kernel, coarse_box, coarse_intrinsics};
 
 use crate::student::Student;
 
@@ -34,20 +34,10 @@ pub struct Upsampler {
     head: Conv2d,
 }
 
-/// A convolution of `k x k` kernels, zero-padded by `k / 2`, its weights drawn as candle's
-/// `conv2d` draws them, or all zero with `zero` (the head starts as the identity on the
-/// upsampled colour).
-fn conv(c_in: usize, c_out: usize, k: usize, zero: bool, vb: VarBuilder) -> Result<Conv2d> {
-    let bound = 1.0 / ((c_in * k * k) as f64).sqrt();
-    let init = if zero {
-        Init::Const(0.0)
-    } else {
-        Init::Uniform {
-            lo: -bound,
-            up: bound,
-        }
-    };
-    let weight = vb.get_with_hints((c_out, c_in, k, k), "weight", init)?;
+/// A convolution of `k x k` kernels, zero-padded by `k / 2`, weights and bias zero until
+/// [`init_upsampler_seeded`] or a checkpoint sets them.
+fn conv(c_in: usize, c_out: usize, k: usize, vb: VarBuilder) -> Result<Conv2d> {
+    let weight = vb.get_with_hints((c_out, c_in, k, k), "weight", Init::Const(0.0))?;
     let bias = vb.get_with_hints(c_out, "bias", Init::Const(0.0))?;
     let cfg = Conv2dConfig {
         padding: k / 2,
@@ -56,14 +46,15 @@ fn conv(c_in: usize, c_out: usize, k: usize, zero: bool, vb: VarBuilder) -> Resu
     Ok(Conv2d::new(weight, Some(bias), cfg))
 }
 
-/// Builds an [`Upsampler`] for `cfg` over a student whose hidden layer is `width` wide.
+/// Builds an [`Upsampler`] for `cfg` over a student whose hidden layer is `width` wide, its
+/// weights zero (training draws them with [`init_upsampler_seeded`]).
 pub fn upsampler(cfg: &UpsamplerConfig, width: usize, vb: VarBuilder) -> Result<Upsampler> {
     let c = &cfg.channels;
-    let reduce = conv(width + 4, c[0], 1, false, vb.pp("reduce"))?;
+    let reduce = conv(width + 4, c[0], 1, vb.pp("reduce"))?;
     let stages = (0..cfg.stages())
-        .map(|s| conv(c[s], 4 * c[s + 1], 3, false, vb.pp("stages").pp(s)))
+        .map(|s| conv(c[s], 4 * c[s + 1], 3, vb.pp("stages").pp(s)))
         .collect::<Result<Vec<_>>>()?;
-    let head = conv(c[cfg.stages()], 4, 3, true, vb.pp("head"))?;
+    let head = conv(c[cfg.stages()], 4, 3, vb.pp("head"))?;
     Ok(Upsampler {
         cfg: cfg.clone(),
         width,
@@ -74,9 +65,9 @@ pub fn upsampler(cfg: &UpsamplerConfig, width: usize, vb: VarBuilder) -> Result<
 }
 
 /// Sets the upsampler's weights in `varmap` to seeded values, in name order: every
-/// convolution's weights uniform in `±1 / sqrt(fan_in)` (as [`upsampler`] draws them from
-/// candle's own, unseeded generator), except the head's, which stay zero, as do the biases.
-/// Training calls it so that a run's seed fixes its result.
+/// convolution's weights uniform in `±1 / sqrt(fan_in)` (PyTorch's default for a
+/// convolution), except the head's, which stay zero (the network starts as bilinear
+/// upsampling), as do the biases. Training starts from it, so a run's seed fixes its result.
 pub fn init_upsampler_seeded(varmap: &candle_nn::VarMap, seed: u64) -> Result<()> {
     use rand::SeedableRng;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -103,34 +94,15 @@ pub fn depth_to_space(x: &Tensor, r: usize) -> Result<Tensor> {
         .reshape((n, c, h * r, w * r))
 }
 
-/// The 1-D weights of bilinear upsampling by `r` (even) as a transposed convolution of
-/// stride `r`, kernel `2 r` and padding `r / 2`: `1 - |i - (2 r - 1) / 2| / r`.
-pub fn bilinear_taps(r: usize) -> Vec<f32> {
-    let centre = (2 * r - 1) as f32 / 2.0;
-    (0..2 * r)
-        .map(|i| 1.0 - (i as f32 - centre).abs() / r as f32)
-        .collect()
-}
-
 /// Bilinear upsampling by `r` of each channel, as the transposed convolution of
-/// [`bilinear_taps`] (zero beyond the edges): output pixel `x` interpolates the inputs at
+/// [`bilinear_kernel`] (zero beyond the edges): output pixel `x` interpolates the inputs at
 /// `(x + 0.5) / r - 0.5`.
 ///
 /// # Shapes
 /// - `x`: `[n, c, h, w]`; returns `[n, c, h r, w r]`
 pub fn bilinear_up(x: &Tensor, r: usize) -> Result<Tensor> {
     let c = x.dim(1)?;
-    let taps = bilinear_taps(r);
-    let k = taps.len();
-    let mut w = vec![0.0f32; c * c * k * k];
-    for ch in 0..c {
-        for i in 0..k {
-            for j in 0..k {
-                w[((ch * c + ch) * k + i) * k + j] = taps[i] * taps[j];
-            }
-        }
-    }
-    let w = Tensor::from_vec(w, (c, c, k, k), x.device())?;
+    let w = Tensor::from_vec(bilinear_kernel(c, r), (c, c, 2 * r, 2 * r), x.device())?;
     x.conv_transpose2d(&w, r / 2, 0, r, 1)
 }
 

@@ -277,6 +277,9 @@ struct RecordedView {
     image: usize,
 }
 
+/// The upsampler's `report.json`: what its training run did ([`UpsamplerReport`]).
+pub const REPORT_FILE: &str = "report.json";
+
 /// What one training run produced.
 #[derive(Debug, Clone, Serialize)]
 pub struct UpsamplerReport {
@@ -293,7 +296,7 @@ pub struct UpsamplerReport {
 /// Trains a new upsampler into `dir` over the student `cfg.student` of `run` and the
 /// teacher `RUN/teacher`, on `data` (the data the student was trained on). `on_step` sees
 /// each step and its loss. When `stop` is set (Ctrl-C) it checkpoints the steps done and
-/// returns.
+/// returns. It writes `config.json` first, then the checkpoint and [`REPORT_FILE`].
 pub fn train_upsampler(
     dir: &Path,
     run: &Path,
@@ -317,15 +320,19 @@ pub fn train_upsampler(
     let margin = model.cfg.model.margin;
     let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
 
-    // Recorded views: the coarse box of every training frame.
-    let views = training_views(data, &student.cfg.train, student.cfg.model.anchor_beams);
-    let mut recorded = Vec::new();
-    for (vi, view) in views.iter().filter(|v| v.recorded).enumerate() {
+    // A view's coarse box, when it holds a hit and a whole crop.
+    let coarse_of = |view: &crate::views::View| -> Result<Option<CoarseBox>> {
         let code = student.audio_codes(data, &[view.aud_id])?;
         let coarse =
             coarse_box_features(&student.student, &view.camera, &code, &range, (r, margin))?;
         let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
-        if coarse.any_hit && bh >= side && bw >= side {
+        Ok((coarse.any_hit && bh >= side && bw >= side).then_some(coarse))
+    };
+    // Recorded views: the coarse box of every training frame.
+    let views = training_views(data, &student.cfg.train, student.cfg.model.anchor_beams);
+    let mut recorded = Vec::new();
+    for (vi, view) in views.iter().filter(|v| v.recorded).enumerate() {
+        if let Some(coarse) = coarse_of(view)? {
             recorded.push(RecordedView { coarse, image: vi });
         }
     }
@@ -335,13 +342,10 @@ pub fn train_upsampler(
     let n_pseudo = t.pseudo_views.min(pseudo_views.len());
     for k in 0..n_pseudo {
         let view = pseudo_views[k * pseudo_views.len() / n_pseudo.max(1)];
-        let code = student.audio_codes(data, &[view.aud_id])?;
-        let coarse =
-            coarse_box_features(&student.student, &view.camera, &code, &range, (r, margin))?;
-        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
-        if !coarse.any_hit || bh < side || bw < side {
+        let Some(coarse) = coarse_of(view)? else {
             continue;
-        }
+        };
+        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
         let teacher_code = teacher.audio_codes(data, &[view.aud_id])?;
         for _ in 0..t.pseudo_crops {
             let (y, x) = (
@@ -466,15 +470,16 @@ pub fn train_upsampler(
         adam: &adam,
         title: "upsampler",
     })?;
-    debug_assert!(dir.join(MODEL_FILE).is_file());
-    Ok(UpsamplerReport {
+    let report = UpsamplerReport {
         steps: done,
         prepare_s,
         train_s,
         final_loss: last_loss,
         recorded_views: recorded.len(),
         pseudo_crops: pseudo.len(),
-    })
+    };
+    save_json(&dir.join(REPORT_FILE), &report)?;
+    Ok(report)
 }
 
 /// A random crop of a recorded view, its target from the frame itself; with `mouth`, one

@@ -145,19 +145,8 @@ impl FrontierJob {
                     .filter(|p| split == Split::Val || p.kind == BackendKind::Ort)
                     .map(|p| p as &dyn FrameModel),
             );
-            let n = self
-                .frames
-                .unwrap_or(usize::MAX)
-                .min(data.dataset.frames(split).len());
-            on_event(&JobEvent::Note(format!(
-                "{}: {} frames x {} ways of rendering",
-                split.name(),
-                n,
-                models.len()
-            )));
             let out = self.out.join(split.name());
-            let evaluation =
-                eval_counted(&models, data, split, self.frames, &out, n, &mut *on_event)?;
+            let evaluation = eval_split(&models, data, split, self.frames, &out, &mut *on_event)?;
             reports.push(evaluation.models);
         }
         // Medians over the `val` pass: the first frames each point rendered.
@@ -300,6 +289,27 @@ fn splits(data: &Path) -> Vec<Split> {
         }
     }
     splits
+}
+
+/// [`eval_counted`] on at most `frames` frames of `split`, after a note of how many frames
+/// and ways of rendering.
+fn eval_split(
+    models: &[&dyn FrameModel],
+    data: &TrainData,
+    split: Split,
+    frames: Option<usize>,
+    out: &Path,
+    on_event: OnEvent,
+) -> Result<Evaluation> {
+    let n = frames
+        .unwrap_or(usize::MAX)
+        .min(data.dataset.frames(split).len());
+    on_event(&JobEvent::Note(format!(
+        "{}: {n} frames x {} ways of rendering",
+        split.name(),
+        models.len()
+    )));
+    eval_counted(models, data, split, frames, out, n, on_event)
 }
 
 /// [`eval_models`] on `n` frames of `split`, each scored frame told as progress of

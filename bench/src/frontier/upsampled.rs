@@ -28,7 +28,7 @@ use serde::Serialize;
 use super::exports::{Export, open_point};
 use super::front::{SplitScore, score};
 use super::points::Timed;
-use super::{THREADS, eval_counted, precision_name};
+use super::{THREADS, eval_split, precision_name};
 use crate::error::{Error, Result, create_dir};
 use crate::report::{Written, machine_cell, write_bench_files};
 
@@ -254,18 +254,8 @@ impl UpsamplerBench {
                 p.split.set(split);
                 models.push(p);
             }
-            let n = self
-                .frames
-                .unwrap_or(usize::MAX)
-                .min(data.dataset.frames(split).len());
-            on_event(&JobEvent::Note(format!(
-                "{}: {n} frames x {} ways of rendering",
-                split.name(),
-                models.len()
-            )));
             let out = self.out.join(split.name());
-            let evaluation =
-                eval_counted(&models, data, split, self.frames, &out, n, &mut *on_event)?;
+            let evaluation = eval_split(&models, data, split, self.frames, &out, &mut *on_event)?;
             reports.push(evaluation.models);
         }
         let scores_of = |label: &str| -> Vec<SplitScore> {

@@ -59,20 +59,18 @@ impl EvalJob {
         let dir = teacher_dir(&self.run);
         let teacher = TeacherModel::open(&dir)
             .map_err(|e| e.context(format!("loading the teacher from {}", dir.display())))?;
-        let mut dirs: Vec<PathBuf> = std::fs::read_dir(&self.run)
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(&self.run)
             .map_err(|e| Error::io(&self.run, e))?
             .filter_map(|e| e.ok().map(|e| e.path()))
+            .collect();
+        entries.sort();
+        let dirs: Vec<&PathBuf> = entries
+            .iter()
             .filter(|p| p.join(RENDER_SPEC_FILE).is_file() && has_checkpoint(p))
             .collect();
-        dirs.sort();
-        let mut up_dirs: Vec<PathBuf> = std::fs::read_dir(&self.run)
-            .map_err(|e| Error::io(&self.run, e))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| UpsampledModel::is_upsampler(p))
-            .collect();
-        up_dirs.sort();
+        let up_dirs = entries.iter().filter(|p| UpsampledModel::is_upsampler(p));
         let mut upsamplers: Vec<(UpsampledModel, Option<CoarseBilinear>)> = Vec::new();
-        for dir in &up_dirs {
+        for dir in up_dirs {
             let up = UpsampledModel::open(dir, &self.run)
                 .map_err(|e| e.context(format!("loading the upsampler from {}", dir.display())))?;
             let factor = up.cfg.model.factor;
