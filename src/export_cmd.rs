@@ -28,9 +28,11 @@ pub struct ExportArgs {
     /// (docs/frame-graph.md). nldf's own commands render from the ray graph.
     #[arg(long)]
     pub frame: bool,
-    /// With --frame: a learned upsampler of the run (its folder inside RUN, e.g.
-    /// `upsampler`) goes into the frame graph; the student runs on its coarse grid.
-    #[arg(long, requires = "frame", conflicts_with = "int8")]
+    /// A learned upsampler of the run (its folder inside RUN, e.g. `upsampler`) goes into
+    /// the graph; the student runs on its coarse grid. Without --frame, the ray graph takes
+    /// the coarse rays of the head's box and gives the box's pixels; `nldf render` and
+    /// `nldf stream` find the box (docs/sharp.md).
+    #[arg(long, conflicts_with = "int8")]
     pub upsampler: Option<String>,
     /// Store the weights in half precision (cast back to f32 in the graph): half the size.
     #[arg(long, conflicts_with = "int8")]
@@ -93,15 +95,19 @@ pub fn run(args: ExportArgs) -> Result<()> {
         _ if args.upsampler.is_some() => {
             let name = args.upsampler.as_deref().unwrap_or_default();
             let dir = args.run.join(name);
-            nldf_export::export_frame_upsampled(&student, &dir, &out, weights).with_context(
-                || {
-                    format!(
-                        "exporting the student in {} with the upsampler in {} as a frame graph",
-                        student.display(),
-                        dir.display()
-                    )
-                },
-            )?
+            let export = if args.frame {
+                nldf_export::export_frame_upsampled
+            } else {
+                nldf_export::export_student_upsampled
+            };
+            export(&student, &dir, &out, weights).with_context(|| {
+                format!(
+                    "exporting the student in {} with the upsampler in {} as a {} graph",
+                    student.display(),
+                    dir.display(),
+                    if args.frame { "frame" } else { "ray" }
+                )
+            })?
         }
         _ if args.frame => export_frame(&student, &out, weights).with_context(|| {
             format!(
@@ -151,6 +157,16 @@ pub fn run(args: ExportArgs) -> Result<()> {
         k.width,
         k.height,
     );
+    if let Some(up) = &info.upsample {
+        println!(
+            "learned upsampler x{}: rays on the {}x{} coarse grid, the box around the head's \
+             widened by {}",
+            up.factor,
+            k.width as usize / up.factor,
+            k.height as usize / up.factor,
+            up.margin
+        );
+    }
     println!(
         "wrote {} ({:.2} MB, {} stored values, weights in {})",
         report.path.display(),

@@ -77,6 +77,21 @@ pub const INPUT_BACKGROUND: &str = "background";
 /// How much of each ray the head covers, f32 `[n_rays, 1]` (models with opacity).
 pub const OUTPUT_OPACITY: &str = "opacity";
 
+/// The coarse box of an upsampled ray graph, bool `[box_rows, box_cols]`, row-major: true
+/// where a coarse ray is given (the given rays are its true cells in row-major order).
+pub const INPUT_CELLS: &str = "cells";
+/// An upsampled ray graph's pixels of the box, f32 `[box_rows r, box_cols r, 3]`, the
+/// background composited in.
+pub const OUTPUT_BOX_RGB: &str = "box_rgb";
+/// How much of each of the box's pixels the head covers, f32 `[box_rows r, box_cols r, 1]`.
+pub const OUTPUT_BOX_OPACITY: &str = "box_opacity";
+/// Symbolic names of an upsampled ray graph's box axes: coarse rows and columns, then
+/// output pixel rows and columns (`r` times as many).
+pub const BOX_ROWS: &str = "box_rows";
+pub const BOX_COLS: &str = "box_cols";
+pub const BOX_HEIGHT: &str = "box_height";
+pub const BOX_WIDTH: &str = "box_width";
+
 /// The graph's input names in the order the exporter writes them: the background last,
 /// for a model with opacity.
 pub fn input_names(opacity: bool) -> Vec<&'static str> {
@@ -94,6 +109,33 @@ pub fn output_names(opacity: bool) -> Vec<&'static str> {
         names.push(OUTPUT_OPACITY);
     }
     names
+}
+
+/// The input names of the model `info` describes, in the order the exporter writes them:
+/// [`input_names`], with [`INPUT_CELLS`] before the background for an upsampled ray graph.
+pub fn model_input_names(info: &ModelInfo) -> Vec<&'static str> {
+    if info.upsample.is_some() {
+        vec![
+            INPUT_ORIGINS,
+            INPUT_DIRECTIONS,
+            INPUT_AUDIO,
+            INPUT_CELLS,
+            INPUT_BACKGROUND,
+        ]
+    } else {
+        input_names(info.opacity)
+    }
+}
+
+/// The output names of the model `info` describes, in the order the exporter writes them:
+/// [`output_names`], or for an upsampled ray graph [`OUTPUT_BOX_RGB`], [`OUTPUT_SEGMENTS`]
+/// and [`OUTPUT_BOX_OPACITY`].
+pub fn model_output_names(info: &ModelInfo) -> Vec<&'static str> {
+    if info.upsample.is_some() {
+        vec![OUTPUT_BOX_RGB, OUTPUT_SEGMENTS, OUTPUT_BOX_OPACITY]
+    } else {
+        output_names(info.opacity)
+    }
 }
 
 /// Value of [`keys::FORMAT`] that marks a model as an nldf student.
@@ -127,9 +169,13 @@ pub const FRAME_OUTPUT_RAYS: &str = "n_rays";
 /// Version of this contract, [`keys::CONTRACT`]: bumped when names, shapes or keys change
 /// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`]; 3: [`keys::OPACITY`],
 /// with the background input and opacity output of a model that has one; 4:
-/// [`keys::BEAM_ANCHOR`], the graph anchoring rays before sampling them). Contract 2 and 3
-/// models are still read: they have no anchor, and contract 2 no opacity.
-pub const CONTRACT_VERSION: u32 = 4;
+/// [`keys::BEAM_ANCHOR`], the graph anchoring rays before sampling them; 5: [`keys::UPSAMPLE`],
+/// the upsampled ray graph, written only for one). Contract 2 and 3 models are still read:
+/// they have no anchor, and contract 2 no opacity.
+pub const CONTRACT_VERSION: u32 = 5;
+/// The contract a ray graph without an upsampler is written with: it reads as it did
+/// before contract 5.
+pub const CONTRACT_PLAIN: u32 = 4;
 
 /// `metadata_props` keys.
 pub mod keys {
@@ -198,6 +244,10 @@ pub mod keys {
     /// (plain integer; absent or 1 without one). Its `keep` input is then the coarse grid's,
     /// `[height / factor, width / factor]`.
     pub const FRAME_UPSAMPLE: &str = "nldf.frame_upsample";
+    /// A ray graph's learned upsampler (`super::UpsampleInfo` as JSON, `{"factor",
+    /// "margin"}`; contract 5): the graph takes the coarse rays of a box of the coarse
+    /// grid and gives the box's pixels ([`super::INPUT_CELLS`], [`super::OUTPUT_BOX_RGB`]).
+    pub const UPSAMPLE: &str = "nldf.upsample";
     /// The background as base64 of an 8-bit RGB PNG (plain string). Written last.
     pub const BACKGROUND_PNG: &str = "nldf.background_png";
 }
@@ -264,6 +314,26 @@ pub struct ModelInfo {
     pub weights_checksum: u64,
     /// The background image, an 8-bit RGB PNG of the image's size.
     pub background_png: Vec<u8>,
+    /// The learned upsampler of an upsampled ray graph (none for a plain one or a frame
+    /// graph, whose upsampler is [`keys::FRAME_UPSAMPLE`]).
+    pub upsample: Option<UpsampleInfo>,
+}
+
+/// What a renderer needs to know of an upsampled ray graph's upsampler.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct UpsampleInfo {
+    /// Output pixels per coarse ray along each side: 2, 4 or 8. The coarse grid's rays pass
+    /// through the centres of the output's `factor x factor` blocks
+    /// (`nldf_core::upsampler_shape::coarse_intrinsics`).
+    pub factor: usize,
+    /// Coarse rays added around the hits on each side of the box
+    /// (`nldf_core::upsampler_shape::coarse_box`).
+    pub margin: usize,
+}
+
+impl UpsampleInfo {
+    /// Largest margin read back.
+    pub const MAX_MARGIN: usize = 64;
 }
 
 fn json<T: Serialize + ?Sized>(v: &T) -> String {
@@ -279,7 +349,13 @@ impl ModelInfo {
         let k = &s.intrinsics;
         let entries: Vec<(&str, String)> = vec![
             (keys::FORMAT, FORMAT.to_string()),
-            (keys::CONTRACT, json(&CONTRACT_VERSION)),
+            (
+                keys::CONTRACT,
+                json(&match self.upsample {
+                    Some(_) => CONTRACT_VERSION,
+                    None => CONTRACT_PLAIN,
+                }),
+            ),
             (keys::IMAGE_WIDTH, json(&k.width)),
             (keys::IMAGE_HEIGHT, json(&k.height)),
             (keys::FOCAL, json(&k.focal)),
@@ -306,6 +382,12 @@ impl ModelInfo {
             (keys::NETWORK, json(&self.network)),
             (keys::RENDER_SPEC, json(s)),
             (keys::BACKGROUND_FILE, s.background.clone()),
+        ];
+        let mut entries = entries;
+        if let Some(up) = &self.upsample {
+            entries.push((keys::UPSAMPLE, json(up)));
+        }
+        entries.extend([
             (
                 keys::WEIGHTS_CHECKSUM,
                 format!("{:016x}", self.weights_checksum),
@@ -314,7 +396,7 @@ impl ModelInfo {
                 keys::BACKGROUND_PNG,
                 base64::engine::general_purpose::STANDARD.encode(&self.background_png),
             ),
-        ];
+        ]);
         entries
             .into_iter()
             .map(|(key, value)| StringStringEntryProto {
@@ -459,6 +541,28 @@ impl ModelInfo {
             step: parse(keys::STEP, get(keys::STEP)?)?,
             spec,
             background_png,
+            upsample: match map.get(keys::UPSAMPLE) {
+                Some(v) if format == FORMAT => {
+                    let up: UpsampleInfo = parse(keys::UPSAMPLE, v)?;
+                    if !matches!(up.factor, 2 | 4 | 8) || up.margin > UpsampleInfo::MAX_MARGIN {
+                        return Err(MetadataError::Malformed(
+                            keys::UPSAMPLE.to_string(),
+                            format!(
+                                "factor {} and margin {}: the factor must be 2, 4 or 8 and \
+                                 the margin at most {}",
+                                up.factor,
+                                up.margin,
+                                UpsampleInfo::MAX_MARGIN
+                            ),
+                        ));
+                    }
+                    Some(up)
+                }
+                _ if contract >= 5 && format == FORMAT => {
+                    return Err(MetadataError::Missing(keys::UPSAMPLE.to_string()));
+                }
+                _ => None,
+            },
         };
         // The flat keys are what foreign runtimes read: they must say what the spec says.
         let k = &info.spec.intrinsics;

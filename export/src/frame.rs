@@ -66,24 +66,7 @@ pub fn export_frame_upsampled(
     out: &Path,
     weights: WeightType,
 ) -> Result<ExportReport> {
-    if weights == WeightType::Int8 {
-        return Err(Error::Frame(
-            "an upsampled frame graph is exported in f32 or f16 (int8 is for the ray graph's \
-             products, measured without the upsampler)"
-                .into(),
-        ));
-    }
-    let ckpt = StudentCheckpoint::open(student_dir)?;
-    let up = UpsamplerCheckpoint::open(upsampler_dir)?;
-    if student_dir.file_name().and_then(|n| n.to_str()) != Some(up.student.as_str()) {
-        return Err(Error::Frame(format!(
-            "the upsampler in {} was trained over the student `{}`, not {}",
-            upsampler_dir.display(),
-            up.student,
-            student_dir.display()
-        )));
-    }
-    crate::student::check_f16_range(&ckpt, student_dir, weights)?;
+    let (ckpt, up) = crate::upsample::open_pair(student_dir, upsampler_dir, weights)?;
     let (model, report_info, n_values) = frame_model(&ckpt, Some(&up), GraphBuilder::new(weights))?;
     write_model(&model, report_info, n_values, out)
 }

@@ -23,3 +23,4 @@ pub use frame::{export_frame, export_frame_int8, export_frame_upsampled};
 pub use graph::{ActivationRanges, Tap, WeightType};
 pub use load::{ExportedModel, FrameModel, read_frame_model, read_model};
 pub use student::{ExportReport, calibration_model, export_student, export_student_int8};
+pub use upsample::export_student_upsampled;

@@ -11,8 +11,7 @@ use nldf_core::frame_audio::FrameAudio;
 
 use crate::contract::{
     self, FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE,
-    FRAME_OUTPUT_RAYS, FRAME_OUTPUT_WINDOWS, INPUT_AUDIO, INPUT_DIRECTIONS, INPUT_ORIGINS,
-    MetadataError, ModelInfo, OUTPUT_RGB, OUTPUT_SEGMENTS,
+    FRAME_OUTPUT_RAYS, FRAME_OUTPUT_WINDOWS, MetadataError, ModelInfo,
 };
 use crate::error::{Error, Result};
 use crate::onnx::{DataType, ModelProto};
@@ -139,8 +138,8 @@ pub fn check_model(path: &Path, bytes: &[u8]) -> Result<(ModelProto, ModelInfo)>
         path,
         &proto,
         &info,
-        &[INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO],
-        &[OUTPUT_RGB, OUTPUT_SEGMENTS],
+        &contract::model_input_names(&info),
+        &contract::model_output_names(&info),
     )?;
     Ok((proto, info))
 }

@@ -142,6 +142,7 @@ pub fn model_info(ckpt: &StudentCheckpoint, graph: &GraphProto) -> ModelInfo {
         step: ckpt.step,
         weights_checksum: contract::weights_checksum(graph),
         background_png: ckpt.background_png.clone(),
+        upsample: None,
     }
 }
 

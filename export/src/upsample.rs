@@ -23,10 +23,15 @@ use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
 use nldf_core::upsampler_shape::{MISS_LOGIT, UpsamplerConfig, bilinear_kernel};
 
 use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
-use crate::contract::OUTPUT_RGB;
+use crate::contract::{
+    BOX_COLS, BOX_HEIGHT, BOX_ROWS, BOX_WIDTH, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS,
+    INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_RGB,
+    OUTPUT_SEGMENTS, RAY_AXIS, UpsampleInfo,
+};
 use crate::error::{Error, Result};
-use crate::graph::{GraphBuilder, attr_int, attr_ints};
-use crate::onnx::DataType;
+use crate::graph::{Dim, GraphBuilder, WeightType, attr_int, attr_ints};
+use crate::onnx::{DataType, ModelProto};
+use crate::student::{ExportReport, model_info, model_proto, student_nodes, write_model};
 
 /// An upsampler folder, read and checked.
 #[derive(Debug, Clone)]
@@ -72,6 +77,138 @@ impl UpsamplerCheckpoint {
     fn weight(&self, name: &str, shape: &[usize]) -> Result<&[f32]> {
         checked_weight(&self.weights, &self.dir, name, shape)
     }
+}
+
+/// Opens the student in `student_dir` and the upsampler in `upsampler_dir` for an export in
+/// `weights`: the upsampler must have been trained over that student, and the graphs that
+/// hold it are f32 or f16.
+pub(crate) fn open_pair(
+    student_dir: &Path,
+    upsampler_dir: &Path,
+    weights: WeightType,
+) -> Result<(StudentCheckpoint, UpsamplerCheckpoint)> {
+    if weights == WeightType::Int8 {
+        return Err(Error::Frame(
+            "a graph with an upsampler is exported in f32 or f16 (int8 is for the ray \
+             graph's products, measured without the upsampler)"
+                .into(),
+        ));
+    }
+    let ckpt = StudentCheckpoint::open(student_dir)?;
+    let up = UpsamplerCheckpoint::open(upsampler_dir)?;
+    if student_dir.file_name().and_then(|n| n.to_str()) != Some(up.student.as_str()) {
+        return Err(Error::Frame(format!(
+            "the upsampler in {} was trained over the student `{}`, not {}",
+            upsampler_dir.display(),
+            up.student,
+            student_dir.display()
+        )));
+    }
+    crate::student::check_f16_range(&ckpt, student_dir, weights)?;
+    Ok((ckpt, up))
+}
+
+/// Exports the student in `student_dir` with the learned upsampler in `upsampler_dir` as an
+/// upsampled ray graph to `out` (written atomically): the coarse rays of a box of the
+/// upsampler's coarse grid in, the box's pixels out ([`crate::contract::UpsampleInfo`]).
+/// nldf's renderer (`nldf_infer::FrameRenderer`) finds the box and its rays.
+pub fn export_student_upsampled(
+    student_dir: &Path,
+    upsampler_dir: &Path,
+    out: &Path,
+    weights: WeightType,
+) -> Result<ExportReport> {
+    let (ckpt, up) = open_pair(student_dir, upsampler_dir, weights)?;
+    let (model, info, n_values) = upsampled_ray_model(&ckpt, &up, GraphBuilder::new(weights))?;
+    write_model(&model, info, n_values, out)
+}
+
+/// The upsampled ray graph of `ckpt` and `up` built with `g`, its metadata and the number
+/// of values its initializers hold.
+///
+/// # Graph
+/// - inputs `rays_o`, `rays_d` `[n_rays, 3]` (the box's coarse rays that meet the head, in
+///   the row-major order of the true cells of `cells`), `audio`, `cells` bool
+///   `[box_rows, box_cols]`, `background` `[box_height, box_width, 3]` (`r` times the
+///   box's rows and columns)
+/// - outputs `box_rgb` `[box_height, box_width, 3]`, `segments` `[n_rays, M, 3]` (the
+///   student's premultiplied segment colours), `box_opacity` `[box_height, box_width, 1]`
+fn upsampled_ray_model(
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    mut g: GraphBuilder,
+) -> Result<(ModelProto, ModelInfo, usize)> {
+    let s = &ckpt.shape;
+    let r = up.shape.factor;
+    nldf_core::upsampler_shape::coarse_intrinsics(&ckpt.spec.intrinsics, r)
+        .map_err(|e| Error::Frame(e.to_string()))?;
+    let sym = |name: &str| Dim::Symbolic(name.to_string());
+    let rays = sym(RAY_AXIS);
+    let origins = g.input(
+        INPUT_ORIGINS,
+        DataType::Float,
+        &[rays.clone(), Dim::Fixed(3)],
+    );
+    let directions = g.input(
+        INPUT_DIRECTIONS,
+        DataType::Float,
+        &[rays.clone(), Dim::Fixed(3)],
+    );
+    let audio = g.input(
+        INPUT_AUDIO,
+        DataType::Float,
+        &[
+            Dim::Fixed(s.audio.att_frames),
+            Dim::Fixed(s.audio.window),
+            Dim::Fixed(s.audio.n_features),
+        ],
+    );
+    let cells = g.input(INPUT_CELLS, DataType::Bool, &[sym(BOX_ROWS), sym(BOX_COLS)]);
+    let pixels = [sym(BOX_HEIGHT), sym(BOX_WIDTH)];
+    let background = g.input(
+        INPUT_BACKGROUND,
+        DataType::Float,
+        &[pixels[0].clone(), pixels[1].clone(), Dim::Fixed(3)],
+    );
+    student_nodes(&mut g, ckpt, (&origins, &directions), &audio, None)?;
+    let (rgb, alpha) = upsampled_box(&mut g, ckpt, up, &cells, &background)?;
+    g.node("Identity", OUTPUT_BOX_RGB, &[&rgb], vec![]);
+    g.node("Identity", OUTPUT_BOX_OPACITY, &[&alpha], vec![]);
+    g.output(
+        OUTPUT_BOX_RGB,
+        DataType::Float,
+        &[pixels[0].clone(), pixels[1].clone(), Dim::Fixed(3)],
+    );
+    g.output(
+        OUTPUT_SEGMENTS,
+        DataType::Float,
+        &[rays, Dim::Fixed(s.segments), Dim::Fixed(3)],
+    );
+    g.output(
+        OUTPUT_BOX_OPACITY,
+        DataType::Float,
+        &[pixels[0].clone(), pixels[1].clone(), Dim::Fixed(1)],
+    );
+    let n_values = g.n_initializer_values();
+    let doc = format!(
+        "NLDF student ({} x {}) with a learned upsampler x{r} ({:?} channels): inputs \
+         {INPUT_ORIGINS} and {INPUT_DIRECTIONS} [{RAY_AXIS}, 3] (the coarse rays of a box of \
+         the coarse grid that meet the head, in row-major order), {INPUT_AUDIO}, \
+         {INPUT_CELLS} bool [{BOX_ROWS}, {BOX_COLS}] (the box; true where a ray is given), \
+         {INPUT_BACKGROUND} [{BOX_HEIGHT}, {BOX_WIDTH}, 3] ({r} x the box's rows and \
+         columns); outputs {OUTPUT_BOX_RGB} [{BOX_HEIGHT}, {BOX_WIDTH}, 3], the box's pixels \
+         composited over the background, {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3] and \
+         {OUTPUT_BOX_OPACITY} [{BOX_HEIGHT}, {BOX_WIDTH}, 1].",
+        s.depth, s.width, up.shape.channels, s.segments,
+    );
+    let graph = g.finish(crate::contract::GRAPH_NAME, &doc);
+    let mut info = model_info(ckpt, &graph);
+    info.upsample = Some(UpsampleInfo {
+        factor: r,
+        margin: up.shape.margin,
+    });
+    let metadata = info.to_metadata();
+    Ok((model_proto(graph, doc, metadata), info, n_values))
 }
 
 /// A convolution of the checkpoint's `name` (`[c_out, c_in, k, k]`), zero-padded by `k /
@@ -169,29 +306,11 @@ fn index_range(
     g.node("Reshape", name, &[&at, &flat], vec![])
 }
 
-/// The upsampled frame: the student's hidden layer, colour and logit on the coarse rays
-/// `hits` (of the `[hc, wc]` grid, with `hit` its bool mask `[hc wc]` and `n_hit` their
-/// count), through the CNN on their box, composited over `background` (float `[H W, 3]`).
-///
-/// The student's nodes must already be in `g` (run on the hits without a background, so
-/// that `OUTPUT_RGB` is its premultiplied colour).
-///
-/// # Shapes
-/// - returns the image `[H, W, 3]`
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn upsampled_image(
-    g: &mut GraphBuilder,
-    ckpt: &StudentCheckpoint,
-    up: &UpsamplerCheckpoint,
-    (hits, hit, n_hit): (&str, &str, &str),
-    background: &str,
-    (hc, wc): (usize, usize),
-) -> Result<String> {
+/// The rows the upsampler reads per coarse ray, `[n_rays, width + 4]`: the student's last
+/// hidden layer, its premultiplied colour and its opacity logit. The student's nodes must
+/// already be in `g` (run without a background, so that [`OUTPUT_RGB`] is its own colour).
+fn student_rows(g: &mut GraphBuilder, ckpt: &StudentCheckpoint) -> Result<String> {
     let s = &ckpt.shape;
-    let cfg = &up.shape;
-    let (width, r) = (s.width, cfg.factor);
-    let channels = width + 4;
-    let (h, w) = (hc * r, wc * r);
     if !s.opacity {
         return Err(Error::Frame(
             "the upsampler needs a student with opacity (its logit is an input)".into(),
@@ -202,16 +321,47 @@ pub(crate) fn upsampled_image(
     } else {
         format!("mlp.body.{}.act", s.n_blocks() - 1)
     };
-    // The rows of the canvas: hidden, colour, logit.
-    let rows = g.node(
+    Ok(g.node(
         "Concat",
         "up.rows",
         &[&hidden, OUTPUT_RGB, "mlp.opacity_logit"],
         vec![attr_int("axis", 1)],
-    );
+    ))
+}
+
+/// A coarse ray that misses the head: zero features and colour, [`MISS_LOGIT`], `[1,
+/// width + 4]`.
+fn miss_row(g: &mut GraphBuilder, width: usize) -> String {
+    let channels = width + 4;
     let mut miss = vec![0.0f32; channels];
     miss[channels - 1] = MISS_LOGIT;
-    let miss = g.constant_f32("up.miss_row", &[1, channels], &miss);
+    g.constant_f32("up.miss_row", &[1, channels], &miss)
+}
+
+/// The upsampled frame: the student's hidden layer, colour and logit on the coarse rays
+/// `hits` (of the `[hc, wc]` grid, with `hit` its bool mask `[hc wc]` and `n_hit` their
+/// count), through the CNN on their box, composited over `background` (float `[H W, 3]`).
+///
+/// The student's nodes must already be in `g` (run on the hits without a background, so
+/// that `OUTPUT_RGB` is its premultiplied colour).
+///
+/// # Shapes
+/// - returns the image `[H, W, 3]`
+pub(crate) fn upsampled_image(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    (hits, hit, n_hit): (&str, &str, &str),
+    background: &str,
+    (hc, wc): (usize, usize),
+) -> Result<String> {
+    let width = ckpt.shape.width;
+    let cfg = &up.shape;
+    let r = cfg.factor;
+    let channels = width + 4;
+    let (h, w) = (hc * r, wc * r);
+    let rows = student_rows(g, ckpt)?;
+    let miss = miss_row(g, width);
     let canvas_shape = g.constant_i64(
         "up.canvas_shape",
         &[2],
@@ -266,13 +416,111 @@ pub(crate) fn upsampled_image(
         vec![attr_int("axis", 0)],
     );
     let x = g.node("Gather", "up.box", &[&x, &cols], vec![attr_int("axis", 1)]);
+
+    // The box's background.
+    let rows_px = index_range(g, "up.pixel_rows", h, &r0, &r1, r);
+    let cols_px = index_range(g, "up.pixel_cols", w, &c0, &c1, r);
+    let image_shape = g.constant_i64("up.image_shape", &[3], &[h as i64, w as i64, 3]);
+    let bg = g.node(
+        "Reshape",
+        "up.background_image",
+        &[background, &image_shape],
+        vec![],
+    );
+    let bg_box = g.node(
+        "Gather",
+        "up.background_band",
+        &[&bg, &rows_px],
+        vec![attr_int("axis", 0)],
+    );
+    let bg_box = g.node(
+        "Gather",
+        "up.background_box",
+        &[&bg_box, &cols_px],
+        vec![attr_int("axis", 1)],
+    );
+    let (pixels, _) = box_pixels(g, ckpt, up, &x, &bg_box)?;
+    let pixels = g.node("Where", "up.pixels", &[&any, &pixels, &bg_box], vec![]);
+
+    // Indices `[bh, bw, 2]` of the box's pixels.
+    let axes12 = g.constant_i64("up.axes12", &[2], &[1, 2]);
+    let axes02 = g.constant_i64("up.axes02", &[2], &[0, 2]);
+    let rows_b = g.node("Unsqueeze", "up.rows_col", &[&rows_px, &axes12], vec![]);
+    let cols_b = g.node("Unsqueeze", "up.cols_row", &[&cols_px, &axes02], vec![]);
+    let zero_r = g.node("Mul", "up.rows_zero", &[&rows_b, &zero], vec![]);
+    let zero_c = g.node("Mul", "up.cols_zero", &[&cols_b, &zero], vec![]);
+    let rows_b = g.node("Add", "up.rows_grid", &[&rows_b, &zero_c], vec![]);
+    let cols_b = g.node("Add", "up.cols_grid", &[&cols_b, &zero_r], vec![]);
+    let index = g.node(
+        "Concat",
+        "up.pixel_index",
+        &[&rows_b, &cols_b],
+        vec![attr_int("axis", 2)],
+    );
+    Ok(g.node("ScatterND", "frame.image", &[&bg, &index, &pixels], vec![]))
+}
+
+/// The upsampled ray graph's box: the student's rows of the given coarse rays placed at the
+/// true cells of `cells` (bool `[bh, bw]`, row-major order; the other cells are misses),
+/// through the CNN, composited over `background` (float `[bh r, bw r, 3]`).
+///
+/// The student's nodes must already be in `g`, as for [`upsampled_image`].
+///
+/// # Shapes
+/// - returns the box's pixels `[bh r, bw r, 3]` and opacity `[bh r, bw r, 1]`
+pub(crate) fn upsampled_box(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    cells: &str,
+    background: &str,
+) -> Result<(String, String)> {
+    let rows = student_rows(g, ckpt)?;
+    let miss = miss_row(g, ckpt.shape.width);
+    // `[bh, bw, width + 4]` of misses, by broadcasting (no shape computed in the graph).
+    let axis2 = g.constant_i64("up.cell_axis", &[1], &[2]);
+    let cells_f = g.node(
+        "Cast",
+        "up.cells_f32",
+        &[cells],
+        vec![attr_int("to", DataType::Float as i64)],
+    );
+    let cells_f = g.node("Unsqueeze", "up.cells_col", &[&cells_f, &axis2], vec![]);
+    let zero = g.constant_f32("up.zero", &[1], &[0.0]);
+    let zeros = g.node("Mul", "up.cells_zero", &[&cells_f, &zero], vec![]);
+    let canvas = g.node("Add", "up.canvas_empty", &[&zeros, &miss], vec![]);
+    let at = g.node("NonZero", "up.cell_index_t", &[cells], vec![]);
+    let at = g.node(
+        "Transpose",
+        "up.cell_index",
+        &[&at],
+        vec![attr_ints("perm", &[1, 0])],
+    );
+    let x = g.node("ScatterND", "up.box", &[&canvas, &at, &rows], vec![]);
+    box_pixels(g, ckpt, up, &x, background)
+}
+
+/// The CNN on the student's box `x` (`[bh, bw, width + 4]`, channel-last) composited over
+/// `background` (`[bh r, bw r, 3]`): the pixels `[bh r, bw r, 3]` and their opacity
+/// `[bh r, bw r, 1]`.
+fn box_pixels(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    x: &str,
+    background: &str,
+) -> Result<(String, String)> {
+    let width = ckpt.shape.width;
+    let cfg = &up.shape;
+    let (r, channels) = (cfg.factor, width + 4);
     let x = g.node(
         "Transpose",
         "up.box_chw",
-        &[&x],
+        &[x],
         vec![attr_ints("perm", &[2, 0, 1])],
     );
     let axis0 = g.constant_i64("up.batch_axis", &[1], &[0]);
+    let axis1 = g.constant_i64("up.channel_axis_chw", &[1], &[1]);
     let x = g.node("Unsqueeze", "up.input", &[&x, &axis0], vec![]);
 
     // The CNN.
@@ -315,55 +563,15 @@ pub(crate) fn upsampled_image(
         &[&out],
         vec![attr_ints("perm", &[1, 2, 0])],
     );
-
-    // The box's pixels and their places in the image.
-    let rows_px = index_range(g, "up.pixel_rows", h, &r0, &r1, r);
-    let cols_px = index_range(g, "up.pixel_cols", w, &c0, &c1, r);
-    let image_shape = g.constant_i64("up.image_shape", &[3], &[h as i64, w as i64, 3]);
-    let bg = g.node(
-        "Reshape",
-        "up.background_image",
-        &[background, &image_shape],
-        vec![],
-    );
-    let bg_box = g.node(
-        "Gather",
-        "up.background_band",
-        &[&bg, &rows_px],
-        vec![attr_int("axis", 0)],
-    );
-    let bg_box = g.node(
-        "Gather",
-        "up.background_box",
-        &[&bg_box, &cols_px],
-        vec![attr_int("axis", 1)],
-    );
     let axis2 = g.constant_i64("up.channel_axis", &[1], &[2]);
     let colour = channels_of(g, "up.colour", &out, &axis2, (0, 3));
     let logit = channels_of(g, "up.logit", &out, &axis2, (3, 4));
     let alpha = g.node("Sigmoid", "up.opacity", &[&logit], vec![]);
     let one = g.constant_f32("up.one", &[1], &[1.0]);
     let clear = g.node("Sub", "up.clear", &[&one, &alpha], vec![]);
-    let behind = g.node("Mul", "up.behind", &[&clear, &bg_box], vec![]);
+    let behind = g.node("Mul", "up.behind", &[&clear, background], vec![]);
     let pixels = g.node("Add", "up.pixels_raw", &[&colour, &behind], vec![]);
-    let pixels = g.node("Where", "up.pixels", &[&any, &pixels, &bg_box], vec![]);
-
-    // Indices `[bh, bw, 2]` of the box's pixels.
-    let axes12 = g.constant_i64("up.axes12", &[2], &[1, 2]);
-    let axes02 = g.constant_i64("up.axes02", &[2], &[0, 2]);
-    let rows_b = g.node("Unsqueeze", "up.rows_col", &[&rows_px, &axes12], vec![]);
-    let cols_b = g.node("Unsqueeze", "up.cols_row", &[&cols_px, &axes02], vec![]);
-    let zero_r = g.node("Mul", "up.rows_zero", &[&rows_b, &zero], vec![]);
-    let zero_c = g.node("Mul", "up.cols_zero", &[&cols_b, &zero], vec![]);
-    let rows_b = g.node("Add", "up.rows_grid", &[&rows_b, &zero_c], vec![]);
-    let cols_b = g.node("Add", "up.cols_grid", &[&cols_b, &zero_r], vec![]);
-    let index = g.node(
-        "Concat",
-        "up.pixel_index",
-        &[&rows_b, &cols_b],
-        vec![attr_int("axis", 2)],
-    );
-    Ok(g.node("ScatterND", "frame.image", &[&bg, &index, &pixels], vec![]))
+    Ok((pixels, alpha))
 }
 
 /// Bilinear upsampling by `r` of the `c` channels of `x` as

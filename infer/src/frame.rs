@@ -2,16 +2,22 @@
 //! `get_rays` with the model's intrinsics, optionally at another resolution), only the rays
 //! that meet the head's bounds within `[near, far]` go through the network, the others take
 //! the background pixel, as the student was trained.
+//!
+//! A model with a learned upsampler (`nldf export --upsampler`) is sent one ray per
+//! `r x r` block instead, through the block's centre, again only those that meet the head;
+//! the graph upsamples the box around them (widened by the upsampler's margin) and every
+//! pixel outside the box is the background, as `nldf_train::upsampler::render_upsampled`
+//! renders.
 
 use glam::Mat4;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
-use nldf_core::upsampler_shape::coarse_intrinsics;
-use nldf_export::contract::ModelInfo;
+use nldf_core::upsampler_shape::{coarse_box, coarse_intrinsics};
+use nldf_export::contract::{ModelInfo, UpsampleInfo};
 
 use crate::error::{Error, Result};
-use crate::runtime::{Backend, RayOutputs};
+use crate::runtime::{Backend, BoxInput, RayOutputs};
 
 /// Largest image side `nldf render` accepts.
 pub const MAX_SIDE: u32 = 8192;
@@ -51,7 +57,7 @@ pub struct Frame {
     /// The image, `[height, width, 3]` in [0, 1].
     pub image: ImageRgb,
     /// Pixels whose rays went through the network (those meeting the head's bounds, unless
-    /// skipping is off).
+    /// skipping is off); with a learned upsampler, the coarse rays that did.
     pub head_pixels: usize,
 }
 
@@ -59,6 +65,8 @@ pub struct Frame {
 pub struct FrameRenderer {
     backend: Box<dyn Backend>,
     intrinsics: Intrinsics,
+    /// The rays' intrinsics: `intrinsics`, or the upsampler's coarse grid of them.
+    ray_intrinsics: Intrinsics,
     background: ImageRgb,
     /// Send only the rays that meet the head's bounds through the network.
     skip_rays: bool,
@@ -84,9 +92,11 @@ impl FrameRenderer {
     /// A renderer of frames seen with `intrinsics`, the background resized to them.
     fn with_intrinsics(backend: Box<dyn Backend>, intrinsics: Intrinsics) -> Result<FrameRenderer> {
         let background = background_at(backend.info(), intrinsics.width, intrinsics.height)?;
+        let ray_intrinsics = rays_seen(backend.info(), &intrinsics)?;
         Ok(FrameRenderer {
             backend,
             intrinsics,
+            ray_intrinsics,
             background,
             skip_rays: true,
         })
@@ -103,6 +113,12 @@ impl FrameRenderer {
         size: u32,
         factor: u32,
     ) -> Result<FrameRenderer> {
+        if let Some(up) = backend.info().upsample {
+            return Err(Error::Argument(format!(
+                "this model has a learned upsampler (x{}): it renders full-size frames itself",
+                up.factor
+            )));
+        }
         let full = intrinsics_at(backend.info(), Some(size))?;
         let intrinsics = coarse_intrinsics(&full, factor.max(1) as usize)
             .map_err(|e| Error::Argument(e.to_string()))?;
@@ -133,6 +149,7 @@ impl FrameRenderer {
             )));
         }
         self.intrinsics.focal = focal;
+        self.ray_intrinsics = rays_seen(self.backend.info(), &self.intrinsics)?;
         Ok(())
     }
 
@@ -144,10 +161,11 @@ impl FrameRenderer {
 
     /// The rays of the frame seen from camera-to-world `c2w` that go through the network:
     /// those meeting the head's bounds within `[near, far]` ([`head_rays`], the rays the
-    /// student was trained on), or all with skipping off.
+    /// student was trained on), or all with skipping off. With a learned upsampler they are
+    /// the coarse grid's, and their pixels index it.
     pub fn rays(&self, c2w: Mat4) -> PixelRays {
         let camera = Camera {
-            intrinsics: self.intrinsics,
+            intrinsics: self.ray_intrinsics,
             c2w,
         };
         let spec = &self.backend.info().spec;
@@ -164,10 +182,64 @@ impl FrameRenderer {
     /// - `audio`: `[att_frames, window, n_features]` flat
     /// - returns an image of the renderer's [`FrameRenderer::intrinsics`] size
     pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
+        if let Some(up) = self.backend.info().upsample {
+            return self.render_upsampled(c2w, audio, up);
+        }
         let rays = self.rays(c2w);
         let mut image = self.background.clone();
         let rgb = self.run_rays(&rays, audio)?.rgb;
         image.paint(&rays.pixels, &rgb);
+        Ok(Frame {
+            image,
+            head_pixels: rays.pixels.len(),
+        })
+    }
+
+    /// [`FrameRenderer::render`] with a learned upsampler: the coarse rays that meet the
+    /// head, the box around them (`coarse_box`, widened by the margin), the graph on the
+    /// box, its pixels pasted into the background.
+    fn render_upsampled(&mut self, c2w: Mat4, audio: &[f32], up: UpsampleInfo) -> Result<Frame> {
+        let rays = self.rays(c2w);
+        let mut image = self.background.clone();
+        if rays.pixels.is_empty() {
+            return Ok(Frame {
+                image,
+                head_pixels: 0,
+            });
+        }
+        let (hc, wc) = (
+            self.ray_intrinsics.height as usize,
+            self.ray_intrinsics.width as usize,
+        );
+        let mut hits = vec![false; hc * wc];
+        for &p in &rays.pixels {
+            hits[p] = true;
+        }
+        let (r0, r1, c0, c1) = coarse_box(&hits, wc, up.margin);
+        let cells: Vec<bool> = (r0..r1)
+            .flat_map(|j| hits[j * wc + c0..j * wc + c1].iter().copied())
+            .collect();
+        let r = up.factor;
+        let w = self.intrinsics.width as usize;
+        let (x0, x1) = (c0 * r, c1 * r);
+        let background: Vec<f32> = (r0 * r..r1 * r)
+            .flat_map(|y| self.background.data[3 * (y * w + x0)..3 * (y * w + x1)].iter())
+            .copied()
+            .collect();
+        let boxed = BoxInput {
+            cells: &cells,
+            rows: r1 - r0,
+            cols: c1 - c0,
+            background: &background,
+        };
+        let out = self
+            .backend
+            .run_box(&rays.rays.origins, &rays.rays.directions, audio, boxed)?;
+        let line = 3 * (x1 - x0);
+        for (k, y) in (r0 * r..r1 * r).enumerate() {
+            image.data[3 * (y * w + x0)..3 * (y * w + x1)]
+                .copy_from_slice(&out.rgb[k * line..(k + 1) * line]);
+        }
         Ok(Frame {
             image,
             head_pixels: rays.pixels.len(),
@@ -195,5 +267,16 @@ impl FrameRenderer {
             &background,
             audio,
         )
+    }
+}
+
+/// The intrinsics of the rays a model is sent for frames of `intrinsics`: those, or with a
+/// learned upsampler its coarse grid's ([`coarse_intrinsics`]; the frame's sides must be
+/// multiples of the factor).
+fn rays_seen(info: &ModelInfo, intrinsics: &Intrinsics) -> Result<Intrinsics> {
+    match info.upsample {
+        None => Ok(*intrinsics),
+        Some(up) => coarse_intrinsics(intrinsics, up.factor)
+            .map_err(|e| Error::Argument(format!("the model's learned upsampler: {e}"))),
     }
 }

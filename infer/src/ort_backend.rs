@@ -7,8 +7,8 @@ use std::sync::OnceLock;
 
 use nldf_export::ExportedModel;
 use nldf_export::contract::{
-    INPUT_AUDIO, INPUT_BACKGROUND, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_OPACITY,
-    OUTPUT_RGB, OUTPUT_SEGMENTS,
+    INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo,
+    OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS,
 };
 use ort::environment::Environment;
 use ort::session::{Session, SessionOutputs};
@@ -16,7 +16,9 @@ use ort::value::TensorRef;
 
 use crate::error::{Error, Result};
 use crate::ort_library::find_ort_library;
-use crate::runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
+use crate::runtime::{
+    Backend, BackendKind, BackendOptions, BoxInput, BoxOutputs, RayOutputs, refuse_boxed,
+};
 
 const NAME: &str = "ort";
 
@@ -169,6 +171,7 @@ impl Backend for OrtBackend {
         background: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs> {
+        refuse_boxed(&self.info)?;
         let n = rays_o.len() / 3;
         let m = self.info.segments;
         let opacity = self.info.opacity;
@@ -201,6 +204,41 @@ impl Backend for OrtBackend {
                     Vec::new()
                 },
             })
+        })
+    }
+
+    fn run_box_once(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+        boxed: BoxInput<'_>,
+    ) -> Result<BoxOutputs> {
+        let r = self.info.upsample.map_or(1, |u| u.factor);
+        let n = origins.len() / 3;
+        let fail = |e: ort::Error| Error::backend(NAME, e);
+        let pixels = [boxed.rows * r, boxed.cols * r, 3];
+        let inputs = ort::inputs![
+            INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
+            INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
+            INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
+                .map_err(fail)?,
+            INPUT_CELLS => TensorRef::from_array_view(([boxed.rows, boxed.cols], boxed.cells))
+                .map_err(fail)?,
+            INPUT_BACKGROUND => TensorRef::from_array_view((pixels, boxed.background))
+                .map_err(fail)?,
+        ];
+        let outputs = self.session.run(inputs).map_err(fail)?;
+        let take = |name: &str| -> Result<Vec<f32>> {
+            let value = outputs
+                .get(name)
+                .ok_or_else(|| Error::backend(NAME, format!("no output `{name}`")))?;
+            let (_, data) = value.try_extract_tensor::<f32>().map_err(fail)?;
+            Ok(data.to_vec())
+        };
+        Ok(BoxOutputs {
+            rgb: take(OUTPUT_BOX_RGB)?,
+            opacity: take(OUTPUT_BOX_OPACITY)?,
         })
     }
 }

@@ -100,6 +100,28 @@ pub struct RayOutputs {
     pub opacity: Vec<f32>,
 }
 
+/// The box an upsampled ray graph renders: its coarse cells and its pixels' background.
+#[derive(Debug, Clone, Copy)]
+pub struct BoxInput<'a> {
+    /// `[rows, cols]` of the coarse grid, row-major: true where a ray is given (the rays
+    /// are the true cells in this order).
+    pub cells: &'a [bool],
+    /// The box's coarse rows and columns.
+    pub rows: usize,
+    pub cols: usize,
+    /// `[rows r, cols r, 3]` flat: the background of the box's pixels (`r` the factor).
+    pub background: &'a [f32],
+}
+
+/// An upsampled ray graph's outputs for one box.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BoxOutputs {
+    /// The box's pixels, `[rows r, cols r, 3]`, the background composited in.
+    pub rgb: Vec<f32>,
+    /// How much of each pixel the head covers, `[rows r, cols r]`.
+    pub opacity: Vec<f32>,
+}
+
 /// A runtime holding one exported model.
 pub trait Backend {
     /// Which runtime this is.
@@ -126,6 +148,88 @@ pub trait Backend {
         background: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs>;
+
+    /// Runs an upsampled ray graph (one whose [`ModelInfo::upsample`] is set) on one box
+    /// with one audio neighbourhood; [`Backend::run_box`] has checked the inputs.
+    ///
+    /// # Shapes
+    /// - `origins`, `directions`: `[n_rays, 3]` flat, `n_rays >= 1` the true cells of the
+    ///   box, in row-major order
+    /// - `audio`: `[att_frames, window, n_features]` flat
+    fn run_box_once(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+        boxed: BoxInput<'_>,
+    ) -> Result<BoxOutputs>;
+
+    /// [`Backend::run_box_once`] after checking the inputs against the model: an
+    /// upsampled model, as many rays as true cells, a background `r` times the box.
+    fn run_box(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+        boxed: BoxInput<'_>,
+    ) -> Result<BoxOutputs> {
+        let info = self.info();
+        let Some(up) = info.upsample else {
+            return Err(Error::Argument(
+                "this model has no learned upsampler: it renders rays (Backend::run), not boxes"
+                    .into(),
+            ));
+        };
+        if origins.len() != directions.len() || !origins.len().is_multiple_of(3) {
+            return Err(Error::Argument(format!(
+                "rays: origins hold {} values and directions {}, expected equal multiples of 3",
+                origins.len(),
+                directions.len()
+            )));
+        }
+        let n_cells = boxed.cells.iter().filter(|&&c| c).count();
+        let (r, area) = (up.factor, boxed.rows * boxed.cols);
+        if boxed.cells.len() != area || n_cells != origins.len() / 3 || n_cells == 0 {
+            return Err(Error::Argument(format!(
+                "box: {} cells for {} x {}, {n_cells} of them true, for {} rays (expected \
+                 one ray per true cell, at least one)",
+                boxed.cells.len(),
+                boxed.rows,
+                boxed.cols,
+                origins.len() / 3
+            )));
+        }
+        if boxed.background.len() != 3 * area * r * r {
+            return Err(Error::Argument(format!(
+                "box: the background holds {} values, expected {} x {} pixels of 3",
+                boxed.background.len(),
+                boxed.rows * r,
+                boxed.cols * r
+            )));
+        }
+        if audio.len() != info.audio.len() {
+            return Err(Error::Argument(format!(
+                "audio: expected {:?} = {} values, got {}",
+                info.audio.shape(),
+                info.audio.len(),
+                audio.len()
+            )));
+        }
+        let out = self.run_box_once(origins, directions, audio, boxed)?;
+        if out.rgb.len() != 3 * area * r * r || out.opacity.len() != area * r * r {
+            return Err(Error::backend(
+                self.kind().name(),
+                format!(
+                    "the box's outputs hold {} and {} values, expected {} and {}",
+                    out.rgb.len(),
+                    out.opacity.len(),
+                    3 * area * r * r,
+                    area * r * r
+                ),
+            ));
+        }
+        Ok(out)
+    }
 
     /// Runs the network on any number of rays, batch by batch.
     ///
@@ -190,6 +294,7 @@ pub fn check_inputs(
     background: &[f32],
     audio: &[f32],
 ) -> Result<()> {
+    refuse_boxed(info)?;
     if !origins.len().is_multiple_of(3) || origins.len() != directions.len() {
         return Err(Error::Argument(format!(
             "rays: origins hold {} values and directions {}, expected equal multiples of 3",
@@ -214,4 +319,17 @@ pub fn check_inputs(
         )));
     }
     Ok(())
+}
+
+/// Refuses single rays for an upsampled ray graph, which renders boxes.
+pub fn refuse_boxed(info: &ModelInfo) -> Result<()> {
+    match info.upsample {
+        Some(up) => Err(Error::Argument(format!(
+            "this model has a learned upsampler (x{}): it renders boxes of its coarse grid \
+             (nldf render, FrameRenderer::render), not single rays; export the student \
+             without --upsampler for a ray graph",
+            up.factor
+        ))),
+        None => Ok(()),
+    }
 }

@@ -9,11 +9,15 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use nldf_export::ExportedModel;
-use nldf_export::contract::{ModelInfo, input_names, output_names};
+use nldf_export::contract::{
+    BOX_COLS, BOX_ROWS, ModelInfo, RAY_AXIS, model_input_names, model_output_names,
+};
 use tract_onnx::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
+use crate::runtime::{
+    Backend, BackendKind, BackendOptions, BoxInput, BoxOutputs, RayOutputs, refuse_boxed,
+};
 
 /// Partial batches are padded up to a multiple of this many rays.
 pub const PLAN_GRANULE: usize = 512;
@@ -27,6 +31,9 @@ pub struct TractBackend {
     model: InferenceModel,
     /// Optimised plans by ray count.
     plans: HashMap<usize, Arc<TypedRunnableModel>>,
+    /// An upsampled ray graph's one plan, its ray count and box sides symbolic (boxes
+    /// change size from frame to frame).
+    boxed: Option<Arc<TypedRunnableModel>>,
     batch_size: usize,
     executor: tract_linalg::multithread::Executor,
 }
@@ -49,10 +56,9 @@ impl TractBackend {
             .map_err(|e| Error::backend(NAME, format!("{}: {e}", model.path.display())))?;
         // tract numbers inputs and outputs by position; onnxruntime binds them by name. Bind
         // by name here too, so that a graph listing them in another order renders the same.
-        let opacity = model.info.opacity;
         parsed
-            .set_input_names(input_names(opacity))
-            .and_then(|()| parsed.select_outputs_by_name(output_names(opacity)))
+            .set_input_names(model_input_names(&model.info))
+            .and_then(|()| parsed.select_outputs_by_name(model_output_names(&model.info)))
             .map_err(|e| {
                 Error::backend(
                     NAME,
@@ -70,14 +76,23 @@ impl TractBackend {
         } else {
             tract_linalg::multithread::Executor::SingleThread
         };
+        let boxed = match model.info.upsample {
+            Some(up) => Some(boxed_plan(&parsed, &model.info, up.factor).map_err(|e| {
+                Error::backend(NAME, format!("{}: compiling: {e}", model.path.display()))
+            })?),
+            None => None,
+        };
         let mut backend = TractBackend {
             info: model.info.clone(),
             model: parsed,
             plans: HashMap::new(),
+            boxed,
             batch_size: options.batch_size,
             executor,
         };
-        backend.plan(options.batch_size)?;
+        if backend.boxed.is_none() {
+            backend.plan(options.batch_size)?;
+        }
         Ok(backend)
     }
 
@@ -115,6 +130,29 @@ impl TractBackend {
     }
 }
 
+/// The plan of an upsampled ray graph: `n_rays` rays, a `box_rows x box_cols` box and
+/// its `factor` times larger background, all symbolic.
+fn boxed_plan(
+    parsed: &InferenceModel,
+    info: &ModelInfo,
+    factor: usize,
+) -> TractResult<Arc<TypedRunnableModel>> {
+    let n: TDim = parsed.symbols.sym(RAY_AXIS).into();
+    let rows: TDim = parsed.symbols.sym(BOX_ROWS).into();
+    let cols: TDim = parsed.symbols.sym(BOX_COLS).into();
+    let r = TDim::from(factor as i64);
+    let three = TDim::from(3i64);
+    parsed
+        .clone()
+        .with_input_fact(0, f32::fact([n.clone(), three.clone()]).into())?
+        .with_input_fact(1, f32::fact([n, three.clone()]).into())?
+        .with_input_fact(2, f32::fact(info.audio.shape()).into())?
+        .with_input_fact(3, bool::fact([rows.clone(), cols.clone()]).into())?
+        .with_input_fact(4, f32::fact([rows * r.clone(), cols * r, three]).into())?
+        .into_optimized()?
+        .into_runnable()
+}
+
 impl Backend for TractBackend {
     fn kind(&self) -> BackendKind {
         BackendKind::Tract
@@ -135,6 +173,7 @@ impl Backend for TractBackend {
         background: &[f32],
         audio: &[f32],
     ) -> Result<RayOutputs> {
+        refuse_boxed(&self.info)?;
         let n = origins.len() / 3;
         let padded = self.padded(n);
         let plan = self.plan(padded)?;
@@ -177,7 +216,7 @@ impl Backend for TractBackend {
             }
             Ok(view.iter().take(per_ray * n).copied().collect())
         };
-        let expected = output_names(self.info.opacity).len();
+        let expected = model_output_names(&self.info).len();
         if outputs.len() != expected {
             return Err(Error::backend(
                 NAME,
@@ -194,6 +233,54 @@ impl Backend for TractBackend {
                 Some(alpha) => take(alpha, 1)?,
                 None => Vec::new(),
             },
+        })
+    }
+
+    fn run_box_once(
+        &mut self,
+        origins: &[f32],
+        directions: &[f32],
+        audio: &[f32],
+        boxed: BoxInput<'_>,
+    ) -> Result<BoxOutputs> {
+        let Some(plan) = self.boxed.clone() else {
+            return Err(Error::Argument(
+                "this model has no learned upsampler: it renders rays, not boxes".into(),
+            ));
+        };
+        let r = self.info.upsample.map_or(1, |u| u.factor);
+        let fail = |e: TractError| Error::backend(NAME, e);
+        let n = origins.len() / 3;
+        let inputs: TVec<TValue> = tvec!(
+            Tensor::from_shape(&[n, 3], origins).map_err(fail)?.into(),
+            Tensor::from_shape(&[n, 3], directions)
+                .map_err(fail)?
+                .into(),
+            Tensor::from_shape(&self.info.audio.shape(), audio)
+                .map_err(fail)?
+                .into(),
+            Tensor::from_shape(&[boxed.rows, boxed.cols], boxed.cells)
+                .map_err(fail)?
+                .into(),
+            Tensor::from_shape(&[boxed.rows * r, boxed.cols * r, 3], boxed.background)
+                .map_err(fail)?
+                .into(),
+        );
+        let outputs =
+            tract_linalg::multithread::multithread_tract_scope(self.executor.clone(), || {
+                plan.run(inputs)
+            })
+            .map_err(|e| Error::backend(NAME, format!("running: {e}")))?;
+        let take = |i: usize| -> Result<Vec<f32>> {
+            let value = outputs
+                .get(i)
+                .ok_or_else(|| Error::backend(NAME, format!("the graph gave no output {i}")))?;
+            let view = value.to_plain_array_view::<f32>().map_err(fail)?;
+            Ok(view.iter().copied().collect())
+        };
+        Ok(BoxOutputs {
+            rgb: take(0)?,
+            opacity: take(2)?,
         })
     }
 }

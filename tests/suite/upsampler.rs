@@ -1,5 +1,6 @@
-//! The learned upsampler (`nldf train upsampler`, `nldf export --frame --upsampler`): the
-//! frame graph with the upsampler inside matches candle's reference renderer
+//! The learned upsampler (`nldf train upsampler`, `nldf export [--frame] --upsampler`): the
+//! frame graph and the ray graph with the upsampler inside (the ray graph through nldf's
+//! own `FrameRenderer`, which finds the box) match candle's reference renderer
 //! (`nldf_train::upsampler::render_upsampled`) within 1e-4 of the largest output value, in
 //! tract and onnxruntime, for a tiny student and at production size (the real-time student,
 //! 256 x 256 and 512 x 512 frames, x4), with a camera that sees no head among the poses.
@@ -12,7 +13,11 @@ use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
 use nldf_core::student_shape::StudentConfig;
 use nldf_core::upsampler_shape::UpsamplerConfig;
-use nldf_export::{WeightType, export_frame_upsampled, read_frame_model};
+use nldf_export::{
+    WeightType, export_frame_upsampled, export_student_upsampled, read_frame_model, read_model,
+};
+use nldf_infer::FrameRenderer;
+use nldf_infer::backend::{BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_train::checkpoint::{save_tensors, weights};
 use nldf_train::nn::{init_seeded, new_varmap};
@@ -51,9 +56,10 @@ fn write_upsampler(
 }
 
 /// Exports the student of `cfg` with a seeded upsampler of factor `factor` as a frame graph
-/// at `size`, renders frames of a speech-like track from three poses (one seeing no head)
-/// with candle's reference and with the graph in every runtime; returns the worst
-/// difference relative to the largest output value, and asserts it is within the bar.
+/// and as a ray graph at `size`, renders frames of a speech-like track from three poses (one
+/// seeing no head) with candle's reference, with the frame graph and with nldf's renderer
+/// on the ray graph, in every runtime; returns the worst difference relative to the largest
+/// output value, and asserts it is within the bar.
 fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), seed: u64) -> f32 {
     let mut spec = spec_for(cfg);
     spec.intrinsics = camera_at(size.0, size.1);
@@ -98,7 +104,7 @@ fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), see
         near: spec.near,
         far: spec.far,
     };
-    let reference: Vec<ImageRgb> = cases
+    let reference: Vec<(ImageRgb, usize)> = cases
         .iter()
         .map(|&(f, pose)| {
             let audio = neighbourhood(&windows, f, cfg.audio.att_frames);
@@ -115,23 +121,21 @@ fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), see
                 intrinsics: spec.intrinsics,
                 c2w: pose,
             };
-            render_upsampled(student, &up, &camera, &background, &code, &range)
-                .unwrap()
-                .0
+            render_upsampled(student, &up, &camera, &background, &code, &range).unwrap()
         })
         .collect();
     assert_eq!(
-        reference[2], background,
+        reference[2].0, background,
         "the camera looking away shows the background"
     );
     assert!(
-        max_diff(&reference[0].data, &background.data) > 0.05,
+        max_diff(&reference[0].0.data, &background.data) > 0.05,
         "{label}: the default camera sees the head"
     );
     let mut worst = 0.0f32;
     for kind in runtimes() {
         let mut graph = FrameGraph::open(&model, kind, 2).unwrap();
-        for (&(f, pose), image) in cases.iter().zip(&reference) {
+        for (&(f, pose), (image, _)) in cases.iter().zip(&reference) {
             let out = graph.render(pose, &layout.chunk(&wave.samples, f)).unwrap();
             let scale = image.data.iter().fold(1.0f32, |m, v| m.max(v.abs()));
             let d = max_diff(&out.image.data, &image.data) / scale;
@@ -152,6 +156,51 @@ fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), see
              of the largest output",
             kind.name()
         );
+    }
+
+    // The ray graph, through nldf's renderer.
+    let ray_path = run.root.join("model_up.onnx");
+    export_student_upsampled(&run.student_dir(), &up_dir, &ray_path, WeightType::F32).unwrap();
+    let ray_model = read_model(&ray_path).unwrap();
+    let info = ray_model
+        .info
+        .upsample
+        .expect("the ray graph carries its upsampler");
+    assert_eq!((info.factor, info.margin), (factor, up_cfg.margin));
+    let options = BackendOptions {
+        threads: 2,
+        spin: false,
+        ..BackendOptions::default()
+    };
+    for kind in runtimes() {
+        let backend = backend_for(&ray_model, kind, options).unwrap();
+        let mut renderer = FrameRenderer::new(backend, None).unwrap();
+        let mut worst_rays = 0.0f32;
+        for (&(f, pose), (image, n_rays)) in cases.iter().zip(&reference) {
+            let audio = neighbourhood(&windows, f, cfg.audio.att_frames);
+            let out = renderer.render(pose, &audio).unwrap();
+            assert_eq!(out.head_pixels, *n_rays, "{label}: coarse rays sent");
+            let scale = image.data.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let d = max_diff(&out.image.data, &image.data) / scale;
+            assert!(
+                out.image.data.iter().all(|v| v.is_finite()),
+                "{label}: ray graph in {} frame {f}: not finite",
+                kind.name()
+            );
+            assert!(
+                d <= REL_TOL,
+                "{label}: ray graph in {} frame {f}: worst difference {d:.2e} of the largest \
+                 output",
+                kind.name()
+            );
+            worst_rays = worst_rays.max(d);
+        }
+        println!(
+            "{label}: upsampled ray graph in {} (nldf's renderer) against candle: worst \
+             difference {worst_rays:.2e} of the largest output",
+            kind.name()
+        );
+        worst = worst.max(worst_rays);
     }
     worst
 }
