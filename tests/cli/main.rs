@@ -1099,3 +1099,82 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
         }
     }
 }
+
+/// The learned upsampler through the command line on a copy of the fixture's run: `nldf
+/// train upsampler`, `nldf export --upsampler` (the ray graph, without --frame), `nldf render`
+/// of a WAV with it (every frame written, the size of the model's), and `--skip-still`
+/// refused for it with a one-line reason and nothing written.
+#[test]
+fn an_upsampled_ray_graph_renders_from_the_command_line() {
+    let f = fixture();
+    let dir = scratch();
+    let d = dir.path();
+    let run = d.join("run");
+    for sub in ["teacher", "student"] {
+        std::fs::create_dir_all(run.join(sub)).unwrap();
+        for entry in std::fs::read_dir(f.run.join(sub)).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_file() {
+                std::fs::copy(&path, run.join(sub).join(path.file_name().unwrap())).unwrap();
+            }
+        }
+    }
+    let config = d.join("upsampler.json");
+    std::fs::write(
+        &config,
+        r#"{"model": {"factor": 2, "channels": [8, 8], "margin": 1},
+            "train": {"iters": 6, "batch": 2, "crop": 4, "halo": 1, "pseudo_views": 2}}"#,
+    )
+    .unwrap();
+    nldf_ok(args(&[
+        "train",
+        "upsampler",
+        "--data",
+        &s(&f.data),
+        "--run",
+        &s(&run),
+        "--config",
+        &s(&config),
+    ]));
+    let model = d.join("up.onnx");
+    let out = nldf_ok(args(&[
+        "export",
+        "--run",
+        &s(&run),
+        "--upsampler",
+        "upsampler",
+        "--out",
+        &s(&model),
+    ]));
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("learned upsampler x2"), "{said}");
+    let video = d.join("video");
+    nldf_ok(args(&[
+        "render",
+        "--model",
+        &s(&model),
+        "--audio",
+        &s(&f.wav),
+        "--out",
+        &s(&video),
+        "--no-video",
+    ]));
+    let frame = nldf_core::image::ImageRgb::load(&video.join("frame_00000.png")).unwrap();
+    assert_eq!((frame.width, frame.height), (16, 12));
+    let refused_out = d.join("refused");
+    refused(
+        "--skip-still with an upsampled ray graph",
+        &args(&[
+            "render",
+            "--model",
+            &s(&model),
+            "--audio",
+            &s(&f.wav),
+            "--out",
+            &s(&refused_out),
+            "--skip-still",
+        ]),
+        &["--skip-still", "learned upsampler"],
+        &[&refused_out],
+    );
+}

@@ -2,8 +2,9 @@
 //! run's own size (256 or 512). The same held-out frames are rendered, taking turns frame
 //! by frame, by the student's ray graph on every pixel ("native rays"), by the ray graph on
 //! the upsampler's coarse grid upscaled bilinearly ("bilinear"), by the frame graph with the
-//! upsampler inside, each in f32 and f16 (the upsampled frame graph in onnxruntime and
-//! tract), and by the teacher in candle; each is scored (PSNR and SSIM on the whole frame and
+//! upsampler inside and by nldf's renderer on the ray graph with the upsampler inside, each
+//! in f32 and f16 (the upsampled graphs in onnxruntime and tract), and by the teacher in
+//! candle; each is scored (PSNR and SSIM on the whole frame and
 //! in the head, mouth PSNR) and timed per whole frame with 2 threads (median).
 //! `upsampler.json` and `upsampler.md` hold the rows with the machine, commit and settings.
 
@@ -54,7 +55,8 @@ pub struct UpsamplerBench {
 /// One way of rendering.
 #[derive(Debug, Clone, Serialize)]
 pub struct UpsamplerRow {
-    /// `teacher`, `native rays`, `bilinear` or `upsampler`.
+    /// `teacher`, `native rays`, `bilinear`, `upsampler, frame graph` or `upsampler, ray
+    /// graph`.
     pub way: String,
     pub precision: String,
     pub runtime: String,
@@ -176,6 +178,7 @@ impl UpsamplerBench {
         create_dir(&models_dir)?;
         let mut exports = Vec::new();
         let mut graphs = Vec::new();
+        let mut ray_graphs = Vec::new();
         for w in [WeightType::F32, WeightType::F16] {
             let p = precision_name(w);
             let path = models_dir.join(format!("{}.{p}.onnx", student.label()));
@@ -192,8 +195,19 @@ impl UpsamplerBench {
             let frame = models_dir.join(format!("{}.frame.{p}.onnx", self.upsampler));
             nldf_export::export_frame_upsampled(&student.dir, &up.dir, &frame, w)?;
             graphs.push((w, nldf_export::read_frame_model(&frame)?));
+            let rays = models_dir.join(format!("{}.rays.{p}.onnx", self.upsampler));
+            nldf_export::export_student_upsampled(&student.dir, &up.dir, &rays, w)?;
+            ray_graphs.push(Export {
+                student: format!("{}.rays", self.upsampler),
+                describe: format!("{} with upsampler x{factor}", student.describe()),
+                short: nldf_train::eval::student_short_name(&student.cfg),
+                step: up.step,
+                macs_per_ray: 0.0,
+                precision: w,
+                path: rays,
+            });
             on_event(&JobEvent::Note(format!(
-                "exported the student's ray graph and the upsampled frame graph in {p}"
+                "exported the student's ray graph and the upsampled frame and ray graphs in {p}"
             )));
         }
         // The ways of rendering, in the tables' order.
@@ -233,6 +247,12 @@ impl UpsamplerBench {
                 });
             }
         }
+        let mut upsampled_rays = Vec::new();
+        for e in &ray_graphs {
+            for kind in [BackendKind::Ort, BackendKind::Tract] {
+                upsampled_rays.push(open_point(e, kind, THREADS, self.batch, None, 1)?);
+            }
+        }
         let teacher = Timed::new(&plan.teacher, true, true);
         let mut reports: Vec<Vec<EvalReport>> = Vec::new();
         for &split in &self.splits {
@@ -252,6 +272,9 @@ impl UpsamplerBench {
             }
             for p in &upsampled {
                 p.split.set(split);
+                models.push(p);
+            }
+            for p in &upsampled_rays {
                 models.push(p);
             }
             let out = self.out.join(split.name());
@@ -315,7 +338,18 @@ impl UpsamplerBench {
         for p in &upsampled {
             let s = timed(&p.seconds);
             row(
-                "upsampler",
+                "upsampler, frame graph",
+                precision_name(p.precision),
+                p.kind.name(),
+                grid,
+                p.label(),
+                s,
+            );
+        }
+        for p in &upsampled_rays {
+            let s = timed(&p.seconds);
+            row(
+                "upsampler, ray graph",
                 precision_name(p.precision),
                 p.kind.name(),
                 grid,
