@@ -159,8 +159,8 @@ pub fn run(args: ExportArgs) -> Result<()> {
     );
     if let Some(up) = &info.upsample {
         println!(
-            "learned upsampler x{}: rays on the {}x{} coarse grid, the box around the head's \
-             widened by {}",
+            "learned upsampler x{}: rays on the {}x{} coarse grid, the CNN on the box around \
+             those that meet the head, widened by {} coarse rays",
             up.factor,
             k.width as usize / up.factor,
             k.height as usize / up.factor,

@@ -157,12 +157,21 @@ pub fn run(args: RenderArgs) -> Result<()> {
     };
     let plan = job.plan()?;
     let k = plan.renderer().intrinsics();
+    let upsample = plan.renderer().info().upsample;
     let bar = progress_bar(plan.n_frames() as u64, "frames");
     let report = plan.render(|p| bar.set_position(p.done as u64))?;
     bar.finish_and_clear();
+    let through = match upsample {
+        None => "of the pixels through the network".to_string(),
+        Some(up) => format!(
+            "as many rays as pixels, the learned upsampler's coarse rays (one per {0} x {0} \
+             block)",
+            up.factor
+        ),
+    };
     println!(
         "{} frames of {}x{} at {} fps with {} ({} threads, batch {}): {:.2} frames/s rendering \
-         ({:.1} % of the pixels through the network), {:.2} s writing PNGs",
+         ({:.1} % {through}), {:.2} s writing PNGs",
         report.n_frames,
         k.width,
         k.height,

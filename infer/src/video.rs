@@ -102,7 +102,8 @@ pub struct VideoReport {
     pub render_seconds: f64,
     /// Seconds spent writing PNGs.
     pub write_seconds: f64,
-    /// Mean fraction of the pixels that went through the network.
+    /// Mean rays through the network per output pixel: the fraction of the pixels whose
+    /// rays did, or with a learned upsampler (one ray per `r x r` block) its coarse rays.
     pub head_fraction: f64,
     /// Frames rendered in full (all of them without skipping).
     pub full_frames: usize,
