@@ -184,6 +184,27 @@ pub fn coarse_box(hits: &[bool], width: usize, margin: usize) -> (usize, usize, 
     )
 }
 
+/// Coarse cells on each side of an output pixel's own cell that the upsampler reads for it:
+/// the head's 3x3 convolution at the output's resolution, each stage's 3x3 convolution at
+/// its own (depth-to-space halves the offsets on the way down), and the bilinear base (the
+/// two nearest cells). The CNN on a box cut `halo` cells beyond the pixels wanted gives
+/// them exactly as the CNN on the whole box does (the zero padding at the smaller box's
+/// edge does not reach them). x2: 2 cells, x4: 2, x8: 2.
+pub fn receptive_halo(factor: usize) -> usize {
+    let stages = factor.max(1).trailing_zeros();
+    let mut halo = 1i64;
+    for x in 0..factor.max(1) as i64 {
+        // The head's taps at the output's resolution, then down through each stage.
+        let (mut lo, mut hi) = (x - 1, x + 1);
+        for _ in 0..stages {
+            lo = lo.div_euclid(2) - 1;
+            hi = hi.div_euclid(2) + 1;
+        }
+        halo = halo.max(-lo).max(hi);
+    }
+    halo as usize
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

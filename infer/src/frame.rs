@@ -13,7 +13,7 @@ use glam::Mat4;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
-use nldf_core::upsampler_shape::{coarse_box, coarse_intrinsics};
+use nldf_core::upsampler_shape::{coarse_box, coarse_intrinsics, receptive_halo};
 use nldf_export::contract::{ModelInfo, UpsampleInfo};
 
 use crate::error::{Error, Result};
@@ -199,26 +199,63 @@ impl FrameRenderer {
     /// head, the box around them (`coarse_box`, widened by the margin), the graph on the
     /// box, its pixels pasted into the background.
     fn render_upsampled(&mut self, c2w: Mat4, audio: &[f32], up: UpsampleInfo) -> Result<Frame> {
-        let rays = self.rays(c2w);
+        let view = self.coarse_view(c2w, up);
         let mut image = self.background.clone();
-        if rays.pixels.is_empty() {
+        let Some(full) = view.full else {
             return Ok(Frame {
                 image,
                 head_pixels: 0,
             });
+        };
+        let (rgb, n_rays) = self.run_sub_box(&view, full, audio, up)?;
+        let r = up.factor;
+        let w = self.intrinsics.width as usize;
+        let (x0, x1) = (full.2 * r, full.3 * r);
+        let line = 3 * (x1 - x0);
+        for (k, y) in (full.0 * r..full.1 * r).enumerate() {
+            image.data[3 * (y * w + x0)..3 * (y * w + x1)]
+                .copy_from_slice(&rgb[k * line..(k + 1) * line]);
         }
-        let (hc, wc) = (
-            self.ray_intrinsics.height as usize,
-            self.ray_intrinsics.width as usize,
-        );
-        let mut hits = vec![false; hc * wc];
+        Ok(Frame {
+            image,
+            head_pixels: n_rays,
+        })
+    }
+
+    /// The coarse rays seen from `c2w` that go through the network, their cells and the
+    /// box around them.
+    fn coarse_view(&self, c2w: Mat4, up: UpsampleInfo) -> CoarseView {
+        let rays = self.rays(c2w);
+        let wc = self.ray_intrinsics.width as usize;
+        let mut hits = vec![false; self.ray_intrinsics.n_pixels()];
         for &p in &rays.pixels {
             hits[p] = true;
         }
-        let (r0, r1, c0, c1) = coarse_box(&hits, wc, up.margin);
+        let full = (!rays.pixels.is_empty()).then(|| coarse_box(&hits, wc, up.margin));
+        CoarseView { rays, hits, full }
+    }
+
+    /// The graph on the sub-box `(row0, row1, col0, col1)` of the coarse grid (within the
+    /// view's box): its pixels `[rows r, cols r, 3]` flat and the rays sent.
+    fn run_sub_box(
+        &mut self,
+        view: &CoarseView,
+        (r0, r1, c0, c1): BoxSides,
+        audio: &[f32],
+        up: UpsampleInfo,
+    ) -> Result<(Vec<f32>, usize)> {
+        let wc = self.ray_intrinsics.width as usize;
         let cells: Vec<bool> = (r0..r1)
-            .flat_map(|j| hits[j * wc + c0..j * wc + c1].iter().copied())
+            .flat_map(|j| view.hits[j * wc + c0..j * wc + c1].iter().copied())
             .collect();
+        let inside = |p: usize| (r0..r1).contains(&(p / wc)) && (c0..c1).contains(&(p % wc));
+        let (mut origins, mut directions) = (Vec::new(), Vec::new());
+        for (k, &p) in view.rays.pixels.iter().enumerate() {
+            if inside(p) {
+                origins.extend_from_slice(&view.rays.rays.origins[3 * k..3 * k + 3]);
+                directions.extend_from_slice(&view.rays.rays.directions[3 * k..3 * k + 3]);
+            }
+        }
         let r = up.factor;
         let w = self.intrinsics.width as usize;
         let (x0, x1) = (c0 * r, c1 * r);
@@ -226,24 +263,102 @@ impl FrameRenderer {
             .flat_map(|y| self.background.data[3 * (y * w + x0)..3 * (y * w + x1)].iter())
             .copied()
             .collect();
+        let n_rays = origins.len() / 3;
+        if n_rays == 0 {
+            return Err(Error::Argument(
+                "a box of the coarse grid without a ray that meets the head".into(),
+            ));
+        }
         let boxed = BoxInput {
             cells: &cells,
             rows: r1 - r0,
             cols: c1 - c0,
             background: &background,
         };
-        let out = self
-            .backend
-            .run_box(&rays.rays.origins, &rays.rays.directions, audio, boxed)?;
-        let line = 3 * (x1 - x0);
-        for (k, y) in (r0 * r..r1 * r).enumerate() {
-            image.data[3 * (y * w + x0)..3 * (y * w + x1)]
-                .copy_from_slice(&out.rgb[k * line..(k + 1) * line]);
+        let out = self.backend.run_box(&origins, &directions, audio, boxed)?;
+        Ok((out.rgb, n_rays))
+    }
+
+    /// The pixels (indices into the frame) that the network can change in the frame seen
+    /// from `c2w`, as [`PixelRays`]: the pixels whose rays meet the head, with their rays;
+    /// with a learned upsampler, every pixel of the head's box, without rays.
+    pub fn head_region(&self, c2w: Mat4) -> PixelRays {
+        let Some(up) = self.backend.info().upsample else {
+            return self.rays(c2w);
+        };
+        let mut out = PixelRays::default();
+        if let Some((r0, r1, c0, c1)) = self.coarse_view(c2w, up).full {
+            let (r, w) = (up.factor, self.intrinsics.width as usize);
+            for y in r0 * r..r1 * r {
+                out.pixels.extend((c0 * r..c1 * r).map(|x| y * w + x));
+            }
         }
-        Ok(Frame {
-            image,
-            head_pixels: rays.pixels.len(),
-        })
+        out
+    }
+
+    /// The colours of the pixels of `region` in the frame seen from `c2w` with the audio
+    /// neighbourhood `audio`, as [`FrameRenderer::render`] gives them (within f32
+    /// rounding), and the rays that went through the network. `region` comes from
+    /// [`FrameRenderer::head_region`] (or a subset of it): its rays go through the network;
+    /// with a learned upsampler the graph runs on the part of the head's box within
+    /// [`receptive_halo`] coarse cells of the pixels, which gives them as the whole box
+    /// does.
+    ///
+    /// # Shapes
+    /// - returns `rgb` `[region.pixels.len(), 3]` flat
+    pub fn render_pixels(
+        &mut self,
+        c2w: Mat4,
+        region: &PixelRays,
+        audio: &[f32],
+    ) -> Result<(Vec<f32>, usize)> {
+        let Some(up) = self.backend.info().upsample else {
+            let rgb = self.run_rays(region, audio)?.rgb;
+            return Ok((rgb, region.pixels.len()));
+        };
+        let view = self.coarse_view(c2w, up);
+        let (Some(full), false) = (view.full, region.pixels.is_empty()) else {
+            return Ok((self.background.gather(&region.pixels), 0));
+        };
+        let (r, w) = (up.factor, self.intrinsics.width as usize);
+        let halo = receptive_halo(r);
+        let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+        for &p in &region.pixels {
+            let (j, i) = (p / w / r, p % w / r);
+            r0 = r0.min(j.saturating_sub(halo));
+            r1 = r1.max(j + halo + 1);
+            c0 = c0.min(i.saturating_sub(halo));
+            c1 = c1.max(i + halo + 1);
+        }
+        let sub = (
+            r0.max(full.0),
+            r1.min(full.1),
+            c0.max(full.2),
+            c1.min(full.3),
+        );
+        if sub.0 >= sub.1 || sub.2 >= sub.3 {
+            // Every pixel lies outside the head's box: the background.
+            return Ok((self.background.gather(&region.pixels), 0));
+        }
+        // A sub-box without a coarse hit runs as the whole box (the graph takes one ray at
+        // least, and the whole box gives those pixels exactly).
+        let wc = self.ray_intrinsics.width as usize;
+        let any_hit =
+            (sub.0..sub.1).any(|j| view.hits[j * wc + sub.2..j * wc + sub.3].contains(&true));
+        let sub = if any_hit { sub } else { full };
+        let (rgb, n_rays) = self.run_sub_box(&view, sub, audio, up)?;
+        let (y0, y1, x0, x1) = (sub.0 * r, sub.1 * r, sub.2 * r, sub.3 * r);
+        let mut out = Vec::with_capacity(3 * region.pixels.len());
+        for &p in &region.pixels {
+            let (y, x) = (p / w, p % w);
+            if (y0..y1).contains(&y) && (x0..x1).contains(&x) {
+                let at = 3 * ((y - y0) * (x1 - x0) + x - x0);
+                out.extend_from_slice(&rgb[at..at + 3]);
+            } else {
+                out.extend_from_slice(&self.background.data[3 * p..3 * p + 3]);
+            }
+        }
+        Ok((out, n_rays))
     }
 
     /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),
@@ -268,6 +383,17 @@ impl FrameRenderer {
             audio,
         )
     }
+}
+
+/// A box of the coarse grid, `(row0, row1, col0, col1)`, ends excluded.
+type BoxSides = (usize, usize, usize, usize);
+
+/// The coarse rays of a frame that go through an upsampled model, their cells (`[hc wc]`)
+/// and the box around them (none without rays).
+struct CoarseView {
+    rays: PixelRays,
+    hits: Vec<bool>,
+    full: Option<BoxSides>,
 }
 
 /// The intrinsics of the rays a model is sent for frames of `intrinsics`: those, or with a

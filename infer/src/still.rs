@@ -9,6 +9,10 @@
 //! A full frame is rendered whenever the pose moves (by any amount) and every `refresh`
 //! frames at a still pose; the pixel set is found once per still pose, on its second frame,
 //! at the cost of one network pass per probe.
+//!
+//! With a learned upsampler the pixels are the head's box's, and a frame re-renders the
+//! part of the box within reach of the moving pixels
+//! ([`FrameRenderer::render_pixels`]): the coarse rays there and the CNN on that part.
 
 use glam::Mat4;
 use nldf_core::image::ImageRgb;
@@ -169,9 +173,8 @@ impl StillSkipper {
         };
         self.since_full += 1;
         let mut image = base;
-        let rgb = renderer.run_rays(&moving, audio)?.rgb;
+        let (rgb, head_pixels) = renderer.render_pixels(c2w, &moving, audio)?;
         image.paint(&moving.pixels, &rgb);
-        let head_pixels = moving.pixels.len();
         self.moving = Some(moving);
         Ok(SkippedFrame {
             frame: Frame { image, head_pixels },
@@ -187,7 +190,7 @@ impl StillSkipper {
         c2w: Mat4,
         base: &ImageRgb,
     ) -> Result<PixelRays> {
-        let rays = renderer.rays(c2w);
+        let rays = renderer.head_region(c2w);
         let n = rays.pixels.len();
         let mut lo = vec![f32::INFINITY; 3 * n];
         let mut hi = vec![f32::NEG_INFINITY; 3 * n];
@@ -204,7 +207,7 @@ impl StillSkipper {
             .collect();
         widen(&first);
         for probe in &self.probes {
-            widen(&renderer.run_rays(&rays, probe)?.rgb);
+            widen(&renderer.render_pixels(c2w, &rays, probe)?.0);
         }
         let k = renderer.intrinsics();
         let hot: Vec<(u32, u32)> = (0..n)
@@ -246,9 +249,13 @@ fn grown_subset(
         rays: Rays::with_capacity(hot.len()),
         pixels: Vec::with_capacity(hot.len()),
     };
+    // A region without rays (a learned upsampler's box) stays without.
+    let with_rays = rays.rays.len() == rays.pixels.len();
     for (r, &p) in rays.pixels.iter().enumerate() {
         if keep[p] {
-            out.rays.push(rays.rays.origin(r), rays.rays.direction(r));
+            if with_rays {
+                out.rays.push(rays.rays.origin(r), rays.rays.direction(r));
+            }
             out.pixels.push(p);
         }
     }

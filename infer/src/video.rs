@@ -149,14 +149,6 @@ impl VideoJob {
             }
             (None, true) => ffmpeg_on_path(),
         };
-        if let (Some(_), Some(up)) = (self.skip, model.info.upsample) {
-            return Err(Error::Argument(format!(
-                "--skip-still re-renders single pixels, which a model with a learned upsampler \
-                 (x{}) does not render: render it without --skip-still, or export the student \
-                 without --upsampler",
-                up.factor
-            )));
-        }
         let skipper = match self.skip {
             Some(config) => {
                 let att = model.info.audio.att_frames;

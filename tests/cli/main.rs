@@ -1102,8 +1102,8 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
 
 /// The learned upsampler through the command line on a copy of the fixture's run: `nldf
 /// train upsampler`, `nldf export --upsampler` (the ray graph, without --frame), `nldf render`
-/// of a WAV with it (every frame written, the size of the model's), and `--skip-still`
-/// refused for it with a one-line reason and nothing written.
+/// of a WAV with it (every frame written, the size of the model's), also with
+/// `--skip-still`.
 #[test]
 fn an_upsampled_ray_graph_renders_from_the_command_line() {
     let f = fixture();
@@ -1161,20 +1161,27 @@ fn an_upsampled_ray_graph_renders_from_the_command_line() {
     ]));
     let frame = nldf_core::image::ImageRgb::load(&video.join("frame_00000.png")).unwrap();
     assert_eq!((frame.width, frame.height), (16, 12));
-    let refused_out = d.join("refused");
-    refused(
-        "--skip-still with an upsampled ray graph",
-        &args(&[
-            "render",
-            "--model",
-            &s(&model),
-            "--audio",
-            &s(&f.wav),
-            "--out",
-            &s(&refused_out),
-            "--skip-still",
-        ]),
-        &["--skip-still", "learned upsampler"],
-        &[&refused_out],
-    );
+    // Skipping still pixels re-renders the part of the box the audio moves.
+    let skipping = d.join("skipping");
+    let out = nldf_ok(args(&[
+        "render",
+        "--model",
+        &s(&model),
+        "--audio",
+        &s(&f.wav),
+        "--out",
+        &s(&skipping),
+        "--no-video",
+        "--skip-still",
+    ]));
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("skipping still pixels"), "{said}");
+    let frames = |dir: &Path| {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().path().extension() == Some("png".as_ref()))
+            .count()
+    };
+    assert_eq!(frames(&skipping), frames(&video));
+    assert!(frames(&video) >= 10);
 }

@@ -201,8 +201,103 @@ fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), see
             kind.name()
         );
         worst = worst.max(worst_rays);
+        part_of_the_box(label, kind, &mut renderer, poses[0], &reference[0], &|f| {
+            neighbourhood(&windows, f, cfg.audio.att_frames)
+        });
     }
     worst
+}
+
+/// A part of the head's box renders as the whole box does: the middle third of the box,
+/// each of three corners alone and a pixel outside the box through `render_pixels` match candle's frame `whole`
+/// (rendered from `pose` with frame 1's audio) within 1e-5 of the largest value, sending no
+/// more coarse rays than the whole frame (fewer where the box is large). Skipping still
+/// pixels at that pose renders full, probed and partial frames within 40 dB of full frames.
+fn part_of_the_box(
+    label: &str,
+    kind: nldf_infer::BackendKind,
+    renderer: &mut FrameRenderer,
+    pose: Mat4,
+    (whole, n_rays): &(ImageRgb, usize),
+    audio: &dyn Fn(usize) -> Vec<f32>,
+) {
+    use nldf_infer::still::{FrameKind, SkipConfig, StillSkipper};
+    let region = renderer.head_region(pose);
+    let w = whole.width as usize;
+    let (ys, xs): (Vec<usize>, Vec<usize>) = region.pixels.iter().map(|p| (p / w, p % w)).unzip();
+    let (y0, y1) = (*ys.iter().min().unwrap(), *ys.iter().max().unwrap() + 1);
+    let (x0, x1) = (*xs.iter().min().unwrap(), *xs.iter().max().unwrap() + 1);
+    let (th, tw) = ((y1 - y0) / 3, (x1 - x0) / 3);
+    let mut part = nldf_core::rays::PixelRays::default();
+    for y in y0 + th..y1 - th {
+        part.pixels.extend((x0 + tw..x1 - tw).map(|x| y * w + x));
+    }
+    let (rgb, sent) = renderer.render_pixels(pose, &part, &audio(1)).unwrap();
+    let want = whole.gather(&part.pixels);
+    let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+    let mut d = max_diff(&rgb, &want) / scale;
+    // The box's corners, each alone, and one pixel outside it.
+    for p in [y0 * w + x0, (y1 - 1) * w + x1 - 1, (y1 - 1) * w + x0, 0] {
+        let one = nldf_core::rays::PixelRays {
+            rays: Default::default(),
+            pixels: vec![p],
+        };
+        let (rgb, _) = renderer.render_pixels(pose, &one, &audio(1)).unwrap();
+        d = d.max(max_diff(&rgb, &whole.gather(&[p])) / scale);
+    }
+    assert!(
+        d <= 1e-5,
+        "{label}: part of the box in {}: {d:.2e}",
+        kind.name()
+    );
+    assert!(
+        sent <= *n_rays,
+        "{label}: {sent} rays for a part, {n_rays} for the whole"
+    );
+    if whole.width >= 256 {
+        assert!(
+            sent < n_rays / 2,
+            "{label}: {sent} rays for a third of the box, {n_rays}"
+        );
+    }
+    println!(
+        "{label}: a third of the box in {}: {d:.2e} of the largest value, {sent} of {n_rays} \
+         coarse rays",
+        kind.name()
+    );
+    let mut skipper = StillSkipper::new(SkipConfig::default(), vec![audio(2), audio(5)]).unwrap();
+    let mut kinds = Vec::new();
+    for f in 0..5 {
+        let out = skipper.render(renderer, pose, &audio(f)).unwrap();
+        let full = renderer.render(pose, &audio(f)).unwrap();
+        let mse = out
+            .frame
+            .image
+            .data
+            .iter()
+            .zip(&full.image.data)
+            .map(|(a, b)| ((a - b) as f64).powi(2))
+            .sum::<f64>()
+            / full.image.data.len() as f64;
+        let psnr = if mse > 0.0 {
+            -10.0 * mse.log10()
+        } else {
+            f64::INFINITY
+        };
+        assert!(psnr > 40.0, "{label}: skipping frame {f}: {psnr:.2} dB");
+        assert!(out.frame.head_pixels <= full.head_pixels);
+        kinds.push(out.kind);
+    }
+    assert_eq!(
+        kinds,
+        [
+            FrameKind::Full,
+            FrameKind::Probed,
+            FrameKind::Partial,
+            FrameKind::Partial,
+            FrameKind::Partial
+        ]
+    );
 }
 
 #[test]

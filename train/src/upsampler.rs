@@ -282,6 +282,72 @@ mod tests {
     use super::*;
     use crate::nn::new_varmap;
 
+    /// `receptive_halo` is the CNN's reach: changing a coarse cell `halo + 1` cells away
+    /// from a pixel's own cell leaves the pixel as it was, changing one `halo` cells away
+    /// moves some pixel of the cell (the bound is tight).
+    #[test]
+    fn the_receptive_halo_is_the_cnns_reach() {
+        use nldf_core::upsampler_shape::receptive_halo;
+        for factor in [2usize, 4, 8] {
+            let (varmap, vb) = new_varmap();
+            let cfg = UpsamplerConfig::with_factor(factor);
+            let width = 6;
+            let up = upsampler(&cfg, width, vb).unwrap();
+            crate::nn::init_seeded(&varmap, 7 + factor as u64).unwrap();
+            let (n, c) = (13usize, width + 4);
+            let base: Vec<f32> = (0..c * n * n)
+                .map(|i| ((i * 7919 % 1000) as f32 / 500.0 - 1.0) * 0.5)
+                .collect();
+            let run = |grid: &[f32]| -> Vec<f32> {
+                let x = Tensor::from_vec(grid.to_vec(), (1, c, n, n), &Device::Cpu).unwrap();
+                up.forward(&x)
+                    .unwrap()
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1()
+                    .unwrap()
+            };
+            let reference = run(&base);
+            let halo = receptive_halo(factor);
+            // The pixels of the centre cell (6, 6), every output channel.
+            let side = n * factor;
+            let cell_moved = |out: &[f32]| -> f32 {
+                let mut worst = 0f32;
+                for ch in 0..4 {
+                    for y in 6 * factor..7 * factor {
+                        for x in 6 * factor..7 * factor {
+                            let at = (ch * side + y) * side + x;
+                            worst = worst.max((out[at] - reference[at]).abs());
+                        }
+                    }
+                }
+                worst
+            };
+            let poke = |dy: i64, dx: i64| -> f32 {
+                let mut grid = base.clone();
+                let (y, x) = ((6 + dy) as usize, (6 + dx) as usize);
+                for ch in 0..c {
+                    grid[(ch * n + y) * n + x] += 3.0;
+                }
+                cell_moved(&run(&grid))
+            };
+            let far = (halo + 1) as i64;
+            for (dy, dx) in [(far, 0), (-far, 0), (0, far), (0, -far), (far, far)] {
+                assert_eq!(
+                    poke(dy, dx),
+                    0.0,
+                    "x{factor}: a cell at ({dy}, {dx}) reached it"
+                );
+            }
+            let near = halo as i64;
+            let reached = [(near, 0), (-near, 0), (0, near), (0, -near)]
+                .iter()
+                .map(|&(dy, dx)| poke(dy, dx))
+                .fold(0f32, f32::max);
+            assert!(reached > 1e-4, "x{factor}: no cell {halo} away reached it");
+        }
+    }
+
     #[test]
     #[allow(clippy::needless_range_loop)] // indices are the formula under test
     fn depth_to_space_follows_onnx_dcr() {
