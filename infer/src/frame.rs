@@ -207,7 +207,7 @@ impl FrameRenderer {
                 head_pixels: 0,
             });
         };
-        let (rgb, n_rays) = self.run_sub_box(&view, full, audio, up)?;
+        let (rgb, n_rays) = self.run_sub_box(&view, &view.hits, full, audio, up)?;
         let r = up.factor;
         let w = self.intrinsics.width as usize;
         let (x0, x1) = (full.2 * r, full.3 * r);
@@ -236,22 +236,26 @@ impl FrameRenderer {
     }
 
     /// The graph on the sub-box `(row0, row1, col0, col1)` of the coarse grid (within the
-    /// view's box): its pixels `[rows r, cols r, 3]` flat and the rays sent.
+    /// view's box), sent the view's rays whose cells `given` (`[hc wc]`) marks (every other
+    /// cell a miss): its pixels `[rows r, cols r, 3]` flat and the rays sent.
     fn run_sub_box(
         &mut self,
         view: &CoarseView,
+        given: &[bool],
         (r0, r1, c0, c1): BoxSides,
         audio: &[f32],
         up: UpsampleInfo,
     ) -> Result<(Vec<f32>, usize)> {
         let wc = self.ray_intrinsics.width as usize;
+        let send =
+            |p: usize| given[p] && (r0..r1).contains(&(p / wc)) && (c0..c1).contains(&(p % wc));
         let cells: Vec<bool> = (r0..r1)
-            .flat_map(|j| view.hits[j * wc + c0..j * wc + c1].iter().copied())
+            .flat_map(|j| (c0..c1).map(move |i| j * wc + i))
+            .map(|p| view.hits[p] && send(p))
             .collect();
-        let inside = |p: usize| (r0..r1).contains(&(p / wc)) && (c0..c1).contains(&(p % wc));
         let (mut origins, mut directions) = (Vec::new(), Vec::new());
         for (k, &p) in view.rays.pixels.iter().enumerate() {
-            if inside(p) {
+            if send(p) {
                 origins.extend_from_slice(&view.rays.rays.origins[3 * k..3 * k + 3]);
                 directions.extend_from_slice(&view.rays.rays.directions[3 * k..3 * k + 3]);
             }
@@ -300,9 +304,9 @@ impl FrameRenderer {
     /// neighbourhood `audio`, as [`FrameRenderer::render`] gives them (within f32
     /// rounding), and the rays that went through the network. `region` comes from
     /// [`FrameRenderer::head_region`] (or a subset of it): its rays go through the network;
-    /// with a learned upsampler the graph runs on the part of the head's box within
-    /// [`receptive_halo`] coarse cells of the pixels, which gives them as the whole box
-    /// does.
+    /// with a learned upsampler the coarse rays within [`receptive_halo`] cells of the
+    /// pixels' own do, and the CNN runs on the part of the head's box around them, which
+    /// gives those pixels as the whole box does.
     ///
     /// # Shapes
     /// - returns `rgb` `[region.pixels.len(), 3]` flat
@@ -321,14 +325,32 @@ impl FrameRenderer {
             return Ok((self.background.gather(&region.pixels), 0));
         };
         let (r, w) = (up.factor, self.intrinsics.width as usize);
+        let (hc, wc) = (
+            self.ray_intrinsics.height as usize,
+            self.ray_intrinsics.width as usize,
+        );
+        // The cells the pixels read: their own, widened by the halo. Only those rays are
+        // sent (the others count as misses, which no wanted pixel reads), and the CNN runs
+        // on the box around them.
         let halo = receptive_halo(r);
-        let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+        let mut own = vec![false; hc * wc];
         for &p in &region.pixels {
-            let (j, i) = (p / w / r, p % w / r);
-            r0 = r0.min(j.saturating_sub(halo));
-            r1 = r1.max(j + halo + 1);
-            c0 = c0.min(i.saturating_sub(halo));
-            c1 = c1.max(i + halo + 1);
+            own[(p / w / r) * wc + p % w / r] = true;
+        }
+        let mut given = vec![false; hc * wc];
+        let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+        for j in 0..hc {
+            for i in 0..wc {
+                if !own[j * wc + i] {
+                    continue;
+                }
+                let (j0, j1) = (j.saturating_sub(halo), (j + halo + 1).min(hc));
+                let (i0, i1) = (i.saturating_sub(halo), (i + halo + 1).min(wc));
+                for jj in j0..j1 {
+                    given[jj * wc + i0..jj * wc + i1].fill(true);
+                }
+                (r0, r1, c0, c1) = (r0.min(j0), r1.max(j1), c0.min(i0), c1.max(i1));
+            }
         }
         let sub = (
             r0.max(full.0),
@@ -340,13 +362,15 @@ impl FrameRenderer {
             // Every pixel lies outside the head's box: the background.
             return Ok((self.background.gather(&region.pixels), 0));
         }
-        // A sub-box without a coarse hit runs as the whole box (the graph takes one ray at
+        // Without a hit among the given cells, the whole box (the graph takes one ray at
         // least, and the whole box gives those pixels exactly).
-        let wc = self.ray_intrinsics.width as usize;
-        let any_hit =
-            (sub.0..sub.1).any(|j| view.hits[j * wc + sub.2..j * wc + sub.3].contains(&true));
-        let sub = if any_hit { sub } else { full };
-        let (rgb, n_rays) = self.run_sub_box(&view, sub, audio, up)?;
+        let any_hit = (0..hc * wc).any(|p| given[p] && view.hits[p]);
+        let (given, sub) = if any_hit {
+            (given, sub)
+        } else {
+            (view.hits.clone(), full)
+        };
+        let (rgb, n_rays) = self.run_sub_box(&view, &given, sub, audio, up)?;
         let (y0, y1, x0, x1) = (sub.0 * r, sub.1 * r, sub.2 * r, sub.3 * r);
         let mut out = Vec::with_capacity(3 * region.pixels.len());
         for &p in &region.pixels {

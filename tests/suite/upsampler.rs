@@ -209,7 +209,8 @@ fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), see
 }
 
 /// A part of the head's box renders as the whole box does: the middle third of the box,
-/// each of three corners alone and a pixel outside the box through `render_pixels` match candle's frame `whole`
+/// two patches at its corners, each of three corners of the box alone and a pixel outside
+/// the box through `render_pixels` match candle's frame `whole`
 /// (rendered from `pose` with frame 1's audio) within 1e-5 of the largest value, sending no
 /// more coarse rays than the whole frame (fewer where the box is large). Skipping still
 /// pixels at that pose renders full, probed and partial frames within 40 dB of full frames.
@@ -236,6 +237,23 @@ fn part_of_the_box(
     let want = whole.gather(&part.pixels);
     let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
     let mut d = max_diff(&rgb, &want) / scale;
+
+    // Two patches far apart: only the rays near each are sent (the others count as
+    // misses), and the CNN's box spans both.
+    let patch =
+        |y: usize, x: usize| (y..y + 3).flat_map(move |yy| (x..x + 3).map(move |xx| yy * w + xx));
+    let two = nldf_core::rays::PixelRays {
+        rays: Default::default(),
+        pixels: patch(y0 + th, x0 + tw)
+            .chain(patch(y1 - th - 3, x1 - tw - 3))
+            .collect(),
+    };
+    let (rgb, sent_two) = renderer.render_pixels(pose, &two, &audio(1)).unwrap();
+    d = d.max(max_diff(&rgb, &whole.gather(&two.pixels)) / scale);
+    assert!(
+        sent_two <= sent,
+        "{label}: two patches sent {sent_two}, their box's third {sent}"
+    );
     // The box's corners, each alone, and one pixel outside it.
     for p in [y0 * w + x0, (y1 - 1) * w + x1 - 1, (y1 - 1) * w + x0, 0] {
         let one = nldf_core::rays::PixelRays {
@@ -262,7 +280,7 @@ fn part_of_the_box(
     }
     println!(
         "{label}: a third of the box in {}: {d:.2e} of the largest value, {sent} of {n_rays} \
-         coarse rays",
+         coarse rays (two patches at its corners: {sent_two})",
         kind.name()
     );
     let mut skipper = StillSkipper::new(SkipConfig::default(), vec![audio(2), audio(5)]).unwrap();
