@@ -101,6 +101,20 @@ fn decimal_figures(cell: &str) -> Vec<String> {
             while end < bytes.len() && bytes[end].is_ascii_digit() {
                 end += 1;
             }
+            // An exponent (`6.90e-7`) belongs to the figure.
+            let mut e = end;
+            if e < bytes.len() && matches!(bytes[e], b'e' | b'E') {
+                e += 1;
+                if e < bytes.len() && matches!(bytes[e], b'-' | b'+') {
+                    e += 1;
+                }
+                if e < bytes.len() && bytes[e].is_ascii_digit() {
+                    while e < bytes.len() && bytes[e].is_ascii_digit() {
+                        e += 1;
+                    }
+                    end = e;
+                }
+            }
             out.push(plain[start..end].to_string());
         }
         k = end.max(k + 1);
@@ -131,8 +145,14 @@ fn numbers_in(text: &str) -> Vec<f64> {
     out
 }
 
-/// Whether `figure` (as written, with `d` decimals) is one of `numbers` to `d` decimals.
+/// Whether `figure` (as written, with `d` decimals) is one of `numbers` to `d` decimals; a
+/// figure with an exponent (`6.90e-7`) is compared in that form.
 fn appears(figure: &str, numbers: &[f64]) -> bool {
+    let lower = figure.to_ascii_lowercase();
+    if let Some((mantissa, _)) = lower.split_once('e') {
+        let d = mantissa.split('.').nth(1).map_or(0, str::len);
+        return numbers.iter().any(|v| format!("{v:.d$e}") == lower);
+    }
     let d = figure.split('.').nth(1).map_or(0, str::len);
     numbers.iter().any(|v| format!("{v:.d$}") == figure)
 }
@@ -256,4 +276,12 @@ fn figures_are_read_as_written() {
     );
     let n = numbers_in("\"psnr\":36.975,\"x\":1e-3, 14m1.155s, -2.5");
     assert_eq!(n, vec![36.975, 1e-3, 14.0, 1.155, -2.5]);
+    // An exponent is part of the figure, and compared as written.
+    assert_eq!(
+        decimal_figures("6.90e-7 and 1.2E+3, 4.5 e"),
+        vec!["6.90e-7", "1.2E+3", "4.5"]
+    );
+    let logged = numbers_in("worst difference 6.90e-7 of the largest output");
+    assert!(appears("6.90e-7", &logged));
+    assert!(!appears("6.90", &logged) && !appears("6.91e-7", &logged));
 }
