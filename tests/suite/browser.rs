@@ -367,3 +367,132 @@ fn check_skipping(
          (worst {nldf_worst}/255)"
     );
 }
+
+/// A frame graph with a learned upsampler (the real-time student at 128 x 128, x4, weights
+/// at a trained network's magnitude) picked through the page's file input: the page sizes
+/// `keep` to the coarse grid, says so, turns its still-pixel skipping off, and draws nldf's
+/// frames (`FrameRenderer` on the same student and upsampler's ray graph) within 2/255, at
+/// both ends and the middle of the track, from the default pose and a turned one.
+#[test]
+fn the_page_draws_an_upsampled_frame_graph() {
+    if !browser_available() {
+        return;
+    }
+    use nldf_core::student_shape::StudentConfig;
+    use nldf_core::upsampler_shape::UpsamplerConfig;
+    use nldf_export::{WeightType, export_frame_upsampled, export_student_upsampled};
+
+    let root = repo();
+    let mut cfg = StudentConfig::realtime();
+    cfg.beam.anchor = Some(nldf_core::beam::BeamAnchor {
+        centre: [0.02, 0.05, -0.01],
+        distance: 2.2,
+    });
+    let mut spec = crate::util::spec_for(&cfg);
+    spec.intrinsics = crate::util::camera_at(128, 128);
+    let run = crate::util::write_run_with(&cfg, 61, spec);
+    run.scale_weights_like_trained(cfg.n_blocks());
+    let up_dir = run.root.join("upsampler");
+    crate::upsampler::write_upsampler(&up_dir, &UpsamplerConfig::with_factor(4), cfg.width, 62);
+    let frame_path = run.root.join("frame_up.onnx");
+    export_frame_upsampled(&run.student_dir(), &up_dir, &frame_path, WeightType::F32).unwrap();
+    let ray_path = run.root.join("model_up.onnx");
+    export_student_upsampled(&run.student_dir(), &up_dir, &ray_path, WeightType::F32).unwrap();
+
+    let tmp = tempfile::tempdir().unwrap();
+    let wav = tmp.path().join("speech.wav");
+    write_test_wav(&wav, 1.0);
+    let out = tmp.path().join("browser");
+    let model = read_model(&ray_path).unwrap();
+    let info = &model.info;
+    let windows = windows_from_wav(info, &ray_path, &wav).unwrap();
+    let n = windows.n_frames;
+    let frames = [0, n / 2, n - 1];
+    let default_pose = Mat4::from_cols_array_2d(&info.spec.default_pose).transpose();
+    let centre = info.spec.bounds.centre();
+    let pose = |(yaw, pitch): (f32, f32)| turn_about(centre, yaw, pitch) * default_pose;
+    let list = frames
+        .iter()
+        .map(|f| f.to_string())
+        .collect::<Vec<_>>()
+        .join(",");
+    let poses = POSES
+        .iter()
+        .map(|(y, p)| format!("{y},{p}"))
+        .collect::<Vec<_>>()
+        .join(";");
+    let run_page = Command::new("node")
+        .current_dir(&root)
+        .arg("web/test/browser.mjs")
+        .args(["--wav", wav.to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap()])
+        .args(["--model-file", frame_path.to_str().unwrap()])
+        .args(["--frames", &list])
+        .args(["--poses", &poses])
+        .output()
+        .unwrap();
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run_page.stdout),
+        String::from_utf8_lossy(&run_page.stderr)
+    );
+    assert!(
+        run_page.status.success(),
+        "web/test/browser.mjs failed:\n{log}"
+    );
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("result.json")).unwrap()).unwrap();
+    for key in ["errors", "page_errors", "console_errors"] {
+        let list = result[key].as_array().unwrap();
+        assert!(list.is_empty(), "the page reported {key}: {list:?}");
+    }
+    let status = result["model_status"].as_str().unwrap_or_default();
+    assert!(
+        status.contains("learned upsampler x4") && status.contains("32 x 32"),
+        "the page does not say it holds an upsampler: {status:?}"
+    );
+    assert_eq!(result["skip_enabled"], false, "skipping is off for it");
+    assert_eq!(
+        (result["width"].as_u64(), result["height"].as_u64()),
+        (Some(128), Some(128))
+    );
+    let backend = backend_for(
+        &model,
+        BackendKind::Tract,
+        BackendOptions {
+            batch_size: 4096,
+            threads: 2,
+            spin: true,
+        },
+    )
+    .unwrap();
+    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    let drawn = result["frames"].as_array().unwrap();
+    assert_eq!(drawn.len(), frames.len() * POSES.len());
+    let mut worst = 0u8;
+    for entry in drawn {
+        let f = entry["frame"].as_u64().unwrap() as usize;
+        let p = entry["pose"].as_u64().unwrap() as usize;
+        let audio = neighbourhood(&windows, f, info.audio.att_frames);
+        let frame = renderer.render(pose(POSES[p]), &audio).unwrap();
+        assert!(
+            frame.head_pixels > 0,
+            "frame {f} pose {p}: the head is in view"
+        );
+        let want = frame.image.to_rgb8();
+        let got = std::fs::read(out.join(entry["file"].as_str().unwrap())).unwrap();
+        assert_eq!(got.len(), want.len(), "frame {f} pose {p}: canvas size");
+        let (d, changed) = diff_8bit(&got, &want);
+        assert!(
+            d <= TOL_8BIT,
+            "frame {f}, pose {:?}: the canvas is {d}/255 off nldf's frame ({changed} channels differ)",
+            POSES[p]
+        );
+        worst = worst.max(d);
+    }
+    println!(
+        "upsampled frame graph, {} canvas frames against nldf's renderer on the ray graph: \
+         worst {worst}/255",
+        drawn.len()
+    );
+}

@@ -30,7 +30,7 @@ const REL_TOL: f32 = 1e-4;
 
 /// A seeded upsampler of `cfg` over a student `width` wide, written to `dir` as the trainer
 /// leaves it (config.json naming the student, weights with the step).
-fn write_upsampler(
+pub(crate) fn write_upsampler(
     dir: &std::path::Path,
     cfg: &UpsamplerConfig,
     width: usize,

@@ -71,11 +71,11 @@ function pose() {
 // `keep` marks (a 0/1 mask, row-major; null: every pixel) rendered: { image, nRays }.
 async function runGraph(chunk, c2w, keep) {
   const { session, info, all } = state.model;
-  const { width, height } = info;
+  const { width, height, keepWidth, keepHeight } = info;
   const out = await session.run({
     audio: new ort.Tensor('float32', chunk, [chunk.length]),
     pose: new ort.Tensor('float32', Float32Array.from(c2w), [4, 4]),
-    keep: new ort.Tensor('bool', keep ?? all, [height, width]),
+    keep: new ort.Tensor('bool', keep ?? all, [keepHeight, keepWidth]),
   }, ['image', 'n_rays']);
   const image = out.image.data;
   const nRays = Number(out.n_rays.data[0]);
@@ -86,7 +86,9 @@ async function runGraph(chunk, c2w, keep) {
   return { image, nRays };
 }
 
-const skipping = () => $('skip').checked;
+// The page skips still pixels of graphs without an upsampler only (its `keep` is then the
+// image's).
+const skipping = () => $('skip').checked && state.model?.info.upsample === 1;
 const probeChunks = () => probeFrames(state.track.frames, SKIP_CONFIG.probes).map((f) => trackChunk(f));
 
 // One frame: the graph's frame for `chunk` from the camera turned by yaw/pitch (with `skip`,
@@ -156,7 +158,7 @@ async function loadModel(source, name) {
     await session.release();
     throw new Error(`${name}: the graph has no ${missing.join(' or ')} (an older export? run nldf export --frame again)`);
   }
-  const all = new Uint8Array(info.width * info.height).fill(1);
+  const all = new Uint8Array(info.keepWidth * info.keepHeight).fill(1);
   const skipper = new StillSkipper(info.width, info.height);
   await exclusive(async () => {
     await state.model?.session.release();
@@ -168,11 +170,16 @@ async function loadModel(source, name) {
   $('drop').style.height = 'auto';
   $('model-status').textContent =
     `${name.split('/').pop()}: ${info.width} x ${info.height}, ${info.fps} fps, ` +
-    `${info.audio.samples} samples (${(info.audio.samples / RATE).toFixed(2)} s) of audio a frame`;
+    `${info.audio.samples} samples (${(info.audio.samples / RATE).toFixed(2)} s) of audio a frame` +
+    (info.upsample > 1
+      ? `; learned upsampler x${info.upsample} (rays on ${info.keepWidth} x ${info.keepHeight}; ` +
+        'still pixels are not skipped)'
+      : '');
+  $('skip').disabled = info.upsample > 1;
   clearError();
   state.dirty = true;
   if (state.track) setTrack(state.track.samples, state.track.name);
-  return { width: info.width, height: info.height, fps: info.fps, audio: info.audio, threads };
+  return { width: info.width, height: info.height, upsample: info.upsample, fps: info.fps, audio: info.audio, threads };
 }
 
 function setTrack(samples, name) {
@@ -427,6 +434,7 @@ const hook = {
   bench: (n = 50, warmup = 5, toCanvas = true, skip = false) => exclusive(async () => {
     const info = state.model.info;
     if (skip && !state.track) throw new Error('skipping needs a track');
+    if (skip && info.upsample > 1) throw new Error('the page skips still pixels of graphs without an upsampler only');
     const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
     const pose = (yaw) => turnedPose(info.defaultPose, info.centre, yaw, 0);
     const skipper = state.model.skipper;

@@ -109,6 +109,12 @@ export function frameModelInfo(bytes, name = 'the model') {
   if (!(Number.isInteger(width) && Number.isInteger(height) && width > 0 && height > 0)) {
     throw new Error(`${name}: image size ${width} x ${height} is not valid`);
   }
+  // A learned upsampler: the student runs on a grid `upsample` times coarser, and `keep` is
+  // that grid's.
+  const upsample = p.has('nldf.frame_upsample') ? Number(p.get('nldf.frame_upsample')) : 1;
+  if (![1, 2, 4, 8].includes(upsample) || width % upsample || height % upsample) {
+    throw new Error(`${name}: nldf.frame_upsample is "${p.get('nldf.frame_upsample')}", not 1, 2, 4 or 8 dividing ${width} x ${height}`);
+  }
   const pose = json('nldf.default_pose');
   if (!(Array.isArray(pose) && pose.length === 4 && pose.every((r) => Array.isArray(r) && r.length === 4))) {
     throw new Error(`${name}: nldf.default_pose is not 4 rows of 4`);
@@ -120,6 +126,9 @@ export function frameModelInfo(bytes, name = 'the model') {
     fps: json('nldf.fps'),
     width,
     height,
+    upsample,
+    keepWidth: width / upsample,
+    keepHeight: height / upsample,
     defaultPose: pose.flat().map(Number),
     centre: [0, 1, 2].map((i) => Math.fround(Math.fround(lo[i] + hi[i]) * 0.5)),
     props: p,

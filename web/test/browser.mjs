@@ -5,8 +5,8 @@
 // canvas showed to an output folder for the Rust test to compare with nldf.
 //
 // node web/test/browser.mjs --wav WAV --out DIR [--frames 0,1,25] [--poses 0,0;0.3,-0.1]
-//   [--skip-frames N] [--model URL] [--mic] [--ray-graph PATH] [--screenshot PNG]
-//   [--chromium PATH]
+//   [--skip-frames N] [--model URL] [--model-file PATH] [--mic] [--ray-graph PATH]
+//   [--screenshot PNG] [--chromium PATH]
 //
 // DIR gets frame_<f>_<p>.rgb (raw RGB u8, pose number p), skip_<f>.rgb and, for a skipped
 // frame, skip_<f>.keep (the page's mask, one byte a pixel), mic.f32 (the chunk the page
@@ -35,6 +35,7 @@ function parseArgs(argv) {
     else if (key === '--model') args.model = value();
     else if (key === '--mic') args.mic = true;
     else if (key === '--ray-graph') args.rayGraph = path.resolve(value());
+    else if (key === '--model-file') args.modelFile = path.resolve(value());
     else if (key === '--screenshot') args.screenshot = path.resolve(value());
     else if (key === '--chromium') args.chromium = value();
     else throw new Error(`unknown argument ${key}`);
@@ -109,6 +110,18 @@ try {
     await page.evaluate((url) => window.nldf.loadModel(url), args.model);
   }
 
+  // A frame graph picked through the file input instead of the default one.
+  if (args.modelFile) {
+    const name = path.basename(args.modelFile);
+    await page.setInputFiles('#model-input', args.modelFile);
+    await page.waitForFunction((n) => window.nldf.state().model?.endsWith(n) || window.nldf.errors.length > 0, name);
+    const errors = await page.evaluate(() => window.nldf.errors.join('; '));
+    if (errors) throw new Error(`the page refused ${name}: ${errors}`);
+    result.model = await page.evaluate(() => window.nldf.state().model);
+    result.model_status = await page.locator('#model-status').textContent();
+    result.skip_enabled = await page.isEnabled('#skip');
+  }
+
   await page.setInputFiles('#wav-input', args.wav);
   await page.waitForFunction(() => window.nldf.state().track !== null || window.nldf.errors.length > 0);
   const meta = await page.evaluate(() => {
@@ -120,7 +133,7 @@ try {
 
   const b64 = (rgb) => Buffer.from(rgb, 'base64');
   // Full frames: skipping off.
-  await page.uncheck('#skip');
+  if (await page.isEnabled('#skip')) await page.uncheck('#skip');
   for (const [p, [yaw, pitch]] of args.poses.entries()) {
     for (const f of args.frames) {
       const rgb = await page.evaluate(async ([f, yaw, pitch]) => {
