@@ -171,25 +171,7 @@ fn build(
 ) -> Result<(ModelProto, ModelInfo, usize, Vec<Tap>)> {
     let s = &ckpt.shape;
     let rays = Dim::Symbolic(RAY_AXIS.to_string());
-    let origins = g.input(
-        INPUT_ORIGINS,
-        DataType::Float,
-        &[rays.clone(), Dim::Fixed(3)],
-    );
-    let directions = g.input(
-        INPUT_DIRECTIONS,
-        DataType::Float,
-        &[rays.clone(), Dim::Fixed(3)],
-    );
-    let audio = g.input(
-        INPUT_AUDIO,
-        DataType::Float,
-        &[
-            Dim::Fixed(s.audio.att_frames),
-            Dim::Fixed(s.audio.window),
-            Dim::Fixed(s.audio.n_features),
-        ],
-    );
+    let (origins, directions, audio) = ray_inputs(&mut g, ckpt);
     let background = s.opacity.then(|| {
         g.input(
             INPUT_BACKGROUND,
@@ -244,6 +226,28 @@ fn build(
     let info = model_info(ckpt, &graph);
     let metadata = info.to_metadata();
     Ok((model_proto(graph, doc, metadata), info, n_values, taps))
+}
+
+/// Every ray graph's first inputs: [`INPUT_ORIGINS`] and [`INPUT_DIRECTIONS`] `[n_rays,
+/// 3]`, [`INPUT_AUDIO`] `[att_frames, window, n_features]`; their names.
+pub(crate) fn ray_inputs(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+) -> (String, String, String) {
+    let a = &ckpt.shape.audio;
+    let rays = [Dim::Symbolic(RAY_AXIS.to_string()), Dim::Fixed(3)];
+    let origins = g.input(INPUT_ORIGINS, DataType::Float, &rays);
+    let directions = g.input(INPUT_DIRECTIONS, DataType::Float, &rays);
+    let audio = g.input(
+        INPUT_AUDIO,
+        DataType::Float,
+        &[
+            Dim::Fixed(a.att_frames),
+            Dim::Fixed(a.window),
+            Dim::Fixed(a.n_features),
+        ],
+    );
+    (origins, directions, audio)
 }
 
 /// The model around `graph`: the contract's IR version and opset, nldf as producer, `doc`

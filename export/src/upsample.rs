@@ -31,7 +31,9 @@ use crate::contract::{
 use crate::error::{Error, Result};
 use crate::graph::{Dim, GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::onnx::{DataType, ModelProto};
-use crate::student::{ExportReport, model_info, model_proto, student_nodes, write_model};
+use crate::student::{
+    ExportReport, model_info, model_proto, ray_inputs, student_nodes, write_model,
+};
 
 /// An upsampler folder, read and checked.
 #[derive(Debug, Clone)]
@@ -144,25 +146,7 @@ fn upsampled_ray_model(
         .map_err(|e| Error::Frame(e.to_string()))?;
     let sym = |name: &str| Dim::Symbolic(name.to_string());
     let rays = sym(RAY_AXIS);
-    let origins = g.input(
-        INPUT_ORIGINS,
-        DataType::Float,
-        &[rays.clone(), Dim::Fixed(3)],
-    );
-    let directions = g.input(
-        INPUT_DIRECTIONS,
-        DataType::Float,
-        &[rays.clone(), Dim::Fixed(3)],
-    );
-    let audio = g.input(
-        INPUT_AUDIO,
-        DataType::Float,
-        &[
-            Dim::Fixed(s.audio.att_frames),
-            Dim::Fixed(s.audio.window),
-            Dim::Fixed(s.audio.n_features),
-        ],
-    );
+    let (origins, directions, audio) = ray_inputs(&mut g, ckpt);
     let cells = g.input(INPUT_CELLS, DataType::Bool, &[sym(BOX_ROWS), sym(BOX_COLS)]);
     let pixels = [sym(BOX_HEIGHT), sym(BOX_WIDTH)];
     let background = g.input(

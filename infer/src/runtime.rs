@@ -180,13 +180,7 @@ pub trait Backend {
                     .into(),
             ));
         };
-        if origins.len() != directions.len() || !origins.len().is_multiple_of(3) {
-            return Err(Error::Argument(format!(
-                "rays: origins hold {} values and directions {}, expected equal multiples of 3",
-                origins.len(),
-                directions.len()
-            )));
-        }
+        check_rays(origins, directions)?;
         let n_cells = boxed.cells.iter().filter(|&&c| c).count();
         let (r, area) = (up.factor, boxed.rows * boxed.cols);
         if boxed.cells.len() != area || n_cells != origins.len() / 3 || n_cells == 0 {
@@ -207,14 +201,7 @@ pub trait Backend {
                 boxed.cols * r
             )));
         }
-        if audio.len() != info.audio.len() {
-            return Err(Error::Argument(format!(
-                "audio: expected {:?} = {} values, got {}",
-                info.audio.shape(),
-                info.audio.len(),
-                audio.len()
-            )));
-        }
+        check_audio(info, audio)?;
         let out = self.run_box_once(origins, directions, audio, boxed)?;
         if out.rgb.len() != 3 * area * r * r || out.opacity.len() != area * r * r {
             return Err(Error::backend(
@@ -295,13 +282,7 @@ pub fn check_inputs(
     audio: &[f32],
 ) -> Result<()> {
     refuse_boxed(info)?;
-    if !origins.len().is_multiple_of(3) || origins.len() != directions.len() {
-        return Err(Error::Argument(format!(
-            "rays: origins hold {} values and directions {}, expected equal multiples of 3",
-            origins.len(),
-            directions.len()
-        )));
-    }
+    check_rays(origins, directions)?;
     if info.opacity && background.len() != origins.len() {
         return Err(Error::Argument(format!(
             "rays: the model composites over the background, which holds {} values for {} \
@@ -310,6 +291,23 @@ pub fn check_inputs(
             origins.len() / 3
         )));
     }
+    check_audio(info, audio)
+}
+
+/// Origins and directions of the same rays, 3 values each.
+fn check_rays(origins: &[f32], directions: &[f32]) -> Result<()> {
+    if !origins.len().is_multiple_of(3) || origins.len() != directions.len() {
+        return Err(Error::Argument(format!(
+            "rays: origins hold {} values and directions {}, expected equal multiples of 3",
+            origins.len(),
+            directions.len()
+        )));
+    }
+    Ok(())
+}
+
+/// An audio neighbourhood of the model's shape.
+fn check_audio(info: &ModelInfo, audio: &[f32]) -> Result<()> {
     if audio.len() != info.audio.len() {
         return Err(Error::Argument(format!(
             "audio: expected {:?} = {} values, got {}",

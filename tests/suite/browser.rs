@@ -169,42 +169,15 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
     );
 
     // The WAV picked through the file input: nldf's frames.
-    let backend = backend_for(
-        &model,
-        BackendKind::Tract,
-        BackendOptions {
-            batch_size: 4096,
-            threads: 2,
-            spin: true,
-        },
-    )
-    .unwrap();
-    let mut renderer = FrameRenderer::new(backend, None).unwrap();
-    let drawn = result["frames"].as_array().unwrap();
-    assert_eq!(drawn.len(), frames.len() * POSES.len());
-    let mut worst = 0u8;
-    for entry in drawn {
-        let f = entry["frame"].as_u64().unwrap() as usize;
-        let p = entry["pose"].as_u64().unwrap() as usize;
-        let audio = neighbourhood(&windows, f, info.audio.att_frames);
-        let want = renderer
-            .render(pose(POSES[p]), &audio)
-            .unwrap()
-            .image
-            .to_rgb8();
-        let got = std::fs::read(out.join(entry["file"].as_str().unwrap())).unwrap();
-        assert_eq!(got.len(), w * h * 3, "frame {f} pose {p}: canvas size");
-        let (d, changed) = diff_8bit(&got, &want);
-        assert!(
-            d <= TOL_8BIT,
-            "frame {f}, pose {:?}: the canvas is {d}/255 off nldf's frame ({changed} channels differ)",
-            POSES[p]
-        );
-        worst = worst.max(d);
-    }
+    let mut renderer = tract_renderer(&model);
+    let worst = check_frames(&result, &out, &mut renderer, &windows, &pose);
+    assert_eq!(
+        result["frames"].as_array().unwrap().len(),
+        frames.len() * POSES.len()
+    );
     println!(
         "{} canvas frames against nldf render: worst {worst}/255",
-        drawn.len()
+        frames.len() * POSES.len()
     );
 
     check_skipping(&result, &out, &model, &windows, &mut renderer);
@@ -456,24 +429,50 @@ fn the_page_draws_an_upsampled_frame_graph() {
         (result["width"].as_u64(), result["height"].as_u64()),
         (Some(128), Some(128))
     );
-    let backend = backend_for(
-        &model,
-        BackendKind::Tract,
-        BackendOptions {
-            batch_size: 4096,
-            threads: 2,
-            spin: true,
-        },
+    let mut renderer = tract_renderer(&model);
+    let worst = check_frames(&result, &out, &mut renderer, &windows, &pose);
+    assert_eq!(
+        result["frames"].as_array().unwrap().len(),
+        frames.len() * POSES.len()
+    );
+    println!(
+        "upsampled frame graph, {} canvas frames against nldf's renderer on the ray graph: \
+         worst {worst}/255",
+        frames.len() * POSES.len()
+    );
+}
+
+/// nldf's renderer on `model` in tract, 2 threads.
+fn tract_renderer(model: &nldf_export::ExportedModel) -> FrameRenderer {
+    let options = BackendOptions {
+        batch_size: 4096,
+        threads: 2,
+        spin: true,
+    };
+    FrameRenderer::new(
+        backend_for(model, BackendKind::Tract, options).unwrap(),
+        None,
     )
-    .unwrap();
-    let mut renderer = FrameRenderer::new(backend, None).unwrap();
+    .unwrap()
+}
+
+/// The page's full frames (`result["frames"]`, every frame at every pose of [`POSES`], files
+/// in `out`) against `renderer`'s frames of the same track frames (`windows`) and poses
+/// (`pose`): each within [`TOL_8BIT`]; returns the worst difference.
+fn check_frames(
+    result: &serde_json::Value,
+    out: &Path,
+    renderer: &mut FrameRenderer,
+    windows: &nldf_core::audio::AudioWindows,
+    pose: &dyn Fn((f32, f32)) -> Mat4,
+) -> u8 {
+    let att = renderer.info().audio.att_frames;
     let drawn = result["frames"].as_array().unwrap();
-    assert_eq!(drawn.len(), frames.len() * POSES.len());
     let mut worst = 0u8;
     for entry in drawn {
         let f = entry["frame"].as_u64().unwrap() as usize;
         let p = entry["pose"].as_u64().unwrap() as usize;
-        let audio = neighbourhood(&windows, f, info.audio.att_frames);
+        let audio = neighbourhood(windows, f, att);
         let frame = renderer.render(pose(POSES[p]), &audio).unwrap();
         assert!(
             frame.head_pixels > 0,
@@ -490,9 +489,5 @@ fn the_page_draws_an_upsampled_frame_graph() {
         );
         worst = worst.max(d);
     }
-    println!(
-        "upsampled frame graph, {} canvas frames against nldf's renderer on the ray graph: \
-         worst {worst}/255",
-        drawn.len()
-    );
+    worst
 }
