@@ -5,8 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use nldf_export::{
-    ExportReport, WeightType, export_frame, export_frame_int8, export_student, export_student_int8,
-    read_frame_model, read_model,
+    ExportReport, WeightType, export_frame, export_frame_int8, export_frame_upsampled_int8,
+    export_student, export_student_int8, export_student_upsampled_int8, read_frame_model,
+    read_model,
 };
 use nldf_infer::quantize::calibrated_ranges;
 
@@ -32,7 +33,7 @@ pub struct ExportArgs {
     /// the graph; the student runs on its coarse grid. Without --frame, the ray graph takes
     /// the coarse rays of the head's box and gives the box's pixels; `nldf render` and
     /// `nldf stream` find the box (docs/sharp.md).
-    #[arg(long, conflicts_with = "int8")]
+    #[arg(long)]
     pub upsampler: Option<String>,
     /// Store the weights in half precision (cast back to f32 in the graph): half the size.
     #[arg(long, conflicts_with = "int8")]
@@ -78,10 +79,14 @@ pub fn run(args: ExportArgs) -> Result<()> {
         (Some(data), WeightType::Int8) => {
             let export = || -> nldf_infer::Result<ExportReport> {
                 let ranges = calibrated_ranges(&student, data, args.calibration_frames)?;
-                Ok(if args.frame {
-                    export_frame_int8(&student, &out, &ranges)?
-                } else {
-                    export_student_int8(&student, &out, &ranges)?
+                let up = args.upsampler.as_ref().map(|name| args.run.join(name));
+                Ok(match (&up, args.frame) {
+                    (Some(up), true) => export_frame_upsampled_int8(&student, up, &out, &ranges)?,
+                    (Some(up), false) => {
+                        export_student_upsampled_int8(&student, up, &out, &ranges)?
+                    }
+                    (None, true) => export_frame_int8(&student, &out, &ranges)?,
+                    (None, false) => export_student_int8(&student, &out, &ranges)?,
                 })
             };
             export().with_context(|| {

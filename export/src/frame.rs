@@ -66,9 +66,26 @@ pub fn export_frame_upsampled(
     out: &Path,
     weights: WeightType,
 ) -> Result<ExportReport> {
+    if weights == WeightType::Int8 {
+        return Err(crate::upsample::needs_ranges());
+    }
     let (ckpt, up) = crate::upsample::open_pair(student_dir, upsampler_dir, weights)?;
     let (model, report_info, n_values) = frame_model(&ckpt, Some(&up), GraphBuilder::new(weights))?;
     write_model(&model, report_info, n_values, out)
+}
+
+/// [`export_frame_upsampled`] with the student's per-ray products in int8 over the
+/// calibrated `ranges` (the ray graph's); the upsampler's convolutions stay in f32.
+pub fn export_frame_upsampled_int8(
+    student_dir: &Path,
+    upsampler_dir: &Path,
+    out: &Path,
+    ranges: &ActivationRanges,
+) -> Result<ExportReport> {
+    let (ckpt, up) = crate::upsample::open_pair(student_dir, upsampler_dir, WeightType::Int8)?;
+    let g = GraphBuilder::int8(ranges.clone());
+    let (model, info, n_values) = frame_model(&ckpt, Some(&up), g)?;
+    write_model(&model, info, n_values, out)
 }
 
 /// [`export_frame`] with int8 products whose inputs have the calibrated `ranges` (the ray

@@ -19,8 +19,10 @@ pub mod student;
 pub mod upsample;
 
 pub use error::{Error, Result};
-pub use frame::{export_frame, export_frame_int8, export_frame_upsampled};
+pub use frame::{
+    export_frame, export_frame_int8, export_frame_upsampled, export_frame_upsampled_int8,
+};
 pub use graph::{ActivationRanges, Tap, WeightType};
 pub use load::{ExportedModel, FrameModel, read_frame_model, read_model};
 pub use student::{ExportReport, calibration_model, export_student, export_student_int8};
-pub use upsample::export_student_upsampled;
+pub use upsample::{export_student_upsampled, export_student_upsampled_int8};

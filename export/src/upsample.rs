@@ -29,7 +29,7 @@ use crate::contract::{
     OUTPUT_SEGMENTS, RAY_AXIS, UpsampleInfo,
 };
 use crate::error::{Error, Result};
-use crate::graph::{Dim, GraphBuilder, WeightType, attr_int, attr_ints};
+use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::onnx::{DataType, ModelProto};
 use crate::student::{
     ExportReport, model_info, model_proto, ray_inputs, student_nodes, write_model,
@@ -82,20 +82,12 @@ impl UpsamplerCheckpoint {
 }
 
 /// Opens the student in `student_dir` and the upsampler in `upsampler_dir` for an export in
-/// `weights`: the upsampler must have been trained over that student, and the graphs that
-/// hold it are f32 or f16.
+/// `weights`: the upsampler must have been trained over that student.
 pub(crate) fn open_pair(
     student_dir: &Path,
     upsampler_dir: &Path,
     weights: WeightType,
 ) -> Result<(StudentCheckpoint, UpsamplerCheckpoint)> {
-    if weights == WeightType::Int8 {
-        return Err(Error::Frame(
-            "a graph with an upsampler is exported in f32 or f16 (int8 is for the ray \
-             graph's products, measured without the upsampler)"
-                .into(),
-        ));
-    }
     let ckpt = StudentCheckpoint::open(student_dir)?;
     let up = UpsamplerCheckpoint::open(upsampler_dir)?;
     if student_dir.file_name().and_then(|n| n.to_str()) != Some(up.student.as_str()) {
@@ -120,9 +112,36 @@ pub fn export_student_upsampled(
     out: &Path,
     weights: WeightType,
 ) -> Result<ExportReport> {
+    if weights == WeightType::Int8 {
+        return Err(needs_ranges());
+    }
     let (ckpt, up) = open_pair(student_dir, upsampler_dir, weights)?;
     let (model, info, n_values) = upsampled_ray_model(&ckpt, &up, GraphBuilder::new(weights))?;
     write_model(&model, info, n_values, out)
+}
+
+/// [`export_student_upsampled`] with the student's per-ray products in int8, their inputs'
+/// ranges calibrated (`ranges`, as for the student's own int8 ray graph); the upsampler's
+/// convolutions stay in f32.
+pub fn export_student_upsampled_int8(
+    student_dir: &Path,
+    upsampler_dir: &Path,
+    out: &Path,
+    ranges: &ActivationRanges,
+) -> Result<ExportReport> {
+    let (ckpt, up) = open_pair(student_dir, upsampler_dir, WeightType::Int8)?;
+    let g = GraphBuilder::int8(ranges.clone());
+    let (model, info, n_values) = upsampled_ray_model(&ckpt, &up, g)?;
+    write_model(&model, info, n_values, out)
+}
+
+/// The error for an int8 export asked for without calibrated ranges.
+pub(crate) fn needs_ranges() -> Error {
+    Error::Calibration(
+        "the activations' ranges must be measured on training rays first \
+         (`nldf export --int8 --data DIR` does it)"
+            .into(),
+    )
 }
 
 /// The upsampled ray graph of `ckpt` and `up` built with `g`, its metadata and the number

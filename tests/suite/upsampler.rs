@@ -543,3 +543,128 @@ fn frames_for_upscaling_cast_rays_through_block_centres() {
         );
     }
 }
+
+/// The upsampled ray graph with the student's products in int8 (`nldf export --upsampler
+/// --int8`; the upsampler's convolutions in f32), the real-time student at 256 x 256, x4,
+/// calibrated on the coarse rays of two poses: its products are integer ones, and its frames
+/// from three poses stay within a relative RMS of 0.05 of the f32 graph's in tract and ort,
+/// the two runtimes within a relative RMS of 5e-3 (and 5e-2 at most) of each other.
+#[test]
+fn an_int8_upsampled_ray_graph_stays_near_the_f32_one() {
+    use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
+    let mut cfg = StudentConfig::realtime();
+    cfg.beam.anchor = Some(nldf_core::beam::BeamAnchor {
+        centre: [0.02, 0.05, -0.01],
+        distance: 2.2,
+    });
+    let mut spec = spec_for(&cfg);
+    spec.intrinsics = camera_at(256, 256);
+    let run = write_run_with(&cfg, 93, spec.clone());
+    run.scale_weights_like_trained(cfg.n_blocks());
+    let up_dir = run.root.join("upsampler");
+    write_upsampler(&up_dir, &UpsamplerConfig::with_factor(4), cfg.width, 94);
+    let f32_path = run.root.join("up_f32.onnx");
+    export_student_upsampled(&run.student_dir(), &up_dir, &f32_path, WeightType::F32).unwrap();
+    let f32_model = read_model(&f32_path).unwrap();
+    let options = BackendOptions {
+        threads: 2,
+        spin: false,
+        ..BackendOptions::default()
+    };
+    let mut reference = FrameRenderer::new(
+        backend_for(&f32_model, nldf_infer::BackendKind::Tract, options).unwrap(),
+        None,
+    )
+    .unwrap();
+    let default_pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let centre = Bounds::centre(&spec.bounds);
+    let poses = [
+        default_pose,
+        turn_about(centre, 0.6, -0.25) * default_pose,
+        turn_about(centre, -0.3, 0.1) * default_pose,
+    ];
+    let windows = crate::util::random_audio(&cfg, 10, 21);
+    let audio = |f: usize| neighbourhood(&windows, f, cfg.audio.att_frames);
+    let plain = read_model(&run.export(WeightType::F32)).unwrap();
+    let calibration: Vec<CalibrationFrame> = poses[..2]
+        .iter()
+        .enumerate()
+        .map(|(i, &pose)| {
+            let rays = reference.rays(pose).rays;
+            CalibrationFrame {
+                origins: rays.origins,
+                directions: rays.directions,
+                audio: audio(2 * i),
+            }
+        })
+        .collect();
+    let ranges = activation_ranges(&run.student_dir(), &plain.info, &calibration).unwrap();
+    let int8_path = run.root.join("up_int8.onnx");
+    nldf_export::export_student_upsampled_int8(&run.student_dir(), &up_dir, &int8_path, &ranges)
+        .unwrap();
+    let int8_model = read_model(&int8_path).unwrap();
+    let graph = int8_model.proto.graph.as_ref().unwrap();
+    let integer = graph
+        .node
+        .iter()
+        .filter(|n| n.op_type.as_deref() == Some("MatMulInteger"))
+        .count();
+    assert_eq!(
+        integer,
+        1 + 2 * cfg.n_blocks(),
+        "the student's products in int8"
+    );
+    let rms =
+        |v: &[f32]| (v.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / v.len() as f64).sqrt();
+    let background = ImageRgb::load(&run.student_dir().join("background.png")).unwrap();
+    let mut frames: Vec<Vec<ImageRgb>> = Vec::new();
+    for kind in runtimes() {
+        let backend = backend_for(&int8_model, kind, options).unwrap();
+        let mut renderer = FrameRenderer::new(backend, None).unwrap();
+        let mut mine = Vec::new();
+        for (i, &pose) in poses.iter().enumerate() {
+            let want = reference.render(pose, &audio(3 + i)).unwrap();
+            let got = renderer.render(pose, &audio(3 + i)).unwrap();
+            assert_eq!(got.head_pixels, want.head_pixels);
+            // Against the f32 graph, on the head's part of the frame (the rest is the
+            // background in both).
+            let moved: Vec<usize> = (0..want.image.data.len())
+                .filter(|&k| want.image.data[k] != background.data[k])
+                .collect();
+            let diff: Vec<f32> = moved
+                .iter()
+                .map(|&k| got.image.data[k] - want.image.data[k])
+                .collect();
+            let base: Vec<f32> = moved.iter().map(|&k| want.image.data[k]).collect();
+            let rel = rms(&diff) / rms(&base);
+            println!(
+                "int8 upsampled ray graph in {}, pose {i}: relative RMS {rel:.2e} of the f32 \
+                 graph's head pixels",
+                kind.name()
+            );
+            assert!(
+                rel.is_finite() && rel <= 0.05,
+                "{}: pose {i}: {rel}",
+                kind.name()
+            );
+            assert!(rel > 1e-6, "{}: identical to the f32 graph", kind.name());
+            mine.push(got.image);
+        }
+        frames.push(mine);
+    }
+    // The runtimes: a value on a rounding tie in one runtime's f32 arithmetic and not in
+    // the other's moves one uint8 step (as in the student's own int8 graph), and the CNN
+    // spreads that ray's change over its pixels' neighbourhood; rare, so the RMS stays small.
+    if frames.len() == 2 {
+        for (i, (a, b)) in frames[0].iter().zip(&frames[1]).enumerate() {
+            let d = max_diff(&a.data, &b.data);
+            let diff: Vec<f32> = a.data.iter().zip(&b.data).map(|(x, y)| x - y).collect();
+            let rel = rms(&diff) / rms(&a.data);
+            println!("tract against ort, pose {i}: largest {d:.2e}, relative RMS {rel:.2e}");
+            assert!(
+                d <= 5e-2 && rel <= 5e-3,
+                "tract against ort, pose {i}: {d}, {rel}"
+            );
+        }
+    }
+}

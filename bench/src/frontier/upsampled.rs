@@ -3,8 +3,8 @@
 //! by frame, by the student's ray graph on every pixel ("native rays"), by the ray graph on
 //! the upsampler's coarse grid upscaled bilinearly ("bilinear"), by the frame graph with the
 //! upsampler inside and by nldf's renderer on the ray graph with the upsampler inside, each
-//! in f32 and f16 (the upsampled graphs in onnxruntime and tract), and by the teacher in
-//! candle; each is scored (PSNR and SSIM on the whole frame and
+//! in f32 and f16 (the upsampled graphs in onnxruntime and tract; the upsampled ray graph
+//! also with the student's products in int8), and by the teacher in candle; each is scored (PSNR and SSIM on the whole frame and
 //! in the head, mouth PSNR) and timed per whole frame with 2 threads (median).
 //! `upsampler.json` and `upsampler.md` hold the rows with the machine, commit and settings.
 
@@ -210,6 +210,23 @@ impl UpsamplerBench {
                 "exported the student's ray graph and the upsampled frame and ray graphs in {p}"
             )));
         }
+        // The upsampled ray graph with the student's products in int8, calibrated as the
+        // frontier calibrates (16 training frames).
+        let ranges = nldf_infer::quantize::calibrated_ranges(&student.dir, &self.data, 16)?;
+        let rays = models_dir.join(format!("{}.rays.int8.onnx", self.upsampler));
+        nldf_export::export_student_upsampled_int8(&student.dir, &up.dir, &rays, &ranges)?;
+        ray_graphs.push(Export {
+            student: format!("{}.rays", self.upsampler),
+            describe: format!("{} with upsampler x{factor}", student.describe()),
+            short: nldf_train::eval::student_short_name(&student.cfg),
+            step: up.step,
+            macs_per_ray: 0.0,
+            precision: WeightType::Int8,
+            path: rays,
+        });
+        on_event(&JobEvent::Note(
+            "exported the upsampled ray graph with int8 products".into(),
+        ));
         // The ways of rendering, in the tables' order.
         let mut native = Vec::new();
         let mut bilinear = Vec::new();
