@@ -28,7 +28,7 @@ use serde::Serialize;
 
 use super::exports::{Export, open_point};
 use super::front::{SplitScore, score};
-use super::points::Timed;
+use super::points::{OnnxPoint, Timed};
 use super::{THREADS, eval_split, precision_name};
 use crate::error::{Error, Result, create_dir};
 use crate::report::{Written, machine_cell, write_bench_files};
@@ -330,17 +330,36 @@ impl UpsamplerBench {
                 timed(&teacher.seconds),
             );
         }
-        for p in &native {
+        let onnx_rows = |row: &mut dyn FnMut(&str, &str, &str, u32, String, f64),
+                         way: &str,
+                         grid: u32,
+                         points: &[OnnxPoint]| {
+            for p in points {
+                let s = timed(&p.seconds);
+                row(
+                    way,
+                    precision_name(p.precision),
+                    p.kind.name(),
+                    grid,
+                    p.label(),
+                    s,
+                );
+            }
+        };
+        onnx_rows(&mut row, "native rays", size, &native);
+        onnx_rows(&mut row, "bilinear", grid, &bilinear);
+        for p in &upsampled {
             let s = timed(&p.seconds);
             row(
-                "native rays",
+                "upsampler, frame graph",
                 precision_name(p.precision),
                 p.kind.name(),
-                size,
+                grid,
                 p.label(),
                 s,
             );
         }
+        onnx_rows(&mut row, "upsampler, ray graph", grid, &upsampled_rays);
         for p in &bilinear {
             let s = timed(&p.seconds);
             row(
