@@ -52,6 +52,9 @@ pub struct UpsamplerBench {
     pub batch: usize,
 }
 
+/// Adds a row: way, precision, runtime, grid side, the model's label, seconds a frame.
+type AddRow<'a> = dyn FnMut(&str, &str, &str, u32, String, f64) + 'a;
+
 /// One way of rendering.
 #[derive(Debug, Clone, Serialize)]
 pub struct UpsamplerRow {
@@ -330,10 +333,7 @@ impl UpsamplerBench {
                 timed(&teacher.seconds),
             );
         }
-        let onnx_rows = |row: &mut dyn FnMut(&str, &str, &str, u32, String, f64),
-                         way: &str,
-                         grid: u32,
-                         points: &[OnnxPoint]| {
+        let onnx_rows = |row: &mut AddRow<'_>, way: &str, grid: u32, points: &[OnnxPoint]| {
             for p in points {
                 let s = timed(&p.seconds);
                 row(
