@@ -31,8 +31,8 @@ pub struct ExportArgs {
     pub frame: bool,
     /// A learned upsampler of the run (its folder inside RUN, e.g. `upsampler`) goes into
     /// the graph; the student runs on its coarse grid. Without --frame, the ray graph takes
-    /// the coarse rays of the head's box and gives the box's pixels; `nldf render` and
-    /// `nldf stream` find the box (docs/sharp.md).
+    /// the coarse rays of the head's box and gives the box's pixels; `nldf render` finds
+    /// the box (docs/sharp.md).
     #[arg(long)]
     pub upsampler: Option<String>,
     /// Store the weights in half precision (cast back to f32 in the graph): half the size.
