@@ -182,6 +182,16 @@ impl UpsamplerBench {
         let mut exports = Vec::new();
         let mut graphs = Vec::new();
         let mut ray_graphs = Vec::new();
+        // An upsampled ray graph, labelled after the upsampler.
+        let ray_export = |precision: WeightType, path: PathBuf| Export {
+            student: format!("{}.rays", self.upsampler),
+            describe: format!("{} with upsampler x{factor}", student.describe()),
+            short: nldf_train::eval::student_short_name(&student.cfg),
+            step: up.step,
+            macs_per_ray: 0.0,
+            precision,
+            path,
+        };
         for w in [WeightType::F32, WeightType::F16] {
             let p = precision_name(w);
             let path = models_dir.join(format!("{}.{p}.onnx", student.label()));
@@ -200,15 +210,7 @@ impl UpsamplerBench {
             graphs.push((w, nldf_export::read_frame_model(&frame)?));
             let rays = models_dir.join(format!("{}.rays.{p}.onnx", self.upsampler));
             nldf_export::export_student_upsampled(&student.dir, &up.dir, &rays, w)?;
-            ray_graphs.push(Export {
-                student: format!("{}.rays", self.upsampler),
-                describe: format!("{} with upsampler x{factor}", student.describe()),
-                short: nldf_train::eval::student_short_name(&student.cfg),
-                step: up.step,
-                macs_per_ray: 0.0,
-                precision: w,
-                path: rays,
-            });
+            ray_graphs.push(ray_export(w, rays));
             on_event(&JobEvent::Note(format!(
                 "exported the student's ray graph and the upsampled frame and ray graphs in {p}"
             )));
@@ -218,15 +220,7 @@ impl UpsamplerBench {
         let ranges = nldf_infer::quantize::calibrated_ranges(&student.dir, &self.data, 16)?;
         let rays = models_dir.join(format!("{}.rays.int8.onnx", self.upsampler));
         nldf_export::export_student_upsampled_int8(&student.dir, &up.dir, &rays, &ranges)?;
-        ray_graphs.push(Export {
-            student: format!("{}.rays", self.upsampler),
-            describe: format!("{} with upsampler x{factor}", student.describe()),
-            short: nldf_train::eval::student_short_name(&student.cfg),
-            step: up.step,
-            macs_per_ray: 0.0,
-            precision: WeightType::Int8,
-            path: rays,
-        });
+        ray_graphs.push(ray_export(WeightType::Int8, rays));
         on_event(&JobEvent::Note(
             "exported the upsampled ray graph with int8 products".into(),
         ));
@@ -360,39 +354,6 @@ impl UpsamplerBench {
             );
         }
         onnx_rows(&mut row, "upsampler, ray graph", grid, &upsampled_rays);
-        for p in &bilinear {
-            let s = timed(&p.seconds);
-            row(
-                "bilinear",
-                precision_name(p.precision),
-                p.kind.name(),
-                grid,
-                p.label(),
-                s,
-            );
-        }
-        for p in &upsampled {
-            let s = timed(&p.seconds);
-            row(
-                "upsampler, frame graph",
-                precision_name(p.precision),
-                p.kind.name(),
-                grid,
-                p.label(),
-                s,
-            );
-        }
-        for p in &upsampled_rays {
-            let s = timed(&p.seconds);
-            row(
-                "upsampler, ray graph",
-                precision_name(p.precision),
-                p.kind.name(),
-                grid,
-                p.label(),
-                s,
-            );
-        }
         let report = UpsamplerBenchReport {
             machine,
             run: self.run.display().to_string(),
