@@ -268,11 +268,6 @@ impl FrameRenderer {
             .copied()
             .collect();
         let n_rays = origins.len() / 3;
-        if n_rays == 0 {
-            return Err(Error::Argument(
-                "a box of the coarse grid without a ray that meets the head".into(),
-            ));
-        }
         let boxed = BoxInput {
             cells: &cells,
             rows: r1 - r0,
@@ -366,11 +361,11 @@ impl FrameRenderer {
         // least, and the whole box gives those pixels exactly).
         let any_hit = (0..hc * wc).any(|p| given[p] && view.hits[p]);
         let (given, sub) = if any_hit {
-            (given, sub)
+            (&given, sub)
         } else {
-            (view.hits.clone(), full)
+            (&view.hits, full)
         };
-        let (rgb, n_rays) = self.run_sub_box(&view, &given, sub, audio, up)?;
+        let (rgb, n_rays) = self.run_sub_box(&view, given, sub, audio, up)?;
         let (y0, y1, x0, x1) = (sub.0 * r, sub.1 * r, sub.2 * r, sub.3 * r);
         let mut out = Vec::with_capacity(3 * region.pixels.len());
         for &p in &region.pixels {
