@@ -45,11 +45,7 @@ pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
 /// [`export_frame_int8`]).
 pub fn export_frame(student_dir: &Path, out: &Path, weights: WeightType) -> Result<ExportReport> {
     if weights == WeightType::Int8 {
-        return Err(Error::Calibration(
-            "the activations' ranges must be measured on training rays first \
-             (`nldf export --frame --int8 --data DIR` does it)"
-                .into(),
-        ));
+        return Err(crate::student::needs_ranges("--frame "));
     }
     let ckpt = StudentCheckpoint::open(student_dir)?;
     crate::student::check_f16_range(&ckpt, student_dir, weights)?;
@@ -67,7 +63,7 @@ pub fn export_frame_upsampled(
     weights: WeightType,
 ) -> Result<ExportReport> {
     if weights == WeightType::Int8 {
-        return Err(crate::upsample::needs_ranges());
+        return Err(crate::student::needs_ranges("--frame --upsampler NAME "));
     }
     let (ckpt, up) = crate::upsample::open_pair(student_dir, upsampler_dir, weights)?;
     let (model, report_info, n_values) = frame_model(&ckpt, Some(&up), GraphBuilder::new(weights))?;

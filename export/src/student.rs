@@ -100,6 +100,16 @@ pub fn calibration_model(student_dir: &Path) -> Result<(Vec<u8>, ModelInfo, Vec<
     Ok((prost::Message::encode_to_vec(&model), info, taps))
 }
 
+/// The error for an int8 export asked for without calibrated ranges; `flags` are the
+/// export's other flags as `nldf export` spells them (`"--frame "`), to name the command
+/// that measures them.
+pub(crate) fn needs_ranges(flags: &str) -> Error {
+    Error::Calibration(format!(
+        "the activations' ranges must be measured on training rays first \
+         (`nldf export {flags}--int8 --data DIR` does it)"
+    ))
+}
+
 /// Encodes `model` and writes it to `out` atomically.
 pub(crate) fn write_model(
     model: &ModelProto,
@@ -153,11 +163,7 @@ pub fn student_model(
     weights: WeightType,
 ) -> Result<(ModelProto, ModelInfo, usize)> {
     if weights == WeightType::Int8 {
-        return Err(Error::Calibration(
-            "the activations' ranges must be measured on training rays first \
-             (`nldf export --int8 --data DIR` does it)"
-                .into(),
-        ));
+        return Err(needs_ranges(""));
     }
     let (model, info, n_values, _) = build(ckpt, GraphBuilder::new(weights))?;
     Ok((model, info, n_values))

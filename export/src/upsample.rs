@@ -1,12 +1,14 @@
-//! The learned upsampler in the frame graph: the student runs on the coarse grid's rays
-//! that meet the head, its last hidden layer, colour and opacity logit are scattered into a
-//! canvas of the grid, the CNN runs on the box around the hits, and its pixels are
-//! composited over the background inside the box, as `nldf_train::upsampler` renders:
+//! The learned upsampler in the frame graph and the ray graph: the student runs on the
+//! coarse grid's rays that meet the head, its last hidden layer, colour and opacity logit
+//! are scattered into a canvas of the grid, the CNN runs on the box around the hits, and
+//! its pixels are composited over the background inside the box, as
+//! `nldf_train::upsampler` renders. The frame graph finds the box itself (below); the ray
+//! graph is given it (`cells`) with the box's rays:
 //!
 //! ```text
 //! canvas [hc wc, width + 4]     misses: zeros, then [0, 0, 0, MISS_LOGIT]
 //! box    rows/cols holding a hit, widened by the margin (1 x 1 at the origin without hits)
-//! x      Slice(canvas) -> [1, width + 4, bh, bw]
+//! x      Gather(canvas) -> [1, width + 4, bh, bw]
 //! reduce Conv 1x1, Relu; stages: Conv 3x3, depth-to-space 2 (DCR), Relu; head: Conv 3x3
 //! base   bilinear(colour, logit) (ConvTranspose: stride r, kernel 2r, pads r/2)
 //! out    colour: base + sigmoid(base logit) head colour; logit: base + head
@@ -113,7 +115,7 @@ pub fn export_student_upsampled(
     weights: WeightType,
 ) -> Result<ExportReport> {
     if weights == WeightType::Int8 {
-        return Err(needs_ranges());
+        return Err(crate::student::needs_ranges("--upsampler NAME "));
     }
     let (ckpt, up) = open_pair(student_dir, upsampler_dir, weights)?;
     let (model, info, n_values) = upsampled_ray_model(&ckpt, &up, GraphBuilder::new(weights))?;
@@ -133,15 +135,6 @@ pub fn export_student_upsampled_int8(
     let g = GraphBuilder::int8(ranges.clone());
     let (model, info, n_values) = upsampled_ray_model(&ckpt, &up, g)?;
     write_model(&model, info, n_values, out)
-}
-
-/// The error for an int8 export asked for without calibrated ranges.
-pub(crate) fn needs_ranges() -> Error {
-    Error::Calibration(
-        "the activations' ranges must be measured on training rays first \
-         (`nldf export --int8 --data DIR` does it)"
-            .into(),
-    )
 }
 
 /// The upsampled ray graph of `ckpt` and `up` built with `g`, its metadata and the number
