@@ -102,46 +102,19 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
     let centre = info.spec.bounds.centre();
     let pose = |(yaw, pitch): (f32, f32)| turn_about(centre, yaw, pitch) * default_pose;
 
-    let list = |v: &[usize]| {
-        v.iter()
-            .map(|f| f.to_string())
-            .collect::<Vec<_>>()
-            .join(",")
-    };
-    let poses = POSES
-        .iter()
-        .map(|(y, p)| format!("{y},{p}"))
-        .collect::<Vec<_>>()
-        .join(";");
-    let run = Command::new("node")
-        .current_dir(&root)
-        .arg("web/test/browser.mjs")
-        .args(["--wav", wav.to_str().unwrap()])
-        .args(["--out", out.to_str().unwrap()])
-        .args(["--frames", &list(&frames)])
-        .args(["--poses", &poses])
-        .args(["--skip-frames", &n.to_string()])
-        .args(["--ray-graph", ray_path.to_str().unwrap()])
-        .arg("--mic")
-        .output()
-        .unwrap();
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run.stdout),
-        String::from_utf8_lossy(&run.stderr)
+    let n_skip = n.to_string();
+    let ray_graph = ray_path.to_str().unwrap();
+    let result = run_page(
+        &wav,
+        &out,
+        &frames,
+        &["--skip-frames", &n_skip, "--ray-graph", ray_graph, "--mic"],
     );
-    assert!(run.status.success(), "web/test/browser.mjs failed:\n{log}");
-    let result: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("result.json")).unwrap()).unwrap();
     println!(
         "{}, onnxruntime-web {}, {} threads, cross-origin isolated: {}",
         result["chromium"], result["ort_version"], result["threads"], result["crossOriginIsolated"]
     );
 
-    for key in ["errors", "page_errors", "console_errors"] {
-        let list = result[key].as_array().unwrap();
-        assert!(list.is_empty(), "the page reported {key}: {list:?}");
-    }
     assert_eq!(result["crossOriginIsolated"], true, "COOP/COEP headers");
     assert!(result["threads"].as_u64().unwrap() >= 2, "threads");
     let refused = result["ray_graph_error"].as_str().unwrap_or_default();
@@ -355,7 +328,6 @@ fn the_page_draws_an_upsampled_frame_graph() {
     use nldf_core::upsampler_shape::UpsamplerConfig;
     use nldf_export::{WeightType, export_frame_upsampled, export_student_upsampled};
 
-    let root = repo();
     let mut cfg = StudentConfig::realtime();
     cfg.beam.anchor = Some(nldf_core::beam::BeamAnchor {
         centre: [0.02, 0.05, -0.01],
@@ -384,41 +356,12 @@ fn the_page_draws_an_upsampled_frame_graph() {
     let default_pose = Mat4::from_cols_array_2d(&info.spec.default_pose).transpose();
     let centre = info.spec.bounds.centre();
     let pose = |(yaw, pitch): (f32, f32)| turn_about(centre, yaw, pitch) * default_pose;
-    let list = frames
-        .iter()
-        .map(|f| f.to_string())
-        .collect::<Vec<_>>()
-        .join(",");
-    let poses = POSES
-        .iter()
-        .map(|(y, p)| format!("{y},{p}"))
-        .collect::<Vec<_>>()
-        .join(";");
-    let run_page = Command::new("node")
-        .current_dir(&root)
-        .arg("web/test/browser.mjs")
-        .args(["--wav", wav.to_str().unwrap()])
-        .args(["--out", out.to_str().unwrap()])
-        .args(["--model-file", frame_path.to_str().unwrap()])
-        .args(["--frames", &list])
-        .args(["--poses", &poses])
-        .output()
-        .unwrap();
-    let log = format!(
-        "{}{}",
-        String::from_utf8_lossy(&run_page.stdout),
-        String::from_utf8_lossy(&run_page.stderr)
+    let result = run_page(
+        &wav,
+        &out,
+        &frames,
+        &["--model-file", frame_path.to_str().unwrap()],
     );
-    assert!(
-        run_page.status.success(),
-        "web/test/browser.mjs failed:\n{log}"
-    );
-    let result: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("result.json")).unwrap()).unwrap();
-    for key in ["errors", "page_errors", "console_errors"] {
-        let list = result[key].as_array().unwrap();
-        assert!(list.is_empty(), "the page reported {key}: {list:?}");
-    }
     let status = result["model_status"].as_str().unwrap_or_default();
     assert!(
         status.contains("learned upsampler x4") && status.contains("32 x 32"),
@@ -490,4 +433,43 @@ fn check_frames(
         worst = worst.max(d);
     }
     worst
+}
+
+/// Runs `web/test/browser.mjs` on `wav` into `out` for the track frames `frames` at every
+/// pose of [`POSES`], with the driver's `extra` arguments; asserts that it succeeded and the
+/// page reported no error, and returns its `result.json`.
+fn run_page(wav: &Path, out: &Path, frames: &[usize], extra: &[&str]) -> serde_json::Value {
+    let list = frames
+        .iter()
+        .map(|f| f.to_string())
+        .collect::<Vec<_>>()
+        .join(",");
+    let poses = POSES
+        .iter()
+        .map(|(y, p)| format!("{y},{p}"))
+        .collect::<Vec<_>>()
+        .join(";");
+    let run = Command::new("node")
+        .current_dir(repo())
+        .arg("web/test/browser.mjs")
+        .args(["--wav", wav.to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap()])
+        .args(["--frames", &list])
+        .args(["--poses", &poses])
+        .args(extra)
+        .output()
+        .unwrap();
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "web/test/browser.mjs failed:\n{log}");
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("result.json")).unwrap()).unwrap();
+    for key in ["errors", "page_errors", "console_errors"] {
+        let list = result[key].as_array().unwrap();
+        assert!(list.is_empty(), "the page reported {key}: {list:?}");
+    }
+    result
 }
