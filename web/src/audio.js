@@ -4,7 +4,8 @@ export const RATE = 16000;
 
 // PCM or float WAV bytes to { rate, samples } (mono: the channels' mean, as nldf reads
 // them), or null when the file is a WAV the parser does not handle (then Web Audio decodes).
-export function parseWav(bytes) {
+// A NaN or infinite sample throws, naming `name` and the sample's frame, as nldf refuses it.
+export function parseWav(bytes, name = 'the WAV file') {
   const view = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
   const tag = (at) => String.fromCharCode(...bytes.subarray(at, at + 4));
   if (bytes.length < 12 || tag(0) !== 'RIFF' || tag(8) !== 'WAVE') return null;
@@ -53,11 +54,18 @@ export function parseWav(bytes) {
   for (let i = 0; i < frames; i++) {
     let sum = 0;
     for (let c = 0; c < channels; c++) {
-      sum = Math.fround(sum + Math.fround(read(data.start + (i * channels + c) * width)));
+      const v = read(data.start + (i * channels + c) * width);
+      if (!Number.isFinite(v)) throw notFinite(name, i);
+      sum = Math.fround(sum + Math.fround(v));
     }
     samples[i] = sum / channels;
   }
   return { rate: fmt.rate, samples };
+}
+
+// nldf's words for a sample that is NaN or infinite (`decode_wav`, core/src/audio.rs).
+function notFinite(name, frame) {
+  return new Error(`${name}: sample ${frame} is not finite`);
 }
 
 // Mono samples at `rate` resampled to 16 kHz by the browser (OfflineAudioContext).
@@ -76,7 +84,7 @@ async function resample(samples, rate) {
 // Any audio file the browser decodes, as 16 kHz mono samples: a 16 kHz WAV bit for bit as
 // nldf reads it, other rates and formats through Web Audio.
 export async function decodeTo16k(bytes, name = 'the audio file') {
-  const wav = parseWav(bytes);
+  const wav = parseWav(bytes, name);
   if (wav) {
     if (wav.samples.length === 0) throw new Error(`${name} holds no samples`);
     return { samples: wav.rate === RATE ? wav.samples : await resample(wav.samples, wav.rate), sourceRate: wav.rate };
@@ -94,6 +102,8 @@ export async function decodeTo16k(bytes, name = 'the audio file') {
     for (let i = 0; i < mono.length; i++) mono[i] += ch[i] / buffer.numberOfChannels;
   }
   if (mono.length === 0) throw new Error(`${name} holds no samples`);
+  const bad = mono.findIndex((v) => !Number.isFinite(v));
+  if (bad >= 0) throw notFinite(name, bad);
   return { samples: buffer.sampleRate === RATE ? mono : await resample(mono, buffer.sampleRate), sourceRate: buffer.sampleRate };
 }
 
