@@ -1,7 +1,8 @@
 // Frames per second of nldf frame graphs in headless Chromium (onnxruntime-web, WASM SIMD,
 // threads), one JSON line per model: full frames with the head turning, and frames skipping
 // still pixels at the default pose (skip_fps, and skip_ray_share: the share of the head's
-// rays re-rendered).
+// rays re-rendered). Each line records the machine, Chromium and whether its WebAssembly has
+// SIMD (`simd`, the page's detection).
 // node web/bench.mjs [--frames 50] [--warmup 5] [--threads 2] [--wav WAV] MODEL.onnx...
 // (default model: models/demo/frame.onnx; default track: a 4 s voiced test signal).
 // Needs scripts/web_env.sh.
@@ -77,9 +78,6 @@ const common = {
   commit: run('git', ['-C', here, 'rev-parse', '--short', 'HEAD']),
   chromium: run(opts.chromium, ['--version']),
   ort_web: JSON.parse(readFileSync(path.join(here, 'node_modules/onnxruntime-web/package.json'), 'utf8')).version,
-  backend: 'wasm (SIMD, threads)',
-  // onnxruntime-web 1.30 ships only its SIMD + threads WASM build.
-  simd: true,
 };
 
 const server = await startServer(0);
@@ -108,6 +106,7 @@ try {
   await page.waitForFunction(() => window.nldf !== undefined);
   const state = await page.evaluate(() => window.nldf.state());
   if (!state.crossOriginIsolated) throw new Error('the page is not cross-origin isolated: no threads');
+  if (typeof state.simd !== 'boolean') throw new Error('the page does not say whether WASM SIMD is there');
   await page.evaluate(async () => {
     const bytes = new Uint8Array(await (await fetch('/bench/track.wav')).arrayBuffer());
     await window.nldf.setWav(bytes, 'track.wav');
@@ -126,6 +125,9 @@ try {
       width: info.width,
       height: info.height,
       ...common,
+      // The page's own detection (src/wasm.js), not an assumption.
+      backend: `wasm (${state.simd ? 'SIMD' : 'no SIMD'}, ${state.threads} threads)`,
+      simd: state.simd,
       threads: state.threads,
       frames: frame.frames,
       fps: Number(frame.fps.toFixed(2)),

@@ -6,6 +6,7 @@ import * as ort from '../ort/ort.wasm.min.mjs';
 import { frameModelInfo, turnedPose, chunkFor, liveChunk } from './model.js';
 import { RATE, decodeTo16k, Ring, startMicrophone } from './audio.js';
 import { SKIP_CONFIG, StillSkipper, probeFrames } from './still.js';
+import { wasmSimd } from './wasm.js';
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -26,6 +27,7 @@ window.addEventListener('error', (e) => showError(`page error: ${e.message}`));
 window.addEventListener('unhandledrejection', (e) => showError(`page error: ${e.reason?.message ?? e.reason}`));
 
 // The runtime: WASM with SIMD and 2-4 threads where the page is cross-origin isolated.
+const simd = wasmSimd();
 const cores = navigator.hardwareConcurrency || 2;
 const threads = Number(params.get('threads')) || (crossOriginIsolated ? Math.min(4, Math.max(2, cores)) : 1);
 ort.env.wasm.wasmPaths = new URL('../ort/', import.meta.url).href;
@@ -33,7 +35,7 @@ ort.env.wasm.numThreads = threads;
 ort.env.wasm.proxy = false;
 ort.env.logLevel = 'error';
 $('runtime').textContent =
-  `onnxruntime-web ${ort.env.versions?.web ?? ''}, WASM SIMD, ${threads} thread${threads > 1 ? 's' : ''}` +
+  `onnxruntime-web ${ort.env.versions?.web ?? ''}, WASM${simd ? ' SIMD' : ' without SIMD'}, ${threads} thread${threads > 1 ? 's' : ''}` +
   (crossOriginIsolated ? '' : ' (page not cross-origin isolated: one thread)');
 
 const state = {
@@ -423,6 +425,7 @@ const hook = {
     mic: !!state.mic,
     crossOriginIsolated,
     threads,
+    simd,
     // The live loop has nothing left to draw.
     idle: !state.dirty && !state.rendering,
   }),
