@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 set -u
-cd /work/main
-N=/work/rel/release/nldf
+# From the repository's root (three folders up); NLDF names the nldf binary to run.
+cd "$(dirname "$0")/../../.."
+N=${NLDF:-target/release/nldf}
 R=runs/t512h2
 step() { echo "== $1 $(date +%T)" >> runs/sharp/head2.progress; }
 step synth
