@@ -13,6 +13,7 @@ mod identity;
 mod infer;
 mod jobs;
 mod layers;
+mod machine_paths;
 mod metrics;
 mod posed;
 mod rendering;
