@@ -29,6 +29,15 @@ pub enum Error {
     /// The run lacks what the benchmark needs (a student, a report).
     #[error("{0}")]
     Missing(String),
+    /// A benchmark's setting or a timed value is out of range.
+    #[error("{0}")]
+    Argument(String),
+    /// The machine was busier at the start than the benchmark's load limit allows.
+    #[error(
+        "load average {load:.2} at the start is above --max-load {max_load:.2}: wait for an \
+         idle machine, or pass --force to measure anyway (the results will say so)"
+    )]
+    Busy { load: f64, max_load: f64 },
     /// Another error, with what was being done when it happened (`what: source` in a
     /// printed chain).
     #[error("{what}")]

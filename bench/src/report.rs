@@ -18,16 +18,15 @@ pub struct Written {
     pub plots: Vec<PathBuf>,
 }
 
-/// The machine as a table cell: CPU, cores, commit and the load when the benchmark began.
+/// The machine as a table cell: CPU, cores, commit, the load at the start and at the end,
+/// and whether the run was forced above its load limit.
 pub fn machine_cell(m: &Machine) -> String {
     format!(
-        "{} ({} cores), commit {}, load {} at the start",
+        "{} ({} cores), commit {}, {}",
         m.cpu,
         m.cores,
         m.commit,
-        m.load_average_1m
-            .map(|l| format!("{l:.2}"))
-            .unwrap_or_else(|| "unknown".into())
+        crate::load::load_text(m)
     )
 }
 

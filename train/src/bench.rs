@@ -24,11 +24,18 @@ pub struct Machine {
     /// `/proc/loadavg`'s one-minute load when the benchmark started (other work on the
     /// machine skews every figure).
     pub load_average_1m: Option<f64>,
+    /// The same when the benchmark ended (`None` until [`Machine::record_end`]).
+    pub load_average_1m_after: Option<f64>,
+    /// The load at the start above which the benchmark refuses to run without `--force`.
+    pub max_load: Option<f64>,
+    /// The load at the start when it was above `max_load` and the benchmark ran anyway
+    /// (`--force`); `None` when it was not forced.
+    pub forced_at_load: Option<f64>,
 }
 
 impl Machine {
-    /// Reads the CPU model (`/proc/cpuinfo`), core count and the git commit of the working
-    /// directory, each `unknown` when it cannot be read.
+    /// Reads the CPU model (`/proc/cpuinfo`), core count, the git commit of the working
+    /// directory (each `unknown` when it cannot be read) and the load now.
     pub fn here() -> Machine {
         let cpu = nldf_core::host::cpu_model().unwrap_or_else(|| "unknown".into());
         let commit = std::process::Command::new("git")
@@ -49,11 +56,24 @@ impl Machine {
                 .duration_since(std::time::UNIX_EPOCH)
                 .map(|d| d.as_secs())
                 .unwrap_or(0),
-            load_average_1m: std::fs::read_to_string("/proc/loadavg")
-                .ok()
-                .and_then(|t| t.split_whitespace().next()?.parse().ok()),
+            load_average_1m: load_average_1m(),
+            load_average_1m_after: None,
+            max_load: None,
+            forced_at_load: None,
         }
     }
+
+    /// Records the load when the benchmark ended.
+    pub fn record_end(&mut self) {
+        self.load_average_1m_after = load_average_1m();
+    }
+}
+
+/// `/proc/loadavg`'s one-minute load average, `None` where it cannot be read.
+pub fn load_average_1m() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse().ok())
 }
 
 /// CPU seconds (user + system) this process has used, from `/proc/self/stat`.
