@@ -136,6 +136,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
         student_distill: !args.pixels_only,
         ..defaults
     };
+    // The kernels' path is what can move the scores between CPUs: the log says which ran.
+    println!(
+        "== training kernels: {} (NLDF_KERNELS forces avx512, avx2 or portable)",
+        nldf_train::kernels::path().name()
+    );
     let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);

@@ -94,6 +94,13 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // NLDF_KERNELS forces the training kernels' path (checked before any work starts).
+    if let Err(e) =
+        nldf_train::kernels::KernelPath::from_env().and_then(nldf_train::kernels::use_path)
+    {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::run(args),
         Command::Synth(args) => synth_cmd::run(args),

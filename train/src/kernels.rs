@@ -1,5 +1,6 @@
 //! CPU kernels for the dense layers of training: a register-blocked matrix product with an
-//! AVX-512 micro-kernel (a portable one elsewhere), the fused forward `act(x W^T + B)`, and
+//! AVX-512 micro-kernel, an AVX2 one that gives the same bits, and a portable one
+//! (`NLDF_KERNELS` forces one: [`KernelPath`]), the fused forward `act(x W^T + B)`, and
 //! the three backward pieces (ReLU mask with the bias gradient, input gradient, weight
 //! gradient), each parallel over rows with rayon.
 //!
@@ -266,6 +267,95 @@ mod avx512 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{MR, NR, Tile};
+    use std::arch::x86_64::*;
+
+    /// Lanes `start..start + 8` of a row of `cols` columns that exist, as a load mask.
+    #[target_feature(enable = "avx2,fma")]
+    fn lanes(cols: usize, start: usize) -> __m256i {
+        let left = cols.saturating_sub(start).min(8) as i32;
+        _mm256_cmpgt_epi32(
+            _mm256_set1_epi32(left),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        )
+    }
+
+    /// Columns `j0..j0 + 16` of the tile's `R` rows: the same fused multiply-adds, in the
+    /// same order over the reduction, and the same epilogue as the AVX-512 kernel.
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn kernel<const R: usize>(t: &Tile, j0: usize) {
+        // SAFETY (whole function): the caller guarantees that every A(i, p), B row and C
+        // element addressed below (rows < t.rows, columns < t.cols) lies inside its slice;
+        // masked-off lanes are neither read nor written.
+        unsafe {
+            let masks = [lanes(t.cols, j0), lanes(t.cols, j0 + 8)];
+            let mut acc = [[_mm256_setzero_ps(); 2]; R];
+            let (rs, cs) = (t.a.rs, t.a.cs);
+            for p in 0..t.k {
+                let brow = t.b.add(p * t.ldb + j0);
+                let b0 = _mm256_maskload_ps(brow, masks[0]);
+                let b1 = _mm256_maskload_ps(brow.add(8), masks[1]);
+                let arow = t.a.ptr.add(p * cs);
+                for (r, acc_r) in acc.iter_mut().enumerate() {
+                    let av = _mm256_set1_ps(*arow.add(r * rs));
+                    acc_r[0] = _mm256_fmadd_ps(av, b0, acc_r[0]);
+                    acc_r[1] = _mm256_fmadd_ps(av, b1, acc_r[1]);
+                }
+            }
+            let zero = _mm256_setzero_ps();
+            for (r, acc_r) in acc.iter().enumerate() {
+                for (v, &mask) in masks.iter().enumerate() {
+                    let at = j0 + 8 * v;
+                    let mut x = acc_r[v];
+                    if t.accumulate {
+                        x = _mm256_add_ps(x, _mm256_maskload_ps(t.c.add(r * t.ldc + at), mask));
+                    }
+                    if !t.addend[r].is_null() {
+                        x = _mm256_add_ps(x, _mm256_maskload_ps(t.addend[r].add(at), mask));
+                    }
+                    if !t.bias.is_null() {
+                        x = _mm256_add_ps(x, _mm256_maskload_ps(t.bias.add(at), mask));
+                    }
+                    if t.relu {
+                        x = _mm256_max_ps(x, zero);
+                    }
+                    if !t.gate[r].is_null() {
+                        let y = _mm256_maskload_ps(t.gate[r].add(at), mask);
+                        x = _mm256_and_ps(x, _mm256_cmp_ps::<_CMP_GT_OQ>(y, zero));
+                    }
+                    _mm256_maskstore_ps(t.c.add(r * t.ldc + at), mask, x);
+                }
+            }
+        }
+    }
+
+    /// Runs one tile (rows 1..=MR, columns 1..=NR), 16 columns at a time.
+    ///
+    /// # Safety
+    /// The CPU supports AVX2 and FMA and the tile's pointers cover its rows and columns.
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn tile(t: &Tile) {
+        debug_assert!(t.rows >= 1 && t.rows <= MR && t.cols >= 1 && t.cols <= NR);
+        let mut j0 = 0;
+        while j0 < t.cols {
+            // SAFETY: as the caller guarantees; columns past t.cols are masked off.
+            unsafe {
+                match t.rows {
+                    1 => kernel::<1>(t, j0),
+                    2 => kernel::<2>(t, j0),
+                    3 => kernel::<3>(t, j0),
+                    4 => kernel::<4>(t, j0),
+                    5 => kernel::<5>(t, j0),
+                    _ => kernel::<6>(t, j0),
+                }
+            }
+            j0 += 16;
+        }
+    }
+}
+
 /// The portable tile (any CPU).
 ///
 /// # Safety
@@ -308,29 +398,123 @@ unsafe fn tile_portable(t: &Tile) {
     }
 }
 
-fn has_avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx512f")
+/// The micro-kernel a matrix product runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum KernelPath {
+    /// AVX-512F, 16 lanes, fused multiply-add.
+    Avx512,
+    /// AVX2 with FMA, 8 lanes: the same fused multiply-adds in the same order as
+    /// [`KernelPath::Avx512`], so both give the same bits.
+    Avx2,
+    /// Plain Rust (any CPU): separate multiply and add, so it rounds differently.
+    Portable,
+}
+
+impl KernelPath {
+    /// The name `NLDF_KERNELS` takes and logs print.
+    pub fn name(self) -> &'static str {
+        match self {
+            KernelPath::Avx512 => "avx512",
+            KernelPath::Avx2 => "avx2",
+            KernelPath::Portable => "portable",
+        }
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
+
+    /// Whether this CPU can run the path.
+    pub fn available(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        {
+            match self {
+                KernelPath::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+                KernelPath::Avx2 => {
+                    std::arch::is_x86_feature_detected!("avx2")
+                        && std::arch::is_x86_feature_detected!("fma")
+                }
+                KernelPath::Portable => true,
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self == KernelPath::Portable
+        }
+    }
+
+    /// The fastest path this CPU has.
+    pub fn best() -> KernelPath {
+        [KernelPath::Avx512, KernelPath::Avx2]
+            .into_iter()
+            .find(|p| p.available())
+            .unwrap_or(KernelPath::Portable)
+    }
+
+    /// The path named by `NLDF_KERNELS` (`avx512`, `avx2`, `portable`), or the best one
+    /// when it is unset or empty; an unknown name or a path this CPU lacks is an error.
+    pub fn from_env() -> Result<KernelPath, String> {
+        let name = std::env::var("NLDF_KERNELS").unwrap_or_default();
+        KernelPath::parse(&name)
+    }
+
+    fn parse(name: &str) -> Result<KernelPath, String> {
+        let path = match name.trim() {
+            "" | "auto" => return Ok(KernelPath::best()),
+            "avx512" => KernelPath::Avx512,
+            "avx2" => KernelPath::Avx2,
+            "portable" => KernelPath::Portable,
+            other => {
+                return Err(format!(
+                    "NLDF_KERNELS={other:?}: expected avx512, avx2, portable or auto"
+                ));
+            }
+        };
+        if path.available() {
+            Ok(path)
+        } else {
+            Err(format!(
+                "NLDF_KERNELS={}: this CPU lacks the instructions of that path",
+                path.name()
+            ))
+        }
     }
 }
 
-/// Runs a tile on the best kernel this CPU has.
+static FORCED: std::sync::OnceLock<KernelPath> = std::sync::OnceLock::new();
+
+/// The path every product of this process runs on: the one [`use_path`] set, else the
+/// best this CPU has. Set it with [`use_path`] before the first product (the CLI does,
+/// from `NLDF_KERNELS`).
+pub fn path() -> KernelPath {
+    *FORCED.get_or_init(KernelPath::best)
+}
+
+/// Makes every later product of this process run on `path`; returns the path in force,
+/// which is the earlier one if a product already ran or a path was already set.
+///
+/// # Errors
+/// If this CPU cannot run `path`.
+pub fn use_path(path: KernelPath) -> Result<KernelPath, String> {
+    if !path.available() {
+        return Err(format!(
+            "kernel path {}: this CPU lacks its instructions",
+            path.name()
+        ));
+    }
+    Ok(*FORCED.get_or_init(|| path))
+}
+
+/// Runs a tile on `path` (one that this CPU has: [`path`] checks it).
 ///
 /// # Safety
 /// The tile's pointers cover its rows and columns.
-unsafe fn run_tile(t: &Tile, avx512: bool) {
+unsafe fn run_tile(t: &Tile, path: KernelPath) {
     #[cfg(target_arch = "x86_64")]
-    if avx512 {
-        // SAFETY: AVX-512F was detected; the caller vouches for the pointers.
-        unsafe { avx512::tile(t) };
-        return;
+    match path {
+        // SAFETY: the path's instructions were detected; the caller vouches for the pointers.
+        KernelPath::Avx512 => return unsafe { avx512::tile(t) },
+        // SAFETY: as above.
+        KernelPath::Avx2 => return unsafe { avx2::tile(t) },
+        KernelPath::Portable => {}
     }
-    let _ = avx512;
+    let _ = path;
     // SAFETY: the caller vouches for the pointers.
     unsafe { tile_portable(t) }
 }
@@ -371,7 +555,7 @@ unsafe fn gemm_rows(
     bias: *const f32,
     relu: bool,
     gate: *const f32,
-    avx512: bool,
+    path: KernelPath,
 ) {
     let (add_ptr, add_ld, add_mode) = addend;
     // The reduction runs in blocks of KC so that a B sub-panel `[KC, NR]` stays in L1 while
@@ -430,7 +614,7 @@ unsafe fn gemm_rows(
                     }
                 };
                 // SAFETY: as above.
-                unsafe { run_tile(&t, avx512) };
+                unsafe { run_tile(&t, path) };
                 i0 += rows;
             }
             j0 += cols;
@@ -571,7 +755,7 @@ fn gemm_parallel(
     bias: Option<&[f32]>,
     relu: bool,
 ) {
-    let avx512 = has_avx512();
+    let path = path();
     let cp = SendPtr(c.as_mut_ptr());
     let (ap, bp, dp) = (
         SendConst(a.as_ptr()),
@@ -606,7 +790,7 @@ fn gemm_parallel(
                     biasp.0,
                     relu,
                     std::ptr::null(),
-                    avx512,
+                    path,
                 )
             };
         });
@@ -845,7 +1029,7 @@ pub fn block_product(
             epi.bias.map_or(std::ptr::null(), <[f32]>::as_ptr),
             epi.relu,
             epi.gate.map_or(std::ptr::null(), <[f32]>::as_ptr),
-            has_avx512(),
+            path(),
         )
     };
 }
@@ -877,7 +1061,7 @@ pub fn block_weight_grad(
     if rows == 0 || n == 0 || k == 0 {
         return;
     }
-    let avx512 = has_avx512();
+    let path = path();
     let mut p0 = 0;
     while p0 < rows {
         let kb = K_BLOCK.min(rows - p0);
@@ -902,7 +1086,7 @@ pub fn block_weight_grad(
                 std::ptr::null(),
                 false,
                 std::ptr::null(),
-                avx512,
+                path,
             )
         };
         p0 += kb;
@@ -1016,6 +1200,132 @@ mod tests {
                     (*x as f64 - y).abs() < 1e-4,
                     "matmul_tn {m}x{k}x{n}: {x} vs {y}"
                 );
+            }
+        }
+    }
+
+    /// `c (+)= act(a b + addend + bias)` gated, on `path`, through the tiles every product
+    /// uses (`a` `[m, k]`, `b` `[k, n]`, addend, bias, gate and `c` `[m, n]`).
+    #[allow(clippy::too_many_arguments)]
+    fn product_on(
+        path: KernelPath,
+        (a, m, k): (&[f32], usize, usize),
+        (b, n): (&[f32], usize),
+        c: &mut [f32],
+        accumulate: bool,
+        addend: Option<&[f32]>,
+        bias: Option<&[f32]>,
+        relu: bool,
+        gate: Option<&[f32]>,
+    ) {
+        let mut packed = Vec::new();
+        // SAFETY: every slice has the shape given (the caller's test data).
+        unsafe {
+            pack_b(b.as_ptr(), n, k, n, &mut packed);
+            gemm_rows(
+                0,
+                m,
+                n,
+                k,
+                StridedA {
+                    ptr: a.as_ptr(),
+                    rs: k,
+                    cs: 1,
+                },
+                packed.as_ptr(),
+                c.as_mut_ptr(),
+                n,
+                accumulate,
+                (
+                    addend.map_or(std::ptr::null(), <[f32]>::as_ptr),
+                    n,
+                    if addend.is_some() {
+                        Addend::Full
+                    } else {
+                        Addend::None
+                    },
+                ),
+                bias.map_or(std::ptr::null(), <[f32]>::as_ptr),
+                relu,
+                gate.map_or(std::ptr::null(), <[f32]>::as_ptr),
+                path,
+            );
+        }
+    }
+
+    #[test]
+    fn the_avx2_path_gives_the_avx512_paths_bits() {
+        if !(KernelPath::Avx512.available() && KernelPath::Avx2.available()) {
+            if std::env::var_os("CI").is_some() {
+                panic!("CI runs on CPUs with AVX-512F and AVX2: this check needs both");
+            }
+            eprintln!("skipped: this CPU lacks AVX-512F or AVX2");
+            return;
+        }
+        let mut checked = 0;
+        for &(m, k, n) in &[
+            (1, 1, 1),
+            (7, 5, 3),
+            (13, 31, 33),
+            (29, KC + 17, 64),
+            (50, 300, 70),
+            (6, 9, NR + 9),
+        ] {
+            let a = values(m * k, 31);
+            let b = values(k * n, 32);
+            let old = values(m * n, 33);
+            let addend = values(m * n, 34);
+            let bias = values(n, 35);
+            let gate = values(m * n, 36);
+            for mode in 0..8 {
+                let (accumulate, relu, extras) = (mode & 1 != 0, mode & 2 != 0, mode & 4 != 0);
+                let run = |path| {
+                    let mut c = old.clone();
+                    product_on(
+                        path,
+                        (&a, m, k),
+                        (&b, n),
+                        &mut c,
+                        accumulate,
+                        extras.then_some(&addend[..]),
+                        extras.then_some(&bias[..]),
+                        relu,
+                        extras.then_some(&gate[..]),
+                    );
+                    c
+                };
+                let (wide, narrow) = (run(KernelPath::Avx512), run(KernelPath::Avx2));
+                let differ = wide
+                    .iter()
+                    .zip(&narrow)
+                    .filter(|(x, y)| x.to_bits() != y.to_bits())
+                    .count();
+                assert_eq!(
+                    differ, 0,
+                    "{m}x{k}x{n}, mode {mode}: {differ} values differ"
+                );
+                // The portable path rounds each product apart: near, not the same bits.
+                let portable = run(KernelPath::Portable);
+                for (x, y) in portable.iter().zip(&wide) {
+                    assert!((x - y).abs() <= 1e-4 * (1.0 + y.abs()), "{x} vs {y}");
+                }
+                checked += wide.len();
+            }
+        }
+        assert!(checked > 0);
+    }
+
+    #[test]
+    fn kernel_paths_are_named_and_checked() {
+        assert_eq!(KernelPath::parse("").unwrap(), KernelPath::best());
+        assert_eq!(KernelPath::parse("auto").unwrap(), KernelPath::best());
+        assert_eq!(KernelPath::parse("portable").unwrap(), KernelPath::Portable);
+        let err = KernelPath::parse("avx3").unwrap_err();
+        assert!(err.contains("NLDF_KERNELS=\"avx3\""), "{err}");
+        for path in [KernelPath::Avx512, KernelPath::Avx2] {
+            match KernelPath::parse(path.name()) {
+                Ok(p) => assert!(p == path && path.available()),
+                Err(e) => assert!(!path.available() && e.contains("lacks"), "{e}"),
             }
         }
     }
