@@ -51,6 +51,40 @@ pub enum BenchCommand {
     Encoding(EncodingBenchArgs),
 }
 
+/// When a benchmark may run: the machine's load at the start.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct LoadArgs {
+    /// Refuse to run when the one-minute load average (/proc/loadavg) at the start is above
+    /// this; the default allows half a core of other work on a 2-core machine.
+    #[arg(long, default_value_t = nldf_bench::load::DEFAULT_MAX_LOAD)]
+    pub max_load: f64,
+    /// Run even when the load is above --max-load; the results say "forced at load X".
+    #[arg(long)]
+    pub force: bool,
+}
+
+impl LoadArgs {
+    /// The benchmark's load gate.
+    pub fn gate(&self) -> nldf_bench::load::LoadGate {
+        nldf_bench::load::LoadGate {
+            max_load: self.max_load,
+            force: self.force,
+        }
+    }
+}
+
+/// How a benchmark with speed ratios repeats its timings, and when it may run.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct TimingArgs {
+    /// Interleaved rounds (A B A B ...) behind every speed ratio: each round gives one ratio,
+    /// and the median with the smallest and largest is reported ("no difference" where they
+    /// reach 1.0).
+    #[arg(long, default_value_t = nldf_bench::repeats::DEFAULT_PAIRS)]
+    pub pairs: usize,
+    #[command(flatten)]
+    pub load: LoadArgs,
+}
+
 #[derive(clap::Args, Debug)]
 pub struct UpsamplerBenchArgs {
     /// Run folder with the teacher, the student and the upsampler.
@@ -77,6 +111,8 @@ pub struct UpsamplerBenchArgs {
     /// Output folder (default RUN/bench_upsampler).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub load: LoadArgs,
 }
 
 fn upsampler(args: UpsamplerBenchArgs) -> Result<()> {
@@ -96,6 +132,7 @@ fn upsampler(args: UpsamplerBenchArgs) -> Result<()> {
         splits,
         teacher: !args.no_teacher,
         batch: args.batch,
+        load: args.load.gate(),
     };
     let mut printer = EventPrinter::default();
     let mut show = |e: &nldf_train::job::JobEvent| printer.show(e);
@@ -113,7 +150,7 @@ pub struct WebBenchArgs {
     /// timed in onnxruntime skipping still pixels as `nldf render --skip-still` does.
     #[arg(long = "ray-model")]
     pub ray_models: Vec<PathBuf>,
-    /// Timed frames per model and runtime.
+    /// Timed frames per model, runtime and round.
     #[arg(long, default_value_t = 60)]
     pub frames: usize,
     /// Threads of every runtime, the browser's WASM threads too.
@@ -128,6 +165,8 @@ pub struct WebBenchArgs {
     /// Folder for web.json and web.md.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub timing: TimingArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -144,6 +183,8 @@ pub struct EncodingBenchArgs {
     /// Folder for encoding.json and encoding.md.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub load: LoadArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -157,12 +198,14 @@ pub struct StudentStepArgs {
     /// Rays per step (the pool adds hard_ratio x this).
     #[arg(long, default_value_t = 4096)]
     pub rays: usize,
-    /// Timed steps (after 2 untimed ones).
+    /// Timed steps per round (after 2 untimed ones before the first).
     #[arg(long, default_value_t = 10)]
     pub steps: usize,
     /// Folder for student_step.json and student_step.md.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub timing: TimingArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -177,12 +220,14 @@ pub struct TeacherStepArgs {
     /// Rays per step.
     #[arg(long, default_value_t = 1024)]
     pub rays: usize,
-    /// Timed steps (after 3 untimed ones).
+    /// Timed steps per round (after 3 untimed ones before the first).
     #[arg(long, default_value_t = 20)]
     pub steps: usize,
     /// Folder for teacher_step.json and teacher_step.md.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub timing: TimingArgs,
 }
 
 /// Runs a `nldf bench` subcommand.
@@ -230,6 +275,8 @@ fn web(args: WebBenchArgs) -> Result<()> {
         frames: args.frames,
         threads: args.threads,
         web: (!args.no_browser).then_some(args.web),
+        pairs: args.timing.pairs,
+        load: args.timing.load.gate(),
     };
     let report = job.run(&mut |note| eprintln!("{note}"))?;
     print_written(&report.write(&args.out)?);
@@ -247,8 +294,9 @@ fn encoding(args: EncodingBenchArgs) -> Result<()> {
         freqs: args.freqs,
         range: args.range,
         reps: args.reps,
+        load: args.load.gate(),
     };
-    print_written(&job.run().write(&args.out)?);
+    print_written(&job.run()?.write(&args.out)?);
     Ok(())
 }
 
@@ -259,6 +307,8 @@ fn student_step(args: StudentStepArgs) -> Result<()> {
         model: args.depth.config(),
         rays: args.rays,
         steps: args.steps,
+        pairs: args.timing.pairs,
+        load: args.timing.load.gate(),
     };
     let mut printer = EventPrinter::default();
     let report = job.run(&mut |e| printer.show(e))?;
@@ -273,6 +323,8 @@ fn teacher_step(args: TeacherStepArgs) -> Result<()> {
         model: args.preset.config(),
         rays: args.rays,
         steps: args.steps,
+        pairs: args.timing.pairs,
+        load: args.timing.load.gate(),
     };
     let mut printer = EventPrinter::default();
     let report = job.run(&mut |e| printer.show(e))?;

@@ -17,7 +17,7 @@ pub struct RenderBenchArgs {
     /// The exported model (`nldf export`).
     #[arg(long)]
     pub model: PathBuf,
-    /// Timed frames per measurement (the median is reported).
+    /// Timed frames per measurement and round (the median is reported).
     #[arg(long, default_value_t = 7)]
     pub reps: usize,
     /// Rays per network call.
@@ -29,6 +29,8 @@ pub struct RenderBenchArgs {
     /// Folder for render.json, render.md and render.png.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub timing: crate::bench_cmd::TimingArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -57,6 +59,8 @@ pub struct StreamBenchArgs {
     /// Folder for stream.json and stream.md (the frames go to a temporary folder).
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub load: crate::bench_cmd::LoadArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -86,14 +90,18 @@ pub struct StillBenchArgs {
     /// Folder for still.json and still.md.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub timing: crate::bench_cmd::TimingArgs,
 }
 
 /// Runs `nldf bench render`.
 pub fn render(args: RenderBenchArgs) -> Result<()> {
-    let plan = RenderBenchPlan::open(&args.model)?;
     let options = crate::render_cmd::backend_options(args.batch, args.threads)?;
+    let plan = RenderBenchPlan::open(&args.model, args.timing.load.gate())?;
     let mut printer = EventPrinter::default();
-    let report = plan.run(args.reps, options, &mut |e| printer.show(e))?;
+    let report = plan.run(args.reps, args.timing.pairs, options, &mut |e| {
+        printer.show(e)
+    })?;
     print_written(&report.write(&args.out)?);
     Ok(())
 }
@@ -111,6 +119,7 @@ pub fn stream(args: StreamBenchArgs) -> Result<()> {
         size: args.size,
         piece_ms: args.piece_ms,
         drop_behind: args.drop_behind,
+        load: args.load.gate(),
     };
     let mut printer = EventPrinter::default();
     let report = job.run(&mut |e| printer.show(e))?;
@@ -134,6 +143,8 @@ pub fn still(args: StillBenchArgs) -> Result<()> {
         backend: args.backend.into(),
         thresholds: args.thresholds,
         options,
+        pairs: args.timing.pairs,
+        load: args.timing.load.gate(),
     };
     let mut printer = EventPrinter::default();
     let report = job.run(&mut |e| printer.show(e))?;

@@ -38,8 +38,9 @@ pub struct FrontierArgs {
     #[arg(long, default_value_t = BackendOptions::default().batch_size)]
     pub batch: usize,
     /// Frames timed for AD-NeRF's setting (8 x 256, 64 + 128 samples per ray, every pixel
-    /// and every sample, seeded weights: its time, not its quality); 0 leaves it out.
-    #[arg(long, default_value_t = 2)]
+    /// and every sample, seeded weights: its time, not its quality), each rendered in turn
+    /// by the points it is set against: the pairs of its speed-ups; 0 leaves it out.
+    #[arg(long, default_value_t = nldf_bench::repeats::DEFAULT_PAIRS)]
     pub adnerf_frames: usize,
     /// The same scene at a higher resolution (`nldf synth --seed S --size 256`): the
     /// teacher and every export in onnxruntime render its `val` frames at its size, with
@@ -52,6 +53,8 @@ pub struct FrontierArgs {
     /// its turn, each turn one untimed frame and then its share of these.
     #[arg(long, default_value_t = 8)]
     pub timed_frames: usize,
+    #[command(flatten)]
+    pub load: crate::bench_cmd::LoadArgs,
 }
 
 /// Runs `nldf bench frontier`.
@@ -68,6 +71,7 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         adnerf_frames: args.adnerf_frames,
         hires_data: args.hires_data,
         timed_frames: args.timed_frames,
+        load: args.load.gate(),
     };
     let mut printer = EventPrinter::default();
     let report = job.run(&mut |e| printer.show(e))?;

@@ -8,6 +8,7 @@ use nldf_train::bench::{EncodingBench, Machine, bench_encoding};
 use serde::Serialize;
 
 use crate::error::Result;
+use crate::load::LoadGate;
 use crate::report::{Written, machine_cell, write_bench_files};
 
 /// What the encoding benchmark measures.
@@ -19,6 +20,9 @@ pub struct EncodingJob {
     pub range: f32,
     /// Timed repetitions (the median is reported).
     pub reps: usize,
+    /// The load limit at the start.
+    #[serde(skip)]
+    pub load: LoadGate,
 }
 
 /// The encoding benchmark's report: `encoding.json`.
@@ -32,16 +36,17 @@ pub struct EncodingReport {
 }
 
 impl EncodingJob {
-    /// Times and checks the variants.
-    pub fn run(&self) -> EncodingReport {
-        let machine = Machine::here();
+    /// Times and checks the variants, if the machine's load admits it.
+    pub fn run(&self) -> Result<EncodingReport> {
+        let mut machine = self.load.admit()?;
         let result = bench_encoding(self.freqs, self.range, self.reps);
-        EncodingReport {
+        machine.record_end();
+        Ok(EncodingReport {
             bench: "encoding",
             machine,
             settings: *self,
             result,
-        }
+        })
     }
 }
 

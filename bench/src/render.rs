@@ -1,6 +1,9 @@
 //! The frame rendering benchmark (`nldf bench render`): an exported model's whole frames in
 //! onnxruntime against bare onnxruntime on the same rays, tract against onnxruntime, and
-//! frame time against the share of pixels the head covers, with a plot of the last.
+//! frame time against the share of pixels the head covers, with a plot of the last. The
+//! measurements run in rounds (bare, ort, tract, every pixel, each coverage; again), so each
+//! ratio is one per round, over interleaved pairs ([`crate::repeats`]); the times in the
+//! table are the median of the rounds' medians.
 
 use std::path::{Path, PathBuf};
 
@@ -13,6 +16,8 @@ use nldf_train::plot::{Series, palette, plot_xy};
 use serde::Serialize;
 
 use crate::error::{Result, create_dir};
+use crate::load::LoadGate;
+use crate::repeats::{Ratio, check_pairs};
 use crate::report::{Written, machine_cell, write_bench_files};
 
 /// An exported model read for the render benchmark.
@@ -30,13 +35,24 @@ pub struct RenderReport {
     pub machine: Machine,
     /// The exported model.
     pub model: PathBuf,
+    /// The first round, its times replaced by the median over the rounds.
     pub result: RenderBench,
+    /// Every round, in order.
+    pub rounds: Vec<RenderBench>,
+    /// Bare onnxruntime's time over the ort whole frame's, per round: the share of the bare
+    /// throughput the whole frame keeps.
+    pub ort_frame_over_bare: Ratio,
+    /// tract's whole-frame time over onnxruntime's, per round.
+    pub tract_over_ort: Ratio,
+    /// Each coverage frame's time over the every-pixel frame's, per round, in the order of
+    /// `result.coverage`.
+    pub coverage_over_full: Vec<Ratio>,
 }
 
 impl RenderBenchPlan {
-    /// Reads the exported model at `path`.
-    pub fn open(path: &Path) -> Result<RenderBenchPlan> {
-        let machine = Machine::here();
+    /// Reads the exported model at `path`, if the machine's load admits the benchmark.
+    pub fn open(path: &Path, load: LoadGate) -> Result<RenderBenchPlan> {
+        let machine = load.admit()?;
         let model = nldf_export::read_model(path)?;
         Ok(RenderBenchPlan {
             machine,
@@ -45,29 +61,83 @@ impl RenderBenchPlan {
         })
     }
 
-    /// Times the model's frames, `reps` per measurement, with `options`; each measurement
-    /// is announced as a note.
+    /// Times the model's frames in `pairs` rounds, `reps` frames per measurement, with
+    /// `options`; each measurement is announced as a note.
     pub fn run(
         self,
         reps: usize,
+        pairs: usize,
         options: BackendOptions,
         on_event: OnEvent,
     ) -> Result<RenderReport> {
+        check_pairs(pairs)?;
         let cfg = RenderBenchConfig {
             reps,
             options,
             ..RenderBenchConfig::default()
         };
-        let result = bench_render(&self.model, &cfg, |what| {
-            on_event(&JobEvent::Note(what.to_string()))
-        })?;
+        let mut rounds = Vec::new();
+        for round in 0..pairs {
+            rounds.push(bench_render(&self.model, &cfg, |what| {
+                on_event(&JobEvent::Note(format!(
+                    "round {} of {pairs}: {what}",
+                    round + 1
+                )))
+            })?);
+        }
+        let mut machine = self.machine;
+        machine.record_end();
+        let ratio = |f: &dyn Fn(&RenderBench) -> (f64, f64)| {
+            Ratio::of_pairs(&rounds.iter().map(f).collect::<Vec<_>>())
+        };
+        let ort_frame_over_bare = ratio(&|r| (r.bare_ort.seconds, r.ort_frame.seconds))?;
+        let tract_over_ort = ratio(&|r| (r.tract_frame.seconds, r.ort_frame.seconds))?;
+        let coverage_over_full = (0..rounds[0].coverage.len())
+            .map(|i| ratio(&|r| (r.coverage[i].seconds, r.full_frame.seconds)))
+            .collect::<Result<Vec<_>>>()?;
+        // The result's own ratios are the rounds' medians, as the table writes them.
+        let mut result = median_round(&rounds);
+        result.ort_frame_over_bare = ort_frame_over_bare.median;
+        result.tract_over_ort = tract_over_ort.median;
+        result.at_30_percent = result.at_30_percent.and_then(|(share, _)| {
+            let i = result
+                .coverage
+                .iter()
+                .position(|t| t.head_fraction == share)?;
+            Some((share, coverage_over_full.get(i)?.median))
+        });
         Ok(RenderReport {
             bench: "render",
-            machine: self.machine,
+            machine,
             model: self.path,
             result,
+            rounds,
+            ort_frame_over_bare,
+            tract_over_ort,
+            coverage_over_full,
         })
     }
+}
+
+/// The first of `rounds` (at least one) with each time the median over the rounds, and the
+/// rates worked out from those medians.
+fn median_round(rounds: &[RenderBench]) -> RenderBench {
+    use nldf_core::stats::median;
+    let mut r = rounds[0].clone();
+    let med = |f: &dyn Fn(&RenderBench) -> f64| median(&rounds.iter().map(f).collect::<Vec<_>>());
+    let set = |t: &mut nldf_infer::bench::FrameTiming, seconds: f64| {
+        t.seconds = seconds;
+        t.rays_per_s = t.network_rays as f64 / seconds.max(1e-12);
+    };
+    set(&mut r.bare_ort, med(&|x| x.bare_ort.seconds));
+    set(&mut r.ort_frame, med(&|x| x.ort_frame.seconds));
+    set(&mut r.tract_frame, med(&|x| x.tract_frame.seconds));
+    set(&mut r.full_frame, med(&|x| x.full_frame.seconds));
+    for i in 0..r.coverage.len() {
+        let s = med(&|x| x.coverage.get(i).map_or(f64::NAN, |t| t.seconds));
+        set(&mut r.coverage[i], s);
+    }
+    r
 }
 
 fn ms(s: f64) -> f64 {
@@ -134,13 +204,13 @@ impl RenderReport {
         let mut md = format!(
             "| render, {} x {} student, {}x{} frames | value |\n|---|---|\n\
              | machine | {} |\n\
-             | settings | batch {}, {} threads, median of {} frames after {} untimed |\n\
+             | settings | batch {}, {} threads, {} rounds, each timing every row by the median of {} frames after {} untimed; times: the median of the rounds; ratios: the median over the rounds (smallest-largest) |\n\
              | default frame | head covers {:.1} % of the pixels ({} rays) |\n\
              | bare onnxruntime, the same rays | {:.1} ms ({:.0} rays/s) |\n\
              | ort whole frame | {:.1} ms ({:.0} rays/s, {:.2} frames/s) |\n\
-             | ort whole frame / bare | {:.1} % of the bare throughput |\n\
+             | ort whole frame / bare | {} the bare throughput |\n\
              | tract whole frame | {:.1} ms ({:.2} frames/s) |\n\
-             | tract / ort | {:.2}x the time |\n\
+             | tract / ort | {} the time |\n\
              | every pixel through the network (ort) | {:.1} ms ({} rays) |\n",
             r.depth,
             r.width,
@@ -149,6 +219,7 @@ impl RenderReport {
             machine_cell(&self.machine),
             cfg.options.batch_size,
             cfg.options.threads,
+            self.rounds.len(),
             cfg.reps,
             cfg.warmup,
             pct(r.ort_frame.head_fraction),
@@ -158,27 +229,20 @@ impl RenderReport {
             ms(r.ort_frame.seconds),
             r.ort_frame.rays_per_s,
             1.0 / r.ort_frame.seconds,
-            pct(r.ort_frame_over_bare),
+            self.ort_frame_over_bare.cell(),
             ms(r.tract_frame.seconds),
             1.0 / r.tract_frame.seconds,
-            r.tract_over_ort,
+            self.tract_over_ort.cell(),
             ms(r.full_frame.seconds),
             r.full_frame.network_rays,
         );
-        for t in &r.coverage {
+        for (t, ratio) in r.coverage.iter().zip(&self.coverage_over_full) {
             md += &format!(
-                "| head on {:.1} % of the pixels (focal {:.0} px) | {:.1} ms, {:.1} % of every-pixel time |\n",
+                "| head on {:.1} % of the pixels (focal {:.0} px) | {:.1} ms, {} the every-pixel time |\n",
                 pct(t.head_fraction),
                 t.focal,
                 ms(t.seconds),
-                pct(t.seconds / r.full_frame.seconds)
-            );
-        }
-        if let Some((share, ratio)) = r.at_30_percent {
-            md += &format!(
-                "| at {:.1} % coverage | {:.1} % of the every-pixel frame time |\n",
-                pct(share),
-                pct(ratio)
+                ratio.cell()
             );
         }
         md

@@ -7,8 +7,10 @@
 //! The verdict is a sign test: a ratio counts as a difference only when every pair falls on
 //! the same side of 1.0, that is when the spread (minimum to maximum) does not reach 1.0.
 //! Were A and B equally fast, each pair would fall on either side with even odds, so `n`
-//! pairs would all agree by chance with probability `2 * 0.5^n`; [`DEFAULT_PAIRS`] keeps
-//! that small. Otherwise the ratio is written as "no difference", its numbers beside it.
+//! pairs would all agree by chance with probability `2 * 0.5^n`; with fewer than
+//! [`MIN_PAIRS_FOR_A_DIFFERENCE`] pairs that is too likely, and the verdict is "no
+//! difference" however the pairs fall. Otherwise the ratio is written as "no difference"
+//! only where the spread reaches 1.0, its numbers beside it.
 
 use serde::Serialize;
 
@@ -16,6 +18,11 @@ use crate::error::{Error, Result};
 
 /// Pairs a benchmark times by default.
 pub const DEFAULT_PAIRS: usize = 5;
+
+/// The fewest pairs that can show a difference: with fewer, every pair falls on one side
+/// too often by chance alone (`2 * 0.5^n`), so the verdict is "no difference" whatever
+/// the ratios.
+pub const MIN_PAIRS_FOR_A_DIFFERENCE: usize = 5;
 
 /// The fewest pairs a benchmark accepts (one pair has no spread).
 pub const MIN_PAIRS: usize = 2;
@@ -45,7 +52,7 @@ pub struct Ratio {
     /// How many pairs.
     pub pairs: usize,
     /// [`Verdict::NoDifference`] where `min <= 1 <= max`, or with fewer than
-    /// [`MIN_PAIRS`] pairs.
+    /// [`MIN_PAIRS_FOR_A_DIFFERENCE`] pairs.
     pub verdict: Verdict,
 }
 
@@ -88,7 +95,7 @@ impl Ratio {
             min,
             max,
             pairs: ratios.len(),
-            verdict: if ratios.len() < MIN_PAIRS {
+            verdict: if ratios.len() < MIN_PAIRS_FOR_A_DIFFERENCE {
                 Verdict::NoDifference
             } else {
                 verdict(min, max)
@@ -201,10 +208,14 @@ mod tests {
         // A spread that touches 1.0 is no difference either.
         let r = Ratio::of_ratios(&[1.0, 1.2, 1.3]).unwrap();
         assert_eq!(r.verdict, Verdict::NoDifference);
-        // Nor is one pair, however far from 1.0: it has no spread.
+        // Nor are too few pairs, however far from 1.0: four that agree prove little.
         let r = Ratio::of_ratios(&[3.0]).unwrap();
         assert_eq!(r.verdict, Verdict::NoDifference);
         assert_eq!(r.cell(), "no difference (3.00x, 3.00-3.00, 1 pair)");
+        let r = Ratio::of_ratios(&[3.0, 3.1, 2.9, 3.05]).unwrap();
+        assert_eq!(r.verdict, Verdict::NoDifference);
+        let r = Ratio::of_ratios(&[3.0, 3.1, 2.9, 3.05, 3.2]).unwrap();
+        assert_eq!(r.verdict, Verdict::Above);
     }
 
     #[test]

@@ -1,6 +1,9 @@
 //! The still-pixel benchmark (`nldf bench still`): frames that re-render only the pixels
 //! the audio moves, against full renders, on a still pose, a pose held 2 s at a time and a
-//! moving pose; time per frame and error against the full frames.
+//! moving pose; time per frame and error against the full frames. Each track runs in
+//! `pairs` rounds (every track, then every track again), a fresh skipper each time, the
+//! full and the skipping frame taking turns frame by frame; the speed-up is one ratio per
+//! round, over interleaved pairs ([`crate::repeats`]).
 
 use std::path::{Path, PathBuf};
 
@@ -14,6 +17,8 @@ use nldf_train::job::{JobEvent, OnEvent};
 use serde::Serialize;
 
 use crate::error::Result;
+use crate::load::LoadGate;
+use crate::repeats::{Ratio, check_pairs};
 use crate::report::{Written, machine_cell, write_bench_files};
 
 /// What the still-pixel benchmark renders.
@@ -32,6 +37,10 @@ pub struct StillBenchJob {
     pub thresholds: Vec<f32>,
     /// Batch size and threads (the pools never spin: the two renderers take turns).
     pub options: BackendOptions,
+    /// Rounds of every track (at least 2).
+    pub pairs: usize,
+    /// The load limit at the start.
+    pub load: LoadGate,
 }
 
 /// The still-pixel benchmark's settings, as its JSON records them.
@@ -47,6 +56,21 @@ pub struct StillSettings {
     /// The first threshold's skipping settings.
     pub skip: SkipConfig,
     pub thresholds: Vec<f32>,
+    /// Rounds of every track.
+    pub pairs: usize,
+}
+
+/// One track at one threshold over every round.
+#[derive(Debug, Clone, Serialize)]
+pub struct StillRow {
+    /// The first round (its rays, full frames and errors are the row's; its speed-up is
+    /// replaced by the median over the rounds).
+    pub track: StillTrack,
+    /// Mean milliseconds per frame of each round, in full and with skipping.
+    pub full_ms_means: Vec<f64>,
+    pub skip_ms_means: Vec<f64>,
+    /// The full frames' mean time over the skipping frames', per round.
+    pub speed_up: Ratio,
 }
 
 /// The model's shape and frame rate, for the table's heading.
@@ -67,7 +91,7 @@ pub struct StillReport {
     pub model: PathBuf,
     pub settings: StillSettings,
     /// One row per track and threshold.
-    pub tracks: Vec<StillTrack>,
+    pub tracks: Vec<StillRow>,
     #[serde(skip)]
     pub network: StillModel,
 }
@@ -75,7 +99,8 @@ pub struct StillReport {
 impl StillBenchJob {
     /// Renders every track in full and with skipping, frame by frame in turn.
     pub fn run(&self, on_event: OnEvent) -> Result<StillReport> {
-        let machine = Machine::here();
+        check_pairs(self.pairs)?;
+        let mut machine = self.load.admit()?;
         let mut options = self.options;
         // The full and the skipping renderer take turns: neither pool may spin beside the
         // other.
@@ -117,28 +142,56 @@ impl StillBenchJob {
             ("moving pose (the default sway)", moving.clone()),
         ];
         // Every threshold on the still and the held tracks; the moving track never skips,
-        // so it runs once.
-        let mut rows = Vec::new();
-        for (i, (label, poses)) in tracks.iter().enumerate() {
-            let moving = i == tracks.len() - 1;
-            for c in if moving { &configs[..1] } else { &configs[..] } {
-                on_event(&JobEvent::Note(format!(
-                    "{label}, threshold {}/255: {frames} frames in full and with skipping",
-                    255.0 * c.threshold
-                )));
-                let mut row = bench_track(
-                    &mut full,
-                    &mut skipping,
-                    label,
-                    poses,
-                    &audio,
-                    *c,
-                    probes.clone(),
-                )?;
-                row.label = format!("{label}, threshold {:.0}/255", 255.0 * c.threshold);
-                rows.push(row);
+        // so it runs once a round.
+        let mut rounds: Vec<Vec<StillTrack>> = Vec::new();
+        for round in 0..self.pairs {
+            let mut rows = Vec::new();
+            for (i, (label, poses)) in tracks.iter().enumerate() {
+                let moving = i == tracks.len() - 1;
+                for c in if moving { &configs[..1] } else { &configs[..] } {
+                    on_event(&JobEvent::Note(format!(
+                        "round {} of {}: {label}, threshold {}/255: {frames} frames in full and \
+                         with skipping",
+                        round + 1,
+                        self.pairs,
+                        255.0 * c.threshold
+                    )));
+                    let mut row = bench_track(
+                        &mut full,
+                        &mut skipping,
+                        label,
+                        poses,
+                        &audio,
+                        *c,
+                        probes.clone(),
+                    )?;
+                    row.label = format!("{label}, threshold {:.0}/255", 255.0 * c.threshold);
+                    rows.push(row);
+                }
             }
+            rounds.push(rows);
         }
+        machine.record_end();
+        let rows = (0..rounds[0].len())
+            .map(|k| {
+                let full_ms_means: Vec<f64> = rounds.iter().map(|r| r[k].full_ms_mean).collect();
+                let skip_ms_means: Vec<f64> = rounds.iter().map(|r| r[k].skip_ms_mean).collect();
+                let pairs: Vec<(f64, f64)> = full_ms_means
+                    .iter()
+                    .copied()
+                    .zip(skip_ms_means.iter().copied())
+                    .collect();
+                let speed_up = Ratio::of_pairs(&pairs)?;
+                let mut track = rounds[0][k].clone();
+                track.speedup = speed_up.median;
+                Ok(StillRow {
+                    track,
+                    full_ms_means,
+                    skip_ms_means,
+                    speed_up,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
         Ok(StillReport {
             bench: "still",
             machine,
@@ -152,6 +205,7 @@ impl StillBenchJob {
                 batch: options.batch_size,
                 skip: config,
                 thresholds: self.thresholds.clone(),
+                pairs: self.pairs,
             },
             tracks: rows,
             network: StillModel {
@@ -193,16 +247,22 @@ impl StillReport {
             config.probes,
             config.refresh,
         );
-        md += "\n| track | full ms/frame (mean, median) | skipping ms/frame (mean, median) | speed-up | network rays | full frames | PSNR vs full | worst frame | max error |\n|---|---|---|---|---|---|---|---|---|\n";
-        for r in &self.tracks {
+        md += &format!(
+            "\n{} rounds of every track, a fresh skipper each; times: the median over the rounds \
+             of each round's mean; speed-up: the median over the rounds of full over skipping \
+             (smallest-largest); rays, frames and errors: the first round's.\n",
+            s.pairs
+        );
+        md += "\n| track | full ms/frame | skipping ms/frame | speed-up | network rays | full frames | PSNR vs full | worst frame | max error |\n|---|---|---|---|---|---|---|---|---|\n";
+        let median = nldf_core::stats::median;
+        for row in &self.tracks {
+            let r = &row.track;
             md += &format!(
-                "| {} | {:.1}, {:.1} | {:.1}, {:.1} | {:.2}x | {:.1} % | {} of {} | {} | {} | {:.1}/255 |\n",
+                "| {} | {:.1} | {:.1} | {} | {:.1} % | {} of {} | {} | {} | {:.1}/255 |\n",
                 r.label,
-                r.full_ms_mean,
-                r.full_ms_median,
-                r.skip_ms_mean,
-                r.skip_ms_median,
-                r.speedup,
+                median(&row.full_ms_means),
+                median(&row.skip_ms_means),
+                row.speed_up.cell(),
                 100.0 * r.ray_share,
                 r.full_frames,
                 r.frames,

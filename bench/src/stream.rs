@@ -11,6 +11,7 @@ use nldf_train::job::{JobEvent, OnEvent};
 use serde::Serialize;
 
 use crate::error::{Result, temp_dir};
+use crate::load::LoadGate;
 use crate::report::{Written, machine_cell, write_bench_files};
 
 /// What the streaming benchmark streams.
@@ -30,6 +31,8 @@ pub struct StreamBenchJob {
     pub piece_ms: u64,
     /// Frames that may wait behind the next one before the stream skips to the newest.
     pub drop_behind: usize,
+    /// The load limit at the start.
+    pub load: LoadGate,
 }
 
 /// The streaming benchmark's settings, as its JSON records them.
@@ -57,7 +60,7 @@ pub struct StreamBenchReport {
 impl StreamBenchJob {
     /// Streams the audio's first `seconds` at real-time speed into a temporary folder.
     pub fn run(&self, on_event: OnEvent) -> Result<StreamBenchReport> {
-        let machine = Machine::here();
+        let mut machine = self.load.admit()?;
         let wave = nldf_core::audio::read_wav(&self.audio)?;
         let wave = wave.truncated((self.seconds * wave.sample_rate as f64) as usize);
         let frames = temp_dir()?;
@@ -78,6 +81,7 @@ impl StreamBenchJob {
         )));
         let source = paced_wav_stream(&wave, 1.0, Duration::from_millis(self.piece_ms.max(1)))?;
         let result = plan.run(source, "the paced stream", |_, _| {})?;
+        machine.record_end();
         Ok(StreamBenchReport {
             bench: "stream",
             machine,

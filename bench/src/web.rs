@@ -4,7 +4,10 @@
 //! against native onnxruntime's. Full frames with the head turning, and frames skipping
 //! still pixels at the default pose: the page's skipping beside nldf's own
 //! (`nldf_infer::still::StillSkipper`, as `nldf render --skip-still`) on the same student's
-//! ray graph in onnxruntime, over the same WAV.
+//! ray graph in onnxruntime, over the same WAV. Everything runs in rounds (every model
+//! natively, then the browser; again), so the browser's frame rate against native
+//! onnxruntime's is one ratio per round, over interleaved pairs ([`crate::repeats`]); the
+//! frame rates in the table are the median over the rounds.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -22,6 +25,8 @@ use nldf_train::bench::Machine;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::load::LoadGate;
+use crate::repeats::{Ratio, check_pairs};
 use crate::report::{Written, machine_cell, write_bench_files};
 
 /// Frames rendered before timing starts (plans compiled, caches warm).
@@ -42,9 +47,13 @@ pub struct WebBenchJob {
     /// The page's folder (`web/`), whose `bench.mjs` times the browser; `None` times the
     /// native runtimes alone.
     pub web: Option<PathBuf>,
+    /// Rounds (at least 2): every model natively, then in the browser.
+    pub pairs: usize,
+    /// The load limit at the start.
+    pub load: LoadGate,
 }
 
-/// One model's frame rates.
+/// One model's frame rates: the median over the rounds, each round's beside it.
 #[derive(Debug, Clone, Serialize)]
 pub struct WebRow {
     pub model: PathBuf,
@@ -65,9 +74,23 @@ pub struct WebRow {
     pub browser: Option<serde_json::Value>,
     /// The ray graph timed with nldf's skipping.
     pub ray_model: Option<PathBuf>,
-    /// Native onnxruntime with nldf's skipping on the ray graph (its `skip_ms_mean` is
-    /// the figure; `full_ms_mean` is the ray graph's full frames).
+    /// Native onnxruntime with nldf's skipping on the ray graph, the first round (its
+    /// `ray_share` is the row's; `full_ms_mean` is the ray graph's full frames).
     pub ort_skip: Option<StillTrack>,
+    /// Native onnxruntime skipping still pixels, frames per second (median over the
+    /// rounds).
+    pub ort_skip_fps: Option<f64>,
+    /// Each round's frames per second: onnxruntime, tract, the browser, the browser
+    /// skipping, onnxruntime skipping.
+    pub rounds_ort_fps: Vec<f64>,
+    pub rounds_tract_fps: Vec<f64>,
+    pub rounds_browser_fps: Vec<f64>,
+    pub rounds_browser_skip_fps: Vec<f64>,
+    pub rounds_ort_skip_fps: Vec<f64>,
+    /// The browser's frame rate over native onnxruntime's, per round.
+    pub browser_over_ort: Option<Ratio>,
+    /// The same, both skipping still pixels.
+    pub browser_over_ort_skipping: Option<Ratio>,
 }
 
 /// The report: `web.json`.
@@ -78,6 +101,8 @@ pub struct WebReport {
     pub machine: Machine,
     pub frames: usize,
     pub threads: usize,
+    /// Rounds of every model and runtime.
+    pub pairs: usize,
     /// Seconds of the WAV (a voiced test signal) every frame's audio comes from.
     pub track_seconds: f64,
     /// Still-pixel skipping's settings, the page's and nldf's.
@@ -86,7 +111,7 @@ pub struct WebReport {
 }
 
 impl WebBenchJob {
-    /// Times every model natively, then in the browser.
+    /// Times every model natively, then in the browser, in rounds.
     pub fn run(&self, note: &mut dyn FnMut(&str)) -> Result<WebReport> {
         if !(self.ray_models.is_empty() || self.ray_models.len() == self.models.len()) {
             return Err(Error::Missing(format!(
@@ -95,7 +120,8 @@ impl WebBenchJob {
                 self.models.len()
             )));
         }
-        let machine = Machine::here();
+        check_pairs(self.pairs)?;
+        let mut machine = self.load.admit()?;
         let dir = crate::error::temp_dir()?;
         let wav = dir.path().join("voice.wav");
         // Whole frames at 25 fps, at least 4 s: the skipping probes spread over the clip.
@@ -108,77 +134,128 @@ impl WebBenchJob {
             },
         )?;
         let skip = SkipConfig::default();
-        let mut rows = Vec::new();
-        for (i, path) in self.models.iter().enumerate() {
-            let model = read_frame_model(path)?;
-            let ort_fps = native_fps(&model, BackendKind::Ort, self.threads, self.frames)?;
-            note(&format!(
-                "{}: onnxruntime {ort_fps:.1} frames/s",
-                path.display()
-            ));
-            let tract_fps = native_fps(&model, BackendKind::Tract, self.threads, self.frames)?;
-            note(&format!(
-                "{}: tract {tract_fps:.1} frames/s",
-                path.display()
-            ));
-            let ray_model = self.ray_models.get(i).cloned();
-            let ort_skip = match &ray_model {
-                Some(rays) => {
+        let models = self
+            .models
+            .iter()
+            .map(|p| read_frame_model(p).map_err(Error::from))
+            .collect::<Result<Vec<_>>>()?;
+        let mut rows: Vec<WebRow> = self
+            .models
+            .iter()
+            .zip(&models)
+            .enumerate()
+            .map(|(i, (path, model))| {
+                let k = model.info.spec.intrinsics;
+                WebRow {
+                    model: path.clone(),
+                    bytes: model.bytes.len() as u64,
+                    width: k.width,
+                    height: k.height,
+                    ort_fps: f64::NAN,
+                    tract_fps: f64::NAN,
+                    browser_fps: None,
+                    browser_skip_fps: None,
+                    browser_skip_rays: None,
+                    browser: None,
+                    ray_model: self.ray_models.get(i).cloned(),
+                    ort_skip: None,
+                    ort_skip_fps: None,
+                    rounds_ort_fps: Vec::new(),
+                    rounds_tract_fps: Vec::new(),
+                    rounds_browser_fps: Vec::new(),
+                    rounds_browser_skip_fps: Vec::new(),
+                    rounds_ort_skip_fps: Vec::new(),
+                    browser_over_ort: None,
+                    browser_over_ort_skipping: None,
+                }
+            })
+            .collect();
+        for round in 0..self.pairs {
+            let of = format!("round {} of {}", round + 1, self.pairs);
+            for (row, model) in rows.iter_mut().zip(&models) {
+                let path = row.model.display().to_string();
+                let ort_fps = native_fps(model, BackendKind::Ort, self.threads, self.frames)?;
+                note(&format!("{of}: {path}: onnxruntime {ort_fps:.1} frames/s"));
+                let tract_fps = native_fps(model, BackendKind::Tract, self.threads, self.frames)?;
+                note(&format!("{of}: {path}: tract {tract_fps:.1} frames/s"));
+                row.rounds_ort_fps.push(ort_fps);
+                row.rounds_tract_fps.push(tract_fps);
+                if let Some(rays) = &row.ray_model {
                     let track =
                         native_skip(rays, &wav, self.threads, self.frames, skip).map_err(|e| {
                             e.context(format!("{}: skipping still pixels", rays.display()))
                         })?;
+                    let fps = 1e3 / track.skip_ms_mean;
                     note(&format!(
-                        "{}: onnxruntime skipping still pixels {:.1} frames/s, {:.1} % of rays",
+                        "{of}: {}: onnxruntime skipping still pixels {fps:.1} frames/s, {:.1} % \
+                         of rays",
                         rays.display(),
-                        1e3 / track.skip_ms_mean,
                         100.0 * track.ray_share
                     ));
-                    Some(track)
+                    row.rounds_ort_skip_fps.push(fps);
+                    row.ort_skip.get_or_insert(track);
                 }
-                None => None,
-            };
-            let k = model.info.spec.intrinsics;
-            rows.push(WebRow {
-                model: path.clone(),
-                bytes: model.bytes.len() as u64,
-                width: k.width,
-                height: k.height,
-                ort_fps,
-                tract_fps,
-                browser_fps: None,
-                browser_skip_fps: None,
-                browser_skip_rays: None,
-                browser: None,
-                ray_model,
-                ort_skip,
-            });
-        }
-        if let Some(web) = &self.web {
-            let lines = browser_fps(web, &self.models, &wav, self.frames, self.threads)?;
-            for (row, value) in rows.iter_mut().zip(lines) {
-                let get = |key: &str| value.get(key).and_then(|v| v.as_f64());
-                row.browser_fps = get("fps");
-                row.browser_skip_fps = get("skip_fps");
-                row.browser_skip_rays = get("skip_ray_share");
-                note(&format!(
-                    "{}: browser {:.1} frames/s, skipping still pixels {:.1}",
-                    row.model.display(),
-                    row.browser_fps.unwrap_or(f64::NAN),
-                    row.browser_skip_fps.unwrap_or(f64::NAN)
-                ));
-                row.browser = Some(value);
             }
+            if let Some(web) = &self.web {
+                let lines = browser_fps(web, &self.models, &wav, self.frames, self.threads)?;
+                for (row, value) in rows.iter_mut().zip(lines) {
+                    let get = |key: &str| value.get(key).and_then(|v| v.as_f64());
+                    if let Some(fps) = get("fps") {
+                        row.rounds_browser_fps.push(fps);
+                    }
+                    if let Some(fps) = get("skip_fps") {
+                        row.rounds_browser_skip_fps.push(fps);
+                    }
+                    row.browser_skip_rays = row.browser_skip_rays.or(get("skip_ray_share"));
+                    note(&format!(
+                        "{of}: {}: browser {:.1} frames/s, skipping still pixels {:.1}",
+                        row.model.display(),
+                        get("fps").unwrap_or(f64::NAN),
+                        get("skip_fps").unwrap_or(f64::NAN)
+                    ));
+                    row.browser.get_or_insert(value);
+                }
+            }
+        }
+        machine.record_end();
+        for row in &mut rows {
+            row.summarise(self.pairs)?;
         }
         Ok(WebReport {
             bench: "web",
             machine,
             frames: self.frames,
             threads: self.threads,
+            pairs: self.pairs,
             track_seconds: track_samples as f64 / 16_000.0,
             skip,
             rows,
         })
+    }
+}
+
+impl WebRow {
+    /// The medians over the rounds and the browser's ratios, from a figure of every one of
+    /// the `pairs` rounds (a figure some round lacks is left out, with its ratio).
+    fn summarise(&mut self, pairs: usize) -> Result<()> {
+        use nldf_core::stats::median;
+        let all = |v: &[f64]| (v.len() == pairs).then(|| median(v));
+        self.ort_fps = median(&self.rounds_ort_fps);
+        self.tract_fps = median(&self.rounds_tract_fps);
+        self.browser_fps = all(&self.rounds_browser_fps);
+        self.browser_skip_fps = all(&self.rounds_browser_skip_fps);
+        self.ort_skip_fps = all(&self.rounds_ort_skip_fps);
+        let ratio = |a: &[f64], b: &[f64]| -> Result<Option<Ratio>> {
+            if a.len() != pairs || b.len() != pairs {
+                return Ok(None);
+            }
+            let pairs: Vec<(f64, f64)> = a.iter().copied().zip(b.iter().copied()).collect();
+            Ratio::of_pairs(&pairs).map(Some)
+        };
+        self.browser_over_ort = ratio(&self.rounds_browser_fps, &self.rounds_ort_fps)?;
+        self.browser_over_ort_skipping =
+            ratio(&self.rounds_browser_skip_fps, &self.rounds_ort_skip_fps)?;
+        Ok(())
     }
 }
 
@@ -314,8 +391,11 @@ impl WebReport {
     pub fn write(&self, out: &Path) -> Result<Written> {
         let k = &self.skip;
         let mut md = format!(
-            "# Frame graph: frames per second\n\nMachine: {}. {} timed frames per model and \
-             runtime after {WARM_UP} warm-up frames, {} threads; each frame from its own audio \
+            "# Frame graph: frames per second\n\nMachine: {}. {} rounds, each timing every model \
+             natively, then in the browser; frames per second: the median over the rounds; \
+             browser / onnxruntime: the median over the rounds of the per-round ratio \
+             (smallest-largest). {} timed frames per model, runtime and round \
+             after {WARM_UP} warm-up frames, {} threads; each frame from its own audio \
              chunk of a {:.1} s voiced test WAV. Full frames: the head turning a little from \
              frame to frame. Skipping still pixels: the head at its default pose, from a fresh \
              skipper (its full and probed frames counted), threshold {:.0}/255, margin {} px, \
@@ -327,6 +407,7 @@ impl WebReport {
              | browser / onnxruntime, skipping |\n\
              | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
             machine_cell(&self.machine),
+            self.pairs,
             self.frames,
             self.threads,
             self.track_seconds,
@@ -338,12 +419,7 @@ impl WebReport {
         let fps = |f: Option<f64>| f.map_or_else(|| "not measured".into(), |f| format!("{f:.1}"));
         let share =
             |s: Option<f64>| s.map_or_else(String::new, |s| format!(" ({:.0} %)", 100.0 * s));
-        let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
-            (Some(a), Some(b)) => format!("{:.2}", a / b),
-            _ => String::new(),
-        };
         for r in &self.rows {
-            let ort_skip = r.ort_skip.as_ref().map(|t| 1e3 / t.skip_ms_mean);
             md.push_str(&format!(
                 "| {} | {:.2} | {} x {} | {} | {:.1} | {:.1} | {} | {}{} | {}{} | {} |\n",
                 r.model.display(),
@@ -353,12 +429,12 @@ impl WebReport {
                 fps(r.browser_fps),
                 r.ort_fps,
                 r.tract_fps,
-                ratio(r.browser_fps, Some(r.ort_fps)),
+                crate::repeats::cell(r.browser_over_ort.as_ref()),
                 fps(r.browser_skip_fps),
                 share(r.browser_skip_rays),
-                fps(ort_skip),
+                fps(r.ort_skip_fps),
                 share(r.ort_skip.as_ref().map(|t| t.ray_share)),
-                ratio(r.browser_skip_fps, ort_skip),
+                crate::repeats::cell(r.browser_over_ort_skipping.as_ref()),
             ));
         }
         let rays: Vec<String> = self

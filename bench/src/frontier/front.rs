@@ -10,6 +10,7 @@ use serde::Serialize;
 
 use super::points::{OnnxPoint, Timed};
 use super::precision_name;
+use crate::repeats::Ratio;
 
 /// Scores of one point on one split.
 #[derive(Debug, Clone, Serialize)]
@@ -52,6 +53,10 @@ pub struct Point {
     pub ms_back_to_back: f64,
     /// Median milliseconds per whole frame over the first frames, 1 thread.
     pub ms_1_thread: Option<f64>,
+    /// Seconds of each whole frame of the `val` scoring pass, in the pass's order: the
+    /// pairs of the speed-ups (every point rendered each frame in turn).
+    #[serde(skip)]
+    pub frame_seconds: Vec<f64>,
     pub scores: Vec<SplitScore>,
     /// No other point is both faster (2 threads) and better on `val` PSNR.
     pub on_front: bool,
@@ -61,6 +66,8 @@ pub struct Point {
 /// (exports only) the 1-thread median.
 pub(crate) struct Times {
     pub(crate) taking_turns: f64,
+    /// Each frame of the scoring pass, in order.
+    pub(crate) frames: Vec<f64>,
     pub(crate) back_to_back: f64,
     pub(crate) one_thread: Option<f64>,
 }
@@ -75,6 +82,7 @@ impl Point {
             ms_2_threads: 1e3 * times.taking_turns,
             ms_back_to_back: 1e3 * times.back_to_back,
             ms_1_thread: times.one_thread.filter(|s| s.is_finite()).map(|s| 1e3 * s),
+            frame_seconds: times.frames,
             scores,
             ..Point::default()
         }
@@ -185,7 +193,18 @@ pub struct SpeedUp {
     pub teacher_psnr: f64,
     pub point: Option<String>,
     pub point_psnr: Option<f64>,
-    pub speed_up: Option<f64>,
+    /// The teacher's time over the point's, frame by frame over the `val` scoring pass
+    /// (each frame a pair: the two rendered it in turn); `None` without a point or without
+    /// paired frames.
+    pub speed_up: Option<Ratio>,
+}
+
+/// `a`'s frame times over `b`'s, frame by frame; `None` where they have no frames in
+/// common or a time is not positive.
+pub(crate) fn paired_ratio(a: &[f64], b: &[f64]) -> Option<Ratio> {
+    let n = a.len().min(b.len());
+    let pairs: Vec<(f64, f64)> = a[..n].iter().copied().zip(b[..n].iter().copied()).collect();
+    Ratio::of_pairs(&pairs).ok()
 }
 
 /// The speed-up on each split the teacher (the first row of `table`) was scored on.
@@ -208,7 +227,7 @@ pub fn speed_ups(table: &[Point]) -> Vec<SpeedUp> {
                 teacher_psnr: ts.psnr,
                 point: best.map(|p| format!("{} {} {}", p.model, p.precision, p.runtime)),
                 point_psnr: best.and_then(|p| p.psnr(&ts.split)),
-                speed_up: best.map(|p| teacher.ms_2_threads / p.ms_2_threads),
+                speed_up: best.and_then(|p| paired_ratio(&teacher.frame_seconds, &p.frame_seconds)),
             }
         })
         .collect()
@@ -272,6 +291,8 @@ mod tests {
             ms_2_threads: ms,
             ms_back_to_back: ms,
             ms_1_thread: None,
+            // Five frames around `ms`, each a little slower than the one before.
+            frame_seconds: (0..5).map(|i| ms * (1.0 + 0.01 * i as f64) / 1e3).collect(),
             scores: vec![SplitScore {
                 split: "val".into(),
                 frames: 1,
@@ -348,6 +369,21 @@ mod tests {
         ];
         let s = &speed_ups(&table)[0];
         assert_eq!(s.point.as_deref(), Some("fast fp32 ort"));
-        assert_eq!(s.speed_up, Some(5.0));
+        let r = s.speed_up.unwrap();
+        assert!((r.median - 5.0).abs() < 1e-9, "{r:?}");
+        assert_eq!((r.pairs, r.verdict), (5, crate::repeats::Verdict::Above));
+    }
+
+    /// The speed-up pairs frame with frame: a point that is faster on the median frame
+    /// but slower on another is no difference.
+    #[test]
+    fn a_speed_up_whose_frames_disagree_is_no_difference() {
+        let mut table = vec![point("teacher", 100.0, 37.0), point("close", 95.0, 36.5)];
+        table[0].frame_seconds = vec![0.100, 0.101, 0.099, 0.100, 0.100];
+        table[1].frame_seconds = vec![0.095, 0.094, 0.104, 0.096, 0.095];
+        let r = speed_ups(&table)[0].speed_up.unwrap();
+        assert!(r.median > 1.0, "{r:?}");
+        assert_eq!(r.verdict, crate::repeats::Verdict::NoDifference);
+        assert!(r.cell().starts_with("no difference"), "{}", r.cell());
     }
 }

@@ -89,8 +89,8 @@ pub(crate) fn hires_points(
             .ok_or_else(|| Error::Missing(format!("{label} lacks its report at {size} pixels")))
     };
     // Each point's turn-taking times are read before it renders again back to back.
-    let teacher_turns = median(&teacher.seconds.borrow());
-    let point_turns: Vec<f64> = points.iter().map(|p| median(&p.seconds.borrow())).collect();
+    let teacher_turns = teacher.seconds.borrow().clone();
+    let point_turns: Vec<Vec<f64>> = points.iter().map(|p| p.seconds.borrow().clone()).collect();
     let models: Vec<&dyn FrameModel> = std::iter::once(&teacher as &dyn FrameModel)
         .chain(points.iter().map(|p| p as &dyn FrameModel))
         .collect();
@@ -98,7 +98,8 @@ pub(crate) fn hires_points(
     let mut table = Vec::new();
     let r = report_of(&teacher.label())?;
     let times = Times {
-        taking_turns: teacher_turns,
+        taking_turns: median(&teacher_turns),
+        frames: teacher_turns,
         back_to_back: back_to_back[0],
         one_thread: None,
     };
@@ -106,7 +107,8 @@ pub(crate) fn hires_points(
     for (i, p) in points.iter().enumerate() {
         let r = report_of(&p.label())?;
         let times = Times {
-            taking_turns: point_turns[i],
+            taking_turns: median(&point_turns[i]),
+            frames: point_turns[i].clone(),
             back_to_back: back_to_back[1 + i],
             one_thread: None,
         };

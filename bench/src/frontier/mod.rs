@@ -7,7 +7,9 @@
 //! pass with 2 threads, where the ways of rendering take turns frame by frame (so a burst of
 //! load on the machine touches all alike), a second median over a few frames rendered back
 //! to back, as a video renders them, and one over a few frames with 1 thread. AD-NeRF's own
-//! setting (8 x 256, 64 + 128 samples) is timed on a few frames with seeded weights.
+//! setting (8 x 256, 64 + 128 samples) is timed on a few frames with seeded weights, taking
+//! turns frame by frame with the points it is set against. Every speed-up is a ratio over
+//! frames rendered in turn, each frame a pair ([`crate::repeats`]).
 //! [`FrontierReport::write`] writes `frontier.json` (machine, commit, load, settings,
 //! points), `frontier.md` and `frontier.png` (PSNR against time on a log axis, the Pareto
 //! front marked), and states the students' speed-up over the teacher at matched PSNR.
@@ -32,7 +34,6 @@ use nldf_core::dataset::Split;
 use nldf_core::stats::median;
 use nldf_export::WeightType;
 use nldf_infer::BackendKind;
-use nldf_train::bench::Machine;
 use nldf_train::data::TrainData;
 use nldf_train::eval::{EvalReport, Evaluation, FrameModel, eval_models};
 use nldf_train::job::eval::EvalJob;
@@ -42,6 +43,7 @@ pub use front::{Point, SpeedUp, SplitScore, mark_front, speed_ups};
 pub use report::{AdNerfSetting, FrontierReport, FrontierSettings};
 
 use crate::error::{Error, Result};
+use crate::load::LoadGate;
 use exports::{Export, export_all, open_point};
 use front::{Times, score};
 use points::{OnnxPoint, Timed};
@@ -85,6 +87,8 @@ pub struct FrontierJob {
     pub hires_data: Option<PathBuf>,
     /// Frames each point also renders back to back, for a second 2-thread median.
     pub timed_frames: usize,
+    /// The load limit at the start.
+    pub load: LoadGate,
 }
 
 impl FrontierJob {
@@ -97,7 +101,7 @@ impl FrontierJob {
             .map_err(|e| {
                 Error::from(e).context("bench frontier renders every export in onnxruntime")
             })?;
-        let machine = Machine::here();
+        let mut machine = self.load.admit()?;
         let splits = splits(&self.data);
         let val = self.eval_job(Split::Val).plan(&mut *on_event)?;
         if val.students.is_empty() {
@@ -149,9 +153,10 @@ impl FrontierJob {
             let evaluation = eval_split(&models, data, split, self.frames, &out, &mut *on_event)?;
             reports.push(evaluation.models);
         }
-        // Medians over the `val` pass: the first frames each point rendered.
+        // Each point's frame times over the `val` pass: the first frames it rendered.
         let n_val = reports[0].first().map_or(0, |r| r.frames.len());
-        let val_median = |s: &RefCell<Vec<f64>>| median(&s.borrow()[..n_val.min(s.borrow().len())]);
+        let pass_frames =
+            |s: &RefCell<Vec<f64>>| s.borrow()[..n_val.min(s.borrow().len())].to_vec();
         // Back-to-back times over `--timed-frames`, every way of rendering in turn.
         let val_frames = val.data.dataset.frames(Split::Val);
         let timed = &val_frames[..self.timed_frames.min(val_frames.len())];
@@ -177,8 +182,10 @@ impl FrontierJob {
                 .iter()
                 .find(|r| r.label == t.label())
                 .ok_or_else(|| Error::Missing("a teacher lacks its val report".into()))?;
+            let frames = pass_frames(&t.seconds);
             let times = Times {
-                taking_turns: val_median(&t.seconds),
+                taking_turns: median(&frames),
+                frames,
                 back_to_back: back_to_back[k],
                 one_thread: None,
             };
@@ -191,15 +198,6 @@ impl FrontierJob {
                 scores_of(&t.label()),
             ));
         }
-        let adnerf = if self.adnerf_frames > 0 {
-            Some(time_adnerf_setting(
-                &val.data,
-                self.adnerf_frames,
-                &mut *on_event,
-            )?)
-        } else {
-            None
-        };
         for (i, p) in points.iter().enumerate() {
             let label = p.label();
             let size = p.renderer.borrow().intrinsics().width;
@@ -207,8 +205,10 @@ impl FrontierJob {
                 .iter()
                 .find(|r| r.label == label)
                 .ok_or_else(|| Error::Missing("a point lacks its val report".into()))?;
+            let frames = pass_frames(&p.seconds);
             let times = Times {
-                taking_turns: val_median(&p.seconds),
+                taking_turns: median(&frames),
+                frames,
                 back_to_back: back_to_back[1 + plain.len() + i],
                 one_thread: one_thread.get(i).copied(),
             };
@@ -216,20 +216,34 @@ impl FrontierJob {
         }
         mark_front(&mut table);
         let speed_up = speed_ups(&table);
+        let adnerf = if self.adnerf_frames > 0 {
+            // Against the speed-ups' points and the fastest export, in turns.
+            let first_point = 1 + plain.len();
+            let listed: Vec<&dyn FrameModel> = report::adnerf_listed(&table, &speed_up)
+                .into_iter()
+                .filter_map(|i| i.checked_sub(first_point))
+                .filter_map(|i| points.get(i).map(|p| p as &dyn FrameModel))
+                .collect();
+            Some(time_adnerf_setting(
+                &val.data,
+                self.adnerf_frames,
+                &listed,
+                &mut *on_event,
+            )?)
+        } else {
+            None
+        };
         let hires_points = match &self.hires_data {
             Some(dir) => Some(hires::hires_points(self, dir, &exports, on_event)?),
             None => None,
         };
+        machine.record_end();
         Ok(FrontierReport {
             machine,
             settings: self.settings(),
             points: table,
             speed_up,
-            adnerf_setting: adnerf.map(|(ms, macs)| AdNerfSetting {
-                ms_2_threads: ms,
-                gmac_per_frame: macs / 1e9,
-                frames: self.adnerf_frames,
-            }),
+            adnerf_setting: adnerf,
             hires_points,
             splits,
         })

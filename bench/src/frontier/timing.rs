@@ -1,5 +1,6 @@
 //! The frontier's timings beside the scoring pass: every way of rendering back to back, in
-//! turns, and AD-NeRF's own setting with seeded weights.
+//! turns, and AD-NeRF's own setting with seeded weights, in turns with the points it is set
+//! against.
 
 use std::time::Instant;
 
@@ -11,7 +12,9 @@ use nldf_train::eval::FrameModel;
 use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::teacher_trainer::TeacherRun;
 
+use super::front::paired_ratio;
 use super::points::Timed;
+use super::report::{AdNerfPair, AdNerfSetting};
 use crate::error::{Result, temp_dir};
 
 /// Rounds of [`time_back_to_back`].
@@ -49,13 +52,15 @@ pub(crate) fn time_back_to_back(
 /// AD-NeRF's setting timed as the paper compares against it: 8 x 256 with 64 coarse + 128
 /// fine samples, every pixel of the frame sampled over `[near, far]` and every sample
 /// evaluated. The weights are seeded (training it takes hours on 2 cores), so this is its
-/// time per frame, not its quality; returns milliseconds per frame (median of `n`
-/// frames) and multiply-adds per frame.
+/// time per frame, not its quality. It renders `n` `val` frames after an untimed one, and
+/// after each of its frames every model of `against` renders the same frame, so that each
+/// frame is a pair for each model's speed-up.
 pub(crate) fn time_adnerf_setting(
     data: &TrainData,
     n: usize,
+    against: &[&dyn FrameModel],
     on_event: OnEvent,
-) -> Result<(f64, f64)> {
+) -> Result<AdNerfSetting> {
     let cfg = TeacherRunConfig {
         model: TeacherConfig::ad_nerf(),
         ..TeacherRunConfig::default()
@@ -65,14 +70,43 @@ pub(crate) fn time_adnerf_setting(
     let timed = Timed::new(&run.model, false, false);
     let frames = data.dataset.frames(Split::Val);
     on_event(&JobEvent::Note(format!(
-        "timing AD-NeRF's setting on {n} frames after an untimed one (seeded weights)"
+        "timing AD-NeRF's setting on {n} frames after an untimed one (seeded weights), taking \
+         turns with {} points",
+        against.len()
     )));
-    for f in frames.iter().cycle().take(n + 1) {
-        timed.render_frame(data, f)?;
+    let seconds = |model: &dyn FrameModel, f: &Frame| -> Result<f64> {
+        let started = Instant::now();
+        model.render_frame(data, f)?;
+        Ok(started.elapsed().as_secs_f64())
+    };
+    let mut own = Vec::with_capacity(n);
+    let mut theirs = vec![Vec::with_capacity(n); against.len()];
+    for (k, f) in frames.iter().cycle().take(n + 1).enumerate() {
+        let s = seconds(&timed, f)?;
+        let others = against
+            .iter()
+            .map(|m| seconds(*m, f))
+            .collect::<Result<Vec<_>>>()?;
+        if k > 0 {
+            own.push(s);
+            for (t, s) in theirs.iter_mut().zip(others) {
+                t.push(s);
+            }
+        }
     }
     let pixels = (data.dataset.intrinsics.width * data.dataset.intrinsics.height) as f64;
-    Ok((
-        1e3 * median(timed.seconds.borrow().get(1..).unwrap_or(&[])),
-        pixels * run.macs_per_ray(),
-    ))
+    Ok(AdNerfSetting {
+        ms_2_threads: 1e3 * median(&own),
+        gmac_per_frame: pixels * run.macs_per_ray() / 1e9,
+        frames: n,
+        against: against
+            .iter()
+            .zip(&theirs)
+            .map(|(m, t)| AdNerfPair {
+                point: m.describe(),
+                ms: 1e3 * median(t),
+                speed_up: paired_ratio(&own, t),
+            })
+            .collect(),
+    })
 }

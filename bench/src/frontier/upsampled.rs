@@ -5,7 +5,10 @@
 //! upsampler inside and by nldf's renderer on the ray graph with the upsampler inside, each
 //! in f32 and f16 (the upsampled graphs in onnxruntime and tract; the upsampled ray graph
 //! also with the student's products in int8), and by the teacher in candle; each is scored (PSNR and SSIM on the whole frame and
-//! in the head, mouth PSNR) and timed per whole frame with 2 threads (median).
+//! in the head, mouth PSNR) and timed per whole frame with 2 threads (median). Each frame
+//! is a pair for any two ways (both rendered it in turn), so every row's speed against the
+//! student's native rays in f32 onnxruntime, and each precision's against the others of its
+//! way and runtime, is a ratio over those pairs ([`crate::repeats`]).
 //! `upsampler.json` and `upsampler.md` hold the rows with the machine, commit and settings.
 
 use std::cell::RefCell;
@@ -27,10 +30,12 @@ use nldf_train::job::{JobEvent, OnEvent};
 use serde::Serialize;
 
 use super::exports::{Export, open_point};
-use super::front::{SplitScore, score};
+use super::front::{SplitScore, paired_ratio, score};
 use super::points::{OnnxPoint, Timed};
 use super::{THREADS, eval_split, precision_name};
 use crate::error::{Error, Result, create_dir};
+use crate::load::LoadGate;
+use crate::repeats::{Ratio, cell};
 use crate::report::{Written, machine_cell, write_bench_files};
 
 /// What `nldf bench upsampler` was asked to do.
@@ -50,10 +55,12 @@ pub struct UpsamplerBench {
     pub teacher: bool,
     /// Rays per network call of the ray graphs.
     pub batch: usize,
+    /// The load limit at the start.
+    pub load: LoadGate,
 }
 
-/// Adds a row: way, precision, runtime, grid side, the model's label, seconds a frame.
-type AddRow<'a> = dyn FnMut(&str, &str, &str, u32, String, f64) + 'a;
+/// Adds a row: way, precision, runtime, grid side, the model's label, seconds of each frame.
+type AddRow<'a> = dyn FnMut(&str, &str, &str, u32, String, Vec<f64>) + 'a;
 
 /// One way of rendering.
 #[derive(Debug, Clone, Serialize)]
@@ -70,6 +77,24 @@ pub struct UpsamplerRow {
     pub s_per_frame: f64,
     pub fps: f64,
     pub scores: Vec<SplitScore>,
+    /// How many times as fast as the student's native rays in f32 onnxruntime: the median
+    /// over the frames of that row's time over this one's (smallest-largest).
+    pub speed_against_native: Option<Ratio>,
+    /// Seconds of each frame, in the order the ways took turns.
+    #[serde(skip)]
+    pub frame_seconds: Vec<f64>,
+}
+
+/// One precision against another of the same way and runtime.
+#[derive(Debug, Clone, Serialize)]
+pub struct PrecisionRatio {
+    pub way: String,
+    pub runtime: String,
+    /// The faster-to-compute precision, and the one it is set against.
+    pub precision: String,
+    pub against: String,
+    /// How many times as fast `precision` is as `against`, frame by frame.
+    pub speed: Ratio,
 }
 
 /// The benchmark's result.
@@ -82,6 +107,8 @@ pub struct UpsamplerBenchReport {
     pub frames: Option<usize>,
     pub threads: usize,
     pub rows: Vec<UpsamplerRow>,
+    /// Each precision against the others of its way and runtime.
+    pub precisions: Vec<PrecisionRatio>,
 }
 
 /// The frame graph with the upsampler in one runtime, timing its frames.
@@ -160,7 +187,7 @@ impl UpsamplerBench {
         nldf_infer::ort_library::OrtSearch::from_env()
             .find()
             .map_err(|e| Error::from(e).context("bench upsampler runs onnxruntime"))?;
-        let machine = Machine::here();
+        let mut machine = self.load.admit()?;
         let first = self.eval_job(self.splits.first().copied().unwrap_or(Split::Val));
         let plan = first.plan(&mut *on_event)?;
         let (up, _) = plan
@@ -301,11 +328,12 @@ impl UpsamplerBench {
                 .filter_map(|rs| rs.iter().find(|r| r.label == label).map(score))
                 .collect()
         };
-        let timed = |s: &RefCell<Vec<f64>>| median(&s.borrow());
+        let timed = |s: &RefCell<Vec<f64>>| s.borrow().clone();
         let grid = size / factor as u32;
         let mut rows = Vec::new();
         let mut row =
-            |way: &str, precision: &str, runtime: &str, grid: u32, label: String, s: f64| {
+            |way: &str, precision: &str, runtime: &str, grid: u32, label: String, f: Vec<f64>| {
+                let s = median(&f);
                 rows.push(UpsamplerRow {
                     way: way.into(),
                     precision: precision.into(),
@@ -315,6 +343,8 @@ impl UpsamplerBench {
                     s_per_frame: s,
                     fps: if s > 0.0 { 1.0 / s } else { f64::NAN },
                     scores: scores_of(&label),
+                    speed_against_native: None,
+                    frame_seconds: f,
                 });
             };
         if self.teacher {
@@ -354,6 +384,8 @@ impl UpsamplerBench {
             );
         }
         onnx_rows(&mut row, "upsampler, ray graph", grid, &upsampled_rays);
+        machine.record_end();
+        let precisions = speed_ratios(&mut rows);
         let report = UpsamplerBenchReport {
             machine,
             run: self.run.display().to_string(),
@@ -362,6 +394,7 @@ impl UpsamplerBench {
             frames: self.frames,
             threads: THREADS,
             rows,
+            precisions,
         };
         let markdown = markdown(&report, &self.splits);
         let written = write_bench_files(&self.out, "upsampler", &report, markdown)?;
@@ -379,13 +412,53 @@ impl UpsamplerBench {
     }
 }
 
+/// Sets each row's speed against the student's native rays in f32 onnxruntime, and returns
+/// each precision against the others of its way and runtime (lower precision first: fp16
+/// and int8 against fp32, int8 against fp16); every ratio frame by frame.
+fn speed_ratios(rows: &mut [UpsamplerRow]) -> Vec<PrecisionRatio> {
+    let native = rows
+        .iter()
+        .find(|r| r.way == "native rays" && r.precision == "fp32" && r.runtime == "ort")
+        .map(|r| r.frame_seconds.clone());
+    if let Some(native) = &native {
+        for r in rows.iter_mut() {
+            r.speed_against_native = paired_ratio(native, &r.frame_seconds);
+        }
+    }
+    let order = ["fp32", "fp16", "int8"];
+    let rank = |p: &str| order.iter().position(|o| *o == p);
+    let mut out = Vec::new();
+    for a in rows.iter() {
+        for b in rows.iter() {
+            let lower =
+                matches!((rank(&a.precision), rank(&b.precision)), (Some(x), Some(y)) if x > y);
+            if a.way != b.way || a.runtime != b.runtime || !lower {
+                continue;
+            }
+            if let Some(speed) = paired_ratio(&b.frame_seconds, &a.frame_seconds) {
+                out.push(PrecisionRatio {
+                    way: a.way.clone(),
+                    runtime: a.runtime.clone(),
+                    precision: a.precision.clone(),
+                    against: b.precision.clone(),
+                    speed,
+                });
+            }
+        }
+    }
+    out
+}
+
 /// The report as Markdown: one row per way of rendering, head PSNR / SSIM per split.
 fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
     let mut md = format!(
         "# Learned upsampler x{} against native rays and bilinear\n\n\
          Run `{}`, upsampler `{}`; {} threads; {} frames a split; {}.\n\
          Times: median seconds a whole frame, the ways of rendering taking turns frame by \
-         frame. Scores: head-region PSNR (dB) / head SSIM, then whole-frame PSNR.\n\n",
+         frame. Speed: how many times as fast as the student's native rays in fp32 \
+         onnxruntime, the median over the frames (each rendered by both in turn) of the \
+         per-frame ratio (smallest-largest). Scores: head-region PSNR (dB) / head SSIM, then \
+         whole-frame PSNR.\n\n",
         r.factor,
         r.run,
         r.upsampler,
@@ -393,7 +466,7 @@ fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
         r.frames.map_or("all".to_string(), |n| n.to_string()),
         machine_cell(&r.machine),
     );
-    md.push_str("| way | precision | runtime | size | grid | ms / frame | frames/s |");
+    md.push_str("| way | precision | runtime | size | grid | ms / frame | frames/s | speed |");
     for s in splits {
         md.push_str(&format!(
             " {} head PSNR / SSIM | {} whole |",
@@ -401,7 +474,7 @@ fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
             s.name()
         ));
     }
-    md.push_str("\n| --- | --- | --- | --- | --- | --- | --- |");
+    md.push_str("\n| --- | --- | --- | --- | --- | --- | --- | --- |");
     for _ in splits {
         md.push_str(" --- | --- |");
     }
@@ -410,14 +483,15 @@ fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
     let f3 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
     for row in &r.rows {
         md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {:.1} | {:.1} |",
+            "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {} |",
             row.way,
             row.precision,
             row.runtime,
             row.size,
             row.grid,
             1000.0 * row.s_per_frame,
-            row.fps
+            row.fps,
+            cell(row.speed_against_native.as_ref())
         ));
         for s in splits {
             match row.scores.iter().find(|x| x.split == s.name()) {
@@ -431,6 +505,23 @@ fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
             }
         }
         md.push('\n');
+    }
+    if !r.precisions.is_empty() {
+        md.push_str(
+            "\nPrecisions against each other, the same way and runtime, frame by frame: how \
+             many times as fast (median over the frames, smallest-largest).\n\n\
+             | way | runtime | precision | against | speed |\n| --- | --- | --- | --- | --- |\n",
+        );
+        for p in &r.precisions {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} |\n",
+                p.way,
+                p.runtime,
+                p.precision,
+                p.against,
+                p.speed.cell()
+            ));
+        }
     }
     md
 }
