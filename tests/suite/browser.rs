@@ -1,18 +1,19 @@
 //! The page (`web/`) in Debian's headless Chromium against nldf: the frames it draws on its
 //! canvas with onnxruntime-web (WASM, SIMD, 2 threads) from the shipped frame graph and a
 //! WAV picked through its file input are nldf's frames (`FrameRenderer` on the shipped ray
-//! graph) within 2/255 per channel, at both ends and the middle of the track, from the
+//! graph) within 1/255 per channel, at both ends and the middle of the track, from the
 //! default pose and a turned one, with still-pixel skipping off; with it on, over the WAV at
 //! the default pose, the page makes its full, probed and partial frames where nldf's
 //! `StillSkipper` (`nldf render --skip-still`) makes them, a skipped frame's re-rendered
-//! pixels are nldf's full frame's within 2/255 and its others the page's last full frame's
+//! pixels are nldf's full frame's within 1/255 and its others the page's last full frame's
 //! exactly, and the skipped frames stray from nldf's full frames no further than nldf's own
-//! skipping does on the same clip (worst channel within 2/255 of nldf's worst, PSNR within
+//! skipping does on the same clip (worst channel within 1/255 of nldf's worst, PSNR within
 //! 0.5 dB); the microphone (Chromium's fake device playing the WAV)
-//! gives a chunk that is not silent and a frame equal to the Rust frame graph's for that
+//! gives a chunk that is not silent and a frame within 1/255 of the Rust frame graph's for that
 //! chunk; a ray graph picked instead is refused on the page; and the page reports no error.
 //! Needs node, /usr/bin/chromium and web/node_modules (`scripts/web_env.sh`): outside CI a
-//! missing one skips, under CI it fails.
+//! missing one skips, under CI it fails. The page's WAV reader is also run in node alone
+//! against nldf's: it refuses NaN and infinite samples with nldf's line.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -29,8 +30,10 @@ use nldf_infer::still::{FrameKind, SkipConfig, StillSkipper, probe_frames};
 
 use crate::util::{ort_available, write_test_wav};
 
-/// Worst allowed difference of an 8-bit channel between the page's canvas and nldf.
-const TOL_8BIT: u8 = 2;
+/// Worst allowed difference of an 8-bit channel between the page's canvas and nldf. Both
+/// round the same float colours to 8 bits the same way, so a float difference under one
+/// step shows as at most one step.
+const TOL_8BIT: u8 = 1;
 
 /// The turned pose: yaw, pitch in radians.
 const POSES: [(f32, f32); 2] = [(0.0, 0.0), (0.35, -0.15)];
@@ -39,16 +42,22 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
+/// Whether node runs here.
+fn node_runs() -> bool {
+    Command::new("node")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+const NODE_MISSING: &str = "node is missing (install Node.js 18 or newer)";
+
 /// Whether node, Chromium and the page's npm packages are here; outside CI a missing one
 /// skips (after saying so), under CI it fails.
 fn browser_available() -> bool {
     let web = repo().join("web");
-    let node = Command::new("node")
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    let missing = if !node {
-        Some("node is missing (install Node.js 18 or newer)".to_string())
+    let missing = if !node_runs() {
+        Some(NODE_MISSING.to_string())
     } else if !Path::new("/usr/bin/chromium").exists() {
         Some("/usr/bin/chromium is missing: run scripts/web_env.sh".to_string())
     } else if !web.join("node_modules/onnxruntime-web/dist").is_dir()
@@ -62,6 +71,112 @@ fn browser_available() -> bool {
         None => true,
         Some(msg) => nldf_tests::tool_missing::<()>(msg).is_some(),
     }
+}
+
+/// The page's modules in node, without a browser: its unit tests (`web/test/*.test.mjs`: the
+/// WAV reader, the WebAssembly SIMD detection) pass, and float WAVs holding a NaN or an infinity (mono and
+/// stereo, in the first, a middle and the last frame) are refused with nldf's own line,
+/// `read_wav`'s error word for word, while a finite one is read to as many samples as
+/// nldf reads. Needs node only: outside CI a missing node skips, under CI it fails.
+#[test]
+fn the_pages_wav_reader_refuses_what_nldf_refuses() {
+    if !node_runs() {
+        nldf_tests::tool_missing::<()>(NODE_MISSING);
+        return;
+    }
+    let run = |args: &[&str]| {
+        let out = Command::new("node")
+            .current_dir(repo())
+            .args(args)
+            .output()
+            .unwrap();
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "node {args:?} failed:\n{text}");
+        text
+    };
+    let mut units: Vec<String> = std::fs::read_dir(repo().join("web/test"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|name| name.ends_with(".test.mjs"))
+        .map(|name| format!("web/test/{name}"))
+        .collect();
+    units.sort();
+    for unit in ["web/test/audio.test.mjs", "web/test/wasm.test.mjs"] {
+        assert!(units.iter().any(|u| u == unit), "{unit} is missing");
+    }
+    let mut args = vec!["--test", "--test-reporter=tap"];
+    args.extend(units.iter().map(String::as_str));
+    let said = run(&args);
+    assert!(said.contains("# fail 0"), "node's tests:\n{said}");
+
+    let tmp = tempfile::tempdir().unwrap();
+    let write = |name: &str, channels: u16, samples: &[f32]| {
+        let path = tmp.path().join(name);
+        let spec = hound::WavSpec {
+            channels,
+            sample_rate: 16_000,
+            bits_per_sample: 32,
+            sample_format: hound::SampleFormat::Float,
+        };
+        let mut w = hound::WavWriter::create(&path, spec).unwrap();
+        for &v in samples {
+            w.write_sample(v).unwrap();
+        }
+        w.finalize().unwrap();
+        path
+    };
+    let files = [
+        write("nan_middle.wav", 1, &[0.1, 0.2, f32::NAN, 0.3]),
+        write("inf_first.wav", 1, &[f32::INFINITY, 0.2]),
+        write(
+            "neg_inf_last_stereo.wav",
+            2,
+            &[0.1, 0.1, 0.2, f32::NEG_INFINITY],
+        ),
+        write("finite.wav", 2, &[0.5, -0.5, 0.25, 0.125, 1.0, -1.0]),
+    ];
+    let names: Vec<&str> = files.iter().map(|f| f.to_str().unwrap()).collect();
+    let script = "import { readFileSync } from 'node:fs';
+        import { parseWav } from './web/src/audio.js';
+        for (const file of process.argv.slice(1)) {
+          try {
+            const wav = parseWav(new Uint8Array(readFileSync(file)), file);
+            console.log(JSON.stringify({ samples: wav ? wav.samples.length : null }));
+          } catch (e) {
+            console.log(JSON.stringify({ error: e.message }));
+          }
+        }";
+    let mut args = vec!["--input-type=module", "-e", script];
+    args.extend(&names);
+    let said = run(&args);
+    let lines: Vec<serde_json::Value> = said
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), files.len(), "one line per file:\n{said}");
+    for (file, page) in files.iter().zip(&lines) {
+        match nldf_core::audio::read_wav(file) {
+            Err(e) => assert_eq!(
+                page["error"].as_str(),
+                Some(e.to_string().as_str()),
+                "{}: the page's line against nldf's",
+                file.display()
+            ),
+            Ok(wave) => assert_eq!(
+                page["samples"].as_u64(),
+                Some(wave.samples.len() as u64),
+                "{}: read by nldf, the page says {page}",
+                file.display()
+            ),
+        }
+        println!("{}: {page}", file.file_name().unwrap().to_string_lossy());
+    }
+    let refused = lines.iter().filter(|l| l["error"].is_string()).count();
+    assert_eq!(refused, 3, "nldf refuses the three non-finite files");
 }
 
 /// The largest difference between two 8-bit images, and how many channels differ at all.
@@ -111,11 +226,19 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
         &["--skip-frames", &n_skip, "--ray-graph", ray_graph, "--mic"],
     );
     println!(
-        "{}, onnxruntime-web {}, {} threads, cross-origin isolated: {}",
-        result["chromium"], result["ort_version"], result["threads"], result["crossOriginIsolated"]
+        "{}, onnxruntime-web {}, {} threads, SIMD {}, cross-origin isolated: {}",
+        result["chromium"],
+        result["ort_version"],
+        result["threads"],
+        result["simd"],
+        result["crossOriginIsolated"]
     );
 
     assert_eq!(result["crossOriginIsolated"], true, "COOP/COEP headers");
+    assert_eq!(
+        result["simd"], true,
+        "the page detects Chromium's WASM SIMD"
+    );
     assert!(result["threads"].as_u64().unwrap() >= 2, "threads");
     let refused = result["ray_graph_error"].as_str().unwrap_or_default();
     assert!(
@@ -143,13 +266,13 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
 
     // The WAV picked through the file input: nldf's frames.
     let mut renderer = tract_renderer(&model);
-    let worst = check_frames(&result, &out, &mut renderer, &windows, &pose);
+    let parity = check_frames(&result, &out, &mut renderer, &windows, &pose);
     assert_eq!(
         result["frames"].as_array().unwrap().len(),
         frames.len() * POSES.len()
     );
     println!(
-        "{} canvas frames against nldf render: worst {worst}/255",
+        "{} canvas frames against nldf render: {parity}",
         frames.len() * POSES.len()
     );
 
@@ -317,7 +440,7 @@ fn check_skipping(
 /// A frame graph with a learned upsampler (the real-time student at 128 x 128, x4, weights
 /// at a trained network's magnitude) picked through the page's file input: the page sizes
 /// `keep` to the coarse grid, says so, turns its still-pixel skipping off, and draws nldf's
-/// frames (`FrameRenderer` on the same student and upsampler's ray graph) within 2/255, at
+/// frames (`FrameRenderer` on the same student and upsampler's ray graph) within 1/255, at
 /// both ends and the middle of the track, from the default pose and a turned one.
 #[test]
 fn the_page_draws_an_upsampled_frame_graph() {
@@ -373,14 +496,14 @@ fn the_page_draws_an_upsampled_frame_graph() {
         (Some(128), Some(128))
     );
     let mut renderer = tract_renderer(&model);
-    let worst = check_frames(&result, &out, &mut renderer, &windows, &pose);
+    let parity = check_frames(&result, &out, &mut renderer, &windows, &pose);
     assert_eq!(
         result["frames"].as_array().unwrap().len(),
         frames.len() * POSES.len()
     );
     println!(
         "upsampled frame graph, {} canvas frames against nldf's renderer on the ray graph: \
-         worst {worst}/255",
+         {parity}",
         frames.len() * POSES.len()
     );
 }
@@ -399,19 +522,48 @@ fn tract_renderer(model: &nldf_export::ExportedModel) -> FrameRenderer {
     .unwrap()
 }
 
+/// How far the page's canvas frames are from nldf's.
+struct CanvasParity {
+    /// The largest difference of an 8-bit channel.
+    worst: u8,
+    /// Channels that differ at all, of `values`.
+    changed: usize,
+    values: usize,
+    /// Of the channels that differ by one step, the largest distance (in 8-bit steps) of
+    /// nldf's float value from the rounding boundary between the two bytes: the page's float
+    /// value is at least this far from nldf's.
+    flip_distance: f32,
+}
+
+impl std::fmt::Display for CanvasParity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "worst {}/255, {} of {} channels differ (the page's float value at least {:.4}/255 \
+             off nldf's where it rounds to the other byte)",
+            self.worst, self.changed, self.values, self.flip_distance
+        )
+    }
+}
+
 /// The page's full frames (`result["frames"]`, every frame at every pose of [`POSES`], files
 /// in `out`) against `renderer`'s frames of the same track frames (`windows`) and poses
-/// (`pose`): each within [`TOL_8BIT`]; returns the worst difference.
+/// (`pose`): each within [`TOL_8BIT`].
 fn check_frames(
     result: &serde_json::Value,
     out: &Path,
     renderer: &mut FrameRenderer,
     windows: &nldf_core::audio::AudioWindows,
     pose: &dyn Fn((f32, f32)) -> Mat4,
-) -> u8 {
+) -> CanvasParity {
     let att = renderer.info().audio.att_frames;
     let drawn = result["frames"].as_array().unwrap();
-    let mut worst = 0u8;
+    let mut parity = CanvasParity {
+        worst: 0,
+        changed: 0,
+        values: 0,
+        flip_distance: 0.0,
+    };
     for entry in drawn {
         let f = entry["frame"].as_u64().unwrap() as usize;
         let p = entry["pose"].as_u64().unwrap() as usize;
@@ -430,9 +582,18 @@ fn check_frames(
             "frame {f}, pose {:?}: the canvas is {d}/255 off nldf's frame ({changed} channels differ)",
             POSES[p]
         );
-        worst = worst.max(d);
+        for ((&g, &w), &v) in got.iter().zip(&want).zip(&frame.image.data) {
+            if g.abs_diff(w) == 1 {
+                let boundary = f32::from(g.max(w)) - 0.5;
+                let x = v.clamp(0.0, 1.0) * 255.0;
+                parity.flip_distance = parity.flip_distance.max((x - boundary).abs());
+            }
+        }
+        parity.worst = parity.worst.max(d);
+        parity.changed += changed;
+        parity.values += got.len();
     }
-    worst
+    parity
 }
 
 /// Runs `web/test/browser.mjs` on `wav` into `out` for the track frames `frames` at every
