@@ -33,9 +33,10 @@ pub struct UpsamplerArgs {
     /// Run folder holding RUN/teacher and the student.
     #[arg(long)]
     pub run: PathBuf,
-    /// The student's folder inside RUN.
-    #[arg(long, default_value = "student")]
-    pub student: String,
+    /// The student's folder inside RUN (default `student`; overrides the configuration's
+    /// `student`, saying so).
+    #[arg(long)]
+    pub student: Option<String>,
     /// Folder of the upsampler inside RUN.
     #[arg(long, default_value = "upsampler")]
     pub name: String,
@@ -297,6 +298,9 @@ fn run_teacher(args: TeacherArgs) -> Result<()> {
     Ok(())
 }
 
+/// The student's folder inside a run when neither `--student` nor a configuration names one.
+const DEFAULT_STUDENT: &str = "student";
+
 /// Runs `nldf train upsampler`.
 fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     use anyhow::Context;
@@ -308,8 +312,20 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
             ..UpsamplerRunConfig::default()
         },
     };
-    if cfg.student.is_empty() {
-        cfg.student = args.student.clone();
+    if let Some(flag) = &args.student {
+        if let Some(file) = &args.config
+            && !cfg.student.is_empty()
+            && cfg.student != *flag
+        {
+            eprintln!(
+                "--student {flag} overrides the student `{}` that {} names",
+                cfg.student,
+                file.display()
+            );
+        }
+        cfg.student = flag.clone();
+    } else if cfg.student.is_empty() {
+        cfg.student = DEFAULT_STUDENT.to_string();
     }
     if let Some(iters) = args.iters {
         cfg.train.iters = iters;

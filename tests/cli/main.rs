@@ -1108,6 +1108,89 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
     assert!(machine["load_average_1m_after"].is_number(), "{machine}");
 }
 
+/// The files of `from`'s teacher and student folders copied into `to`.
+fn copy_trained_run(from: &Path, to: &Path) {
+    for sub in ["teacher", "student"] {
+        std::fs::create_dir_all(to.join(sub)).unwrap();
+        for entry in std::fs::read_dir(from.join(sub)).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_file() {
+                std::fs::copy(&path, to.join(sub).join(path.file_name().unwrap())).unwrap();
+            }
+        }
+    }
+}
+
+/// A tiny upsampler's configuration, naming `student` when given.
+fn upsampler_config(student: Option<&str>) -> String {
+    let student = student.map_or(String::new(), |s| format!(r#""student": "{s}","#));
+    format!(
+        r#"{{"model": {{"factor": 2, "channels": [8, 8], "margin": 1}}, {student}
+            "train": {{"iters": 6, "batch": 2, "crop": 4, "halo": 1, "pseudo_views": 2}}}}"#
+    )
+}
+
+/// `nldf train upsampler --student NAME` with a `--config` that names another student: the
+/// flag wins and says so on stderr. A configuration naming a folder that does not exist
+/// trains over `--student student`, and the upsampler's saved configuration names
+/// `student`; `--student` naming a folder that does not exist is refused by that name,
+/// though the configuration names the trained student.
+#[test]
+fn train_upsampler_student_flag_overrides_the_configuration() {
+    let f = fixture();
+    let dir = scratch();
+    let d = dir.path();
+    let run = d.join("run");
+    copy_trained_run(&f.run, &run);
+    let config = |student: &str| {
+        let path = d.join(format!("upsampler_{student}.json"));
+        std::fs::write(&path, upsampler_config(Some(student))).unwrap();
+        s(&path)
+    };
+    let train = |config: &str, student: &str, name: &str| {
+        args(&[
+            "train",
+            "upsampler",
+            "--data",
+            &s(&f.data),
+            "--run",
+            &s(&run),
+            "--config",
+            config,
+            "--student",
+            student,
+            "--name",
+            name,
+            "--iters",
+            "2",
+        ])
+    };
+    let elsewhere = config("elsewhere");
+    let out = nldf_ok(train(&elsewhere, "student", "upsampler"));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("--student student overrides the student `elsewhere`")
+            && said.contains("upsampler_elsewhere.json"),
+        "the override is not said:\n{said}"
+    );
+    let saved: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            run.join("upsampler")
+                .join(nldf_core::run_files::CONFIG_FILE),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(saved["student"], "student", "the saved configuration");
+
+    refused(
+        "--student naming a missing folder over a configuration naming the trained student",
+        &train(&config("student"), "nowhere", "up2"),
+        &["nowhere"],
+        &[&run.join("up2")],
+    );
+}
+
 /// The learned upsampler through the command line on a copy of the fixture's run: `nldf
 /// train upsampler`, `nldf export --upsampler` (the ray graph, without --frame), `nldf render`
 /// of a WAV with it (every frame written, the size of the model's), also with
@@ -1118,22 +1201,9 @@ fn an_upsampled_ray_graph_renders_from_the_command_line() {
     let dir = scratch();
     let d = dir.path();
     let run = d.join("run");
-    for sub in ["teacher", "student"] {
-        std::fs::create_dir_all(run.join(sub)).unwrap();
-        for entry in std::fs::read_dir(f.run.join(sub)).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_file() {
-                std::fs::copy(&path, run.join(sub).join(path.file_name().unwrap())).unwrap();
-            }
-        }
-    }
+    copy_trained_run(&f.run, &run);
     let config = d.join("upsampler.json");
-    std::fs::write(
-        &config,
-        r#"{"model": {"factor": 2, "channels": [8, 8], "margin": 1},
-            "train": {"iters": 6, "batch": 2, "crop": 4, "halo": 1, "pseudo_views": 2}}"#,
-    )
-    .unwrap();
+    std::fs::write(&config, upsampler_config(None)).unwrap();
     nldf_ok(args(&[
         "train",
         "upsampler",
