@@ -530,3 +530,60 @@ fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
 pub fn default_out(run: &Path) -> PathBuf {
     run.join("bench_upsampler")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(way: &str, precision: &str, runtime: &str, seconds: &[f64]) -> UpsamplerRow {
+        UpsamplerRow {
+            way: way.into(),
+            precision: precision.into(),
+            runtime: runtime.into(),
+            size: 256,
+            grid: 64,
+            s_per_frame: median(seconds),
+            fps: 1.0 / median(seconds),
+            scores: Vec::new(),
+            speed_against_native: None,
+            frame_seconds: seconds.to_vec(),
+        }
+    }
+
+    /// Every row against native rays in fp32 onnxruntime, and each lower precision
+    /// against the higher ones of its own way and runtime only, frame by frame.
+    #[test]
+    fn speeds_pair_frames_within_a_way_and_runtime() {
+        let native = [0.10, 0.11, 0.10, 0.12, 0.10];
+        let f32_rays = [0.05, 0.05, 0.06, 0.05, 0.05];
+        // int8 faster on the median frame, slower on one: no difference against fp16.
+        let f16_rays = [0.040, 0.041, 0.040, 0.040, 0.040];
+        let int8_rays = [0.036, 0.037, 0.044, 0.036, 0.037];
+        let mut rows = vec![
+            row("native rays", "fp32", "ort", &native),
+            row("upsampler, ray graph", "fp32", "ort", &f32_rays),
+            row("upsampler, ray graph", "fp16", "ort", &f16_rays),
+            row("upsampler, ray graph", "int8", "ort", &int8_rays),
+            row("upsampler, ray graph", "fp16", "tract", &f16_rays),
+        ];
+        let precisions = speed_ratios(&mut rows);
+        let native_speed = rows[1].speed_against_native.unwrap();
+        assert!((native_speed.median - 2.0).abs() < 1e-9, "{native_speed:?}");
+        assert_eq!(native_speed.verdict, crate::repeats::Verdict::Above);
+        let names: Vec<(&str, &str, &str)> = precisions
+            .iter()
+            .map(|p| (p.runtime.as_str(), p.precision.as_str(), p.against.as_str()))
+            .collect();
+        assert_eq!(
+            names,
+            [
+                ("ort", "fp16", "fp32"),
+                ("ort", "int8", "fp32"),
+                ("ort", "int8", "fp16"),
+            ]
+        );
+        let int8_f16 = &precisions[2].speed;
+        assert!(int8_f16.median > 1.0, "{int8_f16:?}");
+        assert_eq!(int8_f16.verdict, crate::repeats::Verdict::NoDifference);
+    }
+}
