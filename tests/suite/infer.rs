@@ -629,7 +629,7 @@ fn infer_skipping_still_pixels_stays_within_its_threshold() {
     );
     let all: Vec<Vec<f32>> = probed.iter().map(|&f| audio(f)).collect();
     let mut skipper = StillSkipper::new(config, all.clone()).unwrap();
-    let mut kinds = Vec::new();
+    let (mut kinds, mut sent) = (Vec::new(), Vec::new());
     for f in 0..n {
         let reference = full.render(pose, &audio(f)).unwrap();
         let out = skipper.render(&mut skipping, pose, &audio(f)).unwrap();
@@ -650,12 +650,53 @@ fn infer_skipping_still_pixels_stays_within_its_threshold() {
             assert_eq!(out.frame, reference);
         } else {
             assert!(out.frame.head_pixels <= reference.head_pixels);
+            sent.push(out.frame.head_pixels);
         }
         kinds.push(out.kind);
     }
     let moving = skipper.moving_pixels().unwrap();
     println!("{moving} of {head} head pixels re-rendered over {n} frames: {kinds:?}");
     assert!(0 < moving && moving < head, "{moving} of {head}");
+    // The moving pixels, counted here: the head pixels within `margin` (a square) of one
+    // whose colour spreads by more than the threshold over the first full frame (frame 0's,
+    // which the probed frame 1 starts from) and the probes' renders.
+    let rays = full.rays(pose);
+    let mut spread: Vec<(f32, f32)> = full
+        .render(pose, &audio(0))
+        .unwrap()
+        .image
+        .gather(&rays.pixels)
+        .into_iter()
+        .map(|v| (v, v))
+        .collect();
+    for probe in &all {
+        let rgb = full.run_rays(&rays, probe).unwrap().rgb;
+        for (s, v) in spread.iter_mut().zip(rgb) {
+            *s = (s.0.min(v), s.1.max(v));
+        }
+    }
+    let w = full.intrinsics().width as usize;
+    let hot: Vec<usize> = rays
+        .pixels
+        .iter()
+        .zip(spread.chunks(3))
+        .filter(|(_, s)| s.iter().any(|(lo, hi)| hi - lo > config.threshold))
+        .map(|(&p, _)| p)
+        .collect();
+    let margin = config.margin as usize;
+    let expected = rays
+        .pixels
+        .iter()
+        .filter(|&&p| {
+            hot.iter()
+                .any(|&q| (p / w).abs_diff(q / w) <= margin && (p % w).abs_diff(q % w) <= margin)
+        })
+        .count();
+    assert_eq!(moving, expected, "the moving pixels");
+    assert!(
+        sent.iter().all(|&s| s == moving),
+        "a skipped frame sends the moving pixels' rays: {sent:?}"
+    );
     for (f, k) in kinds.iter().enumerate() {
         let expected = match f % config.refresh {
             0 => FrameKind::Full,
