@@ -1,7 +1,7 @@
 //! The learned upsampler (`nldf train upsampler`, `nldf export [--frame] --upsampler`): the
 //! frame graph and the ray graph with the upsampler inside (the ray graph through nldf's
 //! own `FrameRenderer`, which finds the box) match candle's reference renderer
-//! (`nldf_train::upsampler::render_upsampled`) within 1e-4 of the largest output value, in
+//! (`nldf_train::upsampler::render_upsampled`) within `REL_TOL` of the largest output value, in
 //! tract and onnxruntime, for a tiny student and at production size (the real-time student,
 //! 256 x 256 and 512 x 512 frames, x4), with a camera that sees no head among the poses.
 
@@ -25,8 +25,18 @@ use nldf_train::upsampler::{Upsampler, render_upsampled, upsampler};
 
 use crate::util::{camera_at, configs, max_diff, runtimes, spec_for, write_run_with};
 
-/// The issue's parity bar: within 1e-4 of the largest output value.
-const REL_TOL: f32 = 1e-4;
+/// The parity bar, relative to the largest output value (both graphs, parts of the box).
+/// Measured worst about 9.1e-7.
+const REL_TOL: f32 = 5e-6;
+/// The trained tiny upsampler's frame graph against candle, relative to the largest value.
+/// Measured worst about 3.0e-7.
+const TRAINED_TOL: f32 = 2e-6;
+/// Lowest PSNR allowed, in dB, of a frame that skips still pixels against the full frame.
+/// Measured lowest about 63.6.
+const SKIP_PSNR: f64 = 50.0;
+/// The tiny upsampler's mean loss over its last ten steps, at most this share of its first
+/// ten's.
+const LOSS_FALL: f64 = 0.95;
 
 /// A seeded upsampler of `cfg` over a student `width` wide, written to `dir` as the trainer
 /// leaves it (config.json naming the student, weights with the step).
@@ -211,9 +221,11 @@ fn parity(label: &str, cfg: &StudentConfig, factor: usize, size: (u32, u32), see
 /// A part of the head's box renders as the whole box does: the middle third of the box,
 /// two patches at its corners, each of three corners of the box alone and a pixel outside
 /// the box through `render_pixels` match candle's frame `whole`
-/// (rendered from `pose` with frame 1's audio) within 1e-5 of the largest value, sending no
-/// more coarse rays than the whole frame (fewer where the box is large). Skipping still
-/// pixels at that pose renders full, probed and partial frames within 40 dB of full frames.
+/// (rendered from `pose` with frame 1's audio) within `REL_TOL` of the largest value, sending
+/// the coarse rays within the CNN's reach of their pixels (counted here from the coarse
+/// grid's hits), no more than the whole frame (fewer where the box is large). Skipping still
+/// pixels at that pose renders full, probed and partial frames above `SKIP_PSNR` against
+/// full frames.
 fn part_of_the_box(
     label: &str,
     kind: nldf_infer::BackendKind,
@@ -250,6 +262,48 @@ fn part_of_the_box(
     };
     let (rgb, sent_two) = renderer.render_pixels(pose, &two, &audio(1)).unwrap();
     d = d.max(max_diff(&rgb, &whole.gather(&two.pixels)) / scale);
+    // The rays sent, counted here from the coarse grid's hits (core's head test on the
+    // coarse camera): a hit cell is sent when a wanted pixel's own cell lies within the
+    // CNN's reach of it, in rows and in columns.
+    let info = renderer.backend().info().clone();
+    let up = info.upsample.expect("an upsampled model");
+    let coarse =
+        nldf_core::upsampler_shape::coarse_intrinsics(&renderer.intrinsics(), up.factor).unwrap();
+    let hits = nldf_core::rays::head_rays(
+        &Camera {
+            intrinsics: coarse,
+            c2w: pose,
+        },
+        &info.spec.head_range(),
+    )
+    .pixels;
+    assert_eq!(
+        hits.len(),
+        *n_rays,
+        "{label}: the coarse rays that meet the head"
+    );
+    let halo = nldf_core::upsampler_shape::receptive_halo(up.factor);
+    let (r, wc) = (up.factor, coarse.width as usize);
+    let expected = |pixels: &[usize]| {
+        hits.iter()
+            .filter(|&&c| {
+                pixels.iter().any(|&p| {
+                    let (j, i) = (p / w / r, p % w / r);
+                    (c / wc).abs_diff(j) <= halo && (c % wc).abs_diff(i) <= halo
+                })
+            })
+            .count()
+    };
+    assert_eq!(
+        sent,
+        expected(&part.pixels),
+        "{label}: rays sent for a third of the box"
+    );
+    assert_eq!(
+        sent_two,
+        expected(&two.pixels),
+        "{label}: rays sent for two patches"
+    );
     assert!(
         sent_two <= sent,
         "{label}: two patches sent {sent_two}, their box's third {sent}"
@@ -264,7 +318,7 @@ fn part_of_the_box(
         d = d.max(max_diff(&rgb, &whole.gather(&[p])) / scale);
     }
     assert!(
-        d <= 1e-5,
+        d <= REL_TOL,
         "{label}: part of the box in {}: {d:.2e}",
         kind.name()
     );
@@ -284,7 +338,7 @@ fn part_of_the_box(
         kind.name()
     );
     let mut skipper = StillSkipper::new(SkipConfig::default(), vec![audio(2), audio(5)]).unwrap();
-    let mut kinds = Vec::new();
+    let (mut kinds, mut lowest) = (Vec::new(), f64::INFINITY);
     for f in 0..5 {
         let out = skipper.render(renderer, pose, &audio(f)).unwrap();
         let full = renderer.render(pose, &audio(f)).unwrap();
@@ -302,10 +356,18 @@ fn part_of_the_box(
         } else {
             f64::INFINITY
         };
-        assert!(psnr > 40.0, "{label}: skipping frame {f}: {psnr:.2} dB");
+        assert!(
+            psnr > SKIP_PSNR,
+            "{label}: skipping frame {f}: {psnr:.2} dB"
+        );
+        lowest = lowest.min(psnr);
         assert!(out.frame.head_pixels <= full.head_pixels);
         kinds.push(out.kind);
     }
+    println!(
+        "{label}: skipping in {}: lowest PSNR against full frames {lowest:.2} dB",
+        kind.name()
+    );
     assert_eq!(
         kinds,
         [
@@ -406,8 +468,22 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
         },
     };
     let up_dir = out.join("upsampler");
-    let report = train_upsampler(&up_dir, &out, cfg.clone(), &data, &stop, &mut |_, _| {}).unwrap();
+    let mut losses = Vec::new();
+    let report = train_upsampler(&up_dir, &out, cfg.clone(), &data, &stop, &mut |_, l| {
+        losses.push(l)
+    })
+    .unwrap();
     assert_eq!(report.steps, 80);
+    // Its loss falls: the mean of the last ten steps' losses (each a batch of 4 random
+    // crops) is below LOSS_FALL times the first ten's.
+    assert_eq!(losses.len(), 80);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let (start, end) = (mean(&losses[..10]), mean(&losses[70..]));
+    println!("tiny upsampler: mean loss of the first ten steps {start:.4e}, last ten {end:.4e}");
+    assert!(
+        end < LOSS_FALL * start,
+        "the loss did not fall: {start:.4e} -> {end:.4e}"
+    );
     assert!(
         report.recorded_views > 0 && report.pseudo_crops > 0,
         "{report:?}"
@@ -496,6 +572,39 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
 
     let frame_path = out.join("frame_up.onnx");
     export_frame_upsampled(&out.join("student"), &up_dir, &frame_path, WeightType::F32).unwrap();
+    // Its frame graph renders a recorded frame, from the scene's WAV, as candle renders it
+    // from the dataset's feature windows.
+    let trained = nldf_train::upsampler_trainer::UpsampledModel::open(&up_dir, &out).unwrap();
+    let model = read_frame_model(&frame_path).unwrap();
+    let wave = nldf_core::audio::read_wav(&out.join("data").join("aud.wav")).unwrap();
+    for frame in [&data.dataset.train[1], data.dataset.train.last().unwrap()] {
+        use nldf_train::eval::FrameModel;
+        let want = trained.render_frame(&data, frame).unwrap();
+        assert!(
+            max_diff(&want.data, &data.dataset.background.data) > 0.05,
+            "the recorded frame shows the head"
+        );
+        let scale = want.data.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        for kind in runtimes() {
+            let mut graph = nldf_infer::frame_graph::FrameGraph::open(&model, kind, 2).unwrap();
+            let got = graph
+                .render(frame.c2w, &model.audio.chunk(&wave.samples, frame.aud_id))
+                .unwrap();
+            let d = max_diff(&got.image.data, &want.data) / scale;
+            println!(
+                "tiny upsampler, frame {}: frame graph in {} against candle: {d:.2e} of the \
+                 largest value",
+                frame.aud_id,
+                kind.name()
+            );
+            assert!(
+                d <= TRAINED_TOL,
+                "{}: frame {}: {d:.2e}",
+                kind.name(),
+                frame.aud_id
+            );
+        }
+    }
     // The upsampler belongs to its student: the same student under another name is refused.
     let other = out.join("student_b");
     std::fs::create_dir_all(&other).unwrap();
@@ -548,7 +657,7 @@ fn frames_for_upscaling_cast_rays_through_block_centres() {
 /// --int8`; the upsampler's convolutions in f32), the real-time student at 256 x 256, x4,
 /// calibrated on the coarse rays of two poses: its products are integer ones, and its frames
 /// from three poses stay within a relative RMS of 0.05 of the f32 graph's in tract and ort,
-/// the two runtimes within a relative RMS of 5e-3 (and 5e-2 at most) of each other.
+/// the two runtimes within a relative RMS of 4e-3 (and 5e-2 at most) of each other.
 #[test]
 fn an_int8_upsampled_ray_graph_stays_near_the_f32_one() {
     use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
@@ -662,7 +771,7 @@ fn an_int8_upsampled_ray_graph_stays_near_the_f32_one() {
             let rel = rms(&diff) / rms(&a.data);
             println!("tract against ort, pose {i}: largest {d:.2e}, relative RMS {rel:.2e}");
             assert!(
-                d <= 5e-2 && rel <= 5e-3,
+                d <= 5e-2 && rel <= 4e-3,
                 "tract against ort, pose {i}: {d}, {rel}"
             );
         }
