@@ -1,7 +1,7 @@
 //! Parity across every runtime: the same 10 000 random rays and audio give the same pixels
-//! and segments (max abs difference <= 1e-4) in candle (the reference), tract and
+//! and segments (max abs difference <= `TOL`) in candle (the reference), tract and
 //! onnxruntime through nldf-infer's backends, and Python onnxruntime; at the paper's
-//! production size (88 x 256, K = 16, L = 10, attention on) within 1e-4 of the largest
+//! production size (88 x 256, K = 16, L = 10, attention on) within `REL_TOL` of the largest
 //! output. Under CI a missing
 //! onnxruntime library or Python environment fails the test instead of skipping it.
 
@@ -124,8 +124,8 @@ fn export_candle_tract_ort_and_python_onnxruntime_agree_on_10000_rays() {
 }
 
 /// Relative bound of the production-size parity: every output within `REL_TOL` of the
-/// largest reference output's magnitude (at least 1).
-const REL_TOL: f32 = 1e-4;
+/// largest reference output's magnitude (at least 1). Measured worst about 2.0e-6.
+const REL_TOL: f32 = 1e-5;
 
 /// Parity at the paper's production size: 88 x 256 (43 residual blocks), K = 16, L = 10,
 /// AudioAttNet on, weights at a trained ReLU network's magnitude. Every pair of candle,
@@ -260,17 +260,18 @@ const INT8_RMS: f64 = 0.05;
 /// arithmetic and not in the other's moves one uint8 step, and the layers above carry it.
 const INT8_RUNTIME_TOL: f32 = 2e-2;
 
-/// Relative RMS difference allowed between two runtimes running the same int8 model: a
-/// tenth of the quantization's own error allowance.
-const INT8_RUNTIME_RMS: f64 = 0.1 * INT8_RMS;
+/// Relative RMS difference allowed between two runtimes running the same int8 model.
+/// Measured worst about 3.2e-4.
+const INT8_RUNTIME_RMS: f64 = 3e-3;
 
-/// int8 against fp32 on a trained student's frames, in dB: a tiny student trained on the
-/// recorded pixels of the tiny scene, exported in f32 and in int8 (calibrated on 4 training
-/// frames), both rendered by tract on every `val` frame and every `novel` frame (the head
-/// turned beyond the recorded poses, so some rays leave the calibrated ranges). On each
-/// split the int8 frames' PSNR against the ground truth is within 0.3 dB of the f32 ones'.
+/// int8 against fp32 on a trained student's frames: a tiny student trained on the recorded
+/// pixels of the tiny scene, exported in f32 and in int8 (calibrated on 4 training frames),
+/// both rendered by tract on every `val` frame and every `novel` frame (the head turned
+/// beyond the recorded poses, so some rays leave the calibrated ranges). On each split the
+/// int8 frames' head pixels are within a relative RMS of `TRAINED_INT8_RMS` of the f32
+/// frames' and no channel is off by more than `TRAINED_INT8_MAX`; the frames differ.
 #[test]
-fn int8_stays_within_0_3_db_of_fp32_on_a_trained_students_val_and_novel_frames() {
+fn int8_stays_near_fp32_on_a_trained_students_val_and_novel_frames() {
     use nldf_core::dataset::{AudioChoice, Dataset, Split};
     use nldf_core::metrics::psnr;
     use nldf_infer::frame::FrameRenderer;
@@ -315,20 +316,29 @@ fn int8_stays_within_0_3_db_of_fp32_on_a_trained_students_val_and_novel_frames()
     let (mut int8, _) = renderer(&int8_path);
     for split in [Split::Val, Split::Novel] {
         let ds = Dataset::load_held_out(scene, &AudioChoice::Auto, split).unwrap();
-        let (mut p32, mut p8, mut differ) = (0.0, 0.0, false);
+        let (mut p32, mut sq_diff, mut sq_base, mut worst) = (0.0, 0.0f64, 0.0f64, 0.0f32);
         for f in &ds.val {
             let truth = ds.load_image(f).unwrap();
             let audio = neighbourhood(&ds.audio, f.aud_id, att);
-            let a = fp32.render(f.c2w, &audio).unwrap().image;
-            let b = int8.render(f.c2w, &audio).unwrap().image;
-            differ |= a != b;
-            p32 += psnr(&a, &truth).unwrap();
-            p8 += psnr(&b, &truth).unwrap();
+            let a = fp32.render(f.c2w, &audio).unwrap();
+            let b = int8.render(f.c2w, &audio).unwrap();
+            assert_eq!(a.head_pixels, b.head_pixels);
+            p32 += psnr(&a.image, &truth).unwrap();
+            // The head's pixels: the others are the background in both.
+            for p in fp32.rays(f.c2w).pixels {
+                for c in 3 * p..3 * p + 3 {
+                    let (x, y) = (b.image.data[c], a.image.data[c]);
+                    sq_diff += ((x - y) as f64).powi(2);
+                    sq_base += (y as f64).powi(2);
+                    worst = worst.max((x - y).abs());
+                }
+            }
         }
-        let n = ds.val.len() as f64;
-        let (p32, p8) = (p32 / n, p8 / n);
+        let p32 = p32 / ds.val.len() as f64;
+        let rel = (sq_diff / sq_base).sqrt();
         println!(
-            "{}: {} frames, fp32 {p32:.3} dB, int8 {p8:.3} dB",
+            "{}: {} frames, fp32 {p32:.3} dB against the ground truth; int8 against fp32: \
+             relative RMS {rel:.3e} of the head pixels, worst channel {worst:.3e}",
             split.name(),
             ds.val.len()
         );
@@ -338,14 +348,22 @@ fn int8_stays_within_0_3_db_of_fp32_on_a_trained_students_val_and_novel_frames()
             split.name()
         );
         assert!(
-            differ,
+            worst > 0.0,
             "{}: the int8 frames equal the f32 ones",
             split.name()
         );
         assert!(
-            (p8 - p32).abs() <= 0.3,
-            "{}: int8 {p8:.3} dB against fp32 {p32:.3} dB",
+            rel.is_finite() && rel <= TRAINED_INT8_RMS && worst <= TRAINED_INT8_MAX,
+            "{}: int8 against fp32: relative RMS {rel:.3e}, worst channel {worst:.3e}",
             split.name()
         );
     }
 }
+
+/// Relative RMS difference allowed between a trained tiny student's int8 frames and its f32
+/// frames, over the head's pixels. Measured worst about 3.7e-3.
+const TRAINED_INT8_RMS: f64 = 1e-2;
+
+/// Largest difference of one colour channel allowed between the same frames. Measured
+/// worst about 8.0e-3.
+const TRAINED_INT8_MAX: f32 = 5e-2;

@@ -28,8 +28,9 @@ use prost::Message;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// Parity tolerance of the issue: max abs difference on every output value.
-pub(crate) const TOL: f32 = 1e-4;
+/// Parity tolerance across runtimes for the tiny students: max abs difference on every
+/// output value. Measured worst about 8.3e-7.
+pub(crate) const TOL: f32 = 5e-6;
 
 /// A student run folder and the candle student whose weights it holds.
 pub(crate) struct Run {
