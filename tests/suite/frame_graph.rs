@@ -1,8 +1,8 @@
 //! The frame graph (`nldf export --frame`) against `nldf render`: for the same audio track
 //! and poses, the frames it computes from audio samples and a pose alone match the frames
-//! nldf's renderer makes with the ray graph within 1/255 per channel, in tract, onnxruntime
-//! and Python onnxruntime, and its front end's windows match nldf's within 1e-4 of the
-//! largest feature. At the track's ends (where nldf clamps the windows), for a camera
+//! nldf's renderer makes with the ray graph within f32 rounding (`IMAGE_TOL` per channel,
+//! `TINY_IMAGE_TOL` for the tiny students), in tract, onnxruntime and Python onnxruntime, and
+//! its front end's windows match nldf's within `FEATURE_TOL` of the largest feature. At the track's ends (where nldf clamps the windows), for a camera
 //! that sees no head, for models with and without opacity, at the shipped model's size and at
 //! 28 x 256. With a `keep` mask, the kept pixels are the whole frame's and the others the
 //! background, and only the kept head rays go through the student.
@@ -26,10 +26,19 @@ use crate::util::{
     write_run, write_run_with,
 };
 
-/// Worst allowed difference per channel between the frame graph's frame and nldf's.
-const IMAGE_TOL: f32 = 1.0 / 255.0;
+/// Worst allowed difference per channel between the frame graph's frame and nldf's, for
+/// students at production size (the same f32 network, summed in another order).
+/// Measured worst about 1.1e-5.
+const IMAGE_TOL: f32 = 1e-4;
+/// The same for the tiny students. Measured worst about 7.5e-7.
+const TINY_IMAGE_TOL: f32 = 5e-6;
+/// The shipped frame graph against the shipped ray graph. Measured worst about 1.0e-6.
+const SHIPPED_TOL: f32 = 1e-5;
+/// The fp16 and int8 frame graphs against their ray graphs. Measured worst about 2.5e-6.
+const QUANTIZED_TOL: f32 = 2e-5;
 /// Worst allowed difference of a front-end feature, relative to the largest (at least 1).
-const FEATURE_TOL: f32 = 1e-4;
+/// Measured worst about 2.1e-6.
+const FEATURE_TOL: f32 = 1e-5;
 
 /// A voiced, wobbling test signal with a little noise, `n` samples at 16 kHz.
 fn speech_like(n: usize) -> Vec<f32> {
@@ -67,8 +76,8 @@ fn nldf_renderer(model: &nldf_export::ExportedModel, kind: BackendKind) -> Frame
 /// Exports the student of `cfg` (seed `seed`, frames `size`, weights at a trained
 /// network's magnitude when `trained`) as ray and frame graph, renders frames at both ends
 /// and the middle of a track from three poses (one seeing no head) with nldf's renderer,
-/// and holds the frame graph in tract, onnxruntime and Python onnxruntime against them.
-/// Returns the worst image and feature differences.
+/// and holds the frame graph in tract, onnxruntime and Python onnxruntime against them
+/// (images within `image_tol` per channel). Returns the worst image and feature differences.
 fn parity(
     label: &str,
     cfg: &StudentConfig,
@@ -76,6 +85,7 @@ fn parity(
     size: Option<(u32, u32)>,
     trained: bool,
     python: Option<&Path>,
+    image_tol: f32,
 ) -> (f32, f32) {
     let mut spec = spec_for(cfg);
     if let Some((w, h)) = size {
@@ -143,7 +153,7 @@ fn parity(
                 kind.name()
             );
             assert!(
-                d_image <= IMAGE_TOL && d_feat <= FEATURE_TOL,
+                d_image <= image_tol && d_feat <= FEATURE_TOL,
                 "{label}: {} frame {f}: image {d_image:.2e}, features {d_feat:.2e}",
                 kind.name()
             );
@@ -191,7 +201,7 @@ fn parity(
             d_python = d_python.max(max_diff(&images[i * per..(i + 1) * per], &image.data));
         }
         println!("{label}: frame graph in Python onnxruntime: worst |image diff| {d_python:.2e}");
-        assert!(d_python <= IMAGE_TOL, "{label}: python {d_python}");
+        assert!(d_python <= image_tol, "{label}: python {d_python}");
         worst.0 = worst.0.max(d_python);
     }
     worst
@@ -208,11 +218,21 @@ fn frame_graph_matches_nldf_render_for_tiny_students() {
             None,
             false,
             python.as_deref(),
+            TINY_IMAGE_TOL,
         );
     }
     let mut plain = configs().remove(1);
     plain.opacity = false;
-    parity("no opacity", &plain, 63, None, false, python.as_deref());
+    let python = python.as_deref();
+    parity(
+        "no opacity",
+        &plain,
+        63,
+        None,
+        false,
+        python,
+        TINY_IMAGE_TOL,
+    );
 }
 
 /// The shipped model's shape (the real-time preset) at its 128 x 128 frames, and the
@@ -232,6 +252,7 @@ fn frame_graph_matches_nldf_render_at_production_sizes() {
         Some((128, 128)),
         true,
         python.as_deref(),
+        IMAGE_TOL,
     );
     println!("real-time: worst image {d_img:.2e}, features {d_feat:.2e}");
     let d28 = StudentConfig::paper_d28();
@@ -242,6 +263,7 @@ fn frame_graph_matches_nldf_render_at_production_sizes() {
         Some((64, 48)),
         true,
         python.as_deref(),
+        IMAGE_TOL,
     );
     println!("28 x 256: worst image {d_img:.2e}, features {d_feat:.2e}");
 }
@@ -303,7 +325,7 @@ fn shipped_frame_graph_matches_the_shipped_model() {
             "shipped model: frame graph in {} against nldf render: worst |image diff| {worst:.2e}",
             kind.name()
         );
-        assert!(worst <= IMAGE_TOL, "{}: {worst}", kind.name());
+        assert!(worst <= SHIPPED_TOL, "{}: {worst}", kind.name());
     }
 }
 
@@ -442,7 +464,7 @@ fn fp16_and_int8_frame_graphs_match_their_ray_graphs() {
                  {worst:.2e}",
                 kind.name()
             );
-            assert!(worst <= IMAGE_TOL, "{label} {}: {worst}", kind.name());
+            assert!(worst <= QUANTIZED_TOL, "{label} {}: {worst}", kind.name());
         }
     }
 }
@@ -476,8 +498,8 @@ fn a_frame_graph_needs_nldf_features_and_whole_frames() {
 }
 
 /// The `keep` input: with a random half of the pixels kept, each runtime renders the whole
-/// frame's colours (within [`IMAGE_TOL`]) at the kept pixels and the background at the
-/// others, and `n_rays` says that only the kept pixels' head rays went through the student;
+/// frame's colours (exactly: the kept rays are the same rays through the same graph) at
+/// the kept pixels and the background at the others, and `n_rays` says that only the kept pixels' head rays went through the student;
 /// with none kept, the frame is the background and no ray runs. In f32 and f16.
 #[test]
 fn a_keep_mask_renders_the_kept_pixels_and_the_background_elsewhere() {
@@ -538,14 +560,14 @@ fn a_keep_mask_renders_the_kept_pixels_and_the_background_elsewhere() {
                         worst_other = worst_other.max(max_diff(&got, &px(&background)));
                     }
                 }
-                assert!(worst_kept <= IMAGE_TOL, "{label}: kept pixels {worst_kept}");
-                assert!(worst_other <= 1e-6, "{label}: other pixels {worst_other}");
+                assert!(worst_kept == 0.0, "{label}: kept pixels {worst_kept}");
+                assert!(worst_other == 0.0, "{label}: other pixels {worst_other}");
                 assert_eq!(full.n_rays, head.len(), "{label}: every head ray runs");
                 let kept_head = head.iter().filter(|&&p| half[p]).count();
                 assert_eq!(kept.n_rays, kept_head, "{label}: only kept head rays run");
                 assert_eq!(empty.n_rays, 0, "{label}: nothing kept, nothing runs");
                 assert!(
-                    max_diff(&empty.image.data, &background.data) <= 1e-6,
+                    max_diff(&empty.image.data, &background.data) == 0.0,
                     "{label}: nothing kept is the background"
                 );
             }
