@@ -54,8 +54,8 @@ pub struct Point {
     /// Median milliseconds per whole frame over the first frames, 1 thread.
     pub ms_1_thread: Option<f64>,
     /// Seconds of each whole frame of the `val` scoring pass, in the pass's order: the
-    /// pairs of the speed-ups (every point rendered each frame in turn).
-    #[serde(skip)]
+    /// pairs of the speed-ups (every point rendered each frame in turn), kept so that any
+    /// two points can be compared frame by frame later.
     pub frame_seconds: Vec<f64>,
     pub scores: Vec<SplitScore>,
     /// No other point is both faster (2 threads) and better on `val` PSNR.

@@ -80,8 +80,8 @@ pub struct UpsamplerRow {
     /// How many times as fast as the student's native rays in f32 onnxruntime: the median
     /// over the frames of that row's time over this one's (smallest-largest).
     pub speed_against_native: Option<Ratio>,
-    /// Seconds of each frame, in the order the ways took turns.
-    #[serde(skip)]
+    /// Seconds of each frame, in the order the ways took turns (any two rows pair frame by
+    /// frame).
     pub frame_seconds: Vec<f64>,
 }
 
