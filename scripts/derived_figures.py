@@ -57,13 +57,16 @@ def main():
             "xeon_head2": student_minus_teacher(f"{root}/kept_audio/xeon_head2/student_seed1"),
         },
     }
-    pixels = printed(
-        next(m for m in models(f"{root}/xeon_s0/pixels_only", "novel") if m["label"] != "teacher")
-    )
+    # Now: both students of the equal-minutes runs; before: the former headline student
+    # against the former pixels-only student (5000 steps).
     margins = {}
-    for name, folder in [("now", f"{root}/kept_audio/xeon_s0"), ("before", f"{root}/xeon_s0")]:
-        student = next(m for m in models(folder, "novel") if m["label"] == "student")
-        margins[name] = minus(printed(student), pixels)["head"]
+    for name, distilled, pixels_only in [
+        ("now", f"{root}/epyc_s0_equal_minutes/distilled", f"{root}/epyc_s0_equal_minutes/pixels_only"),
+        ("before", f"{root}/xeon_s0", f"{root}/xeon_s0/pixels_only"),
+    ]:
+        student = next(m for m in models(distilled, "novel") if m["label"] == "student")
+        pixels = next(m for m in models(pixels_only, "novel") if m["label"] != "teacher")
+        margins[name] = minus(printed(student), printed(pixels))["head"]
     out["distilled_minus_pixels_only_novel_head"] = margins
     path = f"{root}/differences.json"
     with open(path + ".tmp", "w") as f:

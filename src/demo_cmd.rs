@@ -35,7 +35,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub teacher_iters: Option<usize>,
     /// Student training steps (0 skips the student and the export) [default: 4500, with
-    /// --pixels-only 5000, with --quick 300].
+    /// --pixels-only 5300, with --quick 300].
     #[arg(long)]
     pub student_iters: Option<usize>,
     /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
