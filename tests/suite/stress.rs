@@ -107,7 +107,8 @@ fn stress_compositing_extreme_densities_and_spacings_matches_f64() {
         "core f32 compositing, {cases} rays of 64 samples: worst weight error {worst_w:.2e}, \
          colour {worst_c:.2e}, segment {worst_seg:.2e}"
     );
-    assert!(worst_w <= 1e-5 && worst_c <= 1e-5 && worst_seg <= 1e-5);
+    // Measured worst about 7e-8 (weights, colours and segments).
+    assert!(worst_w <= 5e-7 && worst_c <= 5e-7 && worst_seg <= 5e-7);
 }
 
 #[test]
@@ -152,7 +153,8 @@ fn stress_candle_compositing_extreme_densities_and_spacings_matches_f64() {
         }
     }
     println!("candle compositing, {n} extreme rays: worst error {worst:.2e}");
-    assert!(worst <= 1e-5);
+    // Measured worst about 9e-8.
+    assert!(worst <= 5e-7);
 }
 
 #[test]
