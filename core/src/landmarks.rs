@@ -126,12 +126,9 @@ pub fn landmarks_from_regions(regions: &[Region], width: u32) -> Option<Landmark
     let eye_line = eyes.map_or(hy - 0.1 * (head[3] - head[2]), |e| (e[2] + e[3]) / 2.0);
     let eye_half = eyes.map_or(0.25 * (head[1] - head[0]), |e| (e[1] - e[0]) / 4.0);
     let mut points = Vec::with_capacity(N_LANDMARKS);
-    // Jaw: the lower half of the head's outline, ear to ear.
-    points.extend(
-        ellipse(head, 0.0, 17, PI, 0.0)
-            .into_iter()
-            .map(|[x, y]| [x, 2.0 * hy - y]),
-    );
+    // Jaw: the lower half of the head's outline, ear to ear (image rows grow downwards, so
+    // angles from pi to 0 already run below the centre).
+    points.extend(ellipse(head, 0.0, 17, PI, 0.0));
     // Brows: five points above each eye.
     for side in [-1.0f32, 1.0] {
         let cx = hx + side * eye_half * 1.2;
@@ -250,6 +247,51 @@ mod tests {
             .map(|&r| if r == Region::Mouth { Region::Face } else { r })
             .collect();
         assert!(landmarks_from_regions(&no_mouth, w).is_none());
+    }
+
+    /// The jaw (0-16) runs along the lower half of the head's outline, ear to ear: no point
+    /// above the head's centre row, the chin (8) on the head's lowest row below the mouth.
+    #[test]
+    fn the_jaw_runs_below_the_head_centre_to_the_chin() {
+        let (w, h) = (40u32, 40u32);
+        let mut regions = vec![Region::Background; (w * h) as usize];
+        for j in 0..h {
+            for i in 0..w {
+                let (x, y) = (i as f32 - 20.0, j as f32 - 20.0);
+                let p = (j * w + i) as usize;
+                if (x / 12.0).powi(2) + (y / 16.0).powi(2) <= 1.0 {
+                    regions[p] = Region::Face;
+                }
+                if (x / 5.0).powi(2) + ((y - 9.0) / 2.5).powi(2) <= 1.0 {
+                    regions[p] = Region::Mouth;
+                }
+            }
+        }
+        let lms = landmarks_from_regions(&regions, w).unwrap();
+        // The head's pixel rows span 4..=36 (centre 20), its columns 8..=32.
+        for (k, [x, y]) in lms.points[..17].iter().enumerate() {
+            assert!(
+                *y >= 20.0 - 1e-3,
+                "jaw point {k} at row {y}, above the centre"
+            );
+            assert!(
+                (8.0 - 1e-3..=32.0 + 1e-3).contains(x),
+                "jaw point {k} at column {x}"
+            );
+        }
+        let chin = lms.points[8];
+        assert!((chin[1] - 36.0).abs() < 1e-3, "chin at row {}", chin[1]);
+        let lowest_lip = lms.points[48..60]
+            .iter()
+            .map(|p| p[1])
+            .fold(f32::MIN, f32::max);
+        assert!(
+            chin[1] > lowest_lip,
+            "chin {} above the lips {lowest_lip}",
+            chin[1]
+        );
+        // Ear to ear: the ends on the head's widest columns, at its centre row.
+        assert!((lms.points[0][0] - 8.0).abs() < 1e-3 && (lms.points[16][0] - 32.0).abs() < 1e-3);
     }
 
     #[test]
