@@ -61,14 +61,15 @@ fn the_student_presets_have_the_papers_depths_and_cost() {
     let alpha: Vec<Vec<f32>> = out.opacity.as_ref().unwrap().to_vec2().unwrap();
     let bg = Tensor::from_vec(vec![0.25f32; 15], (5, 3), &Device::Cpu).unwrap();
     let pix: Vec<Vec<f32>> = out.pixels(&bg).unwrap().to_vec2().unwrap();
+    // Measured worst 0: the colour is the segments' sum and the pixel Eq. 7, to the bit.
     for r in 0..5 {
         let a = alpha[r][0];
         assert!(a > 0.0 && a < 1.0, "opacity {a}");
         for c in 0..3 {
             let sum: f32 = (0..4).map(|i| seg[r][i][c]).sum();
-            assert!((sum - colour[r][c]).abs() < 1e-6);
+            assert_eq!(sum, colour[r][c]);
             // Eq. 7 over the background: colour + (1 - opacity) background.
-            assert!((sum + (1.0 - a) * 0.25 - pix[r][c]).abs() < 1e-6);
+            assert_eq!(sum + (1.0 - a) * 0.25, pix[r][c]);
         }
     }
     // Without opacity (checkpoints made before it), the pixel is the segments' sum.
@@ -179,20 +180,23 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
             .map(|(x, y)| (x - y).abs())
             .fold(0.0f32, f32::max)
     };
-    assert!(
-        max_diff(&out_f, &out_r) < 1e-5,
-        "outputs differ by {}",
-        max_diff(&out_f, &out_r)
-    );
+    let out_diff = max_diff(&out_f, &out_r);
+    println!("fused student: outputs differ by {out_diff:e}");
+    // Measured worst about 8.9e-8.
+    assert!(out_diff < 5e-7, "outputs differ by {out_diff}");
     assert_eq!(grads_f.len(), 2 + 2 * 2 * cfg.n_blocks() + 2 + 1);
+    let mut worst = 0f32;
     for ((name, gf), (_, gr)) in grads_f.iter().zip(&grads_r) {
         let scale = gr.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
         let d = max_diff(gf, gr);
+        worst = worst.max(d / scale);
+        // Measured worst about 2.1e-7 of the largest gradient.
         assert!(
-            d / scale < 1e-4,
+            d / scale < 1e-6,
             "{name}: gradients differ by {d} (scale {scale})"
         );
     }
+    println!("fused student: gradients differ by {worst:e} of the largest");
 }
 
 use crate::util::{assert_learned, tiny_run_config, tiny_scene};
@@ -457,10 +461,8 @@ fn a_student_with_weight_averaging_ends_on_the_average_of_its_decaying_steps() {
         .zip(&last)
         .map(|(e, w)| (e - w).abs())
         .fold(0.0f32, f32::max);
-    assert!(
-        worst < 1e-6,
-        "the last weights are {worst} from the average"
-    );
+    // Measured worst 0: the run averages with the same f32 arithmetic.
+    assert_eq!(worst, 0.0, "the last weights are {worst} from the average");
     let moved = weights(&plain)
         .iter()
         .zip(&last)
@@ -554,21 +556,16 @@ fn the_distillation_loss_adds_the_opacity_term_inside_lambda() {
     let segment = lambda as f32 * 0.09 / 3.0;
     let kl = 0.5 * (0.5f32 / 0.9).ln() + 0.5 * (0.5f32 / 0.1).ln();
     let opacity = lambda as f32 * kl;
-    assert!(
-        (loss(false) - (pixel + segment)).abs() < 1e-6,
-        "{}",
-        loss(false)
-    );
-    assert!(
-        (loss(true) - (pixel + segment + opacity)).abs() < 1e-5,
-        "{}",
-        loss(true)
-    );
+    // Measured worst 0 for both.
+    assert_eq!(loss(false), pixel + segment);
+    assert_eq!(loss(true), pixel + segment + opacity);
     let z = t(vec![-30.0, 0.0, 30.0, 2.0], &[4, 1]);
     let a = t(vec![0.0, 0.5, 1.0, 1.0 / (1.0 + (-2.0f32).exp())], &[4, 1]);
     let d: Vec<f32> = nldf_train::loss::opacity_divergence(&z, &a)
         .unwrap()
         .to_vec1()
         .unwrap();
-    assert!(d.iter().all(|v| v.abs() < 1e-5), "{d:?}");
+    println!("opacity divergence of matching pairs: {d:?}");
+    // Measured worst about 6e-8 (the logit 2 against its rounded sigmoid).
+    assert!(d.iter().all(|v| v.abs() < 5e-7), "{d:?}");
 }
