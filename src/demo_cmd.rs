@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use nldf_core::dataset::{AUDIO_WAV, Split, VOICE_DIR};
+use nldf_core::dataset::{AUDIO_NPY, AUDIO_WAV, Split, VOICE_DIR};
 use nldf_core::run_files::{CURVE_FILE, STUDENT_DIR, TEACHER_DIR};
 use nldf_core::synth::SynthConfig;
 use nldf_infer::backend::{BackendKind, BackendOptions};
@@ -136,6 +136,13 @@ pub fn run(args: DemoArgs) -> Result<()> {
         student_distill: !args.pixels_only,
         ..defaults
     };
+    run_job(job, "nldf demo")
+}
+
+/// Runs a demo job (the synthetic scene's, or `nldf train --data`'s on a dataset) with
+/// progress, then prints the evaluation, renders the video and prints the closing table.
+pub fn run_job(job: DemoJob, command: &str) -> Result<()> {
+    job.check()?;
     // The kernels' path is what can move the scores between CPUs: the log says which ran.
     println!(
         "== training kernels: {} (NLDF_KERNELS forces avx512, avx2 or portable)",
@@ -156,31 +163,45 @@ pub fn run(args: DemoArgs) -> Result<()> {
     crate::eval_cmd::print_evaluation(&report.evaluation, &report.eval_dir, n)?;
     report.evaluation.check_finite()?;
     let video = match &report.model {
-        Some(model) => Some(render_new_voice(&job.out, model)?),
+        Some(model) => Some(render_new_voice(&job.data_dir(), &job.out, model)?),
         None => None,
     };
-    print_summary(&job.out, &report, video.as_ref());
+    print_summary(command, &job.out, &report, video.as_ref());
     Ok(())
 }
 
-/// Renders the exported student speaking with the `voice` split's speaker, a voice it never
-/// heard, at the held-out frames' poses, into OUT/video (replacing an earlier demo's), with
-/// tract: an MP4 when ffmpeg is found, PNG frames always.
-fn render_new_voice(out: &Path, model: &Path) -> Result<VideoReport> {
-    let data = out.join("data");
+/// Renders the exported student at the held-out frames' poses into OUT/video (replacing an
+/// earlier one's), with tract: an MP4 when ffmpeg is found, PNG frames always. It speaks
+/// with the `voice` split's speaker, a voice it never heard, where the dataset has one (the
+/// synthetic scene), else with the dataset's own recording from its start.
+fn render_new_voice(data: &Path, out: &Path, model: &Path) -> Result<VideoReport> {
     let video = out.join("video");
     if video.exists() {
         std::fs::remove_dir_all(&video)
             .with_context(|| format!("removing the earlier demo video {}", video.display()))?;
     }
+    let voice = data.join(VOICE_DIR).join(AUDIO_WAV);
+    let recording = data.join(AUDIO_WAV);
+    // A dataset without its WAV (AD-NeRF ships only aud.npy) speaks its features, silent.
+    let (audio, features, what) = if voice.is_file() {
+        (Some(voice), None, "a voice the student never heard")
+    } else if recording.is_file() {
+        (Some(recording), None, "the recording's audio")
+    } else {
+        (
+            None,
+            Some(data.join(AUDIO_NPY)),
+            "the recording's audio features",
+        )
+    };
     println!(
-        "== rendering a voice the student never heard -> {}",
+        "== rendering {what} at the held-out poses -> {}",
         video.display()
     );
     let job = VideoJob {
         model: model.to_path_buf(),
-        audio: Some(data.join(VOICE_DIR).join(AUDIO_WAV)),
-        features: None,
+        audio,
+        features,
         poses: Some(data.join(Split::Val.file_name())),
         out: video,
         backend: BackendKind::Tract,
@@ -200,8 +221,8 @@ fn render_new_voice(out: &Path, model: &Path) -> Result<VideoReport> {
 /// The closing table: each model's steps, then per held-out split its head-region PSNR
 /// beside its whole-frame PSNR, the mouth's PSNR per split, the share of the background
 /// it repainted, and its speed; then the paths of what the demo made.
-fn print_summary(out: &Path, report: &DemoReport, video: Option<&VideoReport>) {
-    println!("\n== nldf demo: done");
+fn print_summary(command: &str, out: &Path, report: &DemoReport, video: Option<&VideoReport>) {
+    println!("\n== {command}: done");
     let names: Vec<&str> = report.splits.iter().map(|(s, _)| s.name()).collect();
     let mut header = "| model | steps |".to_string();
     for n in &names {

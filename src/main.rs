@@ -37,9 +37,10 @@ enum Command {
     /// audio features, camera poses, depth, parsing masks and scene.json ground truth), with
     /// the novel, voice and sweep evaluation splits.
     Synth(synth_cmd::SynthArgs),
-    /// Train a stage of the pipeline: the teacher NeRF, then the light-field student.
-    #[command(subcommand)]
-    Train(train_cmd::TrainCommand),
+    /// Train on a dataset: with `--data DIR --run RUN` the whole recipe of `nldf demo`
+    /// (teacher, distilled real-time student, export, scores, video), or one stage: the
+    /// teacher NeRF, the light-field student, the learned upsampler.
+    Train(train_cmd::TrainArgs),
     /// Make a WAV file's audio features with nldf's front end, as an AD-NeRF `aud.npy` with
     /// its settings in `aud.json` beside it.
     Features(features_cmd::FeaturesArgs),
@@ -104,7 +105,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::run(args),
         Command::Synth(args) => synth_cmd::run(args),
-        Command::Train(cmd) => train_cmd::run(cmd),
+        Command::Train(args) => train_cmd::run(args),
         Command::Features(args) => features_cmd::run(args),
         Command::Eval(args) => eval_cmd::run(args),
         Command::Export(args) => export_cmd::run(args),

@@ -12,6 +12,43 @@ use nldf_train::job::teacher::{TeacherJob, TeacherSource};
 
 use crate::progress::{EventPrinter, stop_flag};
 
+/// `nldf train`: one stage with a subcommand, or with `--data DIR --run RUN` the whole
+/// recipe of `nldf demo` on that dataset.
+#[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct TrainArgs {
+    #[command(subcommand)]
+    pub command: Option<TrainCommand>,
+    #[command(flatten)]
+    pub recipe: RecipeArgs,
+}
+
+/// The whole recipe on a dataset: teacher, distilled real-time student with pseudo views,
+/// ONNX export, scores on the held-out splits the dataset has, and a video.
+#[derive(clap::Args, Debug)]
+pub struct RecipeArgs {
+    /// Dataset folder in AD-NeRF's layout (read in place; nothing is written into it).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Run folder: RUN/teacher, RUN/student, RUN/model.onnx, RUN/eval/<split>, RUN/video.
+    #[arg(long)]
+    pub run: Option<PathBuf>,
+    /// Teacher training steps [default: the demo's 1100].
+    #[arg(long)]
+    pub teacher_iters: Option<usize>,
+    /// Student training steps [default: the demo's 4500].
+    #[arg(long)]
+    pub student_iters: Option<usize>,
+    /// A wall-clock cap on the teacher in minutes, which only stops a machine slower than
+    /// the recipe was sized for [default: the demo's 7].
+    #[arg(long)]
+    pub minutes: Option<f64>,
+    /// A wall-clock cap on the student in minutes, its teacher targets included [default:
+    /// the demo's 8].
+    #[arg(long)]
+    pub student_minutes: Option<f64>,
+}
+
 #[derive(Subcommand, Debug)]
 pub enum TrainCommand {
     /// Train the audio-conditioned NeRF teacher on a dataset.
@@ -220,12 +257,33 @@ impl TeacherPreset {
 }
 
 /// Runs `nldf train`.
-pub fn run(cmd: TrainCommand) -> Result<()> {
-    match cmd {
-        TrainCommand::Teacher(args) => run_teacher(args),
-        TrainCommand::Student(args) => run_student(args),
-        TrainCommand::Upsampler(args) => run_upsampler(args),
+pub fn run(args: TrainArgs) -> Result<()> {
+    match args.command {
+        Some(TrainCommand::Teacher(args)) => run_teacher(args),
+        Some(TrainCommand::Student(args)) => run_student(args),
+        Some(TrainCommand::Upsampler(args)) => run_upsampler(args),
+        None => run_recipe(args.recipe),
     }
+}
+
+/// `nldf train --data DIR --run RUN`: `nldf demo`'s recipe on a dataset.
+fn run_recipe(args: RecipeArgs) -> Result<()> {
+    let (Some(data), Some(run)) = (args.data, args.run) else {
+        anyhow::bail!(
+            "nldf train needs a stage (teacher, student, upsampler) or --data DIR --run RUN \
+             for the whole recipe"
+        );
+    };
+    let defaults = nldf_train::job::demo::DemoJob::defaults(run);
+    let job = nldf_train::job::demo::DemoJob {
+        data: Some(data),
+        teacher_iters: args.teacher_iters.unwrap_or(defaults.teacher_iters),
+        student_iters: args.student_iters.unwrap_or(defaults.student_iters),
+        teacher_cap_minutes: args.minutes.unwrap_or(defaults.teacher_cap_minutes),
+        student_cap_minutes: args.student_minutes.unwrap_or(defaults.student_cap_minutes),
+        ..defaults
+    };
+    crate::demo_cmd::run_job(job, "nldf train")
 }
 
 impl StudentArgs {

@@ -773,6 +773,32 @@ fn command_line_misuse_is_refused() {
             vec![],
         ),
         (
+            "nldf train with neither a stage nor --data and --run",
+            args(&["train"]),
+            vec!["--data DIR --run RUN"],
+            vec![],
+        ),
+        (
+            "nldf train on a dataset folder that is not there",
+            args(&["train", "--data", &s(&d.join("nowhere")), "--run", &o]),
+            vec!["nowhere", "no such dataset folder"],
+            vec![out.clone()],
+        ),
+        (
+            "nldf train with a zero wall-clock cap",
+            args(&[
+                "train",
+                "--data",
+                &s(&f.data),
+                "--run",
+                &o,
+                "--minutes",
+                "0",
+            ]),
+            vec!["cap must be positive"],
+            vec![out.clone()],
+        ),
+        (
             "an unknown flag",
             args(&["export", "--run", &s(&f.run), "--int4"]),
             vec!["--int4"],
@@ -1262,4 +1288,62 @@ fn an_upsampled_ray_graph_renders_from_the_command_line() {
     };
     assert_eq!(frames(&skipping), frames(&video));
     assert!(frames(&video) >= 10);
+}
+
+/// `nldf train --data DIR --run RUN` runs the demo's recipe on a dataset it did not make:
+/// teacher, distilled student, export, the scores of the splits the dataset has (`val`), and
+/// a video, ending with the table; the dataset itself is left as it was.
+#[test]
+fn nldf_train_runs_the_recipe_on_a_dataset() {
+    let f = fixture();
+    let dir = scratch();
+    let run = dir.path().join("run");
+    let digest = |root: &Path| -> Vec<(PathBuf, Vec<u8>)> {
+        let mut files = Vec::new();
+        let mut stack = vec![root.to_path_buf()];
+        while let Some(p) = stack.pop() {
+            if p.is_dir() {
+                stack.extend(std::fs::read_dir(&p).unwrap().map(|e| e.unwrap().path()));
+            } else {
+                files.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+        files.sort();
+        files
+    };
+    let before = digest(&f.data);
+    let out = nldf_ok(args(&[
+        "train",
+        "--data",
+        &s(&f.data),
+        "--run",
+        &s(&run),
+        "--teacher-iters",
+        "3",
+        "--student-iters",
+        "3",
+    ]));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("== nldf train: done"), "{stdout}");
+    assert!(stdout.contains("distilled with pseudo views"), "{stdout}");
+    for file in [
+        "model.onnx",
+        "eval/val/metrics.json",
+        "teacher/model.safetensors",
+    ] {
+        assert!(run.join(file).is_file(), "{file} missing\n{stdout}");
+    }
+    // Only the splits the dataset has: the fixture has no `novel` or `voice`.
+    assert!(!run.join("eval/novel").exists());
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("eval/val/metrics.json")).unwrap())
+            .unwrap();
+    let labels: Vec<&str> = metrics["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["label"].as_str().unwrap())
+        .collect();
+    assert_eq!(labels, vec!["teacher", "student"]);
+    assert!(digest(&f.data) == before, "the dataset changed");
 }

@@ -32,7 +32,10 @@ pub struct DemoJob {
     /// student to `OUT/student`, the model to `OUT/model.onnx`, the evaluations to
     /// `OUT/eval/<split>`.
     pub out: PathBuf,
-    /// The synthetic scene (seed, length, size).
+    /// A dataset to train on instead of the synthetic scene (`nldf train --data`): read in
+    /// place, nothing written into it. `None`: the synthetic scene is made in `OUT/data`.
+    pub data: Option<PathBuf>,
+    /// The synthetic scene (seed, length, size), when no dataset is given.
     pub scene: SynthConfig,
     /// The teacher's network.
     pub teacher: TeacherConfig,
@@ -136,6 +139,7 @@ impl DemoJob {
     pub fn defaults(out: PathBuf) -> DemoJob {
         DemoJob {
             out,
+            data: None,
             scene: SynthConfig {
                 size: 128,
                 supersample: 3,
@@ -173,8 +177,19 @@ impl DemoJob {
                 "the demo evaluates `val` first; other splits follow it".into(),
             ));
         }
-        synth::validate(&self.scene)?;
-        Ok(())
+        match &self.data {
+            Some(data) if !data.is_dir() => Err(Error::Config(format!(
+                "{}: no such dataset folder",
+                data.display()
+            ))),
+            Some(_) => Ok(()),
+            None => Ok(synth::validate(&self.scene)?),
+        }
+    }
+
+    /// The dataset the stages train on: the given one, or the synthetic scene's folder.
+    pub fn data_dir(&self) -> PathBuf {
+        self.data.clone().unwrap_or_else(|| self.out.join("data"))
     }
 
     /// Writes the whole run's time breakdown, `OUT/timing.json`: the scene, each stage's
@@ -215,9 +230,11 @@ impl DemoJob {
     pub fn run(&self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<DemoReport>> {
         self.check()?;
         let mut own = Timing::open(&self.out.join(DEMO_TIMING_DIR))?;
-        let data = self.out.join("data");
+        let data = self.data_dir();
         let started = Instant::now();
-        if data.join(nldf_core::dataset::SCENE_FILE).is_file() {
+        if self.data.is_some() {
+            on_event(&JobEvent::Stage(format!("dataset: {}", data.display())));
+        } else if data.join(nldf_core::dataset::SCENE_FILE).is_file() {
             on_event(&JobEvent::Stage(format!(
                 "synthetic scene: reusing {}",
                 data.display()
