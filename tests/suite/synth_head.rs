@@ -194,6 +194,8 @@ fn opening_the_mouth_changes_the_mouth_only() {
         .unwrap();
     let upper = |px: usize| px / (size as usize) < eye_row && closed.regions[px].is_head();
     let (above, n_above) = mean_diff(&closed, &open, upper);
+    println!("upper head: mean change {above:e}");
+    // Measured worst about 1.4e-4.
     assert!(
         n_above > 1000 && above < 1e-3,
         "upper head: {n_above} pixels, mean change {above}"
@@ -232,7 +234,9 @@ fn blinking_changes_the_eyes() {
     let elsewhere =
         |px: usize| open.regions[px] != Region::Eyes && shut.regions[px] != Region::Eyes;
     let (rest, _) = mean_diff(&open, &shut, elsewhere);
-    assert!(rest < 2e-3, "blink changed the rest of the image by {rest}");
+    println!("blink: the rest of the image changed by {rest:e}");
+    // Measured worst about 1.2e-6.
+    assert!(rest < 1e-5, "blink changed the rest of the image by {rest}");
 }
 
 #[test]
@@ -339,5 +343,7 @@ fn no_nan_from_odd_cameras_and_states() {
     // The far camera still sees a (tiny) head at the right depth.
     let far = render_head(&head, &FaceState::default(), &cams[2], &bg, 1);
     let t = far.depth.iter().cloned().fold(0.0f32, f32::max);
-    assert!(t == 0.0 || (t - 1e4).abs() < 1.0, "far depth {t}");
+    println!("far camera: depth {t}");
+    // Measured worst about 0.1 from 1e4.
+    assert!(t == 0.0 || (t - 1e4).abs() < 0.5, "far depth {t}");
 }
