@@ -64,22 +64,31 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
         match k % 3 {
             0 => {
                 // Turned to 1.5x the recorded range: beyond every training frame.
-                assert!((t.pose.yaw_deg.abs() - 1.5 * yaw_max).abs() < 1e-4);
-                assert!((t.pose.pitch_deg.abs() - 1.5 * pitch_max).abs() < 1e-4);
+                // Measured worst 0 for the angles, about 2.4e-7 for the distance.
+                assert_eq!(t.pose.yaw_deg.abs(), 1.5 * yaw_max);
+                assert_eq!(t.pose.pitch_deg.abs(), 1.5 * pitch_max);
                 assert!(t.pose.yaw_deg.abs() > yaw_max + 0.4 * yaw_max);
-                assert!((distance - recorded_distance).abs() < 1e-3);
+                println!(
+                    "turned view: distance off by {:e}",
+                    distance - recorded_distance
+                );
+                assert!((distance - recorded_distance).abs() < 2e-6);
             }
             1 => {
                 assert_eq!(t.pose, *recorded);
+                println!("closer view: ratio {}", distance / recorded_distance);
+                // Measured worst about 4.1e-5.
                 assert!(
-                    (distance / recorded_distance - 0.93).abs() < 0.02,
+                    (distance / recorded_distance - 0.93).abs() < 3e-4,
                     "{distance}"
                 );
             }
             _ => {
                 assert_eq!(t.pose, *recorded);
+                println!("farther view: ratio {}", distance / recorded_distance);
+                // Measured worst about 8.5e-5.
                 assert!(
-                    (distance / recorded_distance - 1.15).abs() < 0.02,
+                    (distance / recorded_distance - 1.15).abs() < 5e-4,
                     "{distance}"
                 );
             }
@@ -99,10 +108,8 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
     assert_eq!(voice.audio_source, base.audio_source);
     for (k, f) in frames.iter().enumerate() {
         assert_eq!(f.aud_id, k);
-        assert!(
-            (voice.camera(f).c2w - base.camera(&base.val[k]).c2w)
-                .abs_diff_eq(glam::Mat4::ZERO, 1e-6)
-        );
+        // Measured worst 0: the same poses.
+        assert_eq!(voice.camera(f).c2w, base.camera(&base.val[k]).c2w);
     }
     let n_feat = voice.audio.window * voice.audio.n_features;
     let (own, other) = (
@@ -127,7 +134,8 @@ fn synth_writes_novel_voice_and_sweep_splits_with_exact_ground_truth_that_traini
     let gt = truth(&scene, "sweep");
     assert_eq!(sweep.frames(Split::Sweep).len(), 7);
     assert_eq!(gt[0].pose.yaw_deg, 0.0);
-    assert!((gt[6].pose.yaw_deg - 2.0 * yaw_max).abs() < 1e-4);
+    // Measured worst 0.
+    assert_eq!(gt[6].pose.yaw_deg, 2.0 * yaw_max);
     assert!(gt.windows(2).all(|w| w[1].pose.yaw_deg > w[0].pose.yaw_deg));
 }
 
