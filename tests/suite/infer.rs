@@ -26,8 +26,9 @@ use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob, next_frame, paced_wav_st
 use nldf_infer::video::{VideoJob, frame_file_name};
 use nldf_train::student::StudentConfig;
 
-/// The parity bound between any two renderers' frames.
-const MIN_PSNR: f64 = 60.0;
+/// The parity bound between any two renderers' frames: 20 dB (10x in RMS error) under the
+/// measured worst, about 140.9 dB (onnxruntime against candle and tract, the ops-only config).
+const MIN_PSNR: f64 = 120.0;
 
 #[test]
 fn infer_frames_agree_across_tract_ort_and_candle() {
@@ -425,8 +426,10 @@ fn infer_stream_renders_the_file_renders_frames_as_audio_arrives() {
         assert!(a == b, "frame {f} differs between the file and the stream");
     }
     // The lookahead of AD-NeRF's windows and 8-frame attention at 25 fps: 0.2725 s.
+    println!("lookahead off by {:e}", (report.lookahead_s - 0.2725).abs());
+    // Measured worst about 5.6e-17: f64 rounding.
     assert!(
-        (report.lookahead_s - 0.2725).abs() < 1e-9,
+        (report.lookahead_s - 0.2725).abs() < 4e-16,
         "{}",
         report.lookahead_s
     );
