@@ -31,21 +31,8 @@ pub struct DemoArgs {
     /// Seed of the synthetic scene.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Teacher training steps [default: 1100, with --quick 300].
-    #[arg(long)]
-    pub teacher_iters: Option<usize>,
-    /// Student training steps (0 skips the student and the export) [default: 4500, with
-    /// --pixels-only 5300, with --quick 300].
-    #[arg(long)]
-    pub student_iters: Option<usize>,
-    /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
-    /// the recipe was sized for (and says so) [default: 7, with --quick 2].
-    #[arg(long)]
-    pub minutes: Option<f64>,
-    /// A wall-clock cap on the student in minutes, its teacher targets included
-    /// [default: 8, with --pixels-only 15, with --quick 2].
-    #[arg(long)]
-    pub student_minutes: Option<f64>,
+    #[command(flatten)]
+    pub stages: StageArgs,
     /// Student shape: the real-time preset (16 x 128, K = 8) renders in real time.
     #[arg(long, value_enum, default_value_t = crate::train_cmd::StudentDepth::Realtime)]
     pub student_depth: crate::train_cmd::StudentDepth,
@@ -68,13 +55,37 @@ pub struct DemoArgs {
     pub size: Option<u32>,
 }
 
+/// The steps and wall-clock caps of the recipe's two training stages, for `nldf demo` and
+/// `nldf train --data`.
+#[derive(clap::Args, Debug)]
+pub struct StageArgs {
+    /// Teacher training steps [default: 1100; nldf demo --quick: 300].
+    #[arg(long)]
+    pub teacher_iters: Option<usize>,
+    /// Student training steps (0 skips the student and the export) [default: 4500; nldf
+    /// demo --pixels-only: 5300, --quick: 300].
+    #[arg(long)]
+    pub student_iters: Option<usize>,
+    /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
+    /// the recipe was sized for (and says so) [default: 7; nldf demo --quick: 2].
+    #[arg(long)]
+    pub minutes: Option<f64>,
+    /// A wall-clock cap on the student in minutes, its teacher targets included
+    /// [default: 8; nldf demo --pixels-only: 15, --quick: 2].
+    #[arg(long)]
+    pub student_minutes: Option<f64>,
+}
+
 /// Runs `nldf demo`.
 pub fn run(args: DemoArgs) -> Result<()> {
     let quick = args.quick;
     let pick = |full: f64, fast: f64| if quick { fast } else { full };
-    let minutes = args.minutes.unwrap_or(pick(DEMO_TEACHER_CAP_MINUTES, 2.0));
+    let minutes = args
+        .stages
+        .minutes
+        .unwrap_or(pick(DEMO_TEACHER_CAP_MINUTES, 2.0));
     // The pixels-only student stands in for the teacher too: the caps of both.
-    let student_minutes = args.student_minutes.unwrap_or(pick(
+    let student_minutes = args.stages.student_minutes.unwrap_or(pick(
         if args.pixels_only {
             DEMO_TEACHER_CAP_MINUTES + DEMO_STUDENT_CAP_MINUTES
         } else {
@@ -120,12 +131,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
     }
     let job = DemoJob {
         scene,
-        teacher_iters: args
-            .teacher_iters
-            .unwrap_or(if quick { 300 } else { DEMO_TEACHER_ITERS }),
+        teacher_iters: args.stages.teacher_iters.unwrap_or(if quick {
+            300
+        } else {
+            DEMO_TEACHER_ITERS
+        }),
         teacher_cap_minutes: minutes,
         student: args.student_depth.config(),
         student_iters: args
+            .stages
             .student_iters
             .unwrap_or(match (quick, args.pixels_only) {
                 (true, _) => 300,

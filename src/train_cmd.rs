@@ -33,20 +33,8 @@ pub struct RecipeArgs {
     /// Run folder: RUN/teacher, RUN/student, RUN/model.onnx, RUN/eval/<split>, RUN/video.
     #[arg(long)]
     pub run: Option<PathBuf>,
-    /// Teacher training steps [default: the demo's 1100].
-    #[arg(long)]
-    pub teacher_iters: Option<usize>,
-    /// Student training steps [default: the demo's 4500].
-    #[arg(long)]
-    pub student_iters: Option<usize>,
-    /// A wall-clock cap on the teacher in minutes, which only stops a machine slower than
-    /// the recipe was sized for [default: the demo's 7].
-    #[arg(long)]
-    pub minutes: Option<f64>,
-    /// A wall-clock cap on the student in minutes, its teacher targets included [default:
-    /// the demo's 8].
-    #[arg(long)]
-    pub student_minutes: Option<f64>,
+    #[command(flatten)]
+    pub stages: crate::demo_cmd::StageArgs,
 }
 
 #[derive(Subcommand, Debug)]
@@ -277,10 +265,10 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
     let defaults = nldf_train::job::demo::DemoJob::defaults(run);
     let job = nldf_train::job::demo::DemoJob {
         data: Some(data),
-        teacher_iters: args.teacher_iters.unwrap_or(defaults.teacher_iters),
-        student_iters: args.student_iters.unwrap_or(defaults.student_iters),
-        teacher_cap_minutes: args.minutes.unwrap_or(defaults.teacher_cap_minutes),
-        student_cap_minutes: args.student_minutes.unwrap_or(defaults.student_cap_minutes),
+        teacher_iters: args.stages.teacher_iters.unwrap_or(defaults.teacher_iters),
+        student_iters: args.stages.student_iters.unwrap_or(defaults.student_iters),
+        teacher_cap_minutes: args.stages.minutes.unwrap_or(defaults.teacher_cap_minutes),
+        student_cap_minutes: (args.stages.student_minutes).unwrap_or(defaults.student_cap_minutes),
         ..defaults
     };
     crate::demo_cmd::run_job(job, "nldf train")

@@ -211,8 +211,9 @@ mod tests {
 
     /// Landmarks placed from exact regions put their lip polygon on the mouth: it covers
     /// most of the mouth's pixels and little else.
-    #[test]
-    fn landmarks_from_regions_outline_the_mouth() {
+    /// A 40 x 40 frame's regions: an elliptic head (columns 8..=32, rows 4..=36) with an
+    /// elliptic mouth below its centre.
+    fn head_with_mouth() -> (Vec<Region>, u32, u32) {
         let (w, h) = (40u32, 40u32);
         let mut regions = vec![Region::Background; (w * h) as usize];
         for j in 0..h {
@@ -222,11 +223,17 @@ mod tests {
                 if (x / 12.0).powi(2) + (y / 16.0).powi(2) <= 1.0 {
                     regions[p] = Region::Face;
                 }
-                if ((x - 0.0) / 5.0).powi(2) + ((y - 9.0) / 2.5).powi(2) <= 1.0 {
+                if (x / 5.0).powi(2) + ((y - 9.0) / 2.5).powi(2) <= 1.0 {
                     regions[p] = Region::Mouth;
                 }
             }
         }
+        (regions, w, h)
+    }
+
+    #[test]
+    fn landmarks_from_regions_outline_the_mouth() {
+        let (regions, w, h) = head_with_mouth();
         let lms = landmarks_from_regions(&regions, w).unwrap();
         assert_eq!(lms.points.len(), N_LANDMARKS);
         let mask = lms.mouth_mask(w, h);
@@ -253,20 +260,7 @@ mod tests {
     /// above the head's centre row, the chin (8) on the head's lowest row below the mouth.
     #[test]
     fn the_jaw_runs_below_the_head_centre_to_the_chin() {
-        let (w, h) = (40u32, 40u32);
-        let mut regions = vec![Region::Background; (w * h) as usize];
-        for j in 0..h {
-            for i in 0..w {
-                let (x, y) = (i as f32 - 20.0, j as f32 - 20.0);
-                let p = (j * w + i) as usize;
-                if (x / 12.0).powi(2) + (y / 16.0).powi(2) <= 1.0 {
-                    regions[p] = Region::Face;
-                }
-                if (x / 5.0).powi(2) + ((y - 9.0) / 2.5).powi(2) <= 1.0 {
-                    regions[p] = Region::Mouth;
-                }
-            }
-        }
+        let (regions, w, _) = head_with_mouth();
         let lms = landmarks_from_regions(&regions, w).unwrap();
         // The head's pixel rows span 4..=36 (centre 20), its columns 8..=32.
         for (k, [x, y]) in lms.points[..17].iter().enumerate() {
