@@ -131,9 +131,12 @@ def leaves(value, path, record):
                     v.get(name) if isinstance(v.get(name), str) else json.dumps(v.get(name))
                     for v in value
                 ]
-                if all(name in v for v in value) and len(set(written)) == len(written) and all(
-                    safe(w) for w in written
-                ):
+                # Names and counts identify an element; a measured float does not.
+                identity = all(
+                    isinstance(v.get(name), (str, int)) and not isinstance(v.get(name), bool)
+                    for v in value
+                )
+                if identity and len(set(written)) == len(written) and all(safe(w) for w in written):
                     sel = (name, written)
                     break
         for i, v in enumerate(value):
