@@ -70,7 +70,6 @@ def numbers_in(text):
         if ch.isdigit() or ch in ".-+eE":
             token += ch
             continue
-        t = token.strip("".join(c for c in set(token) if not c.isdigit()))
         t = re.sub(r"^[^0-9]+|[^0-9]+$", "", token)
         if token.startswith("-") and t:
             t = "-" + t

@@ -280,9 +280,10 @@ fn written(v: &serde_json::Value) -> String {
 
 /// The number `key` names in `doc`.
 fn resolve(doc: &Doc, key: &Key) -> Result<f64, String> {
-    let mut steps = key.path.iter();
-    let mut value: serde_json::Value = match doc {
-        Doc::Json(v) => v.clone(),
+    let mut steps = key.path.iter().peekable();
+    let line_value;
+    let mut value: &serde_json::Value = match doc {
+        Doc::Json(v) => v,
         Doc::Lines(lines) => {
             let Some(Step::Line(n)) = steps.next() else {
                 return Err("a text file's key starts with L<line>".into());
@@ -290,31 +291,32 @@ fn resolve(doc: &Doc, key: &Key) -> Result<f64, String> {
             let line = lines
                 .get(n.wrapping_sub(1))
                 .ok_or_else(|| format!("line {n} is past the end"))?;
-            serde_json::from_str::<serde_json::Value>(line)
-                .unwrap_or_else(|_| serde_json::Value::String(line.clone()))
+            line_value = serde_json::from_str::<serde_json::Value>(line)
+                .unwrap_or_else(|_| serde_json::Value::String(line.clone()));
+            &line_value
         }
     };
-    for step in steps {
-        value = match (step, &value) {
-            (Step::Member(name), serde_json::Value::Object(map)) => map
-                .get(name)
-                .cloned()
-                .ok_or_else(|| format!("no member {name:?}"))?,
-            (Step::Index(i), serde_json::Value::Array(items)) => items
-                .get(*i)
-                .cloned()
-                .ok_or_else(|| format!("no element {i}"))?,
+    while let Some(step) = steps.next() {
+        value = match (step, value) {
+            (Step::Member(name), serde_json::Value::Object(map)) => {
+                map.get(name).ok_or_else(|| format!("no member {name:?}"))?
+            }
+            (Step::Index(i), serde_json::Value::Array(items)) => {
+                items.get(*i).ok_or_else(|| format!("no element {i}"))?
+            }
             (Step::Select(name, want), serde_json::Value::Array(items)) => items
                 .iter()
                 .find(|item| item.get(name).is_some_and(|v| written(v) == *want))
-                .cloned()
                 .ok_or_else(|| format!("no element with {name} = {want:?}"))?,
             (Step::Number(k), serde_json::Value::String(s)) => {
-                let numbers = numbers_in(s);
-                let v = numbers
+                if steps.peek().is_some() {
+                    return Err(format!("{{{k}}} must be the key's last step"));
+                }
+                let v = numbers_in(s)
                     .get(k - 1)
+                    .copied()
                     .ok_or_else(|| format!("{s:?} holds fewer than {k} numbers"))?;
-                serde_json::json!(v)
+                return Ok(v * key.scale);
             }
             (step, v) => {
                 let shown: String = written(v).chars().take(80).collect();
@@ -322,14 +324,14 @@ fn resolve(doc: &Doc, key: &Key) -> Result<f64, String> {
             }
         };
     }
-    let number = match &value {
+    let number = match value {
         serde_json::Value::Number(n) => n.as_f64(),
         serde_json::Value::String(s) => s.trim().parse::<f64>().ok(),
         _ => None,
     };
     number
         .map(|v| v * key.scale)
-        .ok_or_else(|| format!("{} is not a number", written(&value)))
+        .ok_or_else(|| format!("{} is not a number", written(value)))
 }
 
 /// Whether `figure` (as written) is `value` at the figure's precision; a figure with an
