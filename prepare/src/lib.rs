@@ -16,5 +16,6 @@ pub mod align;
 pub mod check;
 pub mod error;
 pub mod pose;
+pub mod tools;
 
 pub use error::{Error, Result};
