@@ -17,5 +17,6 @@ pub mod check;
 pub mod error;
 pub mod pose;
 pub mod tools;
+pub mod video;
 
 pub use error::{Error, Result};
