@@ -41,6 +41,21 @@ use trace::{HeadFrame, render_background, render_head};
 /// Depth PNGs store `t * DEPTH_SCALE` as 16-bit integers (0 where the ray misses).
 pub const DEPTH_SCALE: f32 = 10_000.0;
 
+/// Where the second head keeps its exact region labels (nldf's `regions/` palette, one
+/// `<img_id>.png` per frame): ground truth for scoring a dataset prepared from its video
+/// (the mouth above all), out of the loader's sight, which reads that head's mouth from
+/// its landmarks as it would a recording's. The standard head's truth is `regions/`.
+pub const TRUTH_LABELS_DIR: &str = "truth/regions";
+
+/// The folder of a scene's exact region labels: `regions/` for the standard head,
+/// [`TRUTH_LABELS_DIR`] for the second.
+pub fn truth_labels_dir(head: HeadStyle) -> &'static str {
+    match head {
+        HeadStyle::Standard => LABELS_DIR,
+        HeadStyle::Second => TRUTH_LABELS_DIR,
+    }
+}
+
 /// What each frame of an evaluation split is, by `img_id` (`novel`: `turned 1.5x`, `closer`,
 /// `farther`; `voice`: `recorded pose`; `sweep`: `turn 0x` to `turn 2x`), from the scene
 /// file of the dataset at `root`; empty when the dataset has no [`SCENE_FILE`] (a recorded
@@ -291,9 +306,15 @@ fn write_inputs(
         HeadStyle::Standard => LABELS_DIR,
         HeadStyle::Second => LANDMARKS_DIR,
     };
-    for sub in ["head_imgs", PARSING_DIR, labels, "depth"] {
+    for sub in [
+        "head_imgs",
+        PARSING_DIR,
+        labels,
+        truth_labels_dir(cfg.head),
+        "depth",
+    ] {
         let d = dir.join(sub);
-        std::fs::create_dir(&d).map_err(|e| Error::io(&d, e))?;
+        std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
     }
     background.save_png(&dir.join("bc.png"))?;
     write_wav(&dir.join("aud.wav"), wave)?;
@@ -323,7 +344,8 @@ fn render_frames(
 }
 
 /// Writes frame `i`'s image, its face parsing in AD-NeRF's convention (head, no mouth),
-/// nldf's exact labels of the head's parts and depth (`t * DEPTH_SCALE` as 16 bits).
+/// nldf's exact labels of the head's parts (`regions/`, or [`TRUTH_LABELS_DIR`] for the
+/// second head, which also gets 68 landmarks) and depth (`t * DEPTH_SCALE` as 16 bits).
 fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, cfg: &SynthConfig) -> Result<()> {
     let size = cfg.size;
     frame
@@ -336,14 +358,15 @@ fn write_frame(dir: &Path, i: usize, frame: &HeadFrame, cfg: &SynthConfig) -> Re
         &frame.regions,
         Region::parsing_color,
     )?;
+    save_regions_png(
+        &dir.join(format!("{}/{i}.png", truth_labels_dir(cfg.head))),
+        size,
+        size,
+        &frame.regions,
+        Region::label_color,
+    )?;
     match cfg.head {
-        HeadStyle::Standard => save_regions_png(
-            &dir.join(format!("{LABELS_DIR}/{i}.png")),
-            size,
-            size,
-            &frame.regions,
-            Region::label_color,
-        )?,
+        HeadStyle::Standard => {}
         HeadStyle::Second => {
             // A frame without a visible mouth gets its head's centre as every point: a
             // tracker's guess, whose lip polygon covers no pixel.
@@ -463,6 +486,7 @@ fn scene_files(cfg: &SynthConfig, n_frames: usize) -> Vec<(PathBuf, usize)> {
         (SCENE_FILE, 1),
     ]
     .into_iter()
+    .chain((cfg.head == HeadStyle::Second).then_some((TRUTH_LABELS_DIR, n_frames)))
     .map(|(p, n)| (PathBuf::from(p), n))
     .collect()
 }

@@ -61,7 +61,9 @@ pub enum HeadStyle {
     /// tone, larger ears, and head bounds padded by [`SECOND_HEAD_PAD`] of their size on
     /// each side, so the box holds more background. Labelled as AD-NeRF labels a real
     /// recording: its parsing (head, no mouth) and 68 landmarks per frame
-    /// (`ori_imgs/<id>.lms`), without `regions/`.
+    /// (`ori_imgs/<id>.lms`), without `regions/`; its exact labels, the truth a dataset
+    /// prepared from its video is scored against, lie in `truth/regions/`
+    /// ([`super::TRUTH_LABELS_DIR`]), where no loader looks.
     Second,
 }
 
