@@ -15,6 +15,9 @@
 pub mod align;
 pub mod check;
 pub mod error;
+pub mod face;
+pub mod lms68;
+pub mod parsing;
 pub mod pose;
 pub mod tools;
 pub mod video;

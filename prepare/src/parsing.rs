@@ -1,0 +1,283 @@
+//! Parsing masks in AD-NeRF's colours from a person mask and the face's jaw line, and the
+//! background without the person.
+//!
+//! A person pixel is head (with hair and ears) above the jaw line, neck below the jaw close
+//! under the chin, torso elsewhere below it. Beside the jaw (left of its first point, right
+//! of its last) the head reaches down to the chin's height.
+
+use image::{Rgb, RgbImage};
+
+/// AD-NeRF's parsing labels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Part {
+    Background,
+    Head,
+    Neck,
+    Torso,
+}
+
+impl Part {
+    /// AD-NeRF's colour (RGB): head blue, neck green, torso red, background white.
+    pub fn colour(self) -> [u8; 3] {
+        match self {
+            Part::Background => [255, 255, 255],
+            Part::Head => [0, 0, 255],
+            Part::Neck => [0, 255, 0],
+            Part::Torso => [255, 0, 0],
+        }
+    }
+}
+
+/// The parts of a `width x height` frame from its person probability (0-255, row-major) and
+/// its jaw line (pixels, image left to right; the chin is its middle point).
+pub fn parse_frame(person: &[u8], jaw: &[[f32; 2]], width: u32, height: u32) -> Vec<Part> {
+    let (w, h) = (width as usize, height as usize);
+    let mut parts = vec![Part::Background; w * h];
+    if jaw.len() < 3 || person.len() != w * h {
+        return parts;
+    }
+    let chin = jaw[jaw.len() / 2];
+    let top = jaw.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
+    let neck_depth = 0.6 * (chin[1] - top).max(1.0);
+    let x_min = jaw.iter().map(|p| p[0]).fold(f32::INFINITY, f32::min);
+    let x_max = jaw.iter().map(|p| p[0]).fold(f32::NEG_INFINITY, f32::max);
+    let inner_min = jaw[jaw.len() / 4][0].min(jaw[3 * jaw.len() / 4][0]);
+    let inner_max = jaw[jaw.len() / 4][0].max(jaw[3 * jaw.len() / 4][0]);
+    for x in 0..w {
+        let xc = x as f32 + 0.5;
+        let cut = if xc >= x_min && xc <= x_max {
+            lowest_crossing(jaw, xc).unwrap_or(chin[1])
+        } else {
+            chin[1]
+        };
+        for y in 0..h {
+            let i = y * w + x;
+            if person[i] < 128 {
+                continue;
+            }
+            let yc = y as f32 + 0.5;
+            parts[i] = if yc <= cut {
+                Part::Head
+            } else if xc >= inner_min && xc <= inner_max && yc <= chin[1] + neck_depth {
+                Part::Neck
+            } else {
+                Part::Torso
+            };
+        }
+    }
+    parts
+}
+
+/// The largest y at which the polyline crosses the vertical line at `x`.
+fn lowest_crossing(line: &[[f32; 2]], x: f32) -> Option<f32> {
+    line.windows(2)
+        .filter_map(|s| {
+            let ([x0, y0], [x1, y1]) = (s[0], s[1]);
+            let (lo, hi) = (x0.min(x1), x0.max(x1));
+            if x < lo || x > hi {
+                return None;
+            }
+            let t = if hi - lo < 1e-6 {
+                0.5
+            } else {
+                (x - x0) / (x1 - x0)
+            };
+            Some(y0 + t * (y1 - y0))
+        })
+        .reduce(f32::max)
+}
+
+/// The parts drawn in AD-NeRF's colours.
+pub fn parsing_image(parts: &[Part], width: u32, height: u32) -> RgbImage {
+    RgbImage::from_fn(width, height, |x, y| {
+        Rgb(parts[(y * width + x) as usize].colour())
+    })
+}
+
+/// The head's bounding box `[x, y, w, h]` (AD-NeRF's `face_rect`), `None` without a head.
+pub fn head_rect(parts: &[Part], width: u32) -> Option<[u32; 4]> {
+    let w = width as usize;
+    let mut b = [u32::MAX, u32::MAX, 0, 0];
+    for (i, _) in parts.iter().enumerate().filter(|(_, p)| **p == Part::Head) {
+        let (x, y) = ((i % w) as u32, (i / w) as u32);
+        b = [b[0].min(x), b[1].min(y), b[2].max(x), b[3].max(y)];
+    }
+    (b[0] != u32::MAX).then(|| [b[0], b[1], b[2] - b[0] + 1, b[3] - b[1] + 1])
+}
+
+/// The background without the person, from frames sampled over the clip: each pixel is the
+/// per-channel median of the frames where neither the person nor its `margin`-pixel
+/// surroundings cover it; pixels the person always covers take the nearest known pixel's
+/// colour. `frames` are RGB, `people` their person probabilities.
+pub fn background(
+    frames: &[Vec<u8>],
+    people: &[Vec<u8>],
+    width: u32,
+    height: u32,
+    margin: u32,
+) -> RgbImage {
+    let (w, h) = (width as usize, height as usize);
+    let free: Vec<Vec<bool>> = people
+        .iter()
+        .map(|p| {
+            dilate(
+                &p.iter().map(|&v| v >= 64).collect::<Vec<_>>(),
+                w,
+                h,
+                margin as usize,
+            )
+        })
+        .map(|covered| covered.into_iter().map(|c| !c).collect())
+        .collect();
+    let mut out = vec![[0u8; 3]; w * h];
+    let mut known = vec![false; w * h];
+    let mut values: [Vec<u8>; 3] = Default::default();
+    for i in 0..w * h {
+        for v in values.iter_mut() {
+            v.clear();
+        }
+        for (frame, f) in frames.iter().zip(&free) {
+            if f[i] {
+                for (c, v) in values.iter_mut().enumerate() {
+                    v.push(frame[3 * i + c]);
+                }
+            }
+        }
+        if values[0].is_empty() {
+            continue;
+        }
+        for (c, v) in values.iter_mut().enumerate() {
+            let mid = v.len() / 2;
+            out[i][c] = *v.select_nth_unstable(mid).1;
+        }
+        known[i] = true;
+    }
+    fill_nearest(&mut out, &mut known, w, h);
+    RgbImage::from_fn(width, height, |x, y| Rgb(out[y as usize * w + x as usize]))
+}
+
+/// `mask` grown by `r` pixels (a square neighbourhood, two separable passes).
+fn dilate(mask: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
+    if r == 0 {
+        return mask.to_vec();
+    }
+    let mut rows = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            let (a, b) = (x.saturating_sub(r), (x + r).min(w - 1));
+            rows[y * w + x] = mask[y * w + a..=y * w + b].iter().any(|&m| m);
+        }
+    }
+    let mut out = vec![false; w * h];
+    for y in 0..h {
+        let (a, b) = (y.saturating_sub(r), (y + r).min(h - 1));
+        for x in 0..w {
+            out[y * w + x] = (a..=b).any(|yy| rows[yy * w + x]);
+        }
+    }
+    out
+}
+
+/// Gives every unknown pixel the colour of the nearest known one (breadth first, 4-connected).
+fn fill_nearest(out: &mut [[u8; 3]], known: &mut [bool], w: usize, h: usize) {
+    let mut queue: std::collections::VecDeque<usize> = (0..w * h).filter(|&i| known[i]).collect();
+    while let Some(i) = queue.pop_front() {
+        let (x, y) = (i % w, i / w);
+        let mut visit = |j: usize| {
+            if !known[j] {
+                known[j] = true;
+                out[j] = out[i];
+                queue.push_back(j);
+            }
+        };
+        if x > 0 {
+            visit(i - 1);
+        }
+        if x + 1 < w {
+            visit(i + 1);
+        }
+        if y > 0 {
+            visit(i - w);
+        }
+        if y + 1 < h {
+            visit(i + w);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A jaw from (10, 20) down to a chin at (30, 40) and up to (50, 20).
+    fn jaw() -> Vec<[f32; 2]> {
+        vec![
+            [10.0, 20.0],
+            [20.0, 35.0],
+            [30.0, 40.0],
+            [40.0, 35.0],
+            [50.0, 20.0],
+        ]
+    }
+
+    #[test]
+    fn the_person_splits_at_the_jaw_into_head_neck_and_torso() {
+        let (w, h) = (60u32, 80u32);
+        let person = vec![255u8; (w * h) as usize];
+        let parts = parse_frame(&person, &jaw(), w, h);
+        let at = |x: u32, y: u32| parts[(y * w + x) as usize];
+        assert_eq!(at(30, 38), Part::Head);
+        assert_eq!(at(30, 41), Part::Neck);
+        assert_eq!(at(30, 70), Part::Torso);
+        assert_eq!(at(12, 25), Part::Torso, "below the jaw near its end");
+        assert_eq!(
+            at(5, 30),
+            Part::Head,
+            "beside the jaw above the chin: an ear"
+        );
+        assert_eq!(
+            at(5, 45),
+            Part::Torso,
+            "beside the jaw below the chin: a shoulder"
+        );
+        let none = vec![0u8; (w * h) as usize];
+        assert!(
+            parse_frame(&none, &jaw(), w, h)
+                .iter()
+                .all(|p| *p == Part::Background)
+        );
+        assert_eq!(head_rect(&parts, w), Some([0, 0, 60, 40]));
+    }
+
+    #[test]
+    fn the_background_is_the_median_where_the_person_is_away() {
+        let (w, h) = (8u32, 4u32);
+        let n = (w * h) as usize;
+        let scene = |i: usize| [(i * 7) as u8, 100, 200];
+        let mut frames = Vec::new();
+        let mut people = Vec::new();
+        for k in 0..5usize {
+            let mut f = vec![0u8; 3 * n];
+            let mut p = vec![0u8; n];
+            for i in 0..n {
+                f[3 * i..3 * i + 3].copy_from_slice(&scene(i));
+                // The person covers column k and column 7 always; noise in frame 4.
+                if i % w as usize == k || i % w as usize == 7 {
+                    p[i] = 255;
+                    f[3 * i] = 17;
+                }
+            }
+            if k == 4 {
+                f[3] = 250;
+            }
+            frames.push(f);
+            people.push(p);
+        }
+        let bc = background(&frames, &people, w, h, 0);
+        for i in 0..n {
+            let (x, y) = ((i % 8) as u32, (i / 8) as u32);
+            let want = if x == 7 { scene(i - 1) } else { scene(i) };
+            assert_eq!(bc.get_pixel(x, y).0, want, "pixel {x},{y}");
+        }
+    }
+}
