@@ -39,6 +39,19 @@ impl CameraPose {
             centre: m.w_axis.truncate(),
         }
     }
+
+    /// The 4 x 4 camera-to-world matrix as rows (a transforms file's `transform_matrix`).
+    pub fn to_rows(&self) -> [[f32; 4]; 4] {
+        let m = DMat4::from_cols(
+            self.rotation.x_axis.extend(0.0),
+            self.rotation.y_axis.extend(0.0),
+            self.rotation.z_axis.extend(0.0),
+            self.centre.extend(1.0),
+        );
+        m.transpose()
+            .to_cols_array_2d()
+            .map(|r| r.map(|v| v as f32))
+    }
 }
 
 /// A similarity `x -> s Q x + t` of the world, applied to camera tracks.
@@ -419,6 +432,17 @@ mod tests {
             let got = rotation_angle_deg(r);
             assert!((got - deg).abs() <= 1e-9 * deg.max(1.0), "{deg}: {got}");
         }
+    }
+
+    #[test]
+    fn a_pose_round_trips_through_transform_matrix_rows() {
+        let pose = truth_track(7)[3];
+        let rows = pose.to_rows();
+        assert_eq!(rows[3], [0.0, 0.0, 0.0, 1.0]);
+        assert_eq!(rows[1][3], pose.centre.y as f32);
+        let back = CameraPose::from_rows(&rows);
+        assert!((back.centre - pose.centre).length() < 1e-7);
+        assert!(rotation_angle_deg(back.rotation.transpose() * pose.rotation) < 1e-5);
     }
 
     #[test]

@@ -16,6 +16,7 @@ mod layers;
 mod machine_paths;
 mod metrics;
 mod posed;
+mod prepare_check;
 mod rendering;
 mod shipped;
 mod stress;
