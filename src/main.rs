@@ -9,6 +9,7 @@ mod eval_cmd;
 mod export_cmd;
 mod features_cmd;
 mod frontier_cmd;
+mod prepare_cmd;
 mod progress;
 mod render_cmd;
 mod synth_cmd;
@@ -37,6 +38,10 @@ enum Command {
     /// audio features, camera poses, depth, parsing masks and scene.json ground truth), with
     /// the novel, voice and sweep evaluation splits.
     Synth(synth_cmd::SynthArgs),
+    /// Turn a video of one person speaking (an MP4 with sound) into a dataset on a CPU:
+    /// frames, 16 kHz audio and its features, 68 landmarks, head poses, parsing masks and
+    /// the background, in AD-NeRF's layout.
+    Prepare(prepare_cmd::PrepareArgs),
     /// Train on a dataset: with `--data DIR --run RUN` the whole recipe of `nldf demo`
     /// (teacher, distilled real-time student, export, scores, video), or one stage: the
     /// teacher NeRF, the light-field student, the learned upsampler.
@@ -105,6 +110,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(args) => demo_cmd::run(args),
         Command::Synth(args) => synth_cmd::run(args),
+        Command::Prepare(args) => prepare_cmd::run(args),
         Command::Train(args) => train_cmd::run(args),
         Command::Features(args) => features_cmd::run(args),
         Command::Eval(args) => eval_cmd::run(args),

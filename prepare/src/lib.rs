@@ -16,6 +16,7 @@ pub mod align;
 pub mod check;
 pub mod error;
 pub mod face;
+pub mod job;
 pub mod lms68;
 pub mod parsing;
 pub mod pose;

@@ -1,0 +1,601 @@
+//! The whole of `nldf prepare`: a video in, an AD-NeRF dataset out, written into a scratch
+//! folder beside the output and moved into place only when complete, so that a failure
+//! leaves nothing behind.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nldf_core::audio::{
+    FeatureConfig, FeatureSource, audio_windows_for_frames, n_video_frames, read_wav,
+};
+use nldf_core::camera::Intrinsics;
+use nldf_core::dataset::{FrameEntry, TransformsFile, save_audio_features};
+use nldf_core::image::Rect;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::face::{FaceEnv, FaceOutput};
+use crate::lms68::{jaw_line, landmarks_68};
+use crate::parsing::{Part, background, head_rect, parse_frame, parsing_image};
+use crate::pose::{FrameLandmarks, PoseConfig, solve_track};
+use crate::video::{self, Probe, Window};
+
+/// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
+/// since landmarks cannot tell the focal length.
+pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
+/// Frames the background median samples at most.
+const BACKGROUND_SAMPLES: usize = 150;
+/// AD-NeRF's split: the first 10/11 of the frames train, the rest are held out (`val`).
+const TRAIN_SHARE: f64 = 10.0 / 11.0;
+
+/// What to prepare.
+#[derive(Debug, Clone)]
+pub struct PrepareJob {
+    pub video: PathBuf,
+    pub out: PathBuf,
+    /// Output frames are `size x size`.
+    pub size: u32,
+    /// Focal length in output pixels (default [`DEFAULT_FOCAL_AT_450`] scaled).
+    pub focal: Option<f32>,
+    /// Seconds into the clip to start at.
+    pub start: f64,
+    /// Seconds to read (to the end when `None`).
+    pub seconds: Option<f64>,
+    /// The square crop `[x, y, side]` in source pixels (the centred square when `None`).
+    pub crop: Option<[u32; 3]>,
+    /// Fewest frames with one face to train on.
+    pub min_frames: usize,
+    /// Replace an existing output folder.
+    pub force: bool,
+    pub pose: PoseConfig,
+}
+
+/// Progress of a [`PrepareJob`].
+#[derive(Debug, Clone)]
+pub enum Event {
+    /// A stage begins; `total` is its number of frames when it counts frames.
+    Stage {
+        name: &'static str,
+        total: Option<usize>,
+    },
+    /// Frames done in the current stage.
+    Frames(usize),
+}
+
+/// What a finished job did, saved as `prepare.json` beside the dataset.
+#[derive(Debug, Clone, Serialize)]
+pub struct PrepareReport {
+    pub video: String,
+    pub size: u32,
+    pub focal: f32,
+    pub fps: f64,
+    pub frames_read: usize,
+    /// Frames dropped because no single whole face was found in them, and their indices.
+    pub frames_dropped: usize,
+    pub dropped: Vec<usize>,
+    pub train_frames: usize,
+    pub val_frames: usize,
+    /// Whether the bundle step refined the face's shape (the head moved enough).
+    pub bundled: bool,
+    /// Median reprojection error of the landmarks, pixels.
+    pub reprojection_px: f32,
+    /// Seconds per stage and in all.
+    pub seconds: Vec<(String, f64)>,
+    pub total_seconds: f64,
+}
+
+impl PrepareJob {
+    /// The crop and window this job reads from a probed video, checked against it.
+    fn window(&self, probe: &Probe) -> Result<Window> {
+        let crop = self
+            .crop
+            .unwrap_or_else(|| video::centre_square(probe.width, probe.height));
+        let [x, y, side] = crop;
+        if side == 0 || x + side > probe.width || y + side > probe.height {
+            return Err(Error::Argument(format!(
+                "--crop {x},{y},{side} does not fit the {}x{} video",
+                probe.width, probe.height
+            )));
+        }
+        if self.size < 32 {
+            return Err(Error::Argument(format!(
+                "--size {} is below 32 pixels",
+                self.size
+            )));
+        }
+        Ok(Window {
+            start: self.start.max(0.0),
+            seconds: self.seconds,
+            crop,
+            size: self.size,
+        })
+    }
+
+    /// The focal length in output pixels.
+    pub fn focal(&self) -> f32 {
+        self.focal
+            .unwrap_or(DEFAULT_FOCAL_AT_450 * self.size as f32 / 450.0)
+    }
+}
+
+/// Runs `job` with the face environment `env` and the program `ffmpeg`.
+pub fn run(
+    job: &PrepareJob,
+    env: &FaceEnv,
+    ffmpeg: &Path,
+    mut events: impl FnMut(Event),
+) -> Result<PrepareReport> {
+    let focal = job.focal();
+    if !(focal.is_finite() && focal > 0.0) {
+        return Err(Error::Argument(format!(
+            "--focal must be positive, got {focal}"
+        )));
+    }
+    let started = Instant::now();
+    let probe = video::probe(ffmpeg, &job.video)?;
+    if !probe.has_audio {
+        return Err(Error::invalid(
+            &job.video,
+            "has no audio track: nldf learns the face from the voice",
+        ));
+    }
+    let window = job.window(&probe)?;
+    let scratch = Scratch::new(&job.out, job.force)?;
+    let report = prepare_into(job, env, ffmpeg, &probe, &window, &scratch.dir, &mut events);
+    let mut report = match report {
+        Ok(r) => r,
+        Err(e) => return Err(e),
+    };
+    report.total_seconds = started.elapsed().as_secs_f64();
+    nldf_core::files::write_json(&scratch.dir.join("prepare.json"), &report)?;
+    scratch.commit()?;
+    Ok(report)
+}
+
+/// The stages, writing into `dir`.
+fn prepare_into(
+    job: &PrepareJob,
+    env: &FaceEnv,
+    ffmpeg: &Path,
+    probe: &Probe,
+    window: &Window,
+    dir: &Path,
+    events: &mut impl FnMut(Event),
+) -> Result<PrepareReport> {
+    let mut seconds = Vec::new();
+    let mut clock = Instant::now();
+    let mut lap = |name: &str, seconds: &mut Vec<(String, f64)>| {
+        seconds.push((name.to_string(), clock.elapsed().as_secs_f64()));
+        clock = Instant::now();
+    };
+    let size = job.size;
+    let ori = dir.join("ori_imgs");
+    let heads = dir.join("head_imgs");
+    let parsing_dir = dir.join("parsing");
+    for d in [&ori, &heads, &parsing_dir] {
+        std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
+    }
+
+    events(Event::Stage {
+        name: "decoding",
+        total: probe.duration.map(|d| (d * probe.fps) as usize),
+    });
+    let n = decode_to_jpegs(ffmpeg, &job.video, probe, window, &ori, events)?;
+    let wav = dir.join("aud.wav");
+    video::extract_audio(ffmpeg, &job.video, window, &wav)?;
+    let wave = read_wav(&wav)?;
+    let have = n_video_frames(wave.samples.len(), wave.sample_rate, probe.fps as f32);
+    if have + 1 < n {
+        return Err(Error::invalid(
+            &job.video,
+            format!(
+                "its audio lasts {:.2} s, shorter than its {n} video frames",
+                wave.seconds()
+            ),
+        ));
+    }
+    too_short(
+        &job.video,
+        n,
+        job.min_frames,
+        probe.fps,
+        "in the chosen time range",
+    )?;
+    lap("decode", &mut seconds);
+
+    events(Event::Stage {
+        name: "face landmarks",
+        total: Some(n),
+    });
+    let face_dir = dir.join("face");
+    let faces = env.run_frames(&ori, n, &face_dir, |done| events(Event::Frames(done)))?;
+    let kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
+    lap("faces", &mut seconds);
+
+    events(Event::Stage {
+        name: "head pose",
+        total: None,
+    });
+    let k = Intrinsics {
+        focal: job.focal(),
+        cx: size as f32 / 2.0,
+        cy: size as f32 / 2.0,
+        width: size,
+        height: size,
+    };
+    let frames: Vec<FrameLandmarks> = kept
+        .iter()
+        .filter_map(|&i| {
+            faces.landmarks[i]
+                .clone()
+                .map(|points| FrameLandmarks { frame: i, points })
+        })
+        .collect();
+    let canonical = env.canonical()?;
+    let track = solve_track(
+        &frames,
+        &canonical.vertices,
+        &canonical.rigid_weights,
+        &k,
+        &job.pose,
+    )?;
+    lap("pose", &mut seconds);
+
+    events(Event::Stage {
+        name: "parsing",
+        total: Some(kept.len()),
+    });
+    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, size, events)?;
+    lap("parsing", &mut seconds);
+
+    events(Event::Stage {
+        name: "background and heads",
+        total: Some(kept.len()),
+    });
+    let bc = background_of(&kept, &ori, &parsing_dir, &faces, size)?;
+    let bc_path = dir.join("bc.jpg");
+    save_jpeg(&bc_path, bc.as_raw(), size)?;
+    write_heads(&kept, &ori, &parsing_dir, &heads, bc.as_raw(), size, events)?;
+    let features = FeatureConfig::default();
+    let windows = audio_windows_for_frames(&wave, probe.fps as f32, &features, n)
+        .map_err(|e| Error::invalid(&wav, e.to_string()))?;
+    save_audio_features(dir, &windows, &FeatureSource::Nldf(features))?;
+    lap("background", &mut seconds);
+
+    let entries: Vec<FrameEntry> = kept
+        .iter()
+        .zip(&track.c2w)
+        .zip(&rects)
+        .map(|((&i, c2w), rect)| FrameEntry {
+            img_id: i as i64,
+            aud_id: i as i64,
+            transform_matrix: c2w.transpose().to_cols_array_2d(),
+            face_rect: rect.map(|[x, y, w, h]| Rect {
+                x: x as i64,
+                y: y as i64,
+                w: w as i64,
+                h: h as i64,
+            }),
+            eye: None,
+        })
+        .collect();
+    let n_train =
+        ((entries.len() as f64 * TRAIN_SHARE).round() as usize).clamp(1, entries.len() - 1);
+    let (near, far) = bounds(&track.c2w);
+    for (name, part) in [
+        ("transforms_train.json", &entries[..n_train]),
+        ("transforms_val.json", &entries[n_train..]),
+    ] {
+        let file = TransformsFile {
+            focal_len: k.focal,
+            cx: k.cx,
+            cy: k.cy,
+            near: Some(near),
+            far: Some(far),
+            fps: Some(probe.fps as f32),
+            width: Some(size),
+            height: Some(size),
+            frames: part.to_vec(),
+        };
+        file.save(&dir.join(name))?;
+    }
+    std::fs::remove_dir_all(&face_dir).map_err(|e| Error::io(&face_dir, e))?;
+    let dropped: Vec<usize> = (0..n).filter(|i| kept.binary_search(i).is_err()).collect();
+    let mut reprojection = track.reprojection_px.clone();
+    reprojection.sort_by(f32::total_cmp);
+    Ok(PrepareReport {
+        video: job.video.display().to_string(),
+        size,
+        focal: k.focal,
+        fps: probe.fps,
+        frames_read: n,
+        frames_dropped: dropped.len(),
+        dropped,
+        train_frames: n_train,
+        val_frames: entries.len() - n_train,
+        bundled: track.bundled,
+        reprojection_px: reprojection
+            .get(reprojection.len() / 2)
+            .copied()
+            .unwrap_or(0.0),
+        seconds,
+        total_seconds: 0.0,
+    })
+}
+
+/// AD-NeRF's bounds about the mean camera depth of the head's origin, in metres: the head
+/// reaches 0.2 in front of the origin, and 0.4 behind it is empty.
+fn bounds(c2w: &[glam::Mat4]) -> (f32, f32) {
+    let mean = c2w
+        .iter()
+        .map(|m| m.z_axis.truncate().dot(m.w_axis.truncate()))
+        .sum::<f32>()
+        / c2w.len().max(1) as f32;
+    ((mean - 0.2).max(1e-3), mean + 0.4)
+}
+
+fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result<()> {
+    if n < min {
+        return Err(Error::invalid(
+            video,
+            format!(
+                "too short to train: {n} frames with one face {what} ({:.1} s), at least {min} needed",
+                n as f64 / fps
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The frames to keep: one face, whole inside the frame. Refuses a clip with no face, with
+/// two faces, or with too few frames left.
+fn frames_with_one_face(
+    video: &Path,
+    faces: &FaceOutput,
+    size: u32,
+    min: usize,
+    fps: f64,
+) -> Result<Vec<usize>> {
+    let n = faces.faces.len();
+    let checked: Vec<u8> = faces.detections.iter().flatten().copied().collect();
+    let two = checked.iter().filter(|&&d| d >= 2).count()
+        + faces.faces.iter().filter(|&&f| f >= 2).count();
+    if two * 20 > checked.len().max(1) {
+        return Err(Error::invalid(
+            video,
+            format!(
+                "shows two faces ({two} detections of a second face): nldf prepare needs one person alone"
+            ),
+        ));
+    }
+    let margin = -0.01 * size as f32;
+    let inside = |p: &[f32; 2]| p.iter().all(|&v| v >= margin && v <= size as f32 - margin);
+    let kept: Vec<usize> = (0..n)
+        .filter(|&i| {
+            faces.faces[i] == 1
+                && faces.landmarks[i]
+                    .as_ref()
+                    .is_some_and(|l| l.iter().all(inside))
+        })
+        .collect();
+    if kept.is_empty() || kept.len() * 2 < n {
+        return Err(Error::invalid(
+            video,
+            format!("no face found in {} of its {n} frames", n - kept.len()),
+        ));
+    }
+    too_short(
+        video,
+        kept.len(),
+        min,
+        fps,
+        "after dropping the frames without one",
+    )?;
+    Ok(kept)
+}
+
+/// Decodes the frames into `ori/<i>.jpg`, encoding them in parallel batches.
+fn decode_to_jpegs(
+    ffmpeg: &Path,
+    video: &Path,
+    probe: &Probe,
+    window: &Window,
+    ori: &Path,
+    events: &mut impl FnMut(Event),
+) -> Result<usize> {
+    const BATCH: usize = 16;
+    let size = window.size;
+    let mut batch: Vec<(usize, Vec<u8>)> = Vec::with_capacity(BATCH);
+    let flush = |batch: &mut Vec<(usize, Vec<u8>)>| -> Result<()> {
+        batch
+            .par_iter()
+            .try_for_each(|(i, rgb)| save_jpeg(&ori.join(format!("{i}.jpg")), rgb, size))?;
+        batch.clear();
+        Ok(())
+    };
+    let n = video::decode_frames(ffmpeg, video, probe, window, |i, rgb| {
+        batch.push((i, rgb.to_vec()));
+        if batch.len() == BATCH {
+            flush(&mut batch)?;
+            events(Event::Frames(i + 1));
+        }
+        Ok(())
+    })?;
+    flush(&mut batch)?;
+    events(Event::Frames(n));
+    Ok(n)
+}
+
+fn save_jpeg(path: &Path, rgb: &[u8], size: u32) -> Result<()> {
+    let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+    let mut w = std::io::BufWriter::new(file);
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut w, 95)
+        .encode(rgb, size, size, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::invalid(path, format!("cannot write the JPEG: {e}")))
+}
+
+fn read_rgb(path: &Path, size: u32) -> Result<Vec<u8>> {
+    let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot read: {e}")))?;
+    let rgb = img.to_rgb8();
+    if rgb.dimensions() != (size, size) {
+        return Err(Error::invalid(
+            path,
+            format!("is {:?}, not {size}x{size}", rgb.dimensions()),
+        ));
+    }
+    Ok(rgb.into_raw())
+}
+
+fn read_gray(path: &Path, size: u32) -> Result<Vec<u8>> {
+    let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot read: {e}")))?;
+    let g = img.to_luma8();
+    if g.dimensions() != (size, size) {
+        return Err(Error::invalid(
+            path,
+            format!("is {:?}, not {size}x{size}", g.dimensions()),
+        ));
+    }
+    Ok(g.into_raw())
+}
+
+/// Writes `parsing/<i>.png` and `ori_imgs/<i>.lms` for the kept frames; returns each
+/// frame's head box.
+fn write_parsing(
+    faces: &FaceOutput,
+    kept: &[usize],
+    ori: &Path,
+    parsing_dir: &Path,
+    size: u32,
+    events: &mut impl FnMut(Event),
+) -> Result<Vec<Option<[u32; 4]>>> {
+    let mut rects = Vec::with_capacity(kept.len());
+    for (chunk_no, chunk) in kept.chunks(32).enumerate() {
+        let part: Vec<Option<[u32; 4]>> = chunk
+            .par_iter()
+            .map(|&i| -> Result<Option<[u32; 4]>> {
+                let mesh = faces.landmarks[i].as_deref().unwrap_or(&[]);
+                let (Some(lms), Some(jaw)) = (landmarks_68(mesh), jaw_line(mesh)) else {
+                    return Err(Error::Argument(format!("frame {i} lost its landmarks")));
+                };
+                let lms_path = ori.join(format!("{i}.lms"));
+                std::fs::write(&lms_path, lms.to_text()).map_err(|e| Error::io(&lms_path, e))?;
+                let person = read_gray(&faces.mask_dir.join(format!("{i}.png")), size)?;
+                let parts = parse_frame(&person, &jaw, size, size);
+                let png = parsing_dir.join(format!("{i}.png"));
+                parsing_image(&parts, size, size)
+                    .save(&png)
+                    .map_err(|e| Error::invalid(&png, format!("cannot write: {e}")))?;
+                Ok(head_rect(&parts, size))
+            })
+            .collect::<Result<_>>()?;
+        rects.extend(part);
+        events(Event::Frames((chunk_no * 32 + chunk.len()).min(kept.len())));
+    }
+    Ok(rects)
+}
+
+/// The background from up to [`BACKGROUND_SAMPLES`] frames spread over the clip.
+fn background_of(
+    kept: &[usize],
+    ori: &Path,
+    _parsing: &Path,
+    faces: &FaceOutput,
+    size: u32,
+) -> Result<image::RgbImage> {
+    let step = kept.len().div_ceil(BACKGROUND_SAMPLES).max(1);
+    let picked: Vec<usize> = kept.iter().step_by(step).copied().collect();
+    let loaded: Vec<(Vec<u8>, Vec<u8>)> = picked
+        .par_iter()
+        .map(|&i| {
+            Ok((
+                read_rgb(&ori.join(format!("{i}.jpg")), size)?,
+                read_gray(&faces.mask_dir.join(format!("{i}.png")), size)?,
+            ))
+        })
+        .collect::<Result<_>>()?;
+    let (frames, people): (Vec<_>, Vec<_>) = loaded.into_iter().unzip();
+    Ok(background(&frames, &people, size, size, (size / 64).max(1)))
+}
+
+/// Writes `head_imgs/<i>.jpg`: the frame's head over the background (AD-NeRF's head images).
+fn write_heads(
+    kept: &[usize],
+    ori: &Path,
+    parsing_dir: &Path,
+    heads: &Path,
+    bc: &[u8],
+    size: u32,
+    events: &mut impl FnMut(Event),
+) -> Result<()> {
+    let head = Part::Head.colour();
+    for (chunk_no, chunk) in kept.chunks(32).enumerate() {
+        chunk.par_iter().try_for_each(|&i| -> Result<()> {
+            let mut rgb = read_rgb(&ori.join(format!("{i}.jpg")), size)?;
+            let labels = read_rgb(&parsing_dir.join(format!("{i}.png")), size)?;
+            for (px, (lab, b)) in rgb
+                .chunks_exact_mut(3)
+                .zip(labels.chunks_exact(3).zip(bc.chunks_exact(3)))
+            {
+                if lab != head {
+                    px.copy_from_slice(b);
+                }
+            }
+            save_jpeg(&heads.join(format!("{i}.jpg")), &rgb, size)
+        })?;
+        events(Event::Frames((chunk_no * 32 + chunk.len()).min(kept.len())));
+    }
+    Ok(())
+}
+
+/// The output folder being written: `<out>.part` beside it, renamed to `out` by
+/// [`Scratch::commit`] and removed when dropped uncommitted.
+struct Scratch {
+    dir: PathBuf,
+    out: PathBuf,
+    force: bool,
+    done: bool,
+}
+
+impl Scratch {
+    fn new(out: &Path, force: bool) -> Result<Scratch> {
+        let occupied =
+            out.exists() && std::fs::read_dir(out).map_or(true, |mut d| d.next().is_some());
+        if occupied && !force {
+            return Err(Error::invalid(
+                out,
+                "exists and is not empty (pass --force to replace it)",
+            ));
+        }
+        let dir = video::part_path(out);
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        }
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        Ok(Scratch {
+            dir,
+            out: out.to_path_buf(),
+            force,
+            done: false,
+        })
+    }
+
+    fn commit(mut self) -> Result<()> {
+        if self.out.exists() && self.force {
+            std::fs::remove_dir_all(&self.out).map_err(|e| Error::io(&self.out, e))?;
+        } else if self.out.exists() {
+            std::fs::remove_dir(&self.out).map_err(|e| Error::io(&self.out, e))?;
+        }
+        std::fs::rename(&self.dir, &self.out).map_err(|e| Error::io(&self.out, e))?;
+        self.done = true;
+        Ok(())
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !self.done {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+    }
+}

@@ -1,0 +1,160 @@
+//! `nldf prepare`: a video of one person speaking as an AD-NeRF dataset, on a CPU.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use indicatif::ProgressBar;
+use nldf_prepare::face::{self, FaceEnv};
+use nldf_prepare::job::{self, Event, PrepareJob};
+use nldf_prepare::pose::PoseConfig;
+use nldf_prepare::tools;
+
+use crate::progress::progress_bar;
+
+#[derive(clap::Args, Debug)]
+pub struct PrepareArgs {
+    /// The video (MP4 or anything ffmpeg reads): one person facing the camera, speaking, at a
+    /// constant frame rate, with its sound.
+    #[arg(long, required_unless_present = "setup")]
+    pub video: Option<PathBuf>,
+    /// Output dataset folder (created; must be empty or absent unless --force).
+    #[arg(long, required_unless_present = "setup")]
+    pub out: Option<PathBuf>,
+    /// Output frames are SIZE x SIZE pixels (a square crop of the video, scaled).
+    #[arg(long, default_value_t = 512)]
+    pub size: u32,
+    /// Focal length in output pixels; landmarks cannot tell it. Default: AD-NeRF's 1200 at
+    /// 450 pixels, scaled to --size (1365 at 512). Half or twice the true value moves the
+    /// rotations by well under a degree.
+    #[arg(long)]
+    pub focal: Option<f32>,
+    /// Seconds into the video to start at.
+    #[arg(long, default_value_t = 0.0)]
+    pub start: f64,
+    /// Seconds of video to read (default: to its end).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// The square of the video to keep, `X,Y,SIDE` in the video's pixels (default: the
+    /// centred square).
+    #[arg(long, value_parser = parse_crop)]
+    pub crop: Option<Crop>,
+    /// Fewest frames with one face needed to train (100 is 4 s at 25 frames/s).
+    #[arg(long, default_value_t = 100)]
+    pub min_frames: usize,
+    /// Replace the output folder if it exists.
+    #[arg(long)]
+    pub force: bool,
+    /// Only install the face environment (mediapipe's models from PyPI, the canonical face
+    /// from npm, ffmpeg from the imageio-ffmpeg wheel) and exit.
+    #[arg(long)]
+    pub setup: bool,
+}
+
+/// `--crop X,Y,SIDE`.
+#[derive(Debug, Clone, Copy)]
+pub struct Crop(pub [u32; 3]);
+
+fn parse_crop(text: &str) -> std::result::Result<Crop, String> {
+    let v: Vec<u32> = text
+        .split(',')
+        .map(|t| t.trim().parse::<u32>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("`{text}` is not X,Y,SIDE in whole pixels"))?;
+    match v.as_slice() {
+        [x, y, s] if *s > 0 => Ok(Crop([*x, *y, *s])),
+        _ => Err(format!("`{text}` is not X,Y,SIDE with SIDE > 0")),
+    }
+}
+
+/// The face environment, installed first when missing.
+fn face_env() -> Result<FaceEnv> {
+    let dir = tools::face_env_dir()?;
+    if let Some(env) = FaceEnv::open(&dir) {
+        return Ok(env);
+    }
+    eprintln!(
+        "installing the face environment into {} (once)",
+        dir.display()
+    );
+    let env = face::install(&dir, |line| eprintln!("  {line}"))
+        .with_context(|| format!("installing the face environment into {}", dir.display()))?;
+    Ok(env)
+}
+
+pub fn run(args: PrepareArgs) -> Result<()> {
+    let env = face_env()?;
+    if args.setup {
+        println!("face environment ready: {}", env.dir.display());
+        println!("ffmpeg: {}", tools::ffmpeg()?.display());
+        return Ok(());
+    }
+    let (Some(video), Some(out)) = (args.video, args.out) else {
+        bail!("--video and --out are needed");
+    };
+    let ffmpeg = tools::ffmpeg()?;
+    let job = PrepareJob {
+        video,
+        out: out.clone(),
+        size: args.size,
+        focal: args.focal,
+        start: args.start,
+        seconds: args.seconds,
+        crop: args.crop.map(|c| c.0),
+        min_frames: args.min_frames,
+        force: args.force,
+        pose: PoseConfig::default(),
+    };
+    let mut bar: Option<ProgressBar> = None;
+    let report = job::run(&job, &env, &ffmpeg, |event| match event {
+        Event::Stage { name, total } => {
+            if let Some(b) = bar.take() {
+                b.finish();
+            }
+            bar = Some(match total {
+                Some(n) => progress_bar(n as u64, name),
+                None => {
+                    let b = ProgressBar::new_spinner();
+                    b.set_message(name);
+                    b
+                }
+            });
+        }
+        Event::Frames(done) => {
+            if let Some(b) = &bar {
+                if b.length().is_some_and(|l| done as u64 > l) {
+                    b.set_length(done as u64);
+                }
+                b.set_position(done as u64);
+            }
+        }
+    });
+    if let Some(b) = bar.take() {
+        b.finish();
+    }
+    let report = report?;
+    println!(
+        "prepared {} frames ({} train, {} val) of {} read, {} dropped without one whole face; \
+         {:.1} s ({:.1} frames/s){}",
+        report.train_frames + report.val_frames,
+        report.train_frames,
+        report.val_frames,
+        report.frames_read,
+        report.frames_dropped,
+        report.total_seconds,
+        report.frames_read as f64 / report.total_seconds.max(1e-9),
+        if report.bundled {
+            "; face shape refined from the head's motion"
+        } else {
+            ""
+        },
+    );
+    println!(
+        "wrote {}/ (head_imgs, ori_imgs with .lms, parsing, bc.jpg, aud.wav, aud.npy, transforms_train.json, transforms_val.json, prepare.json)",
+        out.display()
+    );
+    println!(
+        "next: nldf train --data {} --run runs/<name>",
+        out.display()
+    );
+    Ok(())
+}
