@@ -49,6 +49,25 @@ pub enum BenchCommand {
     /// The positional encoding's sines and cosines three ways (direct f32, f32
     /// double-angle climb, nldf's f64 climb): time per value and error against f64.
     Encoding(EncodingBenchArgs),
+    /// A dataset prepared from a test video (`nldf synth --video`) scored against the
+    /// synthetic scene it shows, after the one similarity no method can observe: camera
+    /// rotations and positions, head-mask IoU, the background's PSNR where the person never
+    /// is, and how much of the true mouth the landmarks' lips cover; a table with each
+    /// bar, and JSON. Exits non-zero when a bar fails.
+    Prepare(PrepareBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PrepareBenchArgs {
+    /// The synthetic scene (`nldf synth --video`'s dataset): the truth.
+    #[arg(long)]
+    pub truth: PathBuf,
+    /// The dataset prepared from its video (AD-NeRF's layout).
+    #[arg(long)]
+    pub prepared: PathBuf,
+    /// Write the scores, the bars and the verdicts here as JSON.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 /// When a benchmark may run: the machine's load at the start.
@@ -242,7 +261,68 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Web(args) => web(args),
         BenchCommand::Frontier(args) => crate::frontier_cmd::run(args),
         BenchCommand::Upsampler(args) => upsampler(args),
+        BenchCommand::Prepare(args) => prepare(args),
     }
+}
+
+fn prepare(args: PrepareBenchArgs) -> Result<()> {
+    let scores = nldf_prepare::check::score_prepared(&args.truth, &args.prepared)?;
+    let report = scores.report(&args.truth, &args.prepared);
+    print!("{}", prepare_table(&report));
+    if let Some(out) = &args.out {
+        nldf_core::files::write_json(out, &report)?;
+        println!("wrote {}", out.display());
+    }
+    let failed: Vec<&str> = report
+        .checks
+        .iter()
+        .filter(|c| !c.pass)
+        .map(|c| c.metric.as_str())
+        .collect();
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "{} of {} bars failed: {}",
+            failed.len(),
+            report.checks.len(),
+            failed.join("; ")
+        );
+    }
+    Ok(())
+}
+
+/// `nldf bench prepare`'s Markdown: a table of the bars, then the counts and the numbers
+/// without a bar.
+fn prepare_table(report: &nldf_prepare::check::ScoreReport) -> String {
+    let mut s = String::from("| metric | value | bar | |\n|---|---:|---|---|\n");
+    for c in &report.checks {
+        let verdict = if c.pass { "pass" } else { "FAIL" };
+        s += &format!(
+            "| {} | {:.4} {} | {} | {verdict} |\n",
+            c.metric, c.value, c.unit, c.bar
+        );
+    }
+    let r = &report.scores;
+    let p = &r.poses;
+    s += &format!(
+        "\n{} of the truth's {} frames compared ({} missing, {} extra); camera position error \
+         mean {:.4} %; head IoU worst {:.4} (frame {}); background scored on {} pixels; lips \
+         polygon {:.1} % on the mouth over {} frames; focal ratio {:.4}; the similarity: \
+         scale {:.6}, rotation {:.3} deg\n",
+        r.frames_compared,
+        r.frames_truth,
+        r.frames_missing,
+        r.frames_extra,
+        100.0 * p.position_mean,
+        r.head_iou_worst,
+        r.head_iou_worst_img_id,
+        r.bc_pixels,
+        100.0 * r.lips_precision,
+        r.mouth_frames,
+        r.focal_ratio,
+        p.scale,
+        p.rotation_deg
+    );
+    s
 }
 
 /// Prints a benchmark's Markdown and the files it wrote.

@@ -10,6 +10,8 @@ use std::sync::OnceLock;
 use nldf_core::audio::{FeatureConfig, FeatureSource, Waveform, write_wav};
 use nldf_core::dataset::AUDIO_SOURCE_FILE;
 
+mod synth_video;
+
 /// Runs `nldf` with `args`.
 fn nldf<I, S>(args: I) -> Output
 where
