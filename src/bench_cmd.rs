@@ -296,9 +296,13 @@ fn prepare_table(report: &nldf_prepare::check::ScoreReport) -> String {
     let mut s = String::from("| metric | value | bar | |\n|---|---:|---|---|\n");
     for c in &report.checks {
         let verdict = if c.pass { "pass" } else { "FAIL" };
+        let value = format!("{:.4} {}", c.value, c.unit);
+        let bar = format!("{} {}", c.bar, c.unit);
         s += &format!(
-            "| {} | {:.4} {} | {} | {verdict} |\n",
-            c.metric, c.value, c.unit, c.bar
+            "| {} | {} | {} | {verdict} |\n",
+            c.metric,
+            value.trim_end(),
+            bar.trim_end()
         );
     }
     let r = &report.scores;
