@@ -28,6 +28,8 @@ pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
 const BACKGROUND_SAMPLES: usize = 150;
 /// AD-NeRF's split: the first 10/11 of the frames train, the rest are held out (`val`).
 const TRAIN_SHARE: f64 = 10.0 / 11.0;
+/// The face mesh's nose tip: a point on the head in every frame.
+const NOSE_TIP: usize = 1;
 
 /// What to prepare.
 #[derive(Debug, Clone)]
@@ -481,7 +483,7 @@ fn write_parsing(
                 let lms_path = ori.join(format!("{i}.lms"));
                 std::fs::write(&lms_path, lms.to_text()).map_err(|e| Error::io(&lms_path, e))?;
                 let person = read_gray(&faces.mask_dir.join(format!("{i}.png")), size)?;
-                let parts = parse_frame(&person, &jaw, size, size);
+                let parts = parse_frame(&person, &jaw, mesh[NOSE_TIP], size, size);
                 let png = parsing_dir.join(format!("{i}.png"));
                 parsing_image(&parts, size, size)
                     .save(&png)

@@ -28,9 +28,17 @@ impl Part {
     }
 }
 
-/// The parts of a `width x height` frame from its person probability (0-255, row-major) and
-/// its jaw line (pixels, image left to right; the chin is its middle point).
-pub fn parse_frame(person: &[u8], jaw: &[[f32; 2]], width: u32, height: u32) -> Vec<Part> {
+/// The parts of a `width x height` frame from its person probability (0-255, row-major),
+/// its jaw line (pixels, image left to right; the chin is its middle point) and a point on
+/// the face (`seed`, the nose, say): the head is the part above the cut that holds the seed;
+/// person pixels above the cut but apart from it are torso.
+pub fn parse_frame(
+    person: &[u8],
+    jaw: &[[f32; 2]],
+    seed: [f32; 2],
+    width: u32,
+    height: u32,
+) -> Vec<Part> {
     let (w, h) = (width as usize, height as usize);
     let mut parts = vec![Part::Background; w * h];
     if jaw.len() < 3 || person.len() != w * h {
@@ -65,7 +73,39 @@ pub fn parse_frame(person: &[u8], jaw: &[[f32; 2]], width: u32, height: u32) -> 
             };
         }
     }
+    keep_connected_head(&mut parts, seed, w, h);
     parts
+}
+
+/// Turns head pixels that are not 4-connected to `seed` into torso.
+fn keep_connected_head(parts: &mut [Part], seed: [f32; 2], w: usize, h: usize) {
+    let (sx, sy) = (seed[0].floor(), seed[1].floor());
+    let inside = sx >= 0.0 && sy >= 0.0 && (sx as usize) < w && (sy as usize) < h;
+    let start = inside.then(|| sy as usize * w + sx as usize);
+    let mut reached = vec![false; w * h];
+    if let Some(s) = start.filter(|&s| parts[s] == Part::Head) {
+        let mut stack = vec![s];
+        reached[s] = true;
+        while let Some(i) = stack.pop() {
+            let (x, y) = (i % w, i / w);
+            let mut near = [None; 4];
+            near[0] = (x > 0).then(|| i - 1);
+            near[1] = (x + 1 < w).then(|| i + 1);
+            near[2] = (y > 0).then(|| i - w);
+            near[3] = (y + 1 < h).then(|| i + w);
+            for j in near.into_iter().flatten() {
+                if !reached[j] && parts[j] == Part::Head {
+                    reached[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    for (p, r) in parts.iter_mut().zip(&reached) {
+        if *p == Part::Head && !r {
+            *p = Part::Torso;
+        }
+    }
 }
 
 /// The largest y at which the polyline crosses the vertical line at `x`.
@@ -224,7 +264,7 @@ mod tests {
     fn the_person_splits_at_the_jaw_into_head_neck_and_torso() {
         let (w, h) = (60u32, 80u32);
         let person = vec![255u8; (w * h) as usize];
-        let parts = parse_frame(&person, &jaw(), w, h);
+        let parts = parse_frame(&person, &jaw(), [30.0, 10.0], w, h);
         let at = |x: u32, y: u32| parts[(y * w + x) as usize];
         assert_eq!(at(30, 38), Part::Head);
         assert_eq!(at(30, 41), Part::Neck);
@@ -242,7 +282,7 @@ mod tests {
         );
         let none = vec![0u8; (w * h) as usize];
         assert!(
-            parse_frame(&none, &jaw(), w, h)
+            parse_frame(&none, &jaw(), [30.0, 10.0], w, h)
                 .iter()
                 .all(|p| *p == Part::Background)
         );
