@@ -290,6 +290,31 @@ mod tests {
     }
 
     #[test]
+    fn person_pixels_apart_from_the_face_are_not_head() {
+        let (w, h) = (60u32, 80u32);
+        // The head fills columns 8..52 above row 42; a blob at columns 0..4, rows 25..32
+        // (above the chin, beside the jaw) is apart from it.
+        let mut person = vec![0u8; (w * h) as usize];
+        for y in 0..h {
+            for x in 0..w {
+                let head = (8..52).contains(&x) && y < 42;
+                let blob = x < 4 && (25..32).contains(&y);
+                if head || blob {
+                    person[(y * w + x) as usize] = 255;
+                }
+            }
+        }
+        let parts = parse_frame(&person, &jaw(), [30.0, 10.0], w, h);
+        assert_eq!(parts[(28 * w + 2) as usize], Part::Torso);
+        assert_eq!(parts[(28 * w + 9) as usize], Part::Head);
+        let unseeded = parse_frame(&person, &jaw(), [2.0, 70.0], w, h);
+        assert!(
+            unseeded.iter().all(|p| *p != Part::Head),
+            "a seed off the head keeps no head"
+        );
+    }
+
+    #[test]
     fn the_background_is_the_median_where_the_person_is_away() {
         let (w, h) = (8u32, 4u32);
         let n = (w * h) as usize;
