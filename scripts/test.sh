@@ -8,6 +8,9 @@ cd "$(dirname "$0")/.."
 bash scripts/python_env.sh >/dev/null
 # The browser test's Chromium (Debian's, apt, as root) and web/node_modules (npm ci).
 bash scripts/web_env.sh >/dev/null
+# nldf prepare's face environment (mediapipe from PyPI, the canonical face from npm, ffmpeg
+# from the imageio-ffmpeg wheel), installed once under ~/.cache/nldf/face-env.
+cargo run --quiet --bin nldf -- prepare --setup >/dev/null
 
 if cargo nextest --version >/dev/null 2>&1; then
   exec cargo nextest run --workspace --no-fail-fast "$@"

@@ -10,6 +10,7 @@ use std::sync::OnceLock;
 use nldf_core::audio::{FeatureConfig, FeatureSource, Waveform, write_wav};
 use nldf_core::dataset::AUDIO_SOURCE_FILE;
 
+mod prepare;
 mod synth_video;
 
 /// Runs `nldf` with `args`.

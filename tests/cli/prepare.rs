@@ -1,0 +1,303 @@
+//! `nldf prepare`: a synthetic head's test video prepared end to end, and every way a video
+//! can be wrong refused in one line with nothing left behind. Needs ffmpeg and the face
+//! environment (`nldf prepare --setup`, which the test command runs first); outside CI a
+//! missing one skips, under CI it fails.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use super::{args, nldf, nldf_ok, refused, s, scratch};
+
+/// ffmpeg, and whether the face environment is installed; `None` (a skip) only outside CI.
+fn tools() -> Option<PathBuf> {
+    let ffmpeg = match nldf_prepare::tools::ffmpeg() {
+        Ok(p) => p,
+        Err(e) => return nldf_tests::tool_missing(format!("nldf prepare needs ffmpeg: {e}")),
+    };
+    let env = nldf_prepare::tools::face_env_dir().ok();
+    if env
+        .and_then(|d| nldf_prepare::face::FaceEnv::open(&d))
+        .is_none()
+    {
+        return nldf_tests::tool_missing(
+            "nldf prepare needs the face environment: run `nldf prepare --setup`",
+        );
+    }
+    Some(ffmpeg)
+}
+
+/// Runs ffmpeg with `args` and asserts it succeeded.
+fn ffmpeg(program: &Path, args: &[&str]) {
+    let out = Command::new(program)
+        .args(["-hide_banner", "-nostdin", "-loglevel", "error", "-y"])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "ffmpeg {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A 6 s, 128 x 128 test video of the standard head turning up to 20 degrees, made once,
+/// with its synthetic scene (the truth).
+struct Clip {
+    _dir: tempfile::TempDir,
+    scene: PathBuf,
+    video: PathBuf,
+}
+
+fn clip() -> &'static Clip {
+    static C: OnceLock<Clip> = OnceLock::new();
+    C.get_or_init(|| {
+        let dir = scratch();
+        let (scene, video) = (dir.path().join("scene"), dir.path().join("clip.mp4"));
+        nldf_ok(args(&[
+            "synth",
+            "--out",
+            &s(&scene),
+            "--size",
+            "128",
+            "--seconds",
+            "6",
+            "--supersample",
+            "1",
+            "--max-yaw-deg",
+            "20",
+            "--video",
+            &s(&video),
+        ]));
+        Clip {
+            _dir: dir,
+            scene,
+            video,
+        }
+    })
+}
+
+/// The test video becomes a dataset in AD-NeRF's layout that nldf loads, whose head masks
+/// and background match the scene's truth (`nldf bench prepare`'s bars for them), and whose
+/// cameras turn as the scene's do to within a few degrees.
+#[test]
+fn prepare_turns_a_test_video_into_a_dataset_close_to_its_truth() {
+    if tools().is_none() {
+        return;
+    }
+    let c = clip();
+    let dir = scratch();
+    let out = dir.path().join("data");
+    nldf_ok(args(&[
+        "prepare",
+        "--video",
+        &s(&c.video),
+        "--out",
+        &s(&out),
+        "--size",
+        "128",
+    ]));
+    for f in [
+        "bc.jpg",
+        "aud.wav",
+        "aud.npy",
+        "aud.json",
+        "transforms_train.json",
+        "transforms_val.json",
+        "prepare.json",
+        "head_imgs/0.jpg",
+        "ori_imgs/0.jpg",
+        "ori_imgs/0.lms",
+        "parsing/0.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    assert!(!dir.path().join("data.part").exists());
+    let ds = nldf_core::dataset::Dataset::load(&out).unwrap();
+    assert_eq!(ds.train.len() + ds.val.len(), 150);
+    let report = dir.path().join("score.json");
+    nldf(args(&[
+        "bench",
+        "prepare",
+        "--truth",
+        &s(&c.scene),
+        "--prepared",
+        &s(&out),
+        "--out",
+        &s(&report),
+    ]));
+    let scores: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let num = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("{scores}"));
+    assert!(num(&scores["scores"]["head_iou"]) >= 0.9, "{scores}");
+    assert!(num(&scores["scores"]["bc_psnr_db"]) >= 30.0, "{scores}");
+    assert!(num(&scores["scores"]["poses"]["rotation_mean_deg"]) < 5.0, "{scores}");
+}
+
+/// Each broken video is refused in one line naming the file and what is wrong, and no
+/// dataset (nor its scratch folder) is left behind.
+#[test]
+fn prepare_refuses_videos_it_cannot_train_on() {
+    let Some(ff) = tools() else { return };
+    let c = clip();
+    let dir = scratch();
+    let d = dir.path();
+    let v = |name: &str| d.join(name);
+    let src = s(&c.video);
+    ffmpeg(
+        &ff,
+        &["-i", &src, "-an", "-c:v", "copy", &s(&v("silent.mp4"))],
+    );
+    ffmpeg(&ff, &["-i", &src, "-vn", &s(&v("voice.m4a"))]);
+    let bytes = std::fs::read(&c.video).unwrap();
+    std::fs::write(v("corrupt.mp4"), &bytes[bytes.len() / 3..]).unwrap();
+    ffmpeg(&ff, &["-i", &src, "-t", "2", &s(&v("short.mp4"))]);
+    ffmpeg(
+        &ff,
+        &[
+            "-i",
+            &src,
+            "-vf",
+            "setpts='if(mod(N,2),N+0.5,N)/25/TB'",
+            "-fps_mode",
+            "passthrough",
+            "-video_track_timescale",
+            "1000",
+            &s(&v("vfr.mp4")),
+        ],
+    );
+    let bc = s(&c.scene.join("bc.png"));
+    ffmpeg(
+        &ff,
+        &[
+            "-loop",
+            "1",
+            "-i",
+            &bc,
+            "-i",
+            &src,
+            "-map",
+            "0:v",
+            "-map",
+            "1:a",
+            "-t",
+            "6",
+            "-r",
+            "25",
+            "-pix_fmt",
+            "yuv420p",
+            &s(&v("empty.mp4")),
+        ],
+    );
+    ffmpeg(
+        &ff,
+        &[
+            "-i",
+            &src,
+            "-i",
+            &src,
+            "-filter_complex",
+            "[0:v][1:v]hstack,pad=256:256:0:64",
+            "-map",
+            "0:a",
+            &s(&v("two.mp4")),
+        ],
+    );
+    let out = v("data");
+    let cases: [(&str, &str, &[&str]); 7] = [
+        (
+            "no audio track",
+            "silent.mp4",
+            &["silent.mp4", "no audio track"],
+        ),
+        (
+            "an audio-only file",
+            "voice.m4a",
+            &["voice.m4a", "audio only"],
+        ),
+        (
+            "a corrupt MP4",
+            "corrupt.mp4",
+            &["corrupt.mp4", "not a readable video"],
+        ),
+        (
+            "a clip too short",
+            "short.mp4",
+            &["short.mp4", "too short to train"],
+        ),
+        (
+            "a variable frame rate",
+            "vfr.mp4",
+            &["vfr.mp4", "variable frame rate"],
+        ),
+        ("no face", "empty.mp4", &["empty.mp4", "no face"]),
+        ("two faces", "two.mp4", &["two.mp4", "two faces"]),
+    ];
+    for (case, file, needles) in cases {
+        refused(
+            case,
+            &args(&[
+                "prepare",
+                "--video",
+                &s(&v(file)),
+                "--out",
+                &s(&out),
+                "--size",
+                "128",
+            ]),
+            needles,
+            &[&out, &v("data.part")],
+        );
+    }
+}
+
+/// A face that leaves the picture for a few frames: those frames are dropped and counted,
+/// and the rest make the dataset.
+#[test]
+fn prepare_drops_the_frames_where_the_face_leaves_the_picture() {
+    let Some(ff) = tools() else { return };
+    let c = clip();
+    let dir = scratch();
+    let moved = dir.path().join("moved.mp4");
+    // Frames 60-69 slide the picture 100 pixels left: the head leaves it.
+    ffmpeg(
+        &ff,
+        &[
+            "-i",
+            &s(&c.video),
+            "-vf",
+            "pad=256:128:64:0,crop=128:128:'if(between(n,60,69),164,64)':0",
+            "-c:a",
+            "copy",
+            &s(&moved),
+        ],
+    );
+    let out = dir.path().join("data");
+    let log = nldf_ok(args(&[
+        "prepare",
+        "--video",
+        &s(&moved),
+        "--out",
+        &s(&out),
+        "--size",
+        "128",
+    ]));
+    let text = String::from_utf8_lossy(&log.stdout);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("prepare.json")).unwrap()).unwrap();
+    let dropped: Vec<u64> = report["dropped"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert!(
+        (8..=12).contains(&dropped.len()) && dropped.iter().all(|&i| (58..72).contains(&i)),
+        "dropped {dropped:?}\n{text}"
+    );
+    assert!(
+        text.contains(&format!("{} dropped", dropped.len())),
+        "{text}"
+    );
+    assert!(!out.join("ori_imgs/65.lms").exists());
+}
