@@ -9,9 +9,10 @@
 //! (`pi` the pinhole projection in pixels, `C_j` the canonical face, `mu` the prior weight in
 //! px^2 per m^2) by Levenberg-Marquardt on the joint problem, the points eliminated by the
 //! Schur complement so that each step solves a dense system in the poses alone (`6 n_keys`
-//! unknowns). Alternating poses and points would crawl: a deeper face and smaller rotations
-//! explain the same pixels to first order in the rotation (the bas-relief ambiguity), and
-//! only a joint step moves along that valley. After each accepted step the face is mapped
+//! unknowns). Alternating poses and points crawls when the head turns little: a deeper face
+//! and smaller rotations explain the same pixels to first order in the rotation (the
+//! bas-relief ambiguity), and alternation creeps along that valley where a joint step
+//! crosses it. After each accepted step the face is mapped
 //! back onto the canonical by the least-squares similarity (the poses compensated), so it
 //! keeps the canonical's centroid, scale and orientation: the gauge the pixels leave free.
 

@@ -241,3 +241,57 @@ fn little_motion_keeps_the_canonical_face_and_all_weights_may_be_one() {
     assert!(track.bundled);
     assert!(e.rotation_deg < 0.15, "{e:?}");
 }
+
+/// Five minutes at 25 fps; `cargo test --release -p nldf-prepare long_clip -- --ignored
+/// --nocapture` prints the time (the debug build is too slow to be a unit test).
+#[test]
+#[ignore]
+fn long_clip() {
+    let (face, weights) = synthetic_face(20);
+    for (name, weights) in [
+        ("procrustes-like", weights),
+        ("all weights 1", vec![1.0; face.len()]),
+    ] {
+        let clip = clip_of(7500 * 17 / 16, &face, 1.0, 1.0, 21);
+        let start = std::time::Instant::now();
+        let track = solve(&clip, &face, &weights, FOCAL, &PoseConfig::default());
+        let seconds = start.elapsed().as_secs_f64();
+        let e = errors(&track.c2w, &clip.truth);
+        eprintln!(
+            "{} frames, {name}, {} threads: {seconds:.2} s, {e:?}",
+            clip.frames.len(),
+            rayon::current_num_threads()
+        );
+        assert!(track.bundled && e.rotation_deg < 0.3, "{e:?}");
+    }
+}
+
+/// The refined face keeps the canonical's centroid, scale and orientation (the gauge the
+/// pixels leave free) after every bundle step, not only at convergence (where the prior
+/// alone would hold it).
+#[test]
+fn bundle_step_keeps_the_canonical_gauge() {
+    let (canonical, weights) = synthetic_face(3);
+    let clip = clip(&distorted_face(&canonical, &weights, 4), 1.0, 1.0, 5);
+    let used: Vec<usize> = (0..canonical.len()).filter(|&j| weights[j] > 0.0).collect();
+    let pick = |pts: &[Vec3]| used.iter().map(|&j| pts[j].as_dvec3()).collect::<Vec<_>>();
+    let ones = vec![1.0; used.len()];
+    for steps in [1, 2, 30] {
+        let track = solve(
+            &clip,
+            &canonical,
+            &weights,
+            FOCAL,
+            &with(|c| c.bundle_iterations = steps),
+        );
+        let gauge = fit_similarity(&pick(&track.face), &pick(&canonical), &ones).unwrap();
+        let turn = angle_between(gauge.rotation, DQuat::IDENTITY);
+        let (scale, shift) = (gauge.scale - 1.0, gauge.translation.length());
+        eprintln!("{steps} steps: scale {scale:.1e}, turn {turn:.1e} rad, shift {shift:.1e} m");
+        assert!(track.bundled);
+        assert!(
+            scale.abs() < 1e-7 && turn < 1e-7 && shift < 1e-8,
+            "{steps} steps: {gauge:?}"
+        );
+    }
+}

@@ -84,9 +84,11 @@ const BAD: [(&str, Spoil); 19] = [
     }),
 ];
 
+type Warp = fn([f32; 2]) -> [f32; 2];
+
 /// Finite but absurd landmarks in frame 1: each may be refused or solved, never a panic or
 /// a NaN.
-const ABSURD: [(&str, fn([f32; 2]) -> [f32; 2]); 4] = [
+const ABSURD: [(&str, Warp); 4] = [
     ("1e30 times", |p| [p[0] * 1e30, p[1] * 1e30]),
     ("1e-30 times", |p| [p[0] * 1e-30, p[1] * 1e-30]),
     ("mirrored", |p| [512.0 - p[0], p[1]]),

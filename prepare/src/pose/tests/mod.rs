@@ -85,7 +85,11 @@ fn true_c2w(n: usize, amplitude: f32) -> Mat4 {
 
 /// The kept frames of a clip: every 17th frame dropped.
 fn kept_frames() -> Vec<usize> {
-    (0..N_FRAMES).filter(|n| n % 17 != 5).collect()
+    kept_frames_of(N_FRAMES)
+}
+
+fn kept_frames_of(n_frames: usize) -> Vec<usize> {
+    (0..n_frames).filter(|n| n % 17 != 5).collect()
 }
 
 /// Landmarks of `face` seen by `Camera::project` from `c2w`, plus `noise_px` Gaussian noise.
@@ -157,7 +161,11 @@ struct Clip {
 }
 
 fn clip(face: &[Vec3], amplitude: f32, noise_px: f32, seed: u64) -> Clip {
-    let kept = kept_frames();
+    clip_of(N_FRAMES, face, amplitude, noise_px, seed)
+}
+
+fn clip_of(n_frames: usize, face: &[Vec3], amplitude: f32, noise_px: f32, seed: u64) -> Clip {
+    let kept = kept_frames_of(n_frames);
     let truth: Vec<Mat4> = kept.iter().map(|&n| true_c2w(n, amplitude)).collect();
     Clip {
         frames: observe(face, &kept, &truth, FOCAL, noise_px, seed),
