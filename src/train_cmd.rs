@@ -122,9 +122,13 @@ pub struct StudentArgs {
     /// Run folder: the teacher is read from RUN/teacher, the student goes to RUN/student.
     #[arg(long)]
     pub run: PathBuf,
-    /// Layers of the residual MLP at width 256 (paper Table 3).
-    #[arg(long, value_enum, default_value_t = StudentDepth::D88)]
-    pub depth: StudentDepth,
+    /// A network preset: the paper's depths at width 256 (Table 3) or nldf's own, trained
+    /// with the plain settings and the flags below. Without it, and without --width,
+    /// --no-distill, --no-pool and the pseudo-view flags, the student is the recipe's (that
+    /// of `nldf demo` and `nldf train --data`): the real-time 16 x 128 student distilled with
+    /// 600 pseudo views at twice the recorded pose range, 4500 steps.
+    #[arg(long, value_enum)]
+    pub depth: Option<StudentDepth>,
     /// Hidden width (overrides the preset's 256).
     #[arg(long)]
     pub width: Option<usize>,
@@ -276,11 +280,28 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
 
 impl StudentArgs {
     /// The library job these flags ask for.
-    pub fn job(&self) -> StudentJob {
+    pub fn job(&self) -> Result<StudentJob> {
+        let plain = self.depth.is_some()
+            || self.width.is_some()
+            || self.no_distill
+            || self.no_pool
+            || self.pseudo_frames.is_some()
+            || self.pose_range.is_some()
+            || self.pseudo_rays.is_some();
         let source = match &self.config {
             Some(path) => StudentSource::File(path.clone()),
+            None if !plain => {
+                let defaults = nldf_train::job::demo::DemoJob::defaults(self.run.clone());
+                let cfg = nldf_train::job::demo::student_recipe(
+                    &defaults.student,
+                    true,
+                    defaults.pseudo,
+                    defaults.student_iters,
+                )?;
+                StudentSource::Config(Box::new(cfg))
+            }
             None => {
-                let mut model = self.depth.config();
+                let mut model = self.depth.unwrap_or(StudentDepth::D88).config();
                 if let Some(w) = self.width {
                     model.width = w;
                 }
@@ -296,7 +317,7 @@ impl StudentArgs {
                 }
             }
         };
-        StudentJob {
+        Ok(StudentJob {
             data: self.data.clone(),
             run: self.run.clone(),
             name: self.name.clone(),
@@ -304,7 +325,7 @@ impl StudentArgs {
             iters: self.iters,
             minutes: self.minutes,
             resume: self.resume,
-        }
+        })
     }
 }
 
@@ -331,7 +352,7 @@ fn run_student(args: StudentArgs) -> Result<()> {
     let stop = stop_flag();
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);
-    args.job().plan(&mut show)?.run(&stop, &mut show)?;
+    args.job()?.plan(&mut show)?.run(&stop, &mut show)?;
     Ok(())
 }
 
@@ -426,4 +447,54 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
         dir.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        student: StudentArgs,
+    }
+
+    fn source(extra: &[&str]) -> StudentSource {
+        let mut argv = vec!["nldf", "--data", "d", "--run", "r"];
+        argv.extend_from_slice(extra);
+        Cli::try_parse_from(argv).unwrap().student.job().unwrap().source
+    }
+
+    /// `nldf train student` with no shape flags trains the recipe's student, the one
+    /// `nldf train --data` trains; a preset or a switch asks for the plain settings.
+    #[test]
+    fn a_student_without_flags_is_the_recipes() {
+        let defaults = nldf_train::job::demo::DemoJob::defaults("r".into());
+        let recipe = nldf_train::job::demo::student_recipe(
+            &defaults.student,
+            true,
+            defaults.pseudo,
+            defaults.student_iters,
+        )
+        .unwrap();
+        match source(&[]) {
+            StudentSource::Config(cfg) => {
+                assert_eq!(
+                    serde_json::to_value(&*cfg).unwrap(),
+                    serde_json::to_value(&recipe).unwrap()
+                );
+                assert_eq!(cfg.model, nldf_train::student::StudentConfig::realtime());
+                assert_eq!(cfg.train.pseudo_frames, 600);
+            }
+            _ => panic!("not the recipe"),
+        }
+        for flags in [&["--depth", "88"][..], &["--no-pool"], &["--pseudo-frames", "10"]] {
+            assert!(
+                matches!(source(flags), StudentSource::Settings { .. }),
+                "{flags:?}"
+            );
+        }
+    }
 }

@@ -12,7 +12,7 @@ use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{ONNX_FILE, STUDENT_DIR, TEACHER_DIR, has_checkpoint};
 use nldf_core::synth::{self, SynthConfig};
 
-use crate::config::TeacherConfig;
+use crate::config::{StudentRunConfig, TeacherConfig};
 use crate::error::{Error, Result};
 use crate::eval::Evaluation;
 use crate::job::eval::EvalJob;
@@ -128,6 +128,42 @@ pub const DEMO_AUDIO_LR_SCALE: f64 = 0.0;
 /// Share of each demo stage's steps at the full learning rate before it decays tenfold
 /// over the rest.
 pub const DEMO_HOLD: f64 = 0.6;
+
+/// The recipe's student run for `iters` steps: `model` distilled from the teacher with
+/// `pseudo` views (the demo's settings: [`DEMO_PSEUDO_FRACTION`], [`DEMO_STUDENT_LR`],
+/// [`DEMO_AUDIO_LR_SCALE`], [`DEMO_MOUTH`], [`DEMO_STUDENT_BATCH`], [`DEMO_RECORDED_RAYS`]),
+/// or, with `distill` off, the pixels-only comparison (4096 rays a step from every pixel).
+/// Either way the learning rate is held for [`DEMO_HOLD`] of the steps, then falls tenfold.
+/// `nldf demo`, `nldf train --data` and `nldf train student` without shape flags train it.
+pub fn student_recipe(
+    model: &StudentConfig,
+    distill: bool,
+    pseudo: PseudoSettings,
+    iters: usize,
+) -> Result<StudentRunConfig> {
+    let mut cfg = StudentSource::Settings {
+        model: model.clone(),
+        distill,
+        pool: true,
+        pseudo,
+    }
+    .config()?
+    .0;
+    let t = &mut cfg.train;
+    t.iters = iters;
+    let hold = (DEMO_HOLD * iters as f64).round() as usize;
+    t.lr_hold_steps = hold;
+    t.lr_decay_steps = iters.saturating_sub(hold).max(1);
+    if distill {
+        t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
+        t.lr = DEMO_STUDENT_LR;
+        t.audio_lr_scale = DEMO_AUDIO_LR_SCALE;
+        (t.mouth_fraction, t.mouth_weight) = DEMO_MOUTH;
+        t.batch_rays = DEMO_STUDENT_BATCH;
+        t.recorded_rays = DEMO_RECORDED_RAYS;
+    }
+    Ok(cfg)
+}
 
 impl DemoJob {
     /// The demo as `nldf demo` runs it by default, into `out`: the synthetic scene of seed
@@ -324,30 +360,12 @@ impl DemoJob {
                 if resume { ", resuming" } else { "" },
                 student_dir.display()
             )));
-            let mut cfg = StudentSource::Settings {
-                model: self.student.clone(),
-                distill: self.student_distill,
-                pool: true,
-                pseudo: self.pseudo,
-            }
-            .config()?
-            .0;
-            let t = &mut cfg.train;
-            t.iters = self.student_iters;
-            // Held, then tenfold down over the last 40 % of the pinned steps.
-            let hold = (DEMO_HOLD * self.student_iters as f64).round() as usize;
-            t.lr_hold_steps = hold;
-            t.lr_decay_steps = (self.student_iters - hold).max(1);
-            // The pixels-only student keeps the former demo's recipe (4096 rays a step
-            // from every pixel), pinned in steps.
-            if self.student_distill {
-                t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
-                t.lr = DEMO_STUDENT_LR;
-                t.audio_lr_scale = DEMO_AUDIO_LR_SCALE;
-                (t.mouth_fraction, t.mouth_weight) = DEMO_MOUTH;
-                t.batch_rays = DEMO_STUDENT_BATCH;
-                t.recorded_rays = DEMO_RECORDED_RAYS;
-            }
+            let cfg = student_recipe(
+                &self.student,
+                self.student_distill,
+                self.pseudo,
+                self.student_iters,
+            )?;
             // The recipe is complete before the run is built from it (a resumed run keeps
             // its own).
             let mut plan = StudentJob {
