@@ -2,14 +2,14 @@
 //! AD-NeRF's camera track (the head fixed at the origin, the camera moving).
 //!
 //! [`solve_track`] runs four steps:
-//! 1. PnP of each frame's weighted landmarks against the canonical face ([`pnp`]): a
+//! 1. PnP of each frame's weighted landmarks against the canonical face (`pnp`): a
 //!    weak-perspective closed form, then Levenberg-Marquardt on the full perspective
 //!    reprojection error, in f64, every frame on its own (in parallel);
-//! 2. when the head turns enough, a bundle step ([`bundle`]) that refines the face's weighted
+//! 2. when the head turns enough, a bundle step (`bundle`) that refines the face's weighted
 //!    points together with the poses of evenly spaced key frames, with a prior towards the
 //!    canonical face and the canonical's centroid, scale and orientation kept; then PnP again
 //!    against the refined face;
-//! 3. temporal smoothing without lag ([`smooth`]);
+//! 3. temporal smoothing without lag (`smooth`);
 //! 4. the head pose `p = R x + t` (OpenCV camera axes) turned into a camera-to-world matrix
 //!    with OpenGL axes, nldf-core's convention: `c2w = [R^T D | -R^T t]`,
 //!    `D = diag(1, -1, -1)`, so that `Camera { intrinsics, c2w }.project(x)` lands on the
@@ -156,7 +156,8 @@ pub struct CameraTrack {
 /// `canonical` and `weights` are `[n_points]` (mediapipe: the canonical face model in metres
 /// and the procrustes landmark weights; zero for landmarks that move with the mouth or
 /// eyes); every frame's `points` is `[n_points]`; frames increase in `frame`. `k.focal` is
-/// used as given (a wrong one mostly changes the distance). Errors on empty or mismatched
+/// used as given: a wrong one scales the camera's distance with it and bends the rotations
+/// a little (a too-short focal more than a too-long one). Errors on empty or mismatched
 /// input, non-finite values, fewer than [`MIN_WEIGHTED_POINTS`] weighted points, a flat
 /// weighted face, and frames whose landmarks no pose fits.
 pub fn solve_track(
