@@ -144,11 +144,7 @@ pub fn run(
     }
     let window = job.window(&probe)?;
     let scratch = Scratch::new(&job.out, job.force)?;
-    let report = prepare_into(job, env, ffmpeg, &probe, &window, &scratch.dir, &mut events);
-    let mut report = match report {
-        Ok(r) => r,
-        Err(e) => return Err(e),
-    };
+    let mut report = prepare_into(job, env, ffmpeg, &probe, &window, &scratch.dir, &mut events)?;
     report.total_seconds = started.elapsed().as_secs_f64();
     nldf_core::files::write_json(&scratch.dir.join("prepare.json"), &report)?;
     scratch.commit()?;
