@@ -68,6 +68,12 @@ pub struct PrepareBenchArgs {
     /// Write the scores, the bars and the verdicts here as JSON.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Also carry the scene's held-out splits (novel, voice, sweep) into the prepared
+    /// dataset, their cameras mapped into its world, so that `nldf train --data PREPARED`
+    /// scores them as it does on the scene (needs a dataset prepared with the scene's
+    /// --focal).
+    #[arg(long)]
+    pub carry_held_out: bool,
 }
 
 /// When a benchmark may run: the machine's load at the start.
@@ -272,6 +278,15 @@ fn prepare(args: PrepareBenchArgs) -> Result<()> {
     if let Some(out) = &args.out {
         nldf_core::files::write_json(out, &report)?;
         println!("wrote {}", out.display());
+    }
+    if args.carry_held_out {
+        let carried = nldf_prepare::held_out::carry_held_out(&args.truth, &args.prepared)?;
+        let names: Vec<&str> = carried.iter().map(|s| s.name()).collect();
+        println!(
+            "carried the held-out splits {} into {}",
+            names.join(", "),
+            args.prepared.display()
+        );
     }
     let failed: Vec<&str> = report
         .checks

@@ -233,7 +233,7 @@ pub fn score_prepared(truth: &Path, prepared: &Path) -> Result<PrepareScores> {
 }
 
 /// The truth's exact labels: `regions/`, or the second head's `truth/regions/`.
-fn truth_labels(truth: &Path) -> Result<PathBuf> {
+pub(crate) fn truth_labels(truth: &Path) -> Result<PathBuf> {
     [LABELS_DIR, TRUTH_LABELS_DIR]
         .map(|d| truth.join(d))
         .into_iter()
@@ -254,9 +254,9 @@ fn ratio(a: u64, b: u64) -> f64 {
 
 /// A dataset's recording: each train and val frame's camera by `img_id`, and the focal
 /// length.
-struct Track {
-    poses: BTreeMap<i64, CameraPose>,
-    focal: f64,
+pub(crate) struct Track {
+    pub(crate) poses: BTreeMap<i64, CameraPose>,
+    pub(crate) focal: f64,
 }
 
 impl Track {
@@ -267,7 +267,7 @@ impl Track {
 }
 
 /// Reads `transforms_train.json` and `transforms_val.json` of `root`.
-fn read_track(root: &Path) -> Result<Track> {
+pub(crate) fn read_track(root: &Path) -> Result<Track> {
     let mut poses = BTreeMap::new();
     let mut focal = None;
     for split in [Split::Train, Split::Val] {
@@ -436,7 +436,11 @@ fn read_rgb8(path: &Path) -> Result<Rgb8> {
 }
 
 /// Reads a label image of `size`, each pixel the region `read` gives its colour.
-fn read_regions(path: &Path, size: (u32, u32), read: fn([u8; 3]) -> Region) -> Result<Vec<Region>> {
+pub(crate) fn read_regions(
+    path: &Path,
+    size: (u32, u32),
+    read: fn([u8; 3]) -> Region,
+) -> Result<Vec<Region>> {
     let img = read_rgb8(path)?;
     check_size(path, &img, size)?;
     Ok(img

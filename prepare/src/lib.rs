@@ -16,6 +16,7 @@ pub mod align;
 pub mod check;
 pub mod error;
 pub mod face;
+pub mod held_out;
 pub mod job;
 pub mod lms68;
 pub mod parsing;

@@ -1,0 +1,109 @@
+//! A synthetic scene's held-out splits carried into a dataset prepared from its test video,
+//! so that a model trained on the prepared dataset is scored on the same turned heads and
+//! the same unheard voice as one trained on the scene itself.
+//!
+//! The prepared cameras live in their own world (scale, orientation and placement no method
+//! can observe), so each held-out camera is mapped by the inverse of the similarity that
+//! takes the prepared recording onto the true one ([`crate::align`]). The held-out frames'
+//! images, parsing and audio are the scene's; their `.lms` are the scene's, or for a scene
+//! with exact labels, drawn from its mouth as `nldf synth` draws them.
+
+use std::path::Path;
+
+use nldf_core::dataset::{Split, TransformsFile};
+use nldf_core::landmarks::landmarks_from_regions;
+use nldf_core::region::Region;
+
+use crate::align::{CameraPose, align_tracks};
+use crate::check::{read_regions, read_track, truth_labels};
+use crate::error::{Error, Result};
+
+/// The held-out splits carried, in this order.
+pub const HELD_OUT: [Split; 3] = [Split::Novel, Split::Voice, Split::Sweep];
+
+/// Writes the truth's held-out splits into `prepared` (see the module docs) and returns
+/// those it carried. The prepared dataset must use the truth's intrinsics (prepare it with
+/// the scene's `--focal`).
+pub fn carry_held_out(truth: &Path, prepared: &Path) -> Result<Vec<Split>> {
+    let true_track = read_track(truth)?;
+    let track = read_track(prepared)?;
+    let ids: Vec<i64> = (track.poses.keys())
+        .filter(|id| true_track.poses.contains_key(id))
+        .copied()
+        .collect();
+    let cams = |t: &crate::check::Track| ids.iter().map(|i| t.poses[i]).collect::<Vec<_>>();
+    let to_prepared = align_tracks(&cams(&true_track), &cams(&track))?
+        .similarity
+        .inverse();
+    let train_path = prepared.join(Split::Train.file_name());
+    let train = TransformsFile::load(&train_path)?;
+    if (train.focal_len - true_track.focal as f32).abs() > 1e-3 {
+        return Err(Error::invalid(
+            &train_path,
+            format!(
+                "focal_len {} is not the scene's {}: prepare the video with --focal {}",
+                train.focal_len, true_track.focal, true_track.focal
+            ),
+        ));
+    }
+    let mut carried = Vec::new();
+    for split in HELD_OUT {
+        let path = truth.join(split.file_name());
+        if !path.is_file() {
+            continue;
+        }
+        let mut held = TransformsFile::load(&path)?;
+        for f in &mut held.frames {
+            let moved = to_prepared.apply(&CameraPose::from_rows(&f.transform_matrix));
+            f.transform_matrix = moved.to_rows();
+            copy_frame_files(truth, prepared, f.img_id)?;
+        }
+        let file = TransformsFile {
+            frames: held.frames,
+            ..train.clone()
+        };
+        file.save(&prepared.join(split.file_name()))?;
+        if split == Split::Voice {
+            copy_dir(&split.audio_dir(truth), &split.audio_dir(prepared))?;
+        }
+        carried.push(split);
+    }
+    Ok(carried)
+}
+
+/// Copies frame `id`'s image and parsing, and its `.lms` (made from the exact labels where
+/// the scene has none).
+fn copy_frame_files(truth: &Path, prepared: &Path, id: i64) -> Result<()> {
+    for (from, to) in [("head_imgs", "head_imgs"), ("parsing", "parsing")] {
+        let src = truth.join(from).join(format!("{id}.png"));
+        copy(&src, &prepared.join(to).join(format!("{id}.png")))?;
+    }
+    let lms = prepared.join("ori_imgs").join(format!("{id}.lms"));
+    let own = truth.join("ori_imgs").join(format!("{id}.lms"));
+    if own.is_file() {
+        return copy(&own, &lms);
+    }
+    let labels = truth_labels(truth)?.join(format!("{id}.png"));
+    let size = image::image_dimensions(&labels)
+        .map_err(|e| Error::invalid(&labels, format!("not a readable image: {e}")))?;
+    let regions = read_regions(&labels, size, Region::from_label_color)?;
+    let marks = landmarks_from_regions(&regions, size.0)
+        .ok_or_else(|| Error::invalid(&labels, "shows no head or no mouth"))?;
+    std::fs::write(&lms, marks.to_text()).map_err(|e| Error::io(&lms, e))
+}
+
+fn copy(from: &Path, to: &Path) -> Result<()> {
+    std::fs::copy(from, to).map_err(|e| Error::io(from, e))?;
+    Ok(())
+}
+
+fn copy_dir(from: &Path, to: &Path) -> Result<()> {
+    std::fs::create_dir_all(to).map_err(|e| Error::io(to, e))?;
+    for entry in std::fs::read_dir(from).map_err(|e| Error::io(from, e))? {
+        let path = entry.map_err(|e| Error::io(from, e))?.path();
+        if path.is_file() {
+            copy(&path, &to.join(path.file_name().unwrap_or_default()))?;
+        }
+    }
+    Ok(())
+}
