@@ -46,6 +46,10 @@ pub fn carry_held_out(truth: &Path, prepared: &Path) -> Result<Vec<Split>> {
             ),
         ));
     }
+    for dir in ["head_imgs", "parsing", "ori_imgs"] {
+        let d = prepared.join(dir);
+        std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
+    }
     let mut carried = Vec::new();
     for split in HELD_OUT {
         let path = truth.join(split.file_name());

@@ -15,6 +15,7 @@ use nldf_core::region::Region;
 use nldf_core::synth::{HeadStyle, SynthConfig, generate, truth_labels_dir};
 use nldf_prepare::align::{CameraPose, Similarity};
 use nldf_prepare::check::{PrepareScores, score_prepared};
+use nldf_prepare::held_out::carry_held_out;
 use nldf_tests::assert_one_line_naming;
 
 /// The frame the fake prepared dataset drops.
@@ -255,4 +256,50 @@ fn broken_prepared_files_are_one_line_errors_naming_the_file() {
         std::fs::write(d.join("parsing/20.png"), b"\x89PNG").unwrap()
     });
     assert_one_line_naming(&truncated, "parsing/20.png");
+}
+
+/// The held-out splits carried into a prepared dataset: each camera is the scene's seen
+/// through the prepared world's similarity, each frame has its image, parsing and `.lms`
+/// (drawn from the exact labels for the standard head), the voice split its audio; a
+/// dataset prepared at another focal length is refused, naming the flag.
+#[test]
+fn held_out_splits_carried_into_a_prepared_dataset_follow_its_world() {
+    for head in [HeadStyle::Standard, HeadStyle::Second] {
+        let dir = tempfile::tempdir().unwrap();
+        let prepared = dir.path().join("prepared");
+        fake_prepared(truth(head), &prepared, head);
+        let carried = carry_held_out(truth(head), &prepared).unwrap();
+        assert_eq!(carried, [Split::Novel, Split::Voice, Split::Sweep]);
+        let inv = hidden().inverse();
+        for split in carried {
+            let want = TransformsFile::load(&truth(head).join(split.file_name())).unwrap();
+            let got = TransformsFile::load(&prepared.join(split.file_name())).unwrap();
+            assert_eq!(got.frames.len(), want.frames.len());
+            for (g, w) in got.frames.iter().zip(&want.frames) {
+                let expect = inv.apply(&CameraPose::from_rows(&w.transform_matrix));
+                let have = CameraPose::from_rows(&g.transform_matrix);
+                assert!((have.centre - expect.centre).length() < 1e-5, "{split:?}");
+                assert!(
+                    have.rotation.abs_diff_eq(expect.rotation, 1e-5),
+                    "{split:?}"
+                );
+                let id = g.img_id;
+                for f in [format!("head_imgs/{id}.png"), format!("parsing/{id}.png")] {
+                    assert!(prepared.join(&f).is_file(), "{f}");
+                }
+                Landmarks::load(&prepared.join(format!("ori_imgs/{id}.lms"))).unwrap();
+            }
+        }
+        assert!(prepared.join("voice/aud.wav").is_file());
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let prepared = dir.path().join("prepared");
+    fake_prepared(truth(HeadStyle::Second), &prepared, HeadStyle::Second);
+    let path = prepared.join(Split::Train.file_name());
+    let mut t = TransformsFile::load(&path).unwrap();
+    t.focal_len *= 1.1;
+    t.save(&path).unwrap();
+    let e = carry_held_out(truth(HeadStyle::Second), &prepared).unwrap_err();
+    assert_one_line_naming(&e.to_string(), "transforms_train.json");
+    assert_one_line_naming(&e.to_string(), "--focal");
 }
