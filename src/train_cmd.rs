@@ -464,7 +464,12 @@ mod tests {
     fn source(extra: &[&str]) -> StudentSource {
         let mut argv = vec!["nldf", "--data", "d", "--run", "r"];
         argv.extend_from_slice(extra);
-        Cli::try_parse_from(argv).unwrap().student.job().unwrap().source
+        Cli::try_parse_from(argv)
+            .unwrap()
+            .student
+            .job()
+            .unwrap()
+            .source
     }
 
     /// `nldf train student` with no shape flags trains the recipe's student, the one
@@ -490,7 +495,11 @@ mod tests {
             }
             _ => panic!("not the recipe"),
         }
-        for flags in [&["--depth", "88"][..], &["--no-pool"], &["--pseudo-frames", "10"]] {
+        for flags in [
+            &["--depth", "88"][..],
+            &["--no-pool"],
+            &["--pseudo-frames", "10"],
+        ] {
             assert!(
                 matches!(source(flags), StudentSource::Settings { .. }),
                 "{flags:?}"

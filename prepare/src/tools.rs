@@ -48,7 +48,10 @@ pub fn ffmpeg() -> Result<PathBuf> {
         return if runs(&p) {
             Ok(p)
         } else {
-            Err(Error::invalid(&p, format!("{FFMPEG_VAR} names a program that does not run")))
+            Err(Error::invalid(
+                &p,
+                format!("{FFMPEG_VAR} names a program that does not run"),
+            ))
         };
     }
     if let Ok(dir) = face_env_dir() {
