@@ -131,7 +131,10 @@ fn prepare_turns_a_test_video_into_a_dataset_close_to_its_truth() {
     let num = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("{scores}"));
     assert!(num(&scores["scores"]["head_iou"]) >= 0.9, "{scores}");
     assert!(num(&scores["scores"]["bc_psnr_db"]) >= 30.0, "{scores}");
-    assert!(num(&scores["scores"]["poses"]["rotation_mean_deg"]) < 5.0, "{scores}");
+    assert!(
+        num(&scores["scores"]["poses"]["rotation_mean_deg"]) < 5.0,
+        "{scores}"
+    );
 }
 
 /// Each broken video is refused in one line naming the file and what is wrong, and no
