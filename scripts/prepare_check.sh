@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# nldf prepare on the test videos with known truth: both synthetic heads at 128 and 512,
+# turning up to 20 degrees (the default scene turns up to 12), 12 s each. Each scene and its
+# MP4 are made once into WORK; every prepared dataset is scored against its scene by
+# `nldf bench prepare`, whose JSON and table go to OUT (default results/prepare).
+# Usage: scripts/prepare_check.sh WORK [OUT]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+work=${1:?usage: scripts/prepare_check.sh WORK [OUT]}
+out=${2:-results/prepare}
+mkdir -p "$work" "$out"
+nldf=target/release/nldf
+cargo build --release --quiet --bin nldf
+for size in 128 512; do
+  for head in standard second; do
+    name=${head}_${size}
+    scene=$work/$name
+    if [ ! -f "$scene.mp4" ]; then
+      "$nldf" synth --out "$scene" --size "$size" --head "$head" --max-yaw-deg 20 \
+        --video "$scene.mp4" --force >/dev/null
+    fi
+    rm -rf "$work/prepared_$name"
+    "$nldf" prepare --video "$scene.mp4" --out "$work/prepared_$name" --size "$size" \
+      | tee "$out/$name.log"
+    cp "$work/prepared_$name/prepare.json" "$out/${name}_prepare.json"
+    "$nldf" bench prepare --truth "$scene" --prepared "$work/prepared_$name" \
+      --out "$out/$name.json" | tee -a "$out/$name.log" || true
+  done
+done
+# The logs and JSON name the work folder; results/ keeps no machine paths.
+sed -i "s#$work/##g" "$out"/*.log "$out"/*.json
