@@ -11,6 +11,10 @@ Commands:
         faces.u8       N bytes: faces the landmarker found (0, 1 or 2)
         detections.u8  N bytes: faces the detector found on every 5th frame, 255 elsewhere
         mask/<i>.png   the person's probability, 0-255, the frame's size
+        tracks.f32     M x 4 little-endian float32 rows (frame, track id, x, y), pixels,
+                       ordered by frame: corner features on the rigid part of the head
+                       (forehead, hair, nose, cheeks; not the eyes, the lips or the chin)
+                       followed by pyramidal Lucas-Kanade with a forward-backward check
       prints "done <i>" after each frame.
   canonical --assets FILE --loader FILE --out FILE
       decodes the canonical face (468 vertices, cm) and the rigid landmarks' weights from
@@ -23,6 +27,178 @@ import os
 import re
 import struct
 import sys
+
+# mediapipe face mesh indices: the lips, the eyes (with their lids), the face's oval, and the
+# forehead's top (10), the upper lip's top (0) and the chin (152).
+LIPS = [0, 13, 14, 17, 37, 39, 40, 61, 78, 80, 81, 82, 84, 87, 88, 91, 95, 146, 178, 181,
+        185, 191, 267, 269, 270, 291, 308, 310, 311, 312, 314, 317, 318, 321, 324, 375, 402,
+        405, 409, 415]
+LEFT_EYE = [249, 263, 362, 373, 374, 380, 381, 382, 384, 385, 386, 387, 388, 390, 398, 466]
+RIGHT_EYE = [7, 33, 133, 144, 145, 153, 154, 155, 157, 158, 159, 160, 161, 163, 173, 246]
+FOREHEAD, UPPER_LIP, CHIN = 10, 0, 152
+
+
+class Tracker:
+    """Corner features on the rigid part of the head, tracked frame to frame.
+
+    The region: the hull of the 468 landmarks grown upward by half the face's height (the
+    forehead and the hair), inside the person mask shrunk away from the silhouette (whose
+    points slide over the surface), less the eyes' and the lips' hulls grown by a margin and
+    everything below the upper lip (the jaw moves with the mouth). Tracks follow by
+    pyramidal Lucas-Kanade, kept when tracking back lands within `fb_px` of where they
+    started and they stay in the region; new corners top the live ones up to `most`
+    whenever fewer than `least` are alive.
+    """
+
+    def __init__(self, size):
+        import cv2
+        self.cv2 = cv2
+        self.scale = size / 512.0
+        self.least, self.most = 150, 300
+        self.min_distance = max(3, int(round(8 * self.scale)))
+        win = max(9, int(round(21 * self.scale)) | 1)
+        self.lk = dict(winSize=(win, win), maxLevel=3 if size >= 256 else 2,
+                       criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, float(os.environ.get('T_EPS', 0.01))))
+        self.fb_px = float(os.environ.get('T_FB', 1.0)) * max(0.25, 0.5 * self.scale)
+        self.margin = max(2, int(round(10 * self.scale)))
+        self.quality = float(os.environ.get('T_Q', 0.06))
+        self.block = max(3, int(round(7 * self.scale)) | 1)
+        self.anchor_px = float(os.environ.get('T_ANCHOR', 1.0)) * max(0.25, self.scale)
+        self.prev = None
+        import numpy as np
+        self.points = np.zeros((0, 2), np.float32)
+        self.ids = np.zeros(0, np.int64)
+        self.births = np.zeros(0, np.int64)
+        self.anchors = np.zeros((0, 2), np.float32)
+        self.templates = {}
+        self.next_id = 0
+        self.detect_every = int(os.environ.get('T_EVERY', 5))
+        self.last_detect = -self.detect_every
+        self.rows = []
+
+    def region(self, pts, person):
+        import numpy as np
+        cv2 = self.cv2
+        h, w = person.shape
+        up = pts[FOREHEAD] - pts[CHIN]
+        grown = np.concatenate([pts, pts + 0.5 * up])
+        mask = np.zeros((h, w), np.uint8)
+        cv2.fillConvexPoly(mask, cv2.convexHull(grown.astype(np.int32)), 255)
+        inside = (person > 127).astype(np.uint8) * 255
+        k = 2 * self.margin + 1
+        mask &= cv2.erode(inside, np.ones((k, k), np.uint8))
+        # Below the upper lip: the side of the line through it, across the face, that the
+        # chin is on.
+        across = np.array([up[1], -up[0]])
+        lip = pts[UPPER_LIP] - 0.05 * up
+        far = 4.0 * (abs(up[0]) + abs(up[1]) + w + h)
+        lower = np.array([lip - far * across / (np.linalg.norm(across) + 1e-9),
+                          lip + far * across / (np.linalg.norm(across) + 1e-9)])
+        lower = np.concatenate([lower, lower[::-1] - far * up / (np.linalg.norm(up) + 1e-9)])
+        cv2.fillConvexPoly(mask, lower.astype(np.int32), 0)
+        for part in (LIPS, LEFT_EYE, RIGHT_EYE):
+            hull = cv2.convexHull(pts[part].astype(np.int32))
+            cv2.fillConvexPoly(mask, hull, 0)
+            cv2.polylines(mask, [hull], True, 0, thickness=2 * self.margin)
+        return mask
+
+    def step(self, i, gray, pts, person):
+        """Tracks into frame `i` (its landmarks `pts`, 468 x 2, or None) and records it."""
+        import numpy as np
+        cv2 = self.cv2
+        mask = self.region(pts, person) if pts is not None else None
+        if self.prev is not None and len(self.points):
+            good, p1 = self.follow(gray, mask)
+            self.points, self.ids = p1[good], self.ids[good]
+            self.births, self.anchors = self.births[good], self.anchors[good]
+            alive = set(self.births.tolist())
+            self.templates = {b: t for b, t in self.templates.items() if b in alive}
+        due = i - self.last_detect >= self.detect_every
+        if mask is not None and len(self.points) < self.least and due:
+            self.detect(i, gray, mask)
+            self.last_detect = i
+        self.prev = gray
+        for (x, y), t in zip(self.points, self.ids):
+            self.rows.append((i, t, x, y))
+
+    def follow(self, gray, mask):
+        """Frame-to-frame flow checked forward-backward, then each track aligned with its
+        first frame's patch from there (so it does not drift): which tracks survive, and
+        where they are."""
+        import numpy as np
+        cv2 = self.cv2
+        p0 = self.points.reshape(-1, 1, 2)
+        p1, ok1, _ = cv2.calcOpticalFlowPyrLK(self.prev, gray, p0, None, **self.lk)
+        back, ok2, _ = cv2.calcOpticalFlowPyrLK(gray, self.prev, p1, None, **self.lk)
+        fb = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
+        good = (ok1.ravel() == 1) & (ok2.ravel() == 1) & (fb < self.fb_px)
+        p1 = p1.reshape(-1, 2).copy()
+        for b in np.unique(self.births):
+            sel = np.flatnonzero((self.births == b) & good)
+            if len(sel):
+                got, ok = self.align(self.templates[b], self.anchors[sel], gray, p1[sel])
+                good[sel] &= ok & (np.linalg.norm(got - p1[sel], axis=1) < self.anchor_px)
+                p1[sel] = got
+        if mask is None:
+            good[:] = False
+        else:
+            xi = np.clip(np.round(p1[:, 0]).astype(int), 0, gray.shape[1] - 1)
+            yi = np.clip(np.round(p1[:, 1]).astype(int), 0, gray.shape[0] - 1)
+            good &= np.isfinite(p1).all(axis=1) & (mask[yi, xi] > 0)
+        return good, p1
+
+    def align(self, template, anchors, gray, guess):
+        """Lucas-Kanade of the patches at `anchors` in `template` onto `gray`, from `guess`,
+        on crops around the points (the guess is close: no pyramid is needed)."""
+        import numpy as np
+        cv2 = self.cv2
+        m = self.lk["winSize"][0] + 2
+
+        full = np.array(gray.shape[::-1])
+        size = np.minimum(np.ceil(np.maximum(np.ptp(anchors, axis=0), np.ptp(guess, axis=0))).astype(int) + 2 * m + 1, full)
+
+        def crop(img, pts):
+            # The same size in both images, as Lucas-Kanade needs.
+            lo = np.floor(pts.min(axis=0) - m).astype(int)
+            lo = np.clip(lo, 0, full - size)
+            return img[lo[1]:lo[1] + size[1], lo[0]:lo[0] + size[0]], lo.astype(np.float32)
+
+        t_img, t_lo = crop(template, anchors)
+        g_img, g_lo = crop(gray, guess)
+        got, ok, _ = cv2.calcOpticalFlowPyrLK(
+            t_img, g_img, (anchors - t_lo).reshape(-1, 1, 2),
+            (guess - g_lo).reshape(-1, 1, 2).copy(), winSize=self.lk["winSize"], maxLevel=0,
+            criteria=self.lk["criteria"], flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+        return got.reshape(-1, 2) + g_lo, ok.ravel() == 1
+
+    def detect(self, i, gray, mask):
+        import numpy as np
+        cv2 = self.cv2
+        free = mask.copy()
+        for x, y in self.points:
+            cv2.circle(free, (int(round(x)), int(round(y))), self.min_distance, 0, -1)
+        wanted = self.most - len(self.points)
+        ys, xs = np.nonzero(free)
+        if wanted <= 0 or not len(xs):
+            return
+        x0, y0, x1, y1 = xs.min(), ys.min(), xs.max() + 1, ys.max() + 1
+        found = cv2.goodFeaturesToTrack(gray[y0:y1, x0:x1], wanted, self.quality,
+                                        self.min_distance, mask=free[y0:y1, x0:x1],
+                                        blockSize=self.block)
+        if found is None:
+            return
+        found = found.reshape(-1, 2).astype(np.float32) + np.array([x0, y0], np.float32)
+        ids = np.arange(self.next_id, self.next_id + len(found))
+        self.next_id += len(found)
+        self.points = np.concatenate([self.points, found]).astype(np.float32)
+        self.ids = np.concatenate([self.ids, ids])
+        self.births = np.concatenate([self.births, np.full(len(found), i)])
+        self.anchors = np.concatenate([self.anchors, found]).astype(np.float32)
+        self.templates[i] = gray
+
+    def save(self, path):
+        import numpy as np
+        np.asarray(self.rows, dtype="<f4").reshape(-1, 4).tofile(path)
 
 
 def run_frames(args):
@@ -41,6 +217,7 @@ def run_frames(args):
     landmarks = np.full((n, 468, 3), np.nan, dtype="<f4")
     faces = np.zeros(n, dtype=np.uint8)
     detections = np.full(n, 255, dtype=np.uint8)
+    tracker = None
     for i in range(n):
         path = os.path.join(args.frames, "%d.jpg" % i)
         bgr = cv2.imread(path)
@@ -60,10 +237,18 @@ def run_frames(args):
         prob = segmenter.process(rgb).segmentation_mask
         mask = np.clip(prob * 255.0 + 0.5, 0, 255).astype(np.uint8)
         cv2.imwrite(os.path.join(args.out, "mask", "%d.png" % i), mask)
+        if tracker is None:
+            tracker = Tracker(min(h, w))
+        one = landmarks[i, :, :2] if faces[i] == 1 else None
+        tracker.step(i, cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), one, mask)
         print("done %d" % i, flush=True)
     landmarks.tofile(os.path.join(args.out, "landmarks.f32"))
     faces.tofile(os.path.join(args.out, "faces.u8"))
     detections.tofile(os.path.join(args.out, "detections.u8"))
+    if tracker is not None:
+        tracker.save(os.path.join(args.out, "tracks.f32"))
+    else:
+        np.zeros((0, 4), dtype="<f4").tofile(os.path.join(args.out, "tracks.f32"))
     return 0
 
 

@@ -16,6 +16,7 @@ use glam::Vec3;
 use serde::Deserialize;
 
 use crate::error::{Error, Result};
+use crate::pose::TrackPoint;
 use crate::tools::FFMPEG_RECORD;
 
 /// The helper script, written into the environment by [`install`].
@@ -162,6 +163,9 @@ pub struct FaceOutput {
     pub detections: Vec<Option<u8>>,
     /// The folder of the person masks (`<i>.png`, probability 0-255).
     pub mask_dir: PathBuf,
+    /// Corner features on the rigid part of the head, followed over the frames: one entry
+    /// per track and frame it is seen in, by frame.
+    pub tracks: Vec<TrackPoint>,
 }
 
 impl FaceOutput {
@@ -205,8 +209,46 @@ impl FaceOutput {
                 .map(|d| (d != 255).then_some(d))
                 .collect(),
             mask_dir: dir.join("mask"),
+            tracks: read_tracks(&dir.join("tracks.f32"), count)?,
         })
     }
+}
+
+/// The helper's `tracks.f32`: rows of four little-endian f32, `(frame, track, x, y)`, the
+/// frame below `count` and the track a whole number below 2^24 (exact in f32).
+fn read_tracks(path: &Path, count: usize) -> Result<Vec<TrackPoint>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if bytes.len() % 16 != 0 {
+        return Err(Error::invalid(
+            path,
+            format!("holds {} bytes, not rows of 4 floats", bytes.len()),
+        ));
+    }
+    let whole = |v: f32, below: f32| v >= 0.0 && v < below && v.fract() == 0.0;
+    bytes
+        .chunks_exact(16)
+        .enumerate()
+        .map(|(i, row)| {
+            let f: Vec<f32> = row
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            if !(whole(f[0], count as f32) && whole(f[1], 16_777_216.0)) {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "row {i}: frame {} or track {} is not a whole number in range (frames < {count})",
+                        f[0], f[1]
+                    ),
+                ));
+            }
+            Ok(TrackPoint {
+                frame: f[0] as usize,
+                track: f[1] as u32,
+                pixel: [f[2], f[3]],
+            })
+        })
+        .collect()
 }
 
 /// Installs the face environment at `dir` (see the module's docs), calling `say` with a line

@@ -82,6 +82,15 @@ pub struct PrepareReport {
     pub bundled: bool,
     /// Median reprojection error of the landmarks, pixels.
     pub reprojection_px: f32,
+    /// Whether the poses come from the feature tracks (a bundle of their points), else
+    /// from the landmarks alone.
+    pub track_bundled: bool,
+    /// Feature tracks the poses were solved against (0 without).
+    pub tracks_used: usize,
+    /// Frames that saw too few tracks and kept their landmark pose.
+    pub frames_on_landmarks: usize,
+    /// Median reprojection error of the used tracks, pixels (0 without).
+    pub track_residual_px: f32,
     /// Seconds per stage and in all.
     pub seconds: Vec<(String, f64)>,
     pub total_seconds: f64,
@@ -233,6 +242,7 @@ fn prepare_into(
     let canonical = env.canonical()?;
     let track = solve_track(
         &frames,
+        &faces.tracks,
         &canonical.vertices,
         &canonical.rigid_weights,
         &k,
@@ -313,6 +323,10 @@ fn prepare_into(
         train_frames: n_train,
         val_frames: entries.len() - n_train,
         bundled: track.bundled,
+        track_bundled: track.track_bundled,
+        tracks_used: track.tracks_used,
+        frames_on_landmarks: track.frames_on_landmarks,
+        track_residual_px: track.track_residual_px,
         reprojection_px: reprojection
             .get(reprojection.len() / 2)
             .copied()

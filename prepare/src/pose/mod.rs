@@ -1,7 +1,7 @@
 //! Head pose without a 3DMM: mediapipe's 468 face landmarks of every frame turned into
 //! AD-NeRF's camera track (the head fixed at the origin, the camera moving).
 //!
-//! [`solve_track`] runs four steps:
+//! [`solve_track`] runs five steps:
 //! 1. PnP of each frame's weighted landmarks against the canonical face (`pnp`): a
 //!    weak-perspective closed form, then Levenberg-Marquardt on the full perspective
 //!    reprojection error, in f64, every frame on its own (in parallel);
@@ -9,8 +9,12 @@
 //!    points together with the poses of evenly spaced key frames, with a prior towards the
 //!    canonical face and the canonical's centroid, scale and orientation kept; then PnP again
 //!    against the refined face;
-//! 3. temporal smoothing without lag (`smooth`);
-//! 4. the head pose `p = R x + t` (OpenCV camera axes) turned into a camera-to-world matrix
+//! 3. when feature tracks are given and enough of them hold, the poses from the tracks
+//!    (`tracks`): a bundle of the tracks' points and key poses started from step 2, set in
+//!    step 2's world, then PnP of every frame against the tracks' points. Landmarks are
+//!    a face model fitted to the image and lean with it; tracks are points of the head;
+//! 4. temporal smoothing without lag (`smooth`);
+//! 5. the head pose `p = R x + t` (OpenCV camera axes) turned into a camera-to-world matrix
 //!    with OpenGL axes, nldf-core's convention: `c2w = [R^T D | -R^T t]`,
 //!    `D = diag(1, -1, -1)`, so that `Camera { intrinsics, c2w }.project(x)` lands on the
 //!    landmark of face point `x`.
@@ -22,6 +26,10 @@ mod rig;
 mod smooth;
 #[cfg(test)]
 mod tests;
+mod track_bundle;
+mod tracks;
+
+pub use tracks::{MAX_DEPARTURE_DEG, MIN_FRAME_POINTS, MIN_KEY_VIEWS, TrackPoint};
 
 use glam::{DMat3, DMat4, DVec2, DVec3, DVec4, Mat4, Vec3};
 use nldf_core::camera::Intrinsics;
@@ -60,6 +68,21 @@ pub struct PoseConfig {
     pub smooth_sigma_frames: f32,
     /// Half-width of the smoothing window, in video frames (default 3).
     pub smooth_radius_frames: usize,
+    /// Levenberg-Marquardt iterations of each round of the track bundle; 0 turns the
+    /// tracks off (default 20).
+    pub track_iterations: usize,
+    /// Key frames of the track bundle, evenly spaced over the clip (default 100).
+    pub track_key_frames: usize,
+    /// Fewest tracks that must survive the bundle's rounds for their poses to be used
+    /// (default 20).
+    pub track_min_points: usize,
+    /// Huber's `delta` of the track residuals, pixels (default 1).
+    pub track_huber_px: f32,
+    /// A track is dropped when its RMS residual exceeds this many times the median
+    /// track's (default 2.5) ...
+    pub track_reject_factor: f32,
+    /// ... and this many pixels (default 0.3).
+    pub track_reject_floor_px: f32,
 }
 
 impl Default for PoseConfig {
@@ -72,6 +95,12 @@ impl Default for PoseConfig {
             bundle_prior_mm: 10.0,
             smooth_sigma_frames: 1.5,
             smooth_radius_frames: 3,
+            track_iterations: 20,
+            track_key_frames: 100,
+            track_min_points: 20,
+            track_huber_px: 1.0,
+            track_reject_factor: 2.5,
+            track_reject_floor_px: 0.3,
         }
     }
 }
@@ -115,11 +144,44 @@ impl PoseConfig {
                 self.smooth_radius_frames
             ))
         } else {
-            None
+            self.track_problem()
         };
         problem.map_or(Ok(()), |p| {
             Err(Error::Argument(format!("pose config: {p}")))
         })
+    }
+
+    /// What is wrong with the track fields, if anything.
+    fn track_problem(&self) -> Option<String> {
+        let positive = |v: f32| v > 0.0 && v.is_finite();
+        if self.track_iterations > 1000 {
+            Some(format!(
+                "track_iterations {} is over 1000",
+                self.track_iterations
+            ))
+        } else if !(3..=MAX_BUNDLE_FRAMES).contains(&self.track_key_frames) {
+            Some(format!(
+                "track_key_frames {} is not in 3..={MAX_BUNDLE_FRAMES}",
+                self.track_key_frames
+            ))
+        } else if !positive(self.track_huber_px) {
+            Some(format!(
+                "track_huber_px {} is not a finite length > 0",
+                self.track_huber_px
+            ))
+        } else if !(self.track_reject_factor >= 1.0 && self.track_reject_factor.is_finite()) {
+            Some(format!(
+                "track_reject_factor {} is not a finite number >= 1",
+                self.track_reject_factor
+            ))
+        } else if !positive(self.track_reject_floor_px) {
+            Some(format!(
+                "track_reject_floor_px {} is not a finite length > 0",
+                self.track_reject_floor_px
+            ))
+        } else {
+            None
+        }
     }
 }
 
@@ -149,6 +211,14 @@ pub struct CameraTrack {
     /// Per frame, the weighted RMS reprojection error in pixels of the returned pose and
     /// face: `sqrt(sum w |project - landmark|^2 / sum w)`.
     pub reprojection_px: Vec<f32>,
+    /// Whether the poses come from the feature tracks (else from the landmarks alone).
+    pub track_bundled: bool,
+    /// Tracks whose points the poses were solved against (0 without the tracks).
+    pub tracks_used: usize,
+    /// Frames that saw too few of those tracks and kept their landmark pose.
+    pub frames_on_landmarks: usize,
+    /// Median reprojection error of the used tracks' observations, pixels (0 without).
+    pub track_residual_px: f32,
 }
 
 /// Solves the camera track of a clip from its face landmarks (see the module docs).
@@ -160,8 +230,13 @@ pub struct CameraTrack {
 /// a little (a too-short focal more than a too-long one). Errors on empty or mismatched
 /// input, non-finite values, fewer than [`MIN_WEIGHTED_POINTS`] weighted points, a flat
 /// weighted face, and frames whose landmarks no pose fits.
+///
+/// `tracks` are feature tracks on the head (any order; points of frames not in `frames`
+/// and non-finite pixels are ignored); with none, or too few that hold, the poses are the
+/// landmarks' alone.
 pub fn solve_track(
     frames: &[FrameLandmarks],
+    tracks: &[TrackPoint],
     canonical: &[Vec3],
     weights: &[f32],
     k: &Intrinsics,
@@ -184,6 +259,8 @@ pub fn solve_track(
         (rig.canonical.clone(), first)
     };
     let indices: Vec<usize> = frames.iter().map(|f| f.frame).collect();
+    let tracked = tracks::refine_with_tracks(&indices, &poses, tracks, &cam, cfg);
+    let poses = tracked.as_ref().map_or(poses, |t| t.poses.clone());
     let poses = smooth::smooth_poses(
         &indices,
         &poses,
@@ -201,6 +278,12 @@ pub fn solve_track(
         bundled,
         rotation_spread_deg: spread as f32,
         reprojection_px,
+        track_bundled: tracked.is_some(),
+        tracks_used: tracked.as_ref().map_or(0, |t| t.tracks_used),
+        frames_on_landmarks: tracked.as_ref().map_or(0, |t| t.frames_on_landmarks),
+        track_residual_px: tracked
+            .as_ref()
+            .map_or(0.0, |t| t.median_residual_px as f32),
     };
     let finite = track.c2w.iter().all(|m| m.is_finite())
         && track.face.iter().all(|p| p.is_finite())

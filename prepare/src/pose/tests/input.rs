@@ -16,6 +16,7 @@ impl Inputs {
     fn solve(&self) -> Result<CameraTrack> {
         solve_track(
             &self.frames,
+            &[],
             &self.canonical,
             &self.weights,
             &self.k,

@@ -174,7 +174,7 @@ fn clip_of(n_frames: usize, face: &[Vec3], amplitude: f32, noise_px: f32, seed: 
 }
 
 fn solve(clip: &Clip, face: &[Vec3], weights: &[f32], focal: f32, cfg: &PoseConfig) -> CameraTrack {
-    solve_track(&clip.frames, face, weights, &intrinsics(focal), cfg).unwrap()
+    solve_track(&clip.frames, &[], face, weights, &intrinsics(focal), cfg).unwrap()
 }
 
 /// Everything but what is named: PnP, bundle and smoothing with the defaults.
