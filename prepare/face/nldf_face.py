@@ -58,12 +58,12 @@ class Tracker:
         self.min_distance = max(3, int(round(8 * self.scale)))
         win = max(9, int(round(21 * self.scale)) | 1)
         self.lk = dict(winSize=(win, win), maxLevel=3 if size >= 256 else 2,
-                       criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, float(os.environ.get('T_EPS', 0.01))))
-        self.fb_px = float(os.environ.get('T_FB', 1.0)) * max(0.25, 0.5 * self.scale)
+                       criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+        self.fb_px = max(0.25, 0.5 * self.scale)
         self.margin = max(2, int(round(10 * self.scale)))
-        self.quality = float(os.environ.get('T_Q', 0.06))
+        self.quality = 0.045
         self.block = max(3, int(round(7 * self.scale)) | 1)
-        self.anchor_px = float(os.environ.get('T_ANCHOR', 1.0)) * max(0.25, self.scale)
+        self.anchor_px = max(0.25, self.scale)
         self.prev = None
         import numpy as np
         self.points = np.zeros((0, 2), np.float32)
@@ -72,7 +72,7 @@ class Tracker:
         self.anchors = np.zeros((0, 2), np.float32)
         self.templates = {}
         self.next_id = 0
-        self.detect_every = int(os.environ.get('T_EVERY', 5))
+        self.detect_every = 3
         self.last_detect = -self.detect_every
         self.rows = []
 

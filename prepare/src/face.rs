@@ -16,7 +16,7 @@ use glam::Vec3;
 use serde::Deserialize;
 
 use crate::error::{Error, Result};
-use crate::pose::TrackPoint;
+use crate::pose::{FrameLandmarks, TrackPoint};
 use crate::tools::FFMPEG_RECORD;
 
 /// The helper script, written into the environment by [`install`].
@@ -211,6 +211,16 @@ impl FaceOutput {
             mask_dir: dir.join("mask"),
             tracks: read_tracks(&dir.join("tracks.f32"), count)?,
         })
+    }
+
+    /// The landmarks of the frames `kept` that have them, for the pose solver.
+    pub fn landmark_frames(&self, kept: &[usize]) -> Vec<FrameLandmarks> {
+        kept.iter()
+            .filter_map(|&i| {
+                let points = self.landmarks.get(i)?.clone()?;
+                Some(FrameLandmarks { frame: i, points })
+            })
+            .collect()
     }
 }
 

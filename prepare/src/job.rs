@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use crate::face::{FaceEnv, FaceOutput};
 use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{Part, background, head_rect, parse_frame, parsing_image};
-use crate::pose::{FrameLandmarks, PoseConfig, solve_track};
+use crate::pose::{PoseConfig, TrackSummary, solve_track};
 use crate::video::{self, Probe, Window};
 
 /// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
@@ -82,15 +82,8 @@ pub struct PrepareReport {
     pub bundled: bool,
     /// Median reprojection error of the landmarks, pixels.
     pub reprojection_px: f32,
-    /// Whether the poses come from the feature tracks (a bundle of their points), else
-    /// from the landmarks alone.
-    pub track_bundled: bool,
-    /// Feature tracks the poses were solved against (0 without).
-    pub tracks_used: usize,
-    /// Frames that saw too few tracks and kept their landmark pose.
-    pub frames_on_landmarks: usize,
-    /// Median reprojection error of the used tracks, pixels (0 without).
-    pub track_residual_px: f32,
+    /// Whether the poses come from feature tracks, how many, and how well they fit.
+    pub tracks: TrackSummary,
     /// Seconds per stage and in all.
     pub seconds: Vec<(String, f64)>,
     pub total_seconds: f64,
@@ -231,14 +224,7 @@ fn prepare_into(
         width: size,
         height: size,
     };
-    let frames: Vec<FrameLandmarks> = kept
-        .iter()
-        .filter_map(|&i| {
-            faces.landmarks[i]
-                .clone()
-                .map(|points| FrameLandmarks { frame: i, points })
-        })
-        .collect();
+    let frames = faces.landmark_frames(&kept);
     let canonical = env.canonical()?;
     let track = solve_track(
         &frames,
@@ -323,10 +309,7 @@ fn prepare_into(
         train_frames: n_train,
         val_frames: entries.len() - n_train,
         bundled: track.bundled,
-        track_bundled: track.track_bundled,
-        tracks_used: track.tracks_used,
-        frames_on_landmarks: track.frames_on_landmarks,
-        track_residual_px: track.track_residual_px,
+        tracks: track.tracks,
         reprojection_px: reprojection
             .get(reprojection.len() / 2)
             .copied()

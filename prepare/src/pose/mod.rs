@@ -79,9 +79,9 @@ pub struct PoseConfig {
     /// Huber's `delta` of the track residuals, pixels (default 1).
     pub track_huber_px: f32,
     /// A track is dropped when its RMS residual exceeds this many times the median
-    /// track's (default 2.5) ...
+    /// track's (default 2) ...
     pub track_reject_factor: f32,
-    /// ... and this many pixels (default 0.3).
+    /// ... and this many pixels (default 0.2).
     pub track_reject_floor_px: f32,
 }
 
@@ -99,8 +99,8 @@ impl Default for PoseConfig {
             track_key_frames: 100,
             track_min_points: 20,
             track_huber_px: 1.0,
-            track_reject_factor: 2.5,
-            track_reject_floor_px: 0.3,
+            track_reject_factor: 2.0,
+            track_reject_floor_px: 0.2,
         }
     }
 }
@@ -211,14 +211,22 @@ pub struct CameraTrack {
     /// Per frame, the weighted RMS reprojection error in pixels of the returned pose and
     /// face: `sqrt(sum w |project - landmark|^2 / sum w)`.
     pub reprojection_px: Vec<f32>,
-    /// Whether the poses come from the feature tracks (else from the landmarks alone).
-    pub track_bundled: bool,
-    /// Tracks whose points the poses were solved against (0 without the tracks).
+    /// What the feature tracks did.
+    pub tracks: TrackSummary,
+}
+
+/// What the feature tracks did for a [`CameraTrack`] (all zero when they were not used).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct TrackSummary {
+    /// Whether the poses come from the tracks (a bundle of their points), else from the
+    /// landmarks alone.
+    pub bundled: bool,
+    /// Tracks whose points the poses were solved against.
     pub tracks_used: usize,
-    /// Frames that saw too few of those tracks and kept their landmark pose.
+    /// Frames that saw too few of them and took their corrected landmark pose.
     pub frames_on_landmarks: usize,
-    /// Median reprojection error of the used tracks' observations, pixels (0 without).
-    pub track_residual_px: f32,
+    /// Median reprojection error of the used tracks' observations, pixels.
+    pub residual_px: f32,
 }
 
 /// Solves the camera track of a clip from its face landmarks (see the module docs).
@@ -278,12 +286,7 @@ pub fn solve_track(
         bundled,
         rotation_spread_deg: spread as f32,
         reprojection_px,
-        track_bundled: tracked.is_some(),
-        tracks_used: tracked.as_ref().map_or(0, |t| t.tracks_used),
-        frames_on_landmarks: tracked.as_ref().map_or(0, |t| t.frames_on_landmarks),
-        track_residual_px: tracked
-            .as_ref()
-            .map_or(0.0, |t| t.median_residual_px as f32),
+        tracks: tracked.map_or_else(TrackSummary::default, |t| t.summary),
     };
     let finite = track.c2w.iter().all(|m| m.is_finite())
         && track.face.iter().all(|p| p.is_finite())

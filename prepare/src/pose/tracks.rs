@@ -16,8 +16,10 @@
 //!    camera (least squares of `R'_f u + s t_f = t_lm,f` in `u = -d` and `s`), so the
 //!    head's size, distance and origin are the landmark solution's;
 //! 4. every frame's pose by PnP against the kept points seen in it (Huber's loss,
-//!    reweighted), from its landmark pose; frames that see fewer than
-//!    [`MIN_FRAME_POINTS`] keep the landmark pose.
+//!    reweighted), from its landmark pose; a frame that sees fewer than
+//!    [`MIN_FRAME_POINTS`] takes its landmark pose corrected as the solved frames around it
+//!    were (`R = dR R_lm`, `t = t_lm + dt` with `dR = R_t R_lm^T`, `dt = t_t - t_lm`
+//!    interpolated between them), so that the landmarks' bias does not jump in.
 //!
 //! The result is refused (`None`: the caller keeps the landmarks alone) when fewer than
 //! `track_min_points` tracks survive, or when its rotations depart from the landmarks' by
@@ -32,13 +34,14 @@ use serde::{Deserialize, Serialize};
 use super::linalg::{angle_between, cholesky_solve, mean_rotation};
 use super::pnp::{self, Pinhole, Pose};
 use super::track_bundle::{Observation, TrackBundle, huber};
-use super::{PoseConfig, key_frames};
+use super::{PoseConfig, TrackSummary, key_frames};
 
 /// Fewest key frames a track must be seen in to enter the bundle.
 pub const MIN_KEY_VIEWS: usize = 3;
 /// Fewest kept tracks a key frame must see to stay in the bundle.
 const MIN_KEY_POINTS: usize = 6;
-/// Fewest kept tracks a frame must see for its own pose; else it keeps the landmark pose.
+/// Fewest kept tracks a frame must see for its own pose; else it takes its landmark pose
+/// with the nearest solved frame's correction.
 pub const MIN_FRAME_POINTS: usize = 8;
 /// Largest RMS angle between the track and landmark rotations that is believed, degrees.
 pub const MAX_DEPARTURE_DEG: f64 = 10.0;
@@ -66,12 +69,7 @@ pub struct TrackPoint {
 pub(crate) struct TrackSolution {
     /// One pose per solved frame, in the landmark solution's world.
     pub poses: Vec<Pose>,
-    /// Tracks kept after the bundle's rounds.
-    pub tracks_used: usize,
-    /// Frames that saw too few kept tracks and kept their landmark pose.
-    pub frames_on_landmarks: usize,
-    /// Median residual of the kept tracks' observations under the returned poses, pixels.
-    pub median_residual_px: f64,
+    pub summary: TrackSummary,
 }
 
 /// One track's key-frame observations and its point.
@@ -112,7 +110,7 @@ pub(crate) fn refine_with_tracks(
         &key_poses.iter().map(|p| gauge.pose(p)).collect::<Vec<_>>(),
         &landmark_keys,
     );
-    if !(departure <= MAX_DEPARTURE_DEG) {
+    if departure.is_nan() || departure > MAX_DEPARTURE_DEG {
         return None;
     }
     let points: BTreeMap<u32, DVec3> = candidates
@@ -376,12 +374,55 @@ fn solve_frames(
         .collect();
     let mut all: Vec<f64> = solved.iter().flat_map(|s| s.2.iter().copied()).collect();
     all.sort_by(f64::total_cmp);
+    let own: Vec<Option<Pose>> = solved.iter().map(|s| s.1.then_some(s.0)).collect();
     TrackSolution {
-        poses: solved.iter().map(|s| s.0).collect(),
-        tracks_used: points.len(),
-        frames_on_landmarks: solved.iter().filter(|s| !s.1).count(),
-        median_residual_px: all.get(all.len() / 2).copied().unwrap_or(0.0),
+        poses: carry_corrections(landmark, &own),
+        summary: TrackSummary {
+            bundled: true,
+            tracks_used: points.len(),
+            frames_on_landmarks: own.iter().filter(|p| p.is_none()).count(),
+            residual_px: all.get(all.len() / 2).copied().unwrap_or(0.0) as f32,
+        },
     }
+}
+
+/// `own` poses where present; elsewhere the landmark pose with the correction of the
+/// solved frames on either side interpolated (the nearest one's beyond the ends; the
+/// landmark pose itself when no frame is solved).
+fn carry_corrections(landmark: &[Pose], own: &[Option<Pose>]) -> Vec<Pose> {
+    let solved: Vec<usize> = (0..own.len()).filter(|&i| own[i].is_some()).collect();
+    // The correction `(R_t R_lm^T, t_t - t_lm)` of solved frame `j`.
+    let correction = |j: usize| {
+        let p = own[j].expect("solved frames have their own pose");
+        (
+            p.rotation * landmark[j].rotation.inverse(),
+            p.translation - landmark[j].translation,
+        )
+    };
+    (0..own.len())
+        .map(|i| {
+            if let Some(p) = own[i] {
+                return p;
+            }
+            let at = solved.partition_point(|&j| j < i);
+            let (rotation, translation) = match (at.checked_sub(1), solved.get(at)) {
+                (Some(k), Some(&after)) => {
+                    let before = solved[k];
+                    let w = (i - before) as f64 / (after - before) as f64;
+                    let (ra, ta) = correction(before);
+                    let (rb, tb) = correction(after);
+                    (ra.slerp(rb, w), ta.lerp(tb, w))
+                }
+                (Some(k), None) => correction(solved[k]),
+                (None, Some(&after)) => correction(after),
+                (None, None) => return landmark[i],
+            };
+            Pose {
+                rotation: (rotation * landmark[i].rotation).normalize(),
+                translation: landmark[i].translation + translation,
+            }
+        })
+        .collect()
 }
 
 /// Reprojection error lengths of `points` against `pixels` under `pose`, pixels (infinite

@@ -12,6 +12,7 @@ use super::*;
 
 mod accuracy;
 mod input;
+mod tracks;
 
 const FOCAL: f32 = 1320.0;
 const DISTANCE: f32 = 1.0;
