@@ -45,13 +45,17 @@ class Tracker:
     forehead and the hair), inside the person mask shrunk away from the silhouette (whose
     points slide over the surface), less the eyes' and the lips' hulls grown by a margin and
     everything below the upper lip (the jaw moves with the mouth). Tracks follow by
-    pyramidal Lucas-Kanade, kept when tracking back lands within `fb_px` of where they
-    started and they stay in the region; new corners top the live ones up to `most`
-    whenever fewer than `least` are alive.
+    pyramidal Lucas-Kanade from the previous frame, kept when tracking back lands within
+    `fb_px` of where they started; then each is aligned with its patch in the frame it was
+    found in, starting from there, so that it does not drift, and kept when that moves it
+    by less than `anchor_px` and it stays in the region. Corners stronger than `quality`
+    times the region's strongest (Shi-Tomasi) top the live tracks up to `most` when fewer
+    than `least` are alive, at most every `detect_every` frames.
     """
 
     def __init__(self, size):
         import cv2
+        import numpy as np
         self.cv2 = cv2
         self.scale = size / 512.0
         self.least, self.most = 150, 300
@@ -65,7 +69,6 @@ class Tracker:
         self.block = max(3, int(round(7 * self.scale)) | 1)
         self.anchor_px = max(0.25, self.scale)
         self.prev = None
-        import numpy as np
         self.points = np.zeros((0, 2), np.float32)
         self.ids = np.zeros(0, np.int64)
         self.births = np.zeros(0, np.int64)
@@ -104,8 +107,6 @@ class Tracker:
 
     def step(self, i, gray, pts, person):
         """Tracks into frame `i` (its landmarks `pts`, 468 x 2, or None) and records it."""
-        import numpy as np
-        cv2 = self.cv2
         mask = self.region(pts, person) if pts is not None else None
         if self.prev is not None and len(self.points):
             good, p1 = self.follow(gray, mask)
@@ -153,9 +154,9 @@ class Tracker:
         import numpy as np
         cv2 = self.cv2
         m = self.lk["winSize"][0] + 2
-
         full = np.array(gray.shape[::-1])
-        size = np.minimum(np.ceil(np.maximum(np.ptp(anchors, axis=0), np.ptp(guess, axis=0))).astype(int) + 2 * m + 1, full)
+        spread = np.maximum(np.ptp(anchors, axis=0), np.ptp(guess, axis=0))
+        size = np.minimum(np.ceil(spread).astype(int) + 2 * m + 1, full)
 
         def crop(img, pts):
             # The same size in both images, as Lucas-Kanade needs.
@@ -172,6 +173,7 @@ class Tracker:
         return got.reshape(-1, 2) + g_lo, ok.ravel() == 1
 
     def detect(self, i, gray, mask):
+        """New corners in the region of frame `i`, away from the live tracks."""
         import numpy as np
         cv2 = self.cv2
         free = mask.copy()

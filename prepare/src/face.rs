@@ -1,6 +1,7 @@
-//! mediapipe's face landmarker (468 points) and selfie segmentation, run over a folder of
-//! frames by a pinned Python helper in an environment of its own, and the canonical face the
-//! pose is solved against.
+//! mediapipe's face landmarker (468 points) and selfie segmentation, and feature tracks on
+//! the head (OpenCV's corners and Lucas-Kanade flow), run over a folder of frames by a
+//! pinned Python helper in an environment of its own, and the canonical face the pose is
+//! solved against.
 //!
 //! The environment is installed from registry packages alone, once, by [`install`]:
 //! `python3 -m venv`, `pip install` of [`PIP_PACKAGES`] (mediapipe 0.10.21's wheel carries

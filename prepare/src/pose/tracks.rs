@@ -8,8 +8,9 @@
 //!    point nearest their rays, with a weak pull towards the ray's point nearest the head's
 //!    origin, which only matters where the rays are nearly parallel);
 //! 2. the track bundle (`track_bundle`: key poses and points, Huber's loss) runs in rounds,
-//!    each dropping the tracks whose RMS residual exceeds `reject_factor` times the median
-//!    track's (and the floor), tracks that slid over the surface or left it;
+//!    each dropping the tracks whose RMS residual exceeds `track_reject_factor` times the
+//!    median track's (and `track_reject_floor_px`): tracks that slid over the surface or
+//!    left it;
 //! 3. the gauge the pixels leave free is set from the landmark solution: the rotation `Q`
 //!    is the mean of `R_lm^T R_ba` over the key frames, and the scale `s` and offset `d`
 //!    make the landmark world's origin sit where the landmarks put it in every key frame's
