@@ -13,7 +13,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The crates checked: their source folders, relative to the workspace root.
-const SOURCE_DIRS: [&str; 3] = ["core/src", "train/src", "infer/src"];
+const SOURCE_DIRS: [&str; 4] = ["core/src", "prepare/src", "train/src", "infer/src"];
 
 /// Every `*.rs` file under `dir` with its text, by its path relative to `dir`.
 fn rust_files(dir: &Path) -> BTreeMap<PathBuf, String> {

@@ -3,7 +3,7 @@
 
 use glam::{DMat3, DVec2, DVec3, Vec3};
 
-use super::{FrameLandmarks, MIN_WEIGHTED_POINTS};
+use super::config::{FrameLandmarks, MIN_WEIGHTED_POINTS};
 use crate::error::{Error, Result};
 
 /// The weighted landmarks.

@@ -32,10 +32,10 @@ use glam::{DMat3, DQuat, DVec2, DVec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::config::{PoseConfig, TrackSummary, key_frames};
 use super::linalg::{angle_between, cholesky_solve, mean_rotation};
 use super::pnp::{self, Pinhole, Pose};
 use super::track_bundle::{Observation, TrackBundle, huber};
-use super::{PoseConfig, TrackSummary, key_frames};
 
 /// Fewest key frames a track must be seen in to enter the bundle.
 pub const MIN_KEY_VIEWS: usize = 3;
