@@ -142,10 +142,15 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         report.frames_dropped,
         report.total_seconds,
         report.frames_read as f64 / report.total_seconds.max(1e-9),
-        if report.bundled {
-            "; face shape refined from the head's motion"
+        if report.tracks.bundled {
+            format!(
+                "; poses from {} feature tracks on the head",
+                report.tracks.tracks_used
+            )
+        } else if report.bundled {
+            "; poses from the landmarks, the face's shape refined from the head's motion".into()
         } else {
-            ""
+            "; poses from the landmarks".into()
         },
     );
     println!(

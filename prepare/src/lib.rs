@@ -3,11 +3,13 @@
 //! The stages, each a module:
 //! - [`video`]: ffmpeg finds the streams, refuses what cannot be trained on, decodes the
 //!   frames at a fixed rate and size, and the audio at 16 kHz;
-//! - [`face`]: mediapipe's face landmarker (468 points) and selfie segmentation, run by a
-//!   pinned Python helper in its own environment;
+//! - [`face`]: mediapipe's face landmarker (468 points), selfie segmentation and feature
+//!   tracks on the head (OpenCV's Lucas-Kanade), run by a pinned Python helper in its own
+//!   environment;
 //! - [`pose`]: head pose without a 3DMM: PnP of the landmarks against mediapipe's canonical
-//!   face, a bundle step that refines the face's shape across frames, temporal smoothing,
-//!   AD-NeRF's convention (head at the origin, the camera moving, OpenGL axes);
+//!   face, a bundle step that refines the face's shape across frames, then a robust bundle of
+//!   feature tracks on the rigid head started from it, temporal smoothing, AD-NeRF's
+//!   convention (head at the origin, the camera moving, OpenGL axes);
 //! - [`align`]: the similarity that maps one camera track onto another, and the errors left
 //!   after it (to compare a prepared dataset with the truth of a synthetic one);
 //! - [`check`]: a prepared dataset scored against the synthetic scene it was made from.
