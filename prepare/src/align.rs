@@ -20,6 +20,7 @@ use glam::{DMat3, DMat4, DQuat, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::pose::linalg::top_eigenvector4;
 
 /// A camera's pose in a track: its camera-to-world rotation (OpenGL axes, as AD-NeRF's
 /// `transform_matrix`) and its centre.
@@ -261,54 +262,8 @@ fn best_rotation(m: &DMat3) -> DMat3 {
         [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
         [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
     ];
-    let q = largest_eigenvector(n);
+    let q = top_eigenvector4(n);
     DMat3::from_quat(DQuat::from_xyzw(q[1], q[2], q[3], q[0]).normalize())
-}
-
-/// The unit eigenvector of the largest eigenvalue of a symmetric 4 x 4 matrix, by cyclic
-/// Jacobi rotations.
-fn largest_eigenvector(mut a: [[f64; 4]; 4]) -> [f64; 4] {
-    let mut v = [[0.0; 4]; 4];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    let norm: f64 = a.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
-    for _sweep in 0..64 {
-        let off: f64 = (0..4)
-            .flat_map(|i| (0..4).filter(move |&j| j != i).map(move |j| (i, j)))
-            .map(|(i, j)| a[i][j] * a[i][j])
-            .sum::<f64>()
-            .sqrt();
-        if off <= 1e-15 * norm || norm == 0.0 {
-            break;
-        }
-        for p in 0..3 {
-            for q in p + 1..4 {
-                if a[p][q] == 0.0 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                // A <- J^T A J and V <- V J, J the rotation in the (p, q) plane.
-                for row in a.iter_mut().chain(v.iter_mut()) {
-                    let (xp, xq) = (row[p], row[q]);
-                    row[p] = c * xp - s * xq;
-                    row[q] = s * xp + c * xq;
-                }
-                let (row_p, row_q) = (a[p], a[q]);
-                for k in 0..4 {
-                    a[p][k] = c * row_p[k] - s * row_q[k];
-                    a[q][k] = s * row_p[k] + c * row_q[k];
-                }
-            }
-        }
-    }
-    let best = (0..4)
-        .max_by(|&i, &j| a[i][i].total_cmp(&a[j][j]))
-        .unwrap_or(0);
-    [v[0][best], v[1][best], v[2][best], v[3][best]]
 }
 
 #[cfg(test)]

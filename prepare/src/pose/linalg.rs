@@ -64,7 +64,7 @@ pub(crate) fn angle_between(a: DQuat, b: DQuat) -> f64 {
 }
 
 /// The eigenvector of the largest eigenvalue of a symmetric 4x4 matrix (cyclic Jacobi).
-fn top_eigenvector4(mut a: [[f64; 4]; 4]) -> [f64; 4] {
+pub(crate) fn top_eigenvector4(mut a: [[f64; 4]; 4]) -> [f64; 4] {
     let mut v = [[0.0; 4]; 4];
     for (i, row) in v.iter_mut().enumerate() {
         row[i] = 1.0;

@@ -21,7 +21,7 @@
 
 mod bundle;
 mod config;
-mod linalg;
+pub(crate) mod linalg;
 mod pnp;
 mod rig;
 mod smooth;
