@@ -33,7 +33,7 @@ use nldf_core::synth::TRUTH_LABELS_DIR;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::align::{CameraPose, TrackErrors, align_tracks};
+use crate::align::{CameraPose, TrackAlignment, TrackErrors, align_tracks};
 use crate::error::{Error, Result};
 
 /// Bar: mean rotation error, degrees, at most.
@@ -182,20 +182,7 @@ impl PrepareScores {
 pub fn score_prepared(truth: &Path, prepared: &Path) -> Result<PrepareScores> {
     let true_track = read_track(truth)?;
     let track = read_track(prepared)?;
-    let compared: Vec<i64> = (track.poses.keys())
-        .filter(|id| true_track.poses.contains_key(id))
-        .copied()
-        .collect();
-    if compared.is_empty() {
-        return Err(Error::invalid(
-            prepared.join(Split::Train.file_name()),
-            format!(
-                "no img_id in common with the truth's {} frames",
-                true_track.poses.len()
-            ),
-        ));
-    }
-    let poses = align_tracks(&true_track.cameras(&compared), &track.cameras(&compared))?;
+    let (compared, poses) = align_prepared(&true_track, &track, prepared)?;
     let true_bc = read_rgb8(&truth.join("bc.png"))?;
     let files = FrameFiles {
         truth: truth.to_path_buf(),
@@ -250,6 +237,31 @@ pub(crate) fn truth_labels(truth: &Path) -> Result<PathBuf> {
 /// `a / b`, 1 when `b` is 0 (nothing to miss).
 fn ratio(a: u64, b: u64) -> f64 {
     if b == 0 { 1.0 } else { a as f64 / b as f64 }
+}
+
+/// The `img_id`s the recording `track` of the prepared dataset at `prepared` shares with the
+/// truth's, and the alignment of its cameras onto the truth's over them; an error naming
+/// the prepared transforms when none is shared.
+pub(crate) fn align_prepared(
+    true_track: &Track,
+    track: &Track,
+    prepared: &Path,
+) -> Result<(Vec<i64>, TrackAlignment)> {
+    let compared: Vec<i64> = (track.poses.keys())
+        .filter(|id| true_track.poses.contains_key(id))
+        .copied()
+        .collect();
+    if compared.is_empty() {
+        return Err(Error::invalid(
+            prepared.join(Split::Train.file_name()),
+            format!(
+                "no img_id in common with the truth's {} frames",
+                true_track.poses.len()
+            ),
+        ));
+    }
+    let poses = align_tracks(&true_track.cameras(&compared), &track.cameras(&compared))?;
+    Ok((compared, poses))
 }
 
 /// A dataset's recording: each train and val frame's camera by `img_id`, and the focal

@@ -120,11 +120,7 @@ impl FaceEnv {
             .spawn()
             .map_err(|e| Error::io(&self.python, e))?;
         let stderr = child.stderr.take();
-        let log = std::thread::spawn(move || -> Vec<String> {
-            stderr
-                .map(|s| BufReader::new(s).lines().map_while(|l| l.ok()).collect())
-                .unwrap_or_default()
-        });
+        let log = crate::tools::collect_lines(stderr);
         if let Some(stdout) = child.stdout.take() {
             for line in BufReader::new(stdout).lines().map_while(|l| l.ok()) {
                 if let Some(i) = line

@@ -14,8 +14,8 @@ use nldf_core::dataset::{Split, TransformsFile};
 use nldf_core::landmarks::landmarks_from_regions;
 use nldf_core::region::Region;
 
-use crate::align::{CameraPose, align_tracks};
-use crate::check::{read_regions, read_track, truth_labels};
+use crate::align::CameraPose;
+use crate::check::{align_prepared, read_regions, read_track, truth_labels};
 use crate::error::{Error, Result};
 
 /// The held-out splits carried, in this order.
@@ -27,12 +27,8 @@ pub const HELD_OUT: [Split; 3] = [Split::Novel, Split::Voice, Split::Sweep];
 pub fn carry_held_out(truth: &Path, prepared: &Path) -> Result<Vec<Split>> {
     let true_track = read_track(truth)?;
     let track = read_track(prepared)?;
-    let ids: Vec<i64> = (track.poses.keys())
-        .filter(|id| true_track.poses.contains_key(id))
-        .copied()
-        .collect();
-    let cams = |t: &crate::check::Track| ids.iter().map(|i| t.poses[i]).collect::<Vec<_>>();
-    let to_prepared = align_tracks(&cams(&true_track), &cams(&track))?
+    let to_prepared = align_prepared(&true_track, &track, prepared)?
+        .1
         .similarity
         .inverse();
     let train_path = prepared.join(Split::Train.file_name());

@@ -430,28 +430,29 @@ fn save_jpeg(path: &Path, rgb: &[u8], size: u32) -> Result<()> {
         .map_err(|e| Error::invalid(path, format!("cannot write the JPEG: {e}")))
 }
 
+/// The `size x size` image at `path` as RGB bytes.
 fn read_rgb(path: &Path, size: u32) -> Result<Vec<u8>> {
-    let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot read: {e}")))?;
-    let rgb = img.to_rgb8();
-    if rgb.dimensions() != (size, size) {
-        return Err(Error::invalid(
-            path,
-            format!("is {:?}, not {size}x{size}", rgb.dimensions()),
-        ));
-    }
-    Ok(rgb.into_raw())
+    read_pixels(path, size, |img| img.to_rgb8().into_raw())
 }
 
+/// The `size x size` image at `path` as grey bytes.
 fn read_gray(path: &Path, size: u32) -> Result<Vec<u8>> {
+    read_pixels(path, size, |img| img.to_luma8().into_raw())
+}
+
+fn read_pixels(
+    path: &Path,
+    size: u32,
+    pixels: impl FnOnce(image::DynamicImage) -> Vec<u8>,
+) -> Result<Vec<u8>> {
     let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot read: {e}")))?;
-    let g = img.to_luma8();
-    if g.dimensions() != (size, size) {
+    if (img.width(), img.height()) != (size, size) {
         return Err(Error::invalid(
             path,
-            format!("is {:?}, not {size}x{size}", g.dimensions()),
+            format!("is {}x{}, not {size}x{size}", img.width(), img.height()),
         ));
     }
-    Ok(g.into_raw())
+    Ok(pixels(img))
 }
 
 /// Writes `parsing/<i>.png` and `ori_imgs/<i>.lms` for the kept frames; returns each

@@ -83,3 +83,21 @@ fn runs(program: &Path) -> bool {
         .status()
         .is_ok_and(|s| s.success())
 }
+
+/// A thread that reads a child's stream to its end, line by line (so the child never blocks
+/// on a full pipe), and returns the lines.
+pub fn collect_lines(
+    stream: Option<impl std::io::Read + Send + 'static>,
+) -> std::thread::JoinHandle<Vec<String>> {
+    use std::io::BufRead;
+    std::thread::spawn(move || {
+        stream
+            .map(|s| {
+                std::io::BufReader::new(s)
+                    .lines()
+                    .map_while(|l| l.ok())
+                    .collect()
+            })
+            .unwrap_or_default()
+    })
+}

@@ -2,7 +2,7 @@
 //! audio at 16 kHz. Every way a file can be unusable for training (no video, no audio, a
 //! variable frame rate, a corrupt container) is refused here with one line.
 
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -199,11 +199,7 @@ pub fn decode_frames(
         .stderr(Stdio::piped());
     let mut child = cmd.spawn().map_err(|e| Error::io(ffmpeg, e))?;
     let stderr = child.stderr.take();
-    let log = std::thread::spawn(move || -> Vec<String> {
-        stderr
-            .map(|s| BufReader::new(s).lines().map_while(|l| l.ok()).collect())
-            .unwrap_or_default()
-    });
+    let log = crate::tools::collect_lines(stderr);
     let frame_bytes = (window.size as usize).pow(2) * 3;
     let mut buf = vec![0u8; frame_bytes];
     let mut n = 0usize;
