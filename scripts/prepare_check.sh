@@ -2,7 +2,8 @@
 # nldf prepare on the test videos with known truth: both synthetic heads at 128 and 512,
 # turning up to 20 degrees (the default scene turns up to 12), 12 s each. Each scene and its
 # MP4 are made once into WORK; every prepared dataset is scored against its scene by
-# `nldf bench prepare`, whose JSON and table go to OUT (default results/prepare).
+# `nldf bench prepare`, whose JSON and table go to OUT (default results/prepare). Then each
+# 512 video again as a 128 dataset, scored against the 128 scene.
 # Usage: scripts/prepare_check.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -26,6 +27,17 @@ for size in 128 512; do
     "$nldf" bench prepare --truth "$scene" --prepared "$work/prepared_$name" \
       --out "$out/$name.json" | tee -a "$out/$name.log" || true
   done
+done
+# The 512 videos prepared as 128 datasets (analysed at 512, then shrunk), scored against the
+# 128 scenes: the same heads, poses and seeds at the smaller size.
+for head in standard second; do
+  name=${head}_512_as_128
+  rm -rf "$work/prepared_$name"
+  "$nldf" prepare --video "$work/${head}_512.mp4" --out "$work/prepared_$name" --size 128 \
+    | tee "$out/$name.log"
+  cp "$work/prepared_$name/prepare.json" "$out/${name}_prepare.json"
+  "$nldf" bench prepare --truth "$work/${head}_128" --prepared "$work/prepared_$name" \
+    --out "$out/$name.json" | tee -a "$out/$name.log" || true
 done
 # The logs and JSON name the work folder; results/ keeps no machine paths.
 sed -i "s#$work/##g" "$out"/*.log "$out"/*.json

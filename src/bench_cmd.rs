@@ -74,6 +74,28 @@ pub struct PrepareBenchArgs {
     /// --focal).
     #[arg(long)]
     pub carry_held_out: bool,
+    /// How a held-out camera enters the prepared world: `nearest-frame` moves the prepared
+    /// camera of the recorded frame nearest it as the true camera moved from that frame's
+    /// (a `voice` frame gets the prepared pose of the frame it repeats); `similarity` maps
+    /// it by the one similarity fitted to the whole recording.
+    #[arg(long, value_enum, default_value_t = CarryBy::NearestFrame, requires = "carry_held_out")]
+    pub carry_by: CarryBy,
+}
+
+/// `--carry-by`'s values.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CarryBy {
+    NearestFrame,
+    Similarity,
+}
+
+impl From<CarryBy> for nldf_prepare::held_out::Carry {
+    fn from(c: CarryBy) -> Self {
+        match c {
+            CarryBy::NearestFrame => Self::NearestFrame,
+            CarryBy::Similarity => Self::Similarity,
+        }
+    }
 }
 
 /// When a benchmark may run: the machine's load at the start.
@@ -280,7 +302,11 @@ fn prepare(args: PrepareBenchArgs) -> Result<()> {
         println!("wrote {}", out.display());
     }
     if args.carry_held_out {
-        let carried = nldf_prepare::held_out::carry_held_out(&args.truth, &args.prepared)?;
+        let carried = nldf_prepare::held_out::carry_held_out(
+            &args.truth,
+            &args.prepared,
+            args.carry_by.into(),
+        )?;
         let names: Vec<&str> = carried.iter().map(|s| s.name()).collect();
         println!(
             "carried the held-out splits {} into {}",

@@ -23,6 +23,12 @@ pub struct PrepareArgs {
     /// Output frames are SIZE x SIZE pixels (a square crop of the video, scaled).
     #[arg(long, default_value_t = 512)]
     pub size: u32,
+    /// Find the face, its landmarks, tracks, poses and masks in frames of this size, then
+    /// shrink the dataset to --size: landmarks hold a pixel's worth of error at any size,
+    /// so a larger frame gives finer poses. Default: the crop's side, at most 512, and
+    /// never below --size.
+    #[arg(long)]
+    pub analysis_size: Option<u32>,
     /// Focal length in output pixels; landmarks cannot tell it. Default: AD-NeRF's 1200 at
     /// 450 pixels, scaled to --size (1365 at 512). Half or twice the true value moves the
     /// rotations by well under a degree.
@@ -103,6 +109,7 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         min_frames: args.min_frames,
         force: args.force,
         pose: PoseConfig::default(),
+        analysis_size: args.analysis_size,
     };
     let mut bar: Option<ProgressBar> = None;
     let report = job::run(&job, &env, &ffmpeg, |event| match event {

@@ -26,6 +26,11 @@ pub struct SynthArgs {
     /// Image width and height in pixels.
     #[arg(long, default_value_t = 128)]
     pub size: u32,
+    /// Render at this size (its detail: at 512 the hat's stripes, the irises and the teeth
+    /// show), then shrink every image, label and intrinsic to --size, as `nldf prepare`
+    /// shrinks a dataset analysed at a larger size. Default: --size.
+    #[arg(long)]
+    pub render_size: Option<u32>,
     /// Drive the mouth with this WAV file instead of generated speech.
     #[arg(long)]
     pub audio: Option<PathBuf>,
@@ -90,7 +95,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
     let cfg = SynthConfig {
         seed: args.seed,
         seconds,
-        size: args.size,
+        size: args.render_size.unwrap_or(args.size).max(args.size),
         supersample: args.supersample,
         novel_turn: args.novel_turn,
         voice_seed: args.voice_seed,
@@ -100,7 +105,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
     };
     synth::validate(&cfg)?;
     let ffmpeg = match &args.video {
-        Some(video) => Some(video_plan(video, &cfg)?),
+        Some(video) => Some(video_plan(video, args.size)?),
         None => None,
     };
     let bar = progress_bar(synth::frames_rendered(&cfg) as u64, "rendering frames");
@@ -108,6 +113,10 @@ pub fn run(args: SynthArgs) -> Result<()> {
     let summary = synth::generate(&cfg, audio, &args.out, args.force, &|| bar.inc(1))
         .with_context(|| format!("generating the synthetic scene in {}", args.out.display()))?;
     bar.finish_and_clear();
+    if cfg.size > args.size {
+        nldf_prepare::resample::shrink_dataset(&summary.out, cfg.size, args.size)
+            .with_context(|| format!("shrinking the scene in {}", summary.out.display()))?;
+    }
     println!(
         "wrote {} frames ({} train, {} val, and {} of the novel, voice and sweep \
          evaluation splits) of {}x{} in {:.1} s to {}:",
@@ -115,8 +124,8 @@ pub fn run(args: SynthArgs) -> Result<()> {
         summary.n_train,
         summary.n_frames - summary.n_train,
         summary.n_eval,
-        cfg.size,
-        cfg.size,
+        args.size,
+        args.size,
         start.elapsed().as_secs_f32(),
         summary.out.display()
     );
@@ -140,12 +149,9 @@ pub fn run(args: SynthArgs) -> Result<()> {
 }
 
 /// Checks `--video` before any frame is rendered; returns the ffmpeg to mux with.
-fn video_plan(video: &Path, cfg: &SynthConfig) -> Result<PathBuf> {
-    if !cfg.size.is_multiple_of(2) {
-        bail!(
-            "--video needs an even --size (H.264 in yuv420p), got {}",
-            cfg.size
-        );
+fn video_plan(video: &Path, size: u32) -> Result<PathBuf> {
+    if !size.is_multiple_of(2) {
+        bail!("--video needs an even --size (H.264 in yuv420p), got {size}");
     }
     if video.is_dir() {
         bail!("--video {}: is a folder, not a file", video.display());

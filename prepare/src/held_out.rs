@@ -3,10 +3,21 @@
 //! the same unheard voice as one trained on the scene itself.
 //!
 //! The prepared cameras live in their own world (scale, orientation and placement no method
-//! can observe), so each held-out camera is mapped by the inverse of the similarity that
-//! takes the prepared recording onto the true one ([`crate::align`]). The held-out frames'
-//! images, parsing and audio are the scene's; their `.lms` are the scene's, or for a scene
-//! with exact labels, drawn from its mouth as `nldf synth` draws them.
+//! can observe), so each held-out camera has to be brought into it, in one of two ways
+//! ([`Carry`]):
+//! - [`Carry::NearestFrame`] (the default): from the recorded frame whose true camera is
+//!   nearest (for `voice` and the closer and farther `novel` views, the frame they were
+//!   made from), keeping the camera's move relative to it. The held-out camera becomes that
+//!   frame's *prepared* camera moved as the true one moved, its shift scaled into the
+//!   prepared world. A `voice` frame is thus rendered at the prepared pose of the recorded
+//!   frame it repeats, as a user renders new audio on a recorded pose track.
+//! - [`Carry::Similarity`]: by the inverse of the one similarity that takes the whole
+//!   prepared recording onto the true one ([`crate::align`]), so that every pose error of
+//!   the held-out frames' own neighbours shows.
+//!
+//! The held-out frames' images, parsing and audio are the scene's; their `.lms` are the
+//! scene's, or for a scene with exact labels, drawn from its mouth as `nldf synth` draws
+//! them.
 
 use std::path::Path;
 
@@ -14,23 +25,43 @@ use nldf_core::dataset::{Split, TransformsFile};
 use nldf_core::landmarks::landmarks_from_regions;
 use nldf_core::region::Region;
 
-use crate::align::CameraPose;
-use crate::check::{align_prepared, read_regions, read_track, truth_labels};
+use crate::align::{CameraPose, rotation_angle_deg};
+use crate::check::{Track, align_prepared, read_regions, read_track, truth_labels};
 use crate::error::{Error, Result};
 
 /// The held-out splits carried, in this order.
 pub const HELD_OUT: [Split; 3] = [Split::Novel, Split::Voice, Split::Sweep];
 
-/// Writes the truth's held-out splits into `prepared` (see the module docs) and returns
-/// those it carried. The prepared dataset must use the truth's intrinsics (prepare it with
-/// the scene's `--focal`).
-pub fn carry_held_out(truth: &Path, prepared: &Path) -> Result<Vec<Split>> {
+/// How a held-out camera is brought into the prepared world (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Carry {
+    /// From the nearest recorded frame's prepared camera, keeping the move relative to it.
+    #[default]
+    NearestFrame,
+    /// By the inverse of the similarity fitted to the whole recording.
+    Similarity,
+}
+
+/// Writes the truth's held-out splits into `prepared` (see the module docs), each camera
+/// carried as `how` says, and returns the splits it carried. The prepared dataset must use
+/// the truth's intrinsics (prepare it with the scene's `--focal`).
+pub fn carry_held_out(truth: &Path, prepared: &Path, how: Carry) -> Result<Vec<Split>> {
     let true_track = read_track(truth)?;
     let track = read_track(prepared)?;
-    let to_prepared = align_prepared(&true_track, &track, prepared)?
-        .1
-        .similarity
-        .inverse();
+    let (shared, alignment) = align_prepared(&true_track, &track, prepared)?;
+    let to_prepared = alignment.similarity.inverse();
+    let carry = |camera: &CameraPose| match how {
+        Carry::Similarity => to_prepared.apply(camera),
+        Carry::NearestFrame => {
+            let id = nearest_frame(&true_track, &shared, camera);
+            moved_like(
+                &track.poses[&id],
+                &true_track.poses[&id],
+                camera,
+                to_prepared.scale,
+            )
+        }
+    };
     let train_path = prepared.join(Split::Train.file_name());
     let train = TransformsFile::load(&train_path)?;
     if (train.focal_len - true_track.focal as f32).abs() > 1e-3 {
@@ -54,7 +85,7 @@ pub fn carry_held_out(truth: &Path, prepared: &Path) -> Result<Vec<Split>> {
         }
         let mut held = TransformsFile::load(&path)?;
         for f in &mut held.frames {
-            let moved = to_prepared.apply(&CameraPose::from_rows(&f.transform_matrix));
+            let moved = carry(&CameraPose::from_rows(&f.transform_matrix));
             f.transform_matrix = moved.to_rows();
             copy_frame_files(truth, prepared, f.img_id)?;
         }
@@ -69,6 +100,38 @@ pub fn carry_held_out(truth: &Path, prepared: &Path) -> Result<Vec<Split>> {
         carried.push(split);
     }
     Ok(carried)
+}
+
+/// The recorded frame among `ids` whose true camera is nearest `camera`: the angle between
+/// the rotations (radians) plus the distance between the centres as a share of the
+/// frame's own distance from the origin. `ids` is not empty ([`align_prepared`] refuses).
+fn nearest_frame(truth: &Track, ids: &[i64], camera: &CameraPose) -> i64 {
+    let distance = |id: &i64| {
+        let p = &truth.poses[id];
+        let angle = rotation_angle_deg(p.rotation.transpose() * camera.rotation).to_radians();
+        angle + (p.centre - camera.centre).length() / p.centre.length().max(f64::MIN_POSITIVE)
+    };
+    ids.iter()
+        .copied()
+        .min_by(|a, b| distance(a).total_cmp(&distance(b)))
+        .unwrap_or_default()
+}
+
+/// `prepared` (a frame's prepared camera) moved as the true camera of the same frame,
+/// `true_from`, moves to `true_to`: the same rotation relative to the camera, and the same
+/// shift in the camera's own axes, times `scale` (true world lengths into prepared ones).
+pub fn moved_like(
+    prepared: &CameraPose,
+    true_from: &CameraPose,
+    true_to: &CameraPose,
+    scale: f64,
+) -> CameraPose {
+    let back = true_from.rotation.transpose();
+    CameraPose {
+        rotation: prepared.rotation * back * true_to.rotation,
+        centre: prepared.centre
+            + prepared.rotation * (back * (true_to.centre - true_from.centre)) * scale,
+    }
 }
 
 /// Copies frame `id`'s image and parsing, and its `.lms` (made from the exact labels where

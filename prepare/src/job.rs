@@ -19,11 +19,14 @@ use crate::face::{FaceEnv, FaceOutput};
 use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{Part, background, head_rect, parse_frame, parsing_image};
 use crate::pose::{PoseConfig, TrackSummary, solve_track};
+use crate::resample::shrink_dataset;
 use crate::video::{self, Probe, Window};
 
 /// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
 /// since landmarks cannot tell the focal length.
 pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
+/// The largest size frames are analysed at by default (see [`PrepareJob::analysis_size`]).
+pub const ANALYSIS_MAX: u32 = 512;
 /// Frames the background median samples at most.
 const BACKGROUND_SAMPLES: usize = 150;
 /// AD-NeRF's split: the first 10/11 of the frames train, the rest are held out (`val`).
@@ -51,6 +54,10 @@ pub struct PrepareJob {
     /// Replace an existing output folder.
     pub force: bool,
     pub pose: PoseConfig,
+    /// Analyse the frames (landmarks, tracks, poses, masks, background) at this size, then
+    /// shrink the dataset to `size` ([`crate::resample`]). Default: the crop's side, at
+    /// most [`ANALYSIS_MAX`], and never below `size`.
+    pub analysis_size: Option<u32>,
 }
 
 /// Progress of a [`PrepareJob`].
@@ -70,6 +77,8 @@ pub enum Event {
 pub struct PrepareReport {
     pub video: String,
     pub size: u32,
+    /// The size the frames were analysed at before the dataset was shrunk to `size`.
+    pub analysed_at: u32,
     pub focal: f32,
     pub fps: f64,
     pub frames_read: usize,
@@ -116,6 +125,14 @@ impl PrepareJob {
         })
     }
 
+    /// The size frames are analysed at for a crop of `side` source pixels (see
+    /// [`PrepareJob::analysis_size`]).
+    pub fn analysis(&self, side: u32) -> u32 {
+        self.analysis_size
+            .unwrap_or(side.min(ANALYSIS_MAX))
+            .max(self.size)
+    }
+
     /// The focal length in output pixels.
     pub fn focal(&self) -> f32 {
         self.focal
@@ -144,9 +161,29 @@ pub fn run(
             "has no audio track: nldf learns the face from the voice",
         ));
     }
-    let window = job.window(&probe)?;
+    let side = job.window(&probe)?.crop[2];
+    let analysed_at = job.analysis(side);
+    let at = PrepareJob {
+        size: analysed_at,
+        focal: Some(focal * analysed_at as f32 / job.size as f32),
+        ..job.clone()
+    };
+    let window = at.window(&probe)?;
     let scratch = Scratch::new(&job.out, job.force)?;
-    let mut report = prepare_into(job, env, ffmpeg, &probe, &window, &scratch.dir, &mut events)?;
+    let mut report = prepare_into(&at, env, ffmpeg, &probe, &window, &scratch.dir, &mut events)?;
+    if analysed_at > job.size {
+        events(Event::Stage {
+            name: "shrinking",
+            total: None,
+        });
+        let t = Instant::now();
+        shrink_dataset(&scratch.dir, analysed_at, job.size)?;
+        report
+            .seconds
+            .push(("shrink".into(), t.elapsed().as_secs_f64()));
+        report.size = job.size;
+        report.focal = focal;
+    }
     report.total_seconds = started.elapsed().as_secs_f64();
     nldf_core::files::write_json(&scratch.dir.join("prepare.json"), &report)?;
     scratch.commit()?;
@@ -301,6 +338,7 @@ fn prepare_into(
     Ok(PrepareReport {
         video: job.video.display().to_string(),
         size,
+        analysed_at: size,
         focal: k.focal,
         fps: probe.fps,
         frames_read: n,
@@ -422,7 +460,7 @@ fn decode_to_jpegs(
     Ok(n)
 }
 
-fn save_jpeg(path: &Path, rgb: &[u8], size: u32) -> Result<()> {
+pub(crate) fn save_jpeg(path: &Path, rgb: &[u8], size: u32) -> Result<()> {
     let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
     let mut w = std::io::BufWriter::new(file);
     image::codecs::jpeg::JpegEncoder::new_with_quality(&mut w, 95)

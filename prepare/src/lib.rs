@@ -12,6 +12,8 @@
 //!   convention (head at the origin, the camera moving, OpenGL axes);
 //! - [`align`]: the similarity that maps one camera track onto another, and the errors left
 //!   after it (to compare a prepared dataset with the truth of a synthetic one);
+//! - [`resample`]: a dataset analysed at one size written out at a smaller one (landmarks
+//!   and tracks are finer in larger frames);
 //! - [`check`]: a prepared dataset scored against the synthetic scene it was made from.
 
 pub mod align;
@@ -23,6 +25,7 @@ pub mod job;
 pub mod lms68;
 pub mod parsing;
 pub mod pose;
+pub mod resample;
 pub mod tools;
 pub mod video;
 

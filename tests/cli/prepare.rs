@@ -137,6 +137,64 @@ fn prepare_turns_a_test_video_into_a_dataset_close_to_its_truth() {
     );
 }
 
+/// A dataset wanted smaller than the video is analysed at the video's size and shrunk: at
+/// `--size 64` from the 128-pixel test video its poses are those of the dataset prepared at
+/// 128, its landmarks and intrinsics half of theirs, its images 64 x 64.
+#[test]
+fn prepare_analyses_a_larger_video_at_its_own_size() {
+    if tools().is_none() {
+        return;
+    }
+    let c = clip();
+    let dir = scratch();
+    let prepared = |size: &str| {
+        let out = dir.path().join(format!("data{size}"));
+        nldf_ok(args(&[
+            "prepare",
+            "--video",
+            &s(&c.video),
+            "--out",
+            &s(&out),
+            "--size",
+            size,
+        ]));
+        out
+    };
+    let (big, small) = (prepared("128"), prepared("64"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(small.join("prepare.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["size"], 64, "{report}");
+    assert_eq!(report["analysed_at"], 128, "{report}");
+    for f in [
+        "bc.jpg",
+        "ori_imgs/3.jpg",
+        "head_imgs/3.jpg",
+        "parsing/3.png",
+    ] {
+        let img = nldf_core::image::ImageRgb::load(&small.join(f)).unwrap();
+        assert_eq!((img.width, img.height), (64, 64), "{f}");
+    }
+    for split in ["transforms_train.json", "transforms_val.json"] {
+        let b = nldf_core::dataset::TransformsFile::load(&big.join(split)).unwrap();
+        let t = nldf_core::dataset::TransformsFile::load(&small.join(split)).unwrap();
+        assert!((t.focal_len - 0.5 * b.focal_len).abs() < 1e-3, "{split}");
+        assert_eq!((t.cx, t.cy, t.width), (32.0, 32.0, Some(64)), "{split}");
+        assert_eq!(t.frames.len(), b.frames.len(), "{split}");
+        for (tf, bf) in t.frames.iter().zip(&b.frames) {
+            assert_eq!(tf.img_id, bf.img_id);
+            let same = (tf.transform_matrix.iter().flatten())
+                .zip(bf.transform_matrix.iter().flatten())
+                .all(|(a, b)| (a - b).abs() < 1e-5);
+            assert!(same, "{split} img_id {}: the pose moved", tf.img_id);
+        }
+    }
+    let lms = |d: &Path| nldf_core::landmarks::Landmarks::load(&d.join("ori_imgs/3.lms")).unwrap();
+    for (p, q) in lms(&small).points.iter().zip(&lms(&big).points) {
+        assert!((p[0] - 0.5 * q[0]).abs() < 1e-3 && (p[1] - 0.5 * q[1]).abs() < 1e-3);
+    }
+}
+
 /// Each broken video is refused in one line naming the file and what is wrong, and no
 /// dataset (nor its scratch folder) is left behind.
 #[test]

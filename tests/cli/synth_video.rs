@@ -162,3 +162,64 @@ fn synth_video_with_an_odd_size_or_a_folder_is_refused() {
         &[&scene],
     );
 }
+
+/// `--render-size` renders the scene at the larger size and shrinks it: every split's
+/// images are the larger render filtered down (close to its 2 x 2 block means), the labels
+/// are labels of the block they sit in, and the intrinsics, in the transforms files and in
+/// `scene.json`, are halved; the shrunk scene loads as a dataset with all its splits.
+#[test]
+fn synth_render_size_shrinks_a_larger_render() {
+    let dir = scratch();
+    let scene = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let o = s(&out);
+        let mut a = vec!["synth", "--out", &o, "--seconds", "1", "--supersample", "1"];
+        a.extend_from_slice(extra);
+        nldf_ok(args(&a));
+        out
+    };
+    let big = scene("big", &["--size", "64"]);
+    let small = scene("small", &["--size", "32", "--render-size", "64"]);
+    let ds = nldf_core::dataset::Dataset::load(&small).unwrap();
+    assert!(!ds.train.is_empty() && !ds.val.is_empty());
+    for split in ["train", "val", "novel", "voice", "sweep"] {
+        let file = format!("transforms_{split}.json");
+        let b = nldf_core::dataset::TransformsFile::load(&big.join(&file)).unwrap();
+        let t = nldf_core::dataset::TransformsFile::load(&small.join(&file)).unwrap();
+        assert!((t.focal_len - 0.5 * b.focal_len).abs() < 1e-4, "{file}");
+        assert_eq!((t.cx, t.width), (16.0, Some(32)), "{file}");
+        let id = t.frames[0].img_id;
+        let img = |d: &Path, sub: &str| ImageRgb::load(&d.join(format!("{sub}/{id}.png"))).unwrap();
+        let (shrunk, render) = (img(&small, "head_imgs"), img(&big, "head_imgs"));
+        assert_eq!((shrunk.width, shrunk.height), (32, 32));
+        let block = render.downscaled(2);
+        let mse = (shrunk.data.iter().zip(&block.data))
+            .map(|(a, b)| ((a - b) as f64).powi(2))
+            .sum::<f64>()
+            / block.data.len() as f64;
+        let psnr = -10.0 * mse.log10();
+        assert!(
+            psnr > 30.0,
+            "{file} img_id {id}: {psnr:.1} dB from the block means"
+        );
+        let (labels, full) = (img(&small, "regions"), img(&big, "regions"));
+        for y in 0..32u32 {
+            for x in 0..32u32 {
+                let l = labels.get(x, y);
+                let seen = (0..4).any(|k| full.get(2 * x + k % 2, 2 * y + k / 2) == l);
+                assert!(
+                    seen,
+                    "{file} img_id {id}: label ({x}, {y}) is not of its block"
+                );
+            }
+        }
+    }
+    let json = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("scene.json")).unwrap()).unwrap()
+    };
+    let (sb, ss) = (json(&big), json(&small));
+    assert_eq!(ss["intrinsics"]["width"], 32);
+    assert_eq!(ss["config"]["size"], 32);
+    let half = 0.5 * sb["intrinsics"]["focal"].as_f64().unwrap();
+    assert!((ss["intrinsics"]["focal"].as_f64().unwrap() - half).abs() < 1e-4);
+}

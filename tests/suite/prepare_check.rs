@@ -15,7 +15,7 @@ use nldf_core::region::Region;
 use nldf_core::synth::{HeadStyle, SynthConfig, generate, truth_labels_dir};
 use nldf_prepare::align::{CameraPose, Similarity};
 use nldf_prepare::check::{PrepareScores, score_prepared};
-use nldf_prepare::held_out::carry_held_out;
+use nldf_prepare::held_out::{Carry, carry_held_out};
 use nldf_tests::assert_one_line_naming;
 
 /// The frame the fake prepared dataset drops.
@@ -258,8 +258,8 @@ fn broken_prepared_files_are_one_line_errors_naming_the_file() {
     assert_one_line_naming(&truncated, "parsing/20.png");
 }
 
-/// The held-out splits carried into a prepared dataset: each camera is the scene's seen
-/// through the prepared world's similarity, each frame has its image, parsing and `.lms`
+/// The held-out splits carried into a prepared dataset whose poses are exact up to the
+/// similarity: either way each camera is the scene's seen through that similarity, each frame has its image, parsing and `.lms`
 /// (drawn from the exact labels for the standard head), the voice split its audio; a
 /// dataset prepared at another focal length is refused, naming the flag.
 #[test]
@@ -268,27 +268,10 @@ fn held_out_splits_carried_into_a_prepared_dataset_follow_its_world() {
         let dir = tempfile::tempdir().unwrap();
         let prepared = dir.path().join("prepared");
         fake_prepared(truth(head), &prepared, head);
-        let carried = carry_held_out(truth(head), &prepared).unwrap();
-        assert_eq!(carried, [Split::Novel, Split::Voice, Split::Sweep]);
-        let inv = hidden().inverse();
-        for split in carried {
-            let want = TransformsFile::load(&truth(head).join(split.file_name())).unwrap();
-            let got = TransformsFile::load(&prepared.join(split.file_name())).unwrap();
-            assert_eq!(got.frames.len(), want.frames.len());
-            for (g, w) in got.frames.iter().zip(&want.frames) {
-                let expect = inv.apply(&CameraPose::from_rows(&w.transform_matrix));
-                let have = CameraPose::from_rows(&g.transform_matrix);
-                assert!((have.centre - expect.centre).length() < 1e-5, "{split:?}");
-                assert!(
-                    have.rotation.abs_diff_eq(expect.rotation, 1e-5),
-                    "{split:?}"
-                );
-                let id = g.img_id;
-                for f in [format!("head_imgs/{id}.png"), format!("parsing/{id}.png")] {
-                    assert!(prepared.join(&f).is_file(), "{f}");
-                }
-                Landmarks::load(&prepared.join(format!("ori_imgs/{id}.lms"))).unwrap();
-            }
+        for how in [Carry::NearestFrame, Carry::Similarity] {
+            let carried = carry_held_out(truth(head), &prepared, how).unwrap();
+            assert_eq!(carried, [Split::Novel, Split::Voice, Split::Sweep]);
+            assert_carried_exactly(truth(head), &prepared, &carried);
         }
         assert!(prepared.join("voice/aud.wav").is_file());
     }
@@ -299,7 +282,119 @@ fn held_out_splits_carried_into_a_prepared_dataset_follow_its_world() {
     let mut t = TransformsFile::load(&path).unwrap();
     t.focal_len *= 1.1;
     t.save(&path).unwrap();
-    let e = carry_held_out(truth(HeadStyle::Second), &prepared).unwrap_err();
+    let e = carry_held_out(truth(HeadStyle::Second), &prepared, Carry::NearestFrame).unwrap_err();
     assert_one_line_naming(&e.to_string(), "transforms_train.json");
     assert_one_line_naming(&e.to_string(), "--focal");
+}
+
+/// Each carried camera of `splits` is the truth's seen through [`hidden`]'s inverse, and
+/// each frame has its image, parsing and `.lms`.
+fn assert_carried_exactly(scene: &Path, prepared: &Path, splits: &[Split]) {
+    let inv = hidden().inverse();
+    for &split in splits {
+        let want = TransformsFile::load(&scene.join(split.file_name())).unwrap();
+        let got = TransformsFile::load(&prepared.join(split.file_name())).unwrap();
+        assert_eq!(got.frames.len(), want.frames.len());
+        for (g, w) in got.frames.iter().zip(&want.frames) {
+            let expect = inv.apply(&CameraPose::from_rows(&w.transform_matrix));
+            let have = CameraPose::from_rows(&g.transform_matrix);
+            assert!((have.centre - expect.centre).length() < 1e-5, "{split:?}");
+            assert!(
+                have.rotation.abs_diff_eq(expect.rotation, 1e-5),
+                "{split:?}"
+            );
+            let id = g.img_id;
+            for f in [format!("head_imgs/{id}.png"), format!("parsing/{id}.png")] {
+                assert!(prepared.join(&f).is_file(), "{f}");
+            }
+            Landmarks::load(&prepared.join(format!("ori_imgs/{id}.lms"))).unwrap();
+        }
+    }
+}
+
+/// With the prepared poses of the held-out frames nudged off the similarity, a `voice`
+/// frame carried from its nearest frame gets the nudged prepared pose of the recorded frame
+/// it repeats, and a `closer` or `farther` view that pose moved along its own axis; carried
+/// by the similarity, the nudge shows as an error instead.
+#[test]
+fn nearest_frame_carry_starts_from_the_prepared_pose_of_the_frame_it_repeats() {
+    let head = HeadStyle::Standard;
+    let dir = tempfile::tempdir().unwrap();
+    let prepared = dir.path().join("prepared");
+    fake_prepared(truth(head), &prepared, head);
+    let val_path = prepared.join(Split::Val.file_name());
+    let mut val = TransformsFile::load(&val_path).unwrap();
+    let nudge = DMat3::from_axis_angle(DVec3::new(1.0, -0.5, 0.3).normalize(), 0.03);
+    for f in &mut val.frames {
+        let mut p = CameraPose::from_rows(&f.transform_matrix);
+        p.rotation *= nudge;
+        p.centre += DVec3::new(0.004, -0.003, 0.002);
+        f.transform_matrix = p.to_rows();
+    }
+    val.save(&val_path).unwrap();
+    let nudged: Vec<(i64, CameraPose)> = (val.frames.iter())
+        .map(|f| (f.img_id, CameraPose::from_rows(&f.transform_matrix)))
+        .collect();
+    let true_val = TransformsFile::load(&truth(head).join(Split::Val.file_name())).unwrap();
+    let source_of = |camera: &CameraPose| -> Option<CameraPose> {
+        let f = true_val.frames.iter().find(|f| {
+            let p = CameraPose::from_rows(&f.transform_matrix);
+            p.rotation.abs_diff_eq(camera.rotation, 1e-6)
+        })?;
+        (nudged.iter().find(|(id, _)| *id == f.img_id)).map(|(_, p)| *p)
+    };
+    let mut by_similarity_off = 0.0f64;
+    for how in [Carry::NearestFrame, Carry::Similarity] {
+        carry_held_out(truth(head), &prepared, how).unwrap();
+        let voice_truth =
+            TransformsFile::load(&truth(head).join(Split::Voice.file_name())).unwrap();
+        let voice = TransformsFile::load(&prepared.join(Split::Voice.file_name())).unwrap();
+        let mut checked = 0;
+        for (t, g) in voice_truth.frames.iter().zip(&voice.frames) {
+            let want = source_of(&CameraPose::from_rows(&t.transform_matrix))
+                .expect("a voice frame repeats a held-out frame's pose");
+            let got = CameraPose::from_rows(&g.transform_matrix);
+            let off = (got.centre - want.centre).length()
+                + (got.rotation - want.rotation)
+                    .to_cols_array()
+                    .iter()
+                    .map(|v| v.abs())
+                    .sum::<f64>();
+            match how {
+                Carry::NearestFrame => assert!(off < 1e-5, "voice img_id {}: {off}", g.img_id),
+                Carry::Similarity => by_similarity_off = by_similarity_off.max(off),
+            }
+            checked += 1;
+        }
+        assert!(checked > 0);
+        if how == Carry::NearestFrame {
+            let novel_truth =
+                TransformsFile::load(&truth(head).join(Split::Novel.file_name())).unwrap();
+            let novel = TransformsFile::load(&prepared.join(Split::Novel.file_name())).unwrap();
+            let mut dollies = 0;
+            for (t, g) in novel_truth.frames.iter().zip(&novel.frames) {
+                let Some(from) = source_of(&CameraPose::from_rows(&t.transform_matrix)) else {
+                    continue;
+                };
+                let got = CameraPose::from_rows(&g.transform_matrix);
+                assert!(
+                    got.rotation.abs_diff_eq(from.rotation, 1e-5),
+                    "img_id {}",
+                    g.img_id
+                );
+                let shift = from.rotation.transpose() * (got.centre - from.centre);
+                assert!(
+                    shift.x.abs() + shift.y.abs() < 1e-5 * (1.0 + shift.z.abs()),
+                    "{shift}"
+                );
+                assert!(shift.z.abs() > 1e-3, "img_id {}: not moved", g.img_id);
+                dollies += 1;
+            }
+            assert!(dollies > 0, "no closer or farther view found");
+        }
+    }
+    assert!(
+        by_similarity_off > 1e-3,
+        "the similarity hid the nudge: {by_similarity_off}"
+    );
 }
