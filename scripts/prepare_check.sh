@@ -2,13 +2,13 @@
 # nldf prepare on the test videos with known truth: both synthetic heads at 128 and 512,
 # turning up to 20 degrees (the default scene turns up to 12), 12 s each. Each scene and its
 # MP4 are made once into WORK; every prepared dataset is scored against its scene by
-# `nldf bench prepare`, whose JSON and table go to OUT (default results/prepare). Then each
+# `nldf bench prepare`, whose JSON and table go to OUT (default results/prepare/videos). Then each
 # 512 video again as a 128 dataset, scored against the 128 scene.
 # Usage: scripts/prepare_check.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_check.sh WORK [OUT]}
-out=${2:-results/prepare}
+out=${2:-results/prepare/videos}
 mkdir -p "$work" "$out"
 nldf=target/release/nldf
 cargo build --release --quiet --bin nldf

@@ -20,6 +20,7 @@ pub mod align;
 pub mod check;
 pub mod error;
 pub mod face;
+pub(crate) mod frames;
 pub mod held_out;
 pub mod job;
 pub mod lms68;

@@ -165,7 +165,7 @@ fn resize_file(path: &Path, size: u32, kind: Kind) -> Result<()> {
             };
             let small = image::imageops::resize(&img.to_rgb8(), size, size, filter);
             if path.extension().is_some_and(|e| e == "jpg") {
-                return crate::job::save_jpeg(path, small.as_raw(), size);
+                return crate::frames::save_jpeg(path, small.as_raw(), size);
             }
             small.save(path)
         }

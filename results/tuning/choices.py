@@ -49,8 +49,8 @@ def model(rel, label):
 
 def run(folder, label, what, splits=SPLITS, pattern="metrics_{}.json"):
     """A model's scores on each split, from FOLDER/metrics_<split>.json (or PATTERN)."""
-    names = pattern.format("{" + ",".join(splits) + "}")
-    out = {"what": what, "files": f"{folder}/{names}", "label": label}
+    files = [f"{folder}/{pattern.format(s)}" for s in splits]
+    out = {"what": what, "files": "; ".join(files), "label": label}
     for key, name in (("head_psnr", "head_psnr"), ("mouth_psnr", "mouth_psnr"), ("repainted_pct", "repainted")):
         out[key] = {}
         for s in splits:

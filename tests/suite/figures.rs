@@ -458,6 +458,24 @@ fn source_path(cell: &str) -> Option<String> {
 /// The problems of the tables of Markdown text `text` (the file `name` in folder `dir`),
 /// one line each, and how many figures were checked.
 fn check_text(text: &str, dir: &Path, name: &str) -> (Vec<String>, usize) {
+    let (problems, checked, _) = check_text_reading(text, dir, name);
+    (problems, checked)
+}
+
+/// The files whose values the tables of every checked page print (README.md, the model
+/// card, docs/): the results the figures check holds the pages to.
+pub(crate) fn files_read() -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for f in checked_files() {
+        let text = std::fs::read_to_string(&f).unwrap_or_default();
+        let (_, _, read) = check_text_reading(&text, f.parent().unwrap(), "");
+        files.extend(read);
+    }
+    files
+}
+
+/// [`check_text`], with the files it read.
+fn check_text_reading(text: &str, dir: &Path, name: &str) -> (Vec<String>, usize, Vec<PathBuf>) {
     let mut problems = Vec::new();
     let mut checked = 0;
     let mut docs: std::collections::HashMap<PathBuf, Result<Doc, String>> = Default::default();
@@ -583,7 +601,7 @@ fn check_text(text: &str, dir: &Path, name: &str) -> (Vec<String>, usize) {
             }
         }
     }
-    (problems, checked)
+    (problems, checked, docs.into_keys().collect())
 }
 
 /// README.md, the shipped model's card and every Markdown page under docs/.

@@ -18,6 +18,7 @@ mod metrics;
 mod posed;
 mod prepare_check;
 mod rendering;
+mod results_cited;
 mod shipped;
 mod stress;
 mod student;
