@@ -10,8 +10,8 @@ use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::posed::PosedJob;
 
+use crate::presets::StudentPreset;
 use crate::progress::{EventPrinter, stop_flag};
-use crate::train_cmd::StudentDepth;
 
 #[derive(clap::Args, Debug)]
 pub struct AblateArgs {
@@ -25,14 +25,14 @@ pub struct AblateArgs {
     #[arg(long, default_value_t = 1000)]
     pub iters: usize,
     /// Depth of the distillation and pool comparisons (Tables 1 and 2).
-    #[arg(long, value_enum, default_value_t = StudentDepth::D88)]
-    pub depth: StudentDepth,
+    #[arg(long, value_enum, default_value_t = StudentPreset::D88)]
+    pub depth: StudentPreset,
     /// Hidden width of every variant (the paper: 256).
     #[arg(long)]
     pub width: Option<usize>,
     /// Depths of Table 3.
-    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [StudentDepth::D28, StudentDepth::D50, StudentDepth::D88])]
-    pub depths: Vec<StudentDepth>,
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [StudentPreset::D28, StudentPreset::D50, StudentPreset::D88])]
+    pub depths: Vec<StudentPreset>,
     /// Skip the wall-time-matched pixels-only student.
     #[arg(long)]
     pub no_wall_time: bool,
@@ -57,20 +57,20 @@ pub struct AblateArgs {
 }
 
 /// The name of a depth in folder names and tables.
-fn depth_name(d: StudentDepth) -> String {
+fn depth_name(d: StudentPreset) -> String {
     match d {
-        StudentDepth::D28 => "28".to_string(),
-        StudentDepth::D50 => "50".to_string(),
-        StudentDepth::D88 => "88".to_string(),
-        StudentDepth::D28W128 => "28x128".to_string(),
-        StudentDepth::Realtime => "realtime".to_string(),
-        StudentDepth::Tiny => "tiny".to_string(),
+        StudentPreset::D28 => "28".to_string(),
+        StudentPreset::D50 => "50".to_string(),
+        StudentPreset::D88 => "88".to_string(),
+        StudentPreset::D28W128 => "28x128".to_string(),
+        StudentPreset::Realtime => "realtime".to_string(),
+        StudentPreset::Tiny => "tiny".to_string(),
     }
 }
 
 /// Runs `nldf ablate`.
 pub fn run(args: AblateArgs) -> Result<()> {
-    let shape = |d: StudentDepth| {
+    let shape = |d: StudentPreset| {
         let mut cfg = d.config();
         if let Some(w) = args.width {
             cfg.width = w;

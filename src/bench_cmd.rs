@@ -6,13 +6,14 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Subcommand;
-use nldf_bench::Written;
+
+use crate::bench_common::{LoadArgs, TimingArgs, print_written};
 use nldf_bench::encoding::EncodingJob;
 use nldf_bench::step::{StudentStepJob, TeacherStepJob};
 use nldf_bench::web::WebBenchJob;
 
+use crate::presets::TeacherPreset;
 use crate::progress::EventPrinter;
-use crate::train_cmd::TeacherPreset;
 
 #[derive(Subcommand, Debug)]
 pub enum BenchCommand {
@@ -96,40 +97,6 @@ impl From<CarryBy> for nldf_prepare::held_out::Carry {
             CarryBy::Similarity => Self::Similarity,
         }
     }
-}
-
-/// When a benchmark may run: the machine's load at the start.
-#[derive(clap::Args, Debug, Clone, Copy)]
-pub struct LoadArgs {
-    /// Refuse to run when the one-minute load average (/proc/loadavg) at the start is above
-    /// this; the default allows half a core of other work on a 2-core machine.
-    #[arg(long, default_value_t = nldf_bench::load::DEFAULT_MAX_LOAD)]
-    pub max_load: f64,
-    /// Run even when the load is above --max-load; the results say "forced at load X".
-    #[arg(long)]
-    pub force: bool,
-}
-
-impl LoadArgs {
-    /// The benchmark's load gate.
-    pub fn gate(&self) -> nldf_bench::load::LoadGate {
-        nldf_bench::load::LoadGate {
-            max_load: self.max_load,
-            force: self.force,
-        }
-    }
-}
-
-/// How a benchmark with speed ratios repeats its timings, and when it may run.
-#[derive(clap::Args, Debug, Clone, Copy)]
-pub struct TimingArgs {
-    /// Interleaved rounds (A B A B ...) behind every speed ratio: each round gives one ratio,
-    /// and the median with the smallest and largest is reported ("no difference" where they
-    /// reach 1.0).
-    #[arg(long, default_value_t = nldf_bench::repeats::DEFAULT_PAIRS)]
-    pub pairs: usize,
-    #[command(flatten)]
-    pub load: LoadArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -240,8 +207,8 @@ pub struct StudentStepArgs {
     #[arg(long)]
     pub data: Option<PathBuf>,
     /// Student depth.
-    #[arg(long, value_enum, default_value_t = crate::train_cmd::StudentDepth::D88)]
-    pub depth: crate::train_cmd::StudentDepth,
+    #[arg(long, value_enum, default_value_t = crate::presets::StudentPreset::D88)]
+    pub depth: crate::presets::StudentPreset,
     /// Rays per step (the pool adds hard_ratio x this).
     #[arg(long, default_value_t = 4096)]
     pub rays: usize,
@@ -368,19 +335,6 @@ fn prepare_table(report: &nldf_prepare::check::ScoreReport) -> String {
         p.rotation_deg
     );
     s
-}
-
-/// Prints a benchmark's Markdown and the files it wrote.
-pub fn print_written(written: &Written) {
-    print!("{}", written.markdown);
-    println!(
-        "wrote {} and {}",
-        written.json.display(),
-        written.md.display()
-    );
-    for plot in &written.plots {
-        println!("wrote {}", plot.display());
-    }
 }
 
 fn web(args: WebBenchArgs) -> Result<()> {

@@ -9,7 +9,7 @@ use nldf_bench::still::StillBenchJob;
 use nldf_bench::stream::StreamBenchJob;
 use nldf_infer::backend::BackendOptions;
 
-use crate::bench_cmd::print_written;
+use crate::bench_common::print_written;
 use crate::progress::EventPrinter;
 
 #[derive(clap::Args, Debug)]
@@ -30,7 +30,7 @@ pub struct RenderBenchArgs {
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
     #[command(flatten)]
-    pub timing: crate::bench_cmd::TimingArgs,
+    pub timing: crate::bench_common::TimingArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -60,7 +60,7 @@ pub struct StreamBenchArgs {
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
     #[command(flatten)]
-    pub load: crate::bench_cmd::LoadArgs,
+    pub load: crate::bench_common::LoadArgs,
 }
 
 #[derive(clap::Args, Debug)]
@@ -91,7 +91,7 @@ pub struct StillBenchArgs {
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
     #[command(flatten)]
-    pub timing: crate::bench_cmd::TimingArgs,
+    pub timing: crate::bench_common::TimingArgs,
 }
 
 /// Runs `nldf bench render`.

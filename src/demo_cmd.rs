@@ -34,8 +34,8 @@ pub struct DemoArgs {
     #[command(flatten)]
     pub stages: StageArgs,
     /// Student shape: the real-time preset (16 x 128, K = 8) renders in real time.
-    #[arg(long, value_enum, default_value_t = crate::train_cmd::StudentDepth::Realtime)]
-    pub student_depth: crate::train_cmd::StudentDepth,
+    #[arg(long, value_enum, default_value_t = crate::presets::StudentPreset::Realtime)]
+    pub student_depth: crate::presets::StudentPreset,
     /// Train the student on the recorded pixels alone, without the teacher (the
     /// comparison: it breaks up beyond the recorded poses). By default it is distilled
     /// from the teacher with pseudo views at poses the recording lacks.

@@ -54,7 +54,7 @@ pub struct FrontierArgs {
     #[arg(long, default_value_t = 8)]
     pub timed_frames: usize,
     #[command(flatten)]
-    pub load: crate::bench_cmd::LoadArgs,
+    pub load: crate::bench_common::LoadArgs,
 }
 
 /// Runs `nldf bench frontier`.

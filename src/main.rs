@@ -2,6 +2,7 @@
 
 mod ablate_cmd;
 mod bench_cmd;
+mod bench_common;
 mod bench_model_cmd;
 mod demo_cmd;
 mod doctor_cmd;
@@ -10,6 +11,7 @@ mod export_cmd;
 mod features_cmd;
 mod frontier_cmd;
 mod prepare_cmd;
+mod presets;
 mod progress;
 mod render_cmd;
 mod synth_cmd;

@@ -10,6 +10,7 @@ use nldf_train::job::JobEvent;
 use nldf_train::job::student::{PseudoSettings, StudentJob, StudentSource};
 use nldf_train::job::teacher::{TeacherJob, TeacherSource};
 
+use crate::presets::{StudentPreset, TeacherPreset};
 use crate::progress::{EventPrinter, stop_flag};
 
 /// `nldf train`: one stage with a subcommand, or with `--data DIR --run RUN` the whole
@@ -77,43 +78,6 @@ pub struct UpsamplerArgs {
     pub iters: Option<usize>,
 }
 
-/// Student depths of the paper's Table 3 (width 256), plus a tiny one for smoke runs.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StudentDepth {
-    #[value(name = "28")]
-    D28,
-    #[value(name = "50")]
-    D50,
-    #[value(name = "88")]
-    D88,
-    /// 28 layers at width 128: about three times the steps of 28 x 256 in the same time,
-    /// and the demo's student.
-    #[value(name = "28x128")]
-    D28W128,
-    /// 16 x 128 with K = 8 beam points: the real-time preset, and the demo's student.
-    Realtime,
-    /// 6 x 32 with 4 beam points: tests and smoke runs.
-    Tiny,
-}
-
-impl StudentDepth {
-    /// The preset's network configuration.
-    pub fn config(self) -> nldf_train::student::StudentConfig {
-        use nldf_train::student::StudentConfig;
-        match self {
-            StudentDepth::D28 => StudentConfig::paper_d28(),
-            StudentDepth::D50 => StudentConfig::paper_d50(),
-            StudentDepth::D88 => StudentConfig::paper_d88(),
-            StudentDepth::D28W128 => StudentConfig {
-                width: 128,
-                ..StudentConfig::paper_d28()
-            },
-            StudentDepth::Realtime => StudentConfig::realtime(),
-            StudentDepth::Tiny => StudentConfig::tiny(),
-        }
-    }
-}
-
 #[derive(clap::Args, Debug, Clone)]
 pub struct StudentArgs {
     /// Dataset folder the teacher was trained on.
@@ -128,7 +92,7 @@ pub struct StudentArgs {
     /// of `nldf demo` and `nldf train --data`): the real-time 16 x 128 student distilled with
     /// 600 pseudo views at twice the recorded pose range, 4500 steps.
     #[arg(long, value_enum)]
-    pub depth: Option<StudentDepth>,
+    pub depth: Option<StudentPreset>,
     /// Hidden width (overrides the preset's 256).
     #[arg(long)]
     pub width: Option<usize>,
@@ -168,17 +132,6 @@ pub struct StudentArgs {
     /// Continue the student from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
-}
-
-/// Teacher presets.
-#[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub enum TeacherPreset {
-    /// 6 x 128, 32 samples inside the head's bounds: for 2-core machines.
-    Small,
-    /// AD-NeRF's 8 x 256 with 64 + 128 samples.
-    AdNerf,
-    /// 2 x 32, for tests and smoke runs.
-    Tiny,
 }
 
 #[derive(clap::Args, Debug)]
@@ -236,18 +189,6 @@ impl AudioFeaturesArg {
     }
 }
 
-impl TeacherPreset {
-    /// The preset's network configuration.
-    pub fn config(self) -> nldf_train::config::TeacherConfig {
-        use nldf_train::config::TeacherConfig;
-        match self {
-            TeacherPreset::Small => TeacherConfig::small(),
-            TeacherPreset::AdNerf => TeacherConfig::ad_nerf(),
-            TeacherPreset::Tiny => TeacherConfig::tiny(),
-        }
-    }
-}
-
 /// Runs `nldf train`.
 pub fn run(args: TrainArgs) -> Result<()> {
     match args.command {
@@ -301,7 +242,7 @@ impl StudentArgs {
                 StudentSource::Config(Box::new(cfg))
             }
             None => {
-                let mut model = self.depth.unwrap_or(StudentDepth::D88).config();
+                let mut model = self.depth.unwrap_or(StudentPreset::D88).config();
                 if let Some(w) = self.width {
                     model.width = w;
                 }

@@ -1,4 +1,5 @@
-//! Layering: the module graphs of `nldf-core`, `nldf-train` and `nldf-infer` have no cycle.
+//! Layering: the module graph of every crate (core, prepare, export, train, infer, bench and
+//! the command line) has no cycle.
 //!
 //! Each `*.rs` file under a crate's `src/` is a module (`mod.rs` is its folder's module,
 //! `lib.rs` the crate root). A module depends on another that it names in a path:
@@ -13,7 +14,15 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The crates checked: their source folders, relative to the workspace root.
-const SOURCE_DIRS: [&str; 4] = ["core/src", "prepare/src", "train/src", "infer/src"];
+const SOURCE_DIRS: [&str; 7] = [
+    "core/src",
+    "prepare/src",
+    "export/src",
+    "train/src",
+    "infer/src",
+    "bench/src",
+    "src",
+];
 
 /// Every `*.rs` file under `dir` with its text, by its path relative to `dir`.
 fn rust_files(dir: &Path) -> BTreeMap<PathBuf, String> {
@@ -34,7 +43,7 @@ fn rust_files(dir: &Path) -> BTreeMap<PathBuf, String> {
 }
 
 /// The module a file holds: `synth/splits.rs` is `synth::splits`, `synth/mod.rs` is
-/// `synth`, `lib.rs` the root (empty).
+/// `synth`, `lib.rs` (or a binary's `main.rs`) the root (empty).
 fn module_of(rel: &Path) -> Vec<String> {
     let mut parts: Vec<String> = rel
         .iter()
@@ -42,7 +51,7 @@ fn module_of(rel: &Path) -> Vec<String> {
         .collect();
     let file = parts.pop().unwrap_or_default();
     let stem = file.trim_end_matches(".rs");
-    if stem != "mod" && stem != "lib" {
+    if stem != "mod" && stem != "lib" && stem != "main" {
         parts.push(stem.to_string());
     }
     parts

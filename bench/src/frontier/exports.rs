@@ -11,7 +11,7 @@ use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::student_trainer::StudentModel;
 
 use super::points::OnnxPoint;
-use super::{PRECISIONS, precision_name};
+use super::shared::{PRECISIONS, precision_name};
 use crate::error::{Error, Result, chain, create_dir};
 
 /// One student exported in one precision.

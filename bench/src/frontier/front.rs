@@ -9,7 +9,7 @@ use nldf_train::plot::FrontierDot;
 use serde::Serialize;
 
 use super::points::{OnnxPoint, Timed};
-use super::precision_name;
+use super::shared::precision_name;
 use crate::repeats::Ratio;
 
 /// Scores of one point on one split.

@@ -13,8 +13,8 @@ use nldf_train::job::{JobEvent, OnEvent};
 use super::exports::{Export, open_point};
 use super::front::{Point, Times, mark_front, score};
 use super::points::Timed;
+use super::shared::{FrontierJob, THREADS, eval_counted};
 use super::timing::time_back_to_back;
-use super::{FrontierJob, THREADS, eval_counted};
 use crate::error::{Error, Result};
 
 /// The teacher and every export in onnxruntime on the `val` frames of `dir` (the same scene

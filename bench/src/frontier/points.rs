@@ -15,7 +15,7 @@ use nldf_train::data::TrainData;
 use nldf_train::eval::FrameModel;
 use nldf_train::teacher_trainer::TeacherModel;
 
-use super::precision_name;
+use super::shared::precision_name;
 
 /// An exported student in one runtime, rendering whole frames and timing each.
 pub(crate) struct OnnxPoint {

@@ -10,8 +10,8 @@ use nldf_train::bench::Machine;
 use nldf_train::plot::plot_frontier;
 use serde::Serialize;
 
-use super::THREADS;
 use super::front::{Point, SpeedUp, dots_of, head_dots_of};
+use super::shared::THREADS;
 use crate::error::Result;
 use crate::repeats::{Ratio, cell};
 use crate::report::Written;

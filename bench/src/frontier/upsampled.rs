@@ -32,7 +32,7 @@ use serde::Serialize;
 use super::exports::{Export, open_point};
 use super::front::{SplitScore, paired_ratio, score};
 use super::points::{OnnxPoint, Timed};
-use super::{THREADS, eval_split, precision_name};
+use super::shared::{THREADS, eval_split, precision_name};
 use crate::error::{Error, Result, create_dir};
 use crate::load::LoadGate;
 use crate::repeats::{Ratio, cell};

@@ -1,0 +1,62 @@
+//! The network presets the commands offer (`--preset`, `--depth`, `--student-depth`).
+
+/// Teacher presets.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum TeacherPreset {
+    /// 6 x 128, 32 samples inside the head's bounds: for 2-core machines.
+    Small,
+    /// AD-NeRF's 8 x 256 with 64 + 128 samples.
+    AdNerf,
+    /// 2 x 32, for tests and smoke runs.
+    Tiny,
+}
+
+impl TeacherPreset {
+    /// The preset's network configuration.
+    pub fn config(self) -> nldf_train::config::TeacherConfig {
+        use nldf_train::config::TeacherConfig;
+        match self {
+            TeacherPreset::Small => TeacherConfig::small(),
+            TeacherPreset::AdNerf => TeacherConfig::ad_nerf(),
+            TeacherPreset::Tiny => TeacherConfig::tiny(),
+        }
+    }
+}
+
+/// Student presets: the paper's depths of Table 3 (width 256), nldf's own, and a tiny one
+/// for smoke runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StudentPreset {
+    #[value(name = "28")]
+    D28,
+    #[value(name = "50")]
+    D50,
+    #[value(name = "88")]
+    D88,
+    /// 28 layers at width 128: about three times the steps of 28 x 256 in the same time,
+    /// and the demo's student.
+    #[value(name = "28x128")]
+    D28W128,
+    /// 16 x 128 with K = 8 beam points: the real-time preset, and the demo's student.
+    Realtime,
+    /// 6 x 32 with 4 beam points: tests and smoke runs.
+    Tiny,
+}
+
+impl StudentPreset {
+    /// The preset's network configuration.
+    pub fn config(self) -> nldf_train::student::StudentConfig {
+        use nldf_train::student::StudentConfig;
+        match self {
+            StudentPreset::D28 => StudentConfig::paper_d28(),
+            StudentPreset::D50 => StudentConfig::paper_d50(),
+            StudentPreset::D88 => StudentConfig::paper_d88(),
+            StudentPreset::D28W128 => StudentConfig {
+                width: 128,
+                ..StudentConfig::paper_d28()
+            },
+            StudentPreset::Realtime => StudentConfig::realtime(),
+            StudentPreset::Tiny => StudentConfig::tiny(),
+        }
+    }
+}
