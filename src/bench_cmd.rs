@@ -130,7 +130,7 @@ pub struct UpsamplerBenchArgs {
 }
 
 fn upsampler(args: UpsamplerBenchArgs) -> Result<()> {
-    use nldf_bench::frontier::upsampled::{UpsamplerBench, default_out};
+    use nldf_bench::frontier::upsampler_bench::{UpsamplerBench, default_out};
     use nldf_core::dataset::Split;
     let splits: Vec<Split> = if args.splits.is_empty() {
         vec![Split::Val, Split::Novel, Split::Voice]

@@ -316,7 +316,7 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     let mut cfg: UpsamplerRunConfig = match &args.config {
         Some(path) => nldf_train::config::read_config(path)?,
         None => UpsamplerRunConfig {
-            model: nldf_core::upsampler_shape::UpsamplerConfig::with_factor(args.factor),
+            model: nldf_core::upsampler_config::UpsamplerConfig::with_factor(args.factor),
             ..UpsamplerRunConfig::default()
         },
     };

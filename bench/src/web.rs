@@ -15,7 +15,7 @@ use std::time::Instant;
 use glam::Mat4;
 use nldf_core::audio::{Waveform, neighbourhood, write_wav};
 use nldf_core::camera::turn_about;
-use nldf_export::{FrameModel, read_frame_model, read_model};
+use nldf_export::{FrameGraphFile, read_frame_model, read_model};
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_infer::poses::default_pose;
@@ -317,7 +317,7 @@ fn native_skip(
 /// [`WARM_UP`], each with its own audio chunk and a pose turning a little from frame to
 /// frame, as a page playing a voice renders them.
 pub fn native_fps(
-    model: &FrameModel,
+    model: &FrameGraphFile,
     kind: BackendKind,
     threads: usize,
     frames: usize,

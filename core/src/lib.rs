@@ -4,7 +4,7 @@
 //! encoding ([`encoding`], [`beam`]), the f64 compositing reference of the paper's Eq. 3-5
 //! ([`composite`]), datasets in AD-NeRF's layout ([`dataset`]), audio features
 //! ([`audio`]), image metrics ([`metrics`]), the
-//! rules training and rendering share (the student's shape in [`student_shape`], the rays that
+//! rules training and rendering share (the student's shape in [`student_config`], the rays that
 //! meet the head in [`rays::head_rays`], a frame's audio neighbourhood in
 //! [`audio::neighbourhood`], the run folder's files in [`run_files`]) and a procedural talking head whose ground truth is
 //! known exactly ([`synth`]). `nldf-train` (candle), `nldf-export` (prost) and `nldf-infer`
@@ -31,8 +31,8 @@ pub mod region;
 pub mod render_spec;
 pub mod run_files;
 pub mod stats;
-pub mod student_shape;
+pub mod student_config;
 pub mod synth;
-pub mod upsampler_shape;
+pub mod upsampler_config;
 
 pub use error::{Error, Result};

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use nldf_core::image::ImageRgb;
 use nldf_core::render_spec::RenderSpec;
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE, RENDER_SPEC_FILE};
-use nldf_core::student_shape::StudentConfig;
+use nldf_core::student_config::StudentConfig;
 
 use crate::error::{Error, Result};
 

@@ -324,10 +324,10 @@ pub struct ModelInfo {
 pub struct UpsampleInfo {
     /// Output pixels per coarse ray along each side: 2, 4 or 8. The coarse grid's rays pass
     /// through the centres of the output's `factor x factor` blocks
-    /// (`nldf_core::upsampler_shape::coarse_intrinsics`).
+    /// (`nldf_core::upsampler_config::coarse_intrinsics`).
     pub factor: usize,
     /// Coarse rays added around the hits on each side of the box
-    /// (`nldf_core::upsampler_shape::coarse_box`).
+    /// (`nldf_core::upsampler_config::coarse_box`).
     pub margin: usize,
 }
 

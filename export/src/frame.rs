@@ -33,9 +33,9 @@ use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::onnx::{DataType, ModelProto};
 use crate::student::{ExportReport, model_info, model_proto, student_nodes, write_model};
-use crate::upsample::{UpsamplerCheckpoint, upsampled_image};
+use crate::upsampler_graph::{UpsamplerCheckpoint, upsampled_image};
 use nldf_core::camera::Intrinsics;
-use nldf_core::upsampler_shape::coarse_intrinsics;
+use nldf_core::upsampler_config::coarse_intrinsics;
 
 /// Name of the frame graph.
 pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
@@ -65,7 +65,7 @@ pub fn export_frame_upsampled(
     if weights == WeightType::Int8 {
         return Err(crate::student::needs_ranges("--frame --upsampler NAME "));
     }
-    let (ckpt, up) = crate::upsample::open_pair(student_dir, upsampler_dir, weights)?;
+    let (ckpt, up) = crate::upsampler_graph::open_pair(student_dir, upsampler_dir, weights)?;
     let (model, report_info, n_values) = frame_model(&ckpt, Some(&up), GraphBuilder::new(weights))?;
     write_model(&model, report_info, n_values, out)
 }
@@ -78,7 +78,8 @@ pub fn export_frame_upsampled_int8(
     out: &Path,
     ranges: &ActivationRanges,
 ) -> Result<ExportReport> {
-    let (ckpt, up) = crate::upsample::open_pair(student_dir, upsampler_dir, WeightType::Int8)?;
+    let (ckpt, up) =
+        crate::upsampler_graph::open_pair(student_dir, upsampler_dir, WeightType::Int8)?;
     let g = GraphBuilder::int8(ranges.clone());
     let (model, info, n_values) = frame_model(&ckpt, Some(&up), g)?;
     write_model(&model, info, n_values, out)

@@ -16,13 +16,13 @@ pub mod graph;
 pub mod load;
 pub mod onnx;
 pub mod student;
-pub mod upsample;
+pub mod upsampler_graph;
 
 pub use error::{Error, Result};
 pub use frame::{
     export_frame, export_frame_int8, export_frame_upsampled, export_frame_upsampled_int8,
 };
 pub use graph::{ActivationRanges, Tap, WeightType};
-pub use load::{ExportedModel, FrameModel, read_frame_model, read_model};
+pub use load::{ExportedModel, FrameGraphFile, read_frame_model, read_model};
 pub use student::{ExportReport, calibration_model, export_student, export_student_int8};
-pub use upsample::{export_student_upsampled, export_student_upsampled_int8};
+pub use upsampler_graph::{export_student_upsampled, export_student_upsampled_int8};

@@ -44,7 +44,7 @@ pub fn read_model(path: &Path) -> Result<ExportedModel> {
 
 /// A frame graph (`nldf export --frame`), read and checked.
 #[derive(Debug, Clone)]
-pub struct FrameModel {
+pub struct FrameGraphFile {
     /// Where it was read from.
     pub path: PathBuf,
     /// The file's bytes (what a runtime loads).
@@ -58,7 +58,7 @@ pub struct FrameModel {
     pub upsample: usize,
 }
 
-impl FrameModel {
+impl FrameGraphFile {
     /// The `[height, width]` of the `keep` input: the image's, or the upsampler's coarse
     /// grid's.
     pub fn keep_shape(&self) -> [usize; 2] {
@@ -69,7 +69,7 @@ impl FrameModel {
 }
 
 /// Reads and checks the frame graph at `path`, as [`read_model`] reads a ray graph.
-pub fn read_frame_model(path: &Path) -> Result<FrameModel> {
+pub fn read_frame_model(path: &Path) -> Result<FrameGraphFile> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let proto = decode(path, &bytes)?;
     let (info, audio) = ModelInfo::from_frame_metadata(&proto.metadata_props)
@@ -102,7 +102,7 @@ pub fn read_frame_model(path: &Path) -> Result<FrameModel> {
                 )
             })?,
     };
-    Ok(FrameModel {
+    Ok(FrameGraphFile {
         path: path.to_path_buf(),
         bytes,
         info,

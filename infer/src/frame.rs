@@ -13,7 +13,7 @@ use glam::Mat4;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
-use nldf_core::upsampler_shape::{coarse_box, coarse_intrinsics, receptive_halo};
+use nldf_core::upsampler_config::{coarse_box, coarse_intrinsics, receptive_halo};
 use nldf_export::contract::{ModelInfo, UpsampleInfo};
 
 use crate::error::{Error, Result};
@@ -53,7 +53,7 @@ pub fn background_at(info: &ModelInfo, width: u32, height: u32) -> Result<ImageR
 
 /// A rendered frame.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Frame {
+pub struct RenderedFrame {
     /// The image, `[height, width, 3]` in [0, 1].
     pub image: ImageRgb,
     /// Pixels whose rays went through the network (those meeting the head's bounds, unless
@@ -181,7 +181,7 @@ impl FrameRenderer {
     /// # Shapes
     /// - `audio`: `[att_frames, window, n_features]` flat
     /// - returns an image of the renderer's [`FrameRenderer::intrinsics`] size
-    pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<Frame> {
+    pub fn render(&mut self, c2w: Mat4, audio: &[f32]) -> Result<RenderedFrame> {
         if let Some(up) = self.backend.info().upsample {
             return self.render_upsampled(c2w, audio, up);
         }
@@ -189,7 +189,7 @@ impl FrameRenderer {
         let mut image = self.background.clone();
         let rgb = self.run_rays(&rays, audio)?.rgb;
         image.paint(&rays.pixels, &rgb);
-        Ok(Frame {
+        Ok(RenderedFrame {
             image,
             head_pixels: rays.pixels.len(),
         })
@@ -198,11 +198,16 @@ impl FrameRenderer {
     /// [`FrameRenderer::render`] with a learned upsampler: the coarse rays that meet the
     /// head, the box around them (`coarse_box`, widened by the margin), the graph on the
     /// box, its pixels pasted into the background.
-    fn render_upsampled(&mut self, c2w: Mat4, audio: &[f32], up: UpsampleInfo) -> Result<Frame> {
+    fn render_upsampled(
+        &mut self,
+        c2w: Mat4,
+        audio: &[f32],
+        up: UpsampleInfo,
+    ) -> Result<RenderedFrame> {
         let view = self.coarse_view(c2w, up);
         let mut image = self.background.clone();
         let Some(full) = view.full else {
-            return Ok(Frame {
+            return Ok(RenderedFrame {
                 image,
                 head_pixels: 0,
             });
@@ -216,7 +221,7 @@ impl FrameRenderer {
             image.data[3 * (y * w + x0)..3 * (y * w + x1)]
                 .copy_from_slice(&rgb[k * line..(k + 1) * line]);
         }
-        Ok(Frame {
+        Ok(RenderedFrame {
             image,
             head_pixels: n_rays,
         })

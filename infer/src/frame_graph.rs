@@ -7,7 +7,7 @@
 
 use glam::Mat4;
 use nldf_core::image::ImageRgb;
-use nldf_export::FrameModel;
+use nldf_export::FrameGraphFile;
 use nldf_export::contract::{
     FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_RAYS,
     FRAME_OUTPUT_WINDOWS,
@@ -36,7 +36,7 @@ enum Session {
 
 /// A frame graph opened in one runtime.
 pub struct FrameGraph {
-    model: FrameModel,
+    model: FrameGraphFile,
     session: Session,
     /// Every pixel kept, `[height * width]`.
     all: Vec<bool>,
@@ -52,7 +52,7 @@ impl std::fmt::Debug for FrameGraph {
 
 impl FrameGraph {
     /// Opens `model` in the runtime `kind` with `threads` threads.
-    pub fn open(model: &FrameModel, kind: BackendKind, threads: usize) -> Result<FrameGraph> {
+    pub fn open(model: &FrameGraphFile, kind: BackendKind, threads: usize) -> Result<FrameGraph> {
         let session = match kind {
             BackendKind::Tract => Session::Tract(open_tract(model)?),
             BackendKind::Ort => open_ort(model, threads)?,
@@ -65,7 +65,7 @@ impl FrameGraph {
     }
 
     /// The model.
-    pub fn model(&self) -> &FrameModel {
+    pub fn model(&self) -> &FrameGraphFile {
         &self.model
     }
 
@@ -136,7 +136,7 @@ impl FrameGraph {
     }
 }
 
-fn open_tract(model: &FrameModel) -> Result<std::sync::Arc<TypedRunnableModel>> {
+fn open_tract(model: &FrameGraphFile) -> Result<std::sync::Arc<TypedRunnableModel>> {
     let fail = |e: TractError| Error::backend("tract", format!("{}: {e}", model.path.display()));
     let mut parsed = tract_onnx::onnx()
         .model_for_read(&mut &model.bytes[..])
@@ -202,7 +202,7 @@ fn ray_count(mut values: impl Iterator<Item = i64>) -> Result<usize> {
 }
 
 #[cfg(feature = "ort")]
-fn open_ort(model: &FrameModel, threads: usize) -> Result<Session> {
+fn open_ort(model: &FrameGraphFile, threads: usize) -> Result<Session> {
     let env = crate::ort_backend::environment()?;
     let fail = |e: String| Error::backend("ort", format!("{}: {e}", model.path.display()));
     let session = ort::session::Session::builder(env)
@@ -215,7 +215,7 @@ fn open_ort(model: &FrameModel, threads: usize) -> Result<Session> {
 }
 
 #[cfg(not(feature = "ort"))]
-fn open_ort(_model: &FrameModel, _threads: usize) -> Result<Session> {
+fn open_ort(_model: &FrameGraphFile, _threads: usize) -> Result<Session> {
     Err(Error::OrtLibrary(
         "this build has no onnxruntime backend: rebuild with the cargo feature `ort`".into(),
     ))

@@ -34,6 +34,6 @@ pub mod video;
 
 pub use backend::{backend_for, open_backend};
 pub use error::{Error, Result};
-pub use frame::{Frame, FrameRenderer};
+pub use frame::{FrameRenderer, RenderedFrame};
 pub use runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
 pub use video::{VideoJob, VideoPlan, VideoReport};

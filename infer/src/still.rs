@@ -20,7 +20,7 @@ use nldf_core::rays::{PixelRays, Rays};
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::frame::{Frame, FrameRenderer};
+use crate::frame::{FrameRenderer, RenderedFrame};
 
 /// The default [`SkipConfig::threshold`] in steps of 1/255 of a colour channel, the unit
 /// the command line's `--skip-threshold` takes.
@@ -99,7 +99,7 @@ pub enum FrameKind {
 pub struct SkippedFrame {
     /// The image; `head_pixels` counts the rays this frame's audio went through the
     /// network for (the probes' passes not included).
-    pub frame: Frame,
+    pub frame: RenderedFrame,
     pub kind: FrameKind,
 }
 
@@ -177,7 +177,7 @@ impl StillSkipper {
         image.paint(&moving.pixels, &rgb);
         self.moving = Some(moving);
         Ok(SkippedFrame {
-            frame: Frame { image, head_pixels },
+            frame: RenderedFrame { image, head_pixels },
             kind,
         })
     }

@@ -447,8 +447,8 @@ fn the_page_draws_an_upsampled_frame_graph() {
     if !browser_available() {
         return;
     }
-    use nldf_core::student_shape::StudentConfig;
-    use nldf_core::upsampler_shape::UpsamplerConfig;
+    use nldf_core::student_config::StudentConfig;
+    use nldf_core::upsampler_config::UpsamplerConfig;
     use nldf_export::{WeightType, export_frame_upsampled, export_student_upsampled};
 
     let mut cfg = StudentConfig::realtime();

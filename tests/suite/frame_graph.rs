@@ -15,7 +15,7 @@ use nldf_core::bounds::Bounds;
 use nldf_core::camera::{look_at, turn_about};
 use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
-use nldf_core::student_shape::StudentConfig;
+use nldf_core::student_config::StudentConfig;
 use nldf_export::{WeightType, export_frame, read_frame_model, read_model};
 use nldf_infer::FrameRenderer;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};

@@ -4,7 +4,7 @@
 
 use nldf_core::dataset::{AudioChoice, Dataset, Split, VOICE_DIR};
 use nldf_core::rays::head_rays;
-use nldf_core::student_shape::StudentConfig;
+use nldf_core::student_config::StudentConfig;
 use nldf_core::synth::SceneFile;
 use nldf_train::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
 use nldf_train::data::TrainData;

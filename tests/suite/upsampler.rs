@@ -11,8 +11,8 @@ use nldf_core::bounds::{Bounds, HeadRange};
 use nldf_core::camera::{Camera, look_at, turn_about};
 use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
-use nldf_core::student_shape::StudentConfig;
-use nldf_core::upsampler_shape::UpsamplerConfig;
+use nldf_core::student_config::StudentConfig;
+use nldf_core::upsampler_config::UpsamplerConfig;
 use nldf_export::{
     WeightType, export_frame_upsampled, export_student_upsampled, read_frame_model, read_model,
 };
@@ -268,7 +268,7 @@ fn part_of_the_box(
     let info = renderer.backend().info().clone();
     let up = info.upsample.expect("an upsampled model");
     let coarse =
-        nldf_core::upsampler_shape::coarse_intrinsics(&renderer.intrinsics(), up.factor).unwrap();
+        nldf_core::upsampler_config::coarse_intrinsics(&renderer.intrinsics(), up.factor).unwrap();
     let hits = nldf_core::rays::head_rays(
         &Camera {
             intrinsics: coarse,
@@ -282,7 +282,7 @@ fn part_of_the_box(
         *n_rays,
         "{label}: the coarse rays that meet the head"
     );
-    let halo = nldf_core::upsampler_shape::receptive_halo(up.factor);
+    let halo = nldf_core::upsampler_config::receptive_halo(up.factor);
     let (r, wc) = (up.factor, coarse.width as usize);
     let expected = |pixels: &[usize]| {
         hits.iter()

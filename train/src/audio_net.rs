@@ -6,7 +6,7 @@ use candle_nn::{Linear, VarBuilder, linear};
 
 use crate::nn::{Conv1d, conv1d};
 
-use nldf_core::student_shape::AudioConfig;
+use nldf_core::student_config::AudioConfig;
 
 /// AD-NeRF's LeakyReLU slope.
 const SLOPE: f64 = 0.02;

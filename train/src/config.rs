@@ -12,7 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use nldf_core::checks::{MAX_WIDTH, at_least, in_range, in_range_open, positive};
-pub use nldf_core::student_shape::AudioConfig;
+pub use nldf_core::student_config::AudioConfig;
 
 use crate::error::{Error, Result};
 
@@ -541,7 +541,7 @@ impl Default for StudentTrainConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
 pub struct StudentRunConfig {
-    pub model: nldf_core::student_shape::StudentConfig,
+    pub model: nldf_core::student_config::StudentConfig,
     pub train: StudentTrainConfig,
 }
 

@@ -10,7 +10,7 @@ use nldf_core::rays::Rays;
 
 use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::student_op::{StudentOp, StudentPlan};
-pub use nldf_core::student_shape::StudentConfig;
+pub use nldf_core::student_config::StudentConfig;
 
 /// What the light field gives for a batch of rays.
 #[derive(Debug, Clone)]

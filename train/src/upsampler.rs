@@ -1,8 +1,8 @@
 //! The learned upsampler (after MobileR2L): the student evaluates one ray per `r x r` block
 //! of output pixels, on the coarse grid of
-//! [`nldf_core::upsampler_shape::coarse_intrinsics`], and a small CNN turns the grid's
+//! [`nldf_core::upsampler_config::coarse_intrinsics`], and a small CNN turns the grid's
 //! features into the full-size image on the head's bounding box
-//! ([`nldf_core::upsampler_shape::coarse_box`]); every pixel outside the box is the
+//! ([`nldf_core::upsampler_config::coarse_box`]); every pixel outside the box is the
 //! background. The network's shape is [`UpsamplerConfig`]'s; this file holds the candle
 //! layers and the reference renderer that the exported graph must match.
 
@@ -13,8 +13,8 @@ use nldf_core::bounds::HeadRange;
 use nldf_core::camera::Camera;
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::head_rays;
-pub use nldf_core::upsampler_shape::UpsamplerConfig;
-use nldf_core::upsampler_shape::{MISS_LOGIT, bilinear_kernel, coarse_box, coarse_intrinsics};
+pub use nldf_core::upsampler_config::UpsamplerConfig;
+use nldf_core::upsampler_config::{MISS_LOGIT, bilinear_kernel, coarse_box, coarse_intrinsics};
 
 use crate::student::Student;
 
@@ -287,7 +287,7 @@ mod tests {
     /// moves some pixel of the cell (the bound is tight).
     #[test]
     fn the_receptive_halo_is_the_cnns_reach() {
-        use nldf_core::upsampler_shape::receptive_halo;
+        use nldf_core::upsampler_config::receptive_halo;
         for factor in [2usize, 4, 8] {
             let (varmap, vb) = new_varmap();
             let cfg = UpsamplerConfig::with_factor(factor);

@@ -250,7 +250,7 @@ impl FrameModel for CoarseBilinear {
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
         let ds = &data.dataset;
         let camera = ds.camera(frame);
-        let k = nldf_core::upsampler_shape::coarse_intrinsics(&camera.intrinsics, self.factor)?;
+        let k = nldf_core::upsampler_config::coarse_intrinsics(&camera.intrinsics, self.factor)?;
         let coarse = Camera {
             intrinsics: k,
             c2w: camera.c2w,

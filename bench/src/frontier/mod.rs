@@ -26,7 +26,7 @@ mod points;
 pub mod report;
 mod shared;
 mod timing;
-pub mod upsampled;
+pub mod upsampler_bench;
 
 use std::cell::RefCell;
 use std::path::Path;

@@ -19,7 +19,7 @@ use nldf_core::audio::{Waveform, read_wav};
 use nldf_core::dataset::{AUDIO_WAV, Frame, Split, VOICE_DIR};
 use nldf_core::image::ImageRgb;
 use nldf_core::stats::median;
-use nldf_export::{FrameModel as FrameGraphModel, WeightType};
+use nldf_export::{FrameGraphFile, WeightType};
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_train::bench::Machine;
@@ -118,7 +118,7 @@ struct UpsampledPoint {
     kind: BackendKind,
     step: usize,
     graph: RefCell<FrameGraph>,
-    model: FrameGraphModel,
+    model: FrameGraphFile,
     /// The split being rendered (its track is the voice split's own) and its 16 kHz track.
     split: std::cell::Cell<Split>,
     wave: RefCell<Option<(Split, Waveform)>>,

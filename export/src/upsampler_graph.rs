@@ -22,7 +22,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
-use nldf_core::upsampler_shape::{MISS_LOGIT, UpsamplerConfig, bilinear_kernel};
+use nldf_core::upsampler_config::{MISS_LOGIT, UpsamplerConfig, bilinear_kernel};
 
 use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
 use crate::contract::{
@@ -154,7 +154,7 @@ fn upsampled_ray_model(
 ) -> Result<(ModelProto, ModelInfo, usize)> {
     let s = &ckpt.shape;
     let r = up.shape.factor;
-    nldf_core::upsampler_shape::coarse_intrinsics(&ckpt.spec.intrinsics, r)
+    nldf_core::upsampler_config::coarse_intrinsics(&ckpt.spec.intrinsics, r)
         .map_err(|e| Error::Frame(e.to_string()))?;
     let sym = |name: &str| Dim::Symbolic(name.to_string());
     let rays = sym(RAY_AXIS);
