@@ -46,12 +46,16 @@ fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {
     .unwrap();
     let renderer = FrameRenderer::new(backend, None).unwrap();
 
-    let views = training_views(&data, &run.cfg.train, run.cfg.model.beam.anchor.is_some());
+    let views = training_views(
+        &data,
+        &run.model.cfg.train,
+        run.model.cfg.model.beam.anchor.is_some(),
+    );
     let beams = frame_beams(&data, &views, None);
     let frames = data.dataset.frames(Split::Train);
     let width = data.dataset.intrinsics.width as usize;
     let wav_windows = windows_from_wav(&info, &model, &scene.join("aud.wav")).unwrap();
-    let att = run.cfg.model.audio.att_frames;
+    let att = run.model.cfg.model.audio.att_frames;
     for fi in [0, frames.len() / 2, frames.len() - 1] {
         // Rays: the trainer's hit pixels and their rays against the renderer's.
         let view = &views[fi];

@@ -290,7 +290,7 @@ fn stress_training_at_ten_times_the_learning_rate_never_checkpoints_a_nan() {
     let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
     let result = train_loop(&mut run, &data, &AtomicBool::new(false), &mut |_| {});
     match &result {
-        Ok(_) => println!("teacher at 10x lr: finished {} steps", run.step),
+        Ok(_) => println!("teacher at 10x lr: finished {} steps", run.model.step),
         Err(e) => {
             let msg = e.to_string();
             println!("teacher at 10x lr: {msg}");

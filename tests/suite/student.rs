@@ -287,9 +287,15 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     let data = TrainData::load(tiny_scene()).unwrap();
     let (_teacher_dir, teacher) = tiny_teacher(&data);
     let dir = tempfile::tempdir().unwrap();
-    let mut run =
-        StudentRun::create(dir.path(), tiny_student_config(150), &data, Some(&teacher)).unwrap();
-    run.prepare(&data, Some(&teacher), &mut |_, _| {}).unwrap();
+    let mut run = StudentRun::create(
+        dir.path(),
+        tiny_student_config(150),
+        &data,
+        Some(&teacher.model),
+    )
+    .unwrap();
+    run.prepare(&data, Some(&teacher.model), &mut |_, _| {})
+        .unwrap();
     assert!(dir.path().join("targets.safetensors").is_file());
     assert!(dir.path().join("render.json").is_file());
     // The training frames, then 6 pseudo views, each with the teacher's colours of every
@@ -300,7 +306,10 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
     assert!(run.views[n_train..].iter().all(|v| !v.recorded));
     for (fb, t) in run.beams.iter().zip(&run.targets) {
         // 3 M colours and the opacity per pixel.
-        assert_eq!(t.len(), (3 * run.cfg.model.segments + 1) * fb.pixels.len());
+        assert_eq!(
+            t.len(),
+            (3 * run.model.cfg.model.segments + 1) * fb.pixels.len()
+        );
     }
     assert!(run.beams[n_train..].iter().all(|fb| !fb.pixels.is_empty()));
 
@@ -312,7 +321,8 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
         let later = tempfile::tempdir().unwrap();
         let mut cfg = tiny_student_config(150);
         cfg.train.pseudo_per_step = 2;
-        let mut deferred = StudentRun::create(later.path(), cfg, &data, Some(&teacher)).unwrap();
+        let mut deferred =
+            StudentRun::create(later.path(), cfg, &data, Some(&teacher.model)).unwrap();
         deferred
             .prepare_deferred(&data, Some(reopened), &mut |_, _| {})
             .unwrap();
@@ -346,30 +356,30 @@ fn a_tiny_distilled_student_learns_the_tiny_scene_and_its_pool_spares_the_audio_
         v
     };
     let audio_of = |varmap: &candle_nn::VarMap| vars_of(varmap, "audio.");
-    assert_eq!(audio_of(&run.varmap), audio_of(&teacher.varmap));
-    let before = run.validation_scores(&data, 2).unwrap();
+    assert_eq!(audio_of(&run.model.varmap), audio_of(&teacher.model.varmap));
+    let before = run.model.validation_scores(&data, 2).unwrap();
     let mut losses = Vec::new();
     for _ in 0..150 {
         let s = run.train_step(&data).unwrap();
         assert!(s.loss.is_finite());
         losses.push(s.loss);
     }
-    let after = run.validation_scores(&data, 2).unwrap();
+    let after = run.model.validation_scores(&data, 2).unwrap();
     assert_learned("student", &losses, 0.5, before.psnr, after.psnr);
     assert!(!run.pool.entries.is_empty() && run.pool.entries.len() <= run.pool.capacity);
 
     // A pool-only batch moves the light field but not the audio encoder.
-    let audio_before = audio_of(&run.varmap);
-    let mlp_before = vars_of(&run.varmap, "mlp.");
+    let audio_before = audio_of(&run.model.varmap);
+    let mlp_before = vars_of(&run.model.varmap, "mlp.");
     let loss = run.pool_step(&data, 64).unwrap();
     assert!(loss.is_some_and(f64::is_finite));
     assert_eq!(
-        audio_of(&run.varmap),
+        audio_of(&run.model.varmap),
         audio_before,
         "a pool batch changed the audio encoder"
     );
     assert_ne!(
-        vars_of(&run.varmap, "mlp."),
+        vars_of(&run.model.varmap, "mlp."),
         mlp_before,
         "a pool batch left the light field unchanged"
     );
@@ -393,7 +403,7 @@ fn a_student_resumes_bit_exactly_with_its_pool() {
         .collect();
     let mut resumed = StudentRun::open(dir.path()).unwrap();
     resumed.prepare(&data, None, &mut |_, _| {}).unwrap();
-    assert_eq!(resumed.step, 5);
+    assert_eq!(resumed.model.step, 5);
     assert!(!saved_pool.entries.is_empty());
     assert_eq!(resumed.pool, saved_pool);
     let again: Vec<f64> = (0..2)

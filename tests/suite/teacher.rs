@@ -189,12 +189,12 @@ fn a_tiny_teacher_learns_the_tiny_scene() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut run = TeacherRun::create(dir.path(), tiny_run_config(200), &data).unwrap();
-    let before = run.validation_scores(&data, 2).unwrap();
+    let before = run.model.validation_scores(&data, 2).unwrap();
     let mut losses = Vec::new();
     for _ in 0..200 {
         losses.push(run.train_step(&data).unwrap().0);
     }
-    let after = run.validation_scores(&data, 2).unwrap();
+    let after = run.model.validation_scores(&data, 2).unwrap();
     assert_learned("teacher", &losses, 0.6, before.psnr, after.psnr);
 }
 
@@ -211,7 +211,7 @@ fn resuming_from_a_checkpoint_gives_the_identical_next_step() {
     let (a1, _) = run.train_step(&data).unwrap();
     let (a2, _) = run.train_step(&data).unwrap();
     let mut resumed = TeacherRun::open(dir.path()).unwrap();
-    assert_eq!(resumed.step, 6);
+    assert_eq!(resumed.model.step, 6);
     let (b1, _) = resumed.train_step(&data).unwrap();
     let (b2, _) = resumed.train_step(&data).unwrap();
     assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
@@ -245,13 +245,13 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
     assert!(log[1].val_psnr.is_some() && log[0].val_psnr.is_none());
     // A stop request leaves a checkpoint that opens at the step it stopped at.
     let mut run = TeacherRun::open(dir.path()).unwrap();
-    run.cfg.train.iters = 30;
+    run.model.cfg.train.iters = 30;
     assert!(
         run.train(&data, &AtomicBool::new(true), &mut |_| {})
             .unwrap()
             .is_none()
     );
-    assert_eq!(TeacherRun::open(dir.path()).unwrap().step, 12);
+    assert_eq!(TeacherRun::open(dir.path()).unwrap().model.step, 12);
     for f in [
         "model.safetensors",
         "train_state.safetensors",
@@ -417,7 +417,7 @@ fn a_teacher_with_importance_samples_trains_and_renders() {
     assert!(losses.iter().all(|l| l.is_finite()));
     assert!(losses[35..].iter().sum::<f64>() < losses[..5].iter().sum::<f64>());
     let frame = &data.dataset.val[0];
-    let img = run.render_frame(&data, frame).unwrap();
+    let img = run.model.render_frame(&data, frame).unwrap();
     assert!(
         img.data
             .iter()
@@ -446,7 +446,7 @@ fn trained_teacher(mut cfg: TeacherRunConfig, steps: usize) -> TrainedTeacher {
     }
     let frame = &data.dataset.val[0];
     let rays = nldf_core::rays::rays_for_image(&data.dataset.camera(frame));
-    let code = run.audio_codes(&data, &[frame.aud_id]).unwrap();
+    let code = run.model.audio_codes(&data, &[frame.aud_id]).unwrap();
     TrainedTeacher {
         _dir: dir,
         data,
@@ -467,7 +467,7 @@ fn segment_targets_sum_to_the_teachers_pixel() {
     } = trained_teacher(tiny_run_config(30), 30);
     let ds = &data.dataset;
     let bg = &ds.background.data;
-    let t = &run.teacher;
+    let t = &run.model.teacher;
     let pixels = t
         .render_eval(
             &rays,
@@ -549,7 +549,7 @@ fn importance_sampled_segment_targets_follow_t_intervals() {
     } = trained_teacher(cfg, 120);
     let ds = &data.dataset;
     let bg = &ds.background.data;
-    let t = &run.teacher;
+    let t = &run.model.teacher;
     let m = 4;
     let seg = t
         .segment_targets(&rays, bg, &code, &data.head_range(), m, false)

@@ -304,7 +304,9 @@ fn adam_refuses_a_non_finite_gradient_and_checkpoints_refuse_non_finite_weights(
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let run = TeacherRun::create(dir.path(), tiny_run_config(5), &data).unwrap();
-    let (name, var) = nldf_train::nn::sorted_vars(&run.varmap).unwrap().remove(0);
+    let (name, var) = nldf_train::nn::sorted_vars(&run.model.varmap)
+        .unwrap()
+        .remove(0);
     let mut values: Vec<f32> = var.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
     values[0] = f32::NAN;
     var.set(&Tensor::from_vec(values, var.shape(), &Device::Cpu).unwrap())
@@ -574,8 +576,9 @@ fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
             intrinsics: info.spec.intrinsics,
             c2w: poses[f],
         };
-        let code = run.audio_codes(&data, &[f]).unwrap();
+        let code = run.model.audio_codes(&data, &[f]).unwrap();
         let want = run
+            .model
             .render_view(&camera, &data.dataset.background, &code, &data)
             .unwrap()
             .to_rgb8();

@@ -394,7 +394,7 @@ pub fn bench_teacher_step(
         run.train_step(data)?;
         Ok(run.last_hit_rays)
     })?;
-    let cfg = &run.cfg;
+    let cfg = &run.model.cfg;
     Timed {
         model: if cfg.model.n_importance > 0 {
             format!(
@@ -433,11 +433,11 @@ pub fn bench_student_step(
     warmup: usize,
     steps: usize,
 ) -> Result<StepBench> {
-    let batch = run.cfg.train.batch_rays;
+    let batch = run.model.cfg.train.batch_rays;
     let (rays, wall, cores_busy) = timed_steps(warmup, steps, || {
         Ok(batch + run.train_step(data)?.pool_beams)
     })?;
-    let m = &run.cfg.model;
+    let m = &run.model.cfg.model;
     Timed {
         model: format!("student {}x{} (M = {})", m.depth, m.width, m.segments),
         batch_rays: batch,

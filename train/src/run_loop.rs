@@ -74,15 +74,15 @@ pub trait TrainingRun {
 macro_rules! run_fields {
     ($run:ty) => {
         fn dir(&self) -> &std::path::Path {
-            &self.dir
+            &self.model.dir
         }
 
         fn step(&self) -> usize {
-            self.step
+            self.model.step
         }
 
         fn schedule(&self) -> $crate::run_loop::Schedule {
-            let t = &self.cfg.train;
+            let t = &self.model.cfg.train;
             $crate::run_loop::Schedule {
                 iters: t.iters,
                 batch_rays: t.batch_rays,

@@ -194,19 +194,6 @@ pub struct StudentRun {
     average: Option<Vec<Tensor>>,
 }
 
-impl std::ops::Deref for StudentRun {
-    type Target = StudentModel;
-    fn deref(&self) -> &StudentModel {
-        &self.model
-    }
-}
-
-impl std::ops::DerefMut for StudentRun {
-    fn deref_mut(&mut self) -> &mut StudentModel {
-        &mut self.model
-    }
-}
-
 /// The timing part of the teacher rendering recorded frames' targets.
 pub const RECORDED_TARGETS_PART: &str = "teacher targets: recorded frames";
 /// The timing part of the teacher rendering pseudo views' targets.
@@ -245,13 +232,17 @@ impl StudentRun {
             cfg.model.attention = t.step >= t.cfg.train.att_start;
         }
         let run = Self::build(dir, cfg)?;
-        init_seeded(&run.varmap, run.cfg.train.seed)?;
-        crate::audio_net::centre_attention(&run.varmap, "audio", run.cfg.model.audio.att_frames)?;
+        init_seeded(&run.model.varmap, run.model.cfg.train.seed)?;
+        crate::audio_net::centre_attention(
+            &run.model.varmap,
+            "audio",
+            run.model.cfg.model.audio.att_frames,
+        )?;
         if let Some(t) = teacher {
             let theirs = sorted_vars(&t.varmap)?
                 .into_iter()
                 .collect::<HashMap<String, candle_core::Var>>();
-            for (name, var) in sorted_vars(&run.varmap)? {
+            for (name, var) in sorted_vars(&run.model.varmap)? {
                 if name.starts_with("audio.")
                     && let Some(src) = theirs.get(&name)
                 {
@@ -364,9 +355,9 @@ impl StudentRun {
     /// What the teacher renders per ray for this student.
     fn target_layout(&self) -> TargetLayout {
         TargetLayout {
-            segments: self.cfg.model.segments,
-            opacity: self.cfg.model.opacity,
-            anchor: self.cfg.model.beam.anchor,
+            segments: self.model.cfg.model.segments,
+            opacity: self.model.cfg.model.opacity,
+            anchor: self.model.cfg.model.beam.anchor,
         }
     }
 
@@ -378,12 +369,18 @@ impl StudentRun {
         teacher: Option<&TeacherModel>,
     ) -> Result<Option<TargetLayout>> {
         let teacher_step = teacher.map(|t| t.step);
-        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        self.views = training_views(data, &self.cfg.train, self.cfg.model.beam.anchor.is_some());
+        std::fs::create_dir_all(&self.model.dir).map_err(|e| Error::io(&self.model.dir, e))?;
+        self.views = training_views(
+            data,
+            &self.model.cfg.train,
+            self.model.cfg.model.beam.anchor.is_some(),
+        );
         // Pseudo views find their mouth by projecting the recorded frames' mouth through
         // the teacher's depth.
         let mouth_points = match teacher {
-            Some(t) if self.views.iter().any(|v| !v.recorded) && self.cfg.train.project_mouth => {
+            Some(t)
+                if self.views.iter().any(|v| !v.recorded) && self.model.cfg.train.project_mouth =>
+            {
                 Some(mouth_surface_points(t, data)?)
             }
             _ => None,
@@ -399,17 +396,20 @@ impl StudentRun {
             t.seed ^ 0x7ec0_4de5,
         );
         self.pending = None;
-        let spec =
-            RenderSpec::of_dataset(&data.dataset, data.bounds, self.cfg.model.audio.att_frames);
-        spec.save(&self.dir.join(RENDER_SPEC_FILE))?;
+        let spec = RenderSpec::of_dataset(
+            &data.dataset,
+            data.bounds,
+            self.model.cfg.model.audio.att_frames,
+        );
+        spec.save(&self.model.dir.join(RENDER_SPEC_FILE))?;
         data.dataset
             .background
-            .save_png(&self.dir.join(BACKGROUND_FILE))?;
-        if !self.cfg.train.distill {
+            .save_png(&self.model.dir.join(BACKGROUND_FILE))?;
+        if !self.model.cfg.train.distill {
             return Ok(None);
         }
         let layout = self.target_layout();
-        let path = self.dir.join(TARGETS_FILE);
+        let path = self.model.dir.join(TARGETS_FILE);
         let fingerprint = views_fingerprint(&self.views, &self.beams);
         // Without a teacher at hand, a cache made by any teacher step is used.
         if path.is_file()
@@ -425,13 +425,13 @@ impl StudentRun {
     fn no_teacher(&self) -> Error {
         Error::Config(format!(
             "distillation needs the teacher's segment colours: {} is missing and no teacher was given",
-            self.dir.join(TARGETS_FILE).display()
+            self.model.dir.join(TARGETS_FILE).display()
         ))
     }
 
     fn save_targets(&self, teacher_step: usize) -> Result<()> {
         save_targets(
-            &self.dir.join(TARGETS_FILE),
+            &self.model.dir.join(TARGETS_FILE),
             &self.targets,
             self.target_layout(),
             teacher_step,
@@ -446,7 +446,7 @@ impl StudentRun {
             return Ok(());
         };
         let layout = self.target_layout();
-        let end = (next + self.cfg.train.pseudo_per_step).min(self.views.len());
+        let end = (next + self.model.cfg.train.pseudo_per_step).min(self.views.len());
         let started = std::time::Instant::now();
         for v in next..end {
             self.targets[v] = view_targets(&teacher, data, &self.views[v], &self.beams[v], layout)?;
@@ -468,7 +468,10 @@ impl StudentRun {
 
     /// The learning rate now ([`StudentTrainConfig::learning_rate`]).
     pub fn learning_rate(&self) -> f64 {
-        self.cfg.train.learning_rate(self.step, self.elapsed())
+        self.model
+            .cfg
+            .train
+            .learning_rate(self.model.step, self.elapsed())
     }
 
     /// Audio codes of views (each its recorded frame's).
@@ -480,13 +483,13 @@ impl StudentRun {
             .iter()
             .map(|&i| self.views[i as usize].aud_id)
             .collect();
-        self.audio_codes(data, &ids)
+        self.model.audio_codes(data, &ids)
     }
 
     /// Draws the main batch: per picked frame, rays from the mouth, the face and the rest
     /// of the hit pixels in the configured proportions.
     fn draw_batch(&self, rng: &mut ChaCha8Rng) -> Vec<BeamRef> {
-        let t = &self.cfg.train;
+        let t = &self.model.cfg.train;
         let usable = |recorded: bool| -> Vec<usize> {
             (0..self.beams.len())
                 .filter(|&f| {
@@ -559,9 +562,9 @@ impl StudentRun {
     /// whose audio codes are detached: the pool trains the light field only.
     pub fn train_step(&mut self, data: &TrainData) -> Result<StudentStep> {
         self.render_pending(data)?;
-        let t = self.cfg.train.clone();
+        let t = self.model.cfg.train.clone();
         let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
-        rng.set_stream(self.step as u64 + 1);
+        rng.set_stream(self.model.step as u64 + 1);
         let main = self.draw_batch(&mut rng);
         if main.is_empty() {
             return Err(Error::Config(
@@ -594,7 +597,7 @@ impl StudentRun {
         } else {
             0
         };
-        self.step += 1;
+        self.model.step += 1;
         self.update_average()?;
         let step = StudentStep {
             loss: out.loss,
@@ -619,8 +622,8 @@ impl StudentRun {
     /// Trains one batch drawn from the pool alone (the audio encoder gets no gradient).
     /// Returns the batch's loss, or `None` when the pool is empty.
     pub fn pool_step(&mut self, data: &TrainData, n: usize) -> Result<Option<f64>> {
-        let mut rng = ChaCha8Rng::seed_from_u64(self.cfg.train.seed ^ 0x9e37_79b9);
-        rng.set_stream(self.step as u64 + 1);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.model.cfg.train.seed ^ 0x9e37_79b9);
+        rng.set_stream(self.model.step as u64 + 1);
         let drawn = self.pool.draw(n, &mut rng);
         if drawn.is_empty() {
             return Ok(None);
@@ -642,8 +645,8 @@ impl StudentRun {
         update: bool,
     ) -> Result<StepOutput> {
         let ds = &data.dataset;
-        let t = &self.cfg.train;
-        let m = self.cfg.model.segments;
+        let t = &self.model.cfg.train;
+        let m = self.model.cfg.model.segments;
         let distill = t.distill;
         // Codes: one row per distinct frame, main frames first.
         let mut slot_of: HashMap<(u32, bool), u32> = HashMap::new();
@@ -679,7 +682,7 @@ impl StudentRun {
         let layout = self.target_layout();
         let width = layout.width();
         let opacity = layout.opacity;
-        let floor = self.cfg.train.opacity_floor;
+        let floor = self.model.cfg.train.opacity_floor;
         let empty = vec![0.0f32; width];
         let mut rays = Rays::with_capacity(n);
         let mut gt = Vec::with_capacity(3 * n);
@@ -741,10 +744,14 @@ impl StudentRun {
         }
         let dev = Device::Cpu;
         let codes = table.index_select(&Tensor::from_vec(row_of_ray, n, &dev)?, 0)?;
-        let spec = &self.cfg.model.beam;
+        let spec = &self.model.cfg.model.beam;
         let beams = encode_beams_parallel(&rays, ds.near, ds.far, spec, jitter_seed);
         let beams = Tensor::from_vec(beams, (n, spec.encoded_len()), &dev)?;
-        let out = self.student.mlp.forward_fused(&beams, &codes, update)?;
+        let out = self
+            .model
+            .student
+            .mlp
+            .forward_fused(&beams, &codes, update)?;
         let pixels = if opacity {
             out.pixels(&Tensor::from_vec(bg, (n, 3), &dev)?)?
         } else {
@@ -812,10 +819,10 @@ impl StudentRun {
     /// place: `w_avg <- d w_avg + (1 - d) w`, started at the weights themselves.
     fn update_average(&mut self) -> Result<()> {
         let (decay, hold, iters) = {
-            let t = &self.cfg.train;
+            let t = &self.model.cfg.train;
             (t.ema_decay, t.lr_hold_steps, t.iters)
         };
-        if decay <= 0.0 || self.step <= hold {
+        if decay <= 0.0 || self.model.step <= hold {
             return Ok(());
         }
         let vars = sorted_vars(&self.model.varmap)?;
@@ -830,7 +837,7 @@ impl StudentRun {
                 .map(|(a, (_, v))| (a * decay)? + (v.as_tensor() * (1.0 - decay))?)
                 .collect::<candle_core::Result<Vec<_>>>()?,
         };
-        if self.step == iters {
+        if self.model.step == iters {
             for (a, (_, v)) in average.iter().zip(&vars) {
                 v.set(a)?;
             }
@@ -841,14 +848,14 @@ impl StudentRun {
 
     /// Writes the checkpoint: config, pool, optimizer state and weights.
     pub fn save(&self) -> Result<()> {
-        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        save_json(&self.dir.join(CONFIG_FILE), &self.cfg)?;
-        save_pool(&self.dir.join(POOL_FILE), &self.pool, self.step)?;
-        let t = &self.cfg.train;
+        std::fs::create_dir_all(&self.model.dir).map_err(|e| Error::io(&self.model.dir, e))?;
+        save_json(&self.model.dir.join(CONFIG_FILE), &self.model.cfg)?;
+        save_pool(&self.model.dir.join(POOL_FILE), &self.pool, self.model.step)?;
+        let t = &self.model.cfg.train;
         let title = format!(
             "student {}x{}, {} rays/step{}{}",
-            self.cfg.model.depth,
-            self.cfg.model.width,
+            self.model.cfg.model.depth,
+            self.model.cfg.model.width,
             t.batch_rays,
             if t.distill {
                 ", distilled"
@@ -858,11 +865,11 @@ impl StudentRun {
             if t.pool { ", beam pool" } else { "" }
         );
         save_checkpoint(&CheckpointParts {
-            dir: &self.dir,
+            dir: &self.model.dir,
             kind: "student",
-            step: self.step,
+            step: self.model.step,
             elapsed: self.elapsed(),
-            varmap: &self.varmap,
+            varmap: &self.model.varmap,
             adam: &self.adam,
             title: &title,
         })

@@ -149,19 +149,6 @@ pub struct TeacherRun {
     clock: Clock,
 }
 
-impl std::ops::Deref for TeacherRun {
-    type Target = TeacherModel;
-    fn deref(&self) -> &TeacherModel {
-        &self.model
-    }
-}
-
-impl std::ops::DerefMut for TeacherRun {
-    fn deref_mut(&mut self) -> &mut TeacherModel {
-        &mut self.model
-    }
-}
-
 /// One step's rays with their targets.
 #[derive(Default)]
 struct StepBatch {
@@ -184,8 +171,12 @@ impl TeacherRun {
     pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
         cfg.model.audio.set_from(&data.dataset);
         let run = Self::build(dir, cfg)?;
-        init_seeded(&run.varmap, run.cfg.train.seed)?;
-        crate::audio_net::centre_attention(&run.varmap, "audio", run.cfg.model.audio.att_frames)?;
+        init_seeded(&run.model.varmap, run.model.cfg.train.seed)?;
+        crate::audio_net::centre_attention(
+            &run.model.varmap,
+            "audio",
+            run.model.cfg.model.audio.att_frames,
+        )?;
         Ok(run)
     }
 
@@ -225,10 +216,10 @@ impl TeacherRun {
     /// The learning rate now: tenfold down over `lr_decay_steps`, or over the time budget
     /// when one is set and further along ([`crate::config::decayed_learning_rate`]).
     pub fn learning_rate(&self) -> f64 {
-        let t = &self.cfg.train;
+        let t = &self.model.cfg.train;
         crate::config::decayed_learning_rate(
             t.lr,
-            self.step.saturating_sub(t.lr_hold_steps),
+            self.model.step.saturating_sub(t.lr_hold_steps),
             t.lr_decay_steps,
             self.elapsed(),
             t.time_budget_s,
@@ -237,8 +228,8 @@ impl TeacherRun {
 
     /// The random stream of the current step's batch.
     fn step_rng(&self) -> ChaCha8Rng {
-        let mut rng = ChaCha8Rng::seed_from_u64(self.cfg.train.seed);
-        rng.set_stream(self.step as u64 + 1);
+        let mut rng = ChaCha8Rng::seed_from_u64(self.model.cfg.train.seed);
+        rng.set_stream(self.model.step as u64 + 1);
         rng
     }
 
@@ -246,7 +237,7 @@ impl TeacherRun {
     /// its share of rays, `mouth_fraction` of them from the frame's mouth region (when the
     /// dataset knows one), the rest [`sample_batch`]'s face-biased draw.
     fn sample_step_batch(&self, data: &TrainData, rng: &mut ChaCha8Rng) -> StepBatch {
-        let t = &self.cfg.train;
+        let t = &self.model.cfg.train;
         let frames = data.dataset.frames(Split::Train);
         let n_frames = t.frames_per_batch.min(frames.len()).max(1);
         let picked = sample_indices(rng, frames.len(), n_frames).into_vec();
@@ -308,8 +299,8 @@ impl TeacherRun {
             ..
         } = self.sample_step_batch(data, &mut rng);
         let aud_ids: Vec<usize> = picked.iter().map(|&fi| frames[fi].aud_id).collect();
-        let codes = self.audio_codes(data, &aud_ids)?;
-        let out = self.teacher.render(
+        let codes = self.model.audio_codes(data, &aud_ids)?;
+        let out = self.model.teacher.render(
             &rays,
             &bg,
             &codes,
@@ -346,7 +337,7 @@ impl TeacherRun {
         let lr = self.learning_rate();
         let grads = loss.backward()?;
         self.adam.step(&grads, lr)?;
-        self.step += 1;
+        self.model.step += 1;
         Ok((value, psnr_from_mse(value)))
     }
 
@@ -354,16 +345,16 @@ impl TeacherRun {
     pub fn save(&self) -> Result<()> {
         let title = format!(
             "teacher {}x{}, {} rays/step",
-            self.cfg.model.depth, self.cfg.model.width, self.cfg.train.batch_rays
+            self.model.cfg.model.depth, self.model.cfg.model.width, self.model.cfg.train.batch_rays
         );
-        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        save_json(&self.dir.join(CONFIG_FILE), &self.cfg)?;
+        std::fs::create_dir_all(&self.model.dir).map_err(|e| Error::io(&self.model.dir, e))?;
+        save_json(&self.model.dir.join(CONFIG_FILE), &self.model.cfg)?;
         save_checkpoint(&CheckpointParts {
-            dir: &self.dir,
+            dir: &self.model.dir,
             kind: "teacher",
-            step: self.step,
+            step: self.model.step,
             elapsed: self.elapsed(),
-            varmap: &self.varmap,
+            varmap: &self.model.varmap,
             adam: &self.adam,
             title: &title,
         })

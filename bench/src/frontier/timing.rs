@@ -97,7 +97,7 @@ pub(crate) fn time_adnerf_setting(
     let pixels = (data.dataset.intrinsics.width * data.dataset.intrinsics.height) as f64;
     Ok(AdNerfSetting {
         ms_2_threads: 1e3 * median(&own),
-        gmac_per_frame: pixels * run.macs_per_ray() / 1e9,
+        gmac_per_frame: pixels * run.model.macs_per_ray() / 1e9,
         frames: n,
         against: against
             .iter()

@@ -335,11 +335,11 @@ impl DemoJob {
         // steps (as the budgeted teacher's did over its minutes); the cap only stops.
         if !resume {
             let hold = (DEMO_HOLD * self.teacher_iters as f64).round() as usize;
-            plan.run.cfg.train.lr_hold_steps = hold;
-            plan.run.cfg.train.lr_decay_steps = (self.teacher_iters - hold).max(1);
+            plan.run.model.cfg.train.lr_hold_steps = hold;
+            plan.run.model.cfg.train.lr_decay_steps = (self.teacher_iters - hold).max(1);
         }
-        plan.run.cfg.train.time_budget_s = 0.0;
-        plan.run.cfg.train.time_cap_s = self.teacher_cap_minutes * 60.0;
+        plan.run.model.cfg.train.time_budget_s = 0.0;
+        plan.run.model.cfg.train.time_cap_s = self.teacher_cap_minutes * 60.0;
         plan.run(stop, on_event)?;
         if stop.load(Ordering::Relaxed) {
             return Ok(None);
@@ -378,7 +378,7 @@ impl DemoJob {
                 resume,
             }
             .plan(on_event)?;
-            let t = &mut plan.run.cfg.train;
+            let t = &mut plan.run.model.cfg.train;
             t.time_budget_s = 0.0;
             t.time_cap_s = self.student_cap_minutes * 60.0;
             plan.run(stop, on_event)?;

@@ -146,11 +146,14 @@ impl StudentJob {
         let (mut run, data) = if self.resume {
             let mut run = StudentRun::open(&dir)?;
             if let Some(n) = self.iters {
-                run.cfg.train.iters = n;
+                run.model.cfg.train.iters = n;
             }
-            let own = AudioChoice::Matching(run.cfg.model.audio.features.clone());
+            let own = AudioChoice::Matching(run.model.cfg.model.audio.features.clone());
             let data = load_data(&self.data, &teachers_audio.unwrap_or(own), on_event)?;
-            on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
+            on_event(&JobEvent::Note(format!(
+                "resuming at step {}",
+                run.model.step
+            )));
             (run, data)
         } else {
             let cfg = self.new_config()?;
@@ -168,7 +171,7 @@ impl StudentJob {
             (run, data)
         };
         if let Some(m) = self.minutes {
-            run.cfg.train.time_budget_s = m * 60.0;
+            run.model.cfg.train.time_budget_s = m * 60.0;
         }
         Ok(StudentPlan { run, data, teacher })
     }
@@ -199,7 +202,7 @@ impl StudentPlan {
                 })
             })?;
         let mut before = Timing::default();
-        if self.run.cfg.train.distill {
+        if self.run.model.cfg.train.distill {
             let n = self.run.views.iter().filter(|v| v.recorded).count();
             before.add(RECORDED_TARGETS_PART, started.elapsed().as_secs_f64(), n);
         }
@@ -208,7 +211,7 @@ impl StudentPlan {
             on_event(&JobEvent::Note(format!(
                 "the teacher renders {pending} pseudo views, {} before each step, while the \
                  student trains",
-                self.run.cfg.train.pseudo_per_step
+                self.run.model.cfg.train.pseudo_per_step
             )));
         }
         let scores = train_stage(
@@ -219,7 +222,7 @@ impl StudentPlan {
             stop,
             on_event,
         )?;
-        on_event(&wrote(&self.run.dir, STUDENT_FILES));
+        on_event(&wrote(&self.run.model.dir, STUDENT_FILES));
         Ok(scores)
     }
 }

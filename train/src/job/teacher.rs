@@ -60,11 +60,14 @@ impl TeacherJob {
             // The checkpoint's config says which audio features the run reads.
             let mut run = TeacherRun::open(&dir)?;
             if let Some(n) = self.iters {
-                run.cfg.train.iters = n;
+                run.model.cfg.train.iters = n;
             }
-            let audio = AudioChoice::Matching(run.cfg.model.audio.features.clone());
+            let audio = AudioChoice::Matching(run.model.cfg.model.audio.features.clone());
             let data = load_data(&self.data, &audio, on_event)?;
-            on_event(&JobEvent::Note(format!("resuming at step {}", run.step)));
+            on_event(&JobEvent::Note(format!(
+                "resuming at step {}",
+                run.model.step
+            )));
             (run, data)
         } else {
             let cfg = self.new_config()?;
@@ -72,7 +75,7 @@ impl TeacherJob {
             (TeacherRun::create(&dir, cfg, &data)?, data)
         };
         if let Some(b) = self.budget_s {
-            run.cfg.train.time_budget_s = b;
+            run.model.cfg.train.time_budget_s = b;
         }
         Ok(TeacherPlan { run, data })
     }
@@ -108,7 +111,7 @@ impl TeacherPlan {
             stop,
             on_event,
         )?;
-        on_event(&wrote(&self.run.dir, TEACHER_FILES));
+        on_event(&wrote(&self.run.model.dir, TEACHER_FILES));
         Ok(scores)
     }
 }
