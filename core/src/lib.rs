@@ -26,6 +26,7 @@ pub mod host;
 pub mod image;
 pub mod landmarks;
 pub mod metrics;
+pub mod npy;
 pub mod rays;
 pub mod region;
 pub mod render_spec;

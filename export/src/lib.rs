@@ -13,6 +13,7 @@ pub mod contract;
 pub mod error;
 pub mod frame;
 pub mod graph;
+pub(crate) mod layers;
 pub mod load;
 pub mod onnx;
 pub mod student;

@@ -22,7 +22,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
-use nldf_core::upsampler_config::{MISS_LOGIT, UpsamplerConfig, bilinear_kernel};
+use nldf_core::upsampler_config::{MISS_LOGIT, UpsamplerConfig};
 
 use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
 use crate::contract::{
@@ -32,6 +32,7 @@ use crate::contract::{
 };
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
+use crate::layers::{self, bilinear_up, depth_to_space};
 use crate::onnx::{DataType, ModelProto};
 use crate::student::{
     ExportReport, model_info, model_proto, ray_inputs, student_nodes, write_model,
@@ -220,16 +221,7 @@ fn conv(
     let b = up.weight(&format!("{name}.bias"), &[c_out])?;
     let w = g.weight(&format!("up.{name}.weight"), &[c_out, c_in, k, k], w);
     let b = g.weight(&format!("up.{name}.bias"), &[c_out], b);
-    let p = (k / 2) as i64;
-    Ok(g.node(
-        "Conv",
-        &format!("up.{name}"),
-        &[x, &w, &b],
-        vec![
-            attr_ints("kernel_shape", &[k as i64, k as i64]),
-            attr_ints("pads", &[p, p, p, p]),
-        ],
-    ))
+    Ok(layers::conv2d(g, &format!("up.{name}"), x, &w, &b, k))
 }
 
 /// The first and one-past-last index of a true entry of `any` (int64 `[n]`, 0 or 1),
@@ -568,39 +560,4 @@ fn box_pixels(
     let behind = g.node("Mul", "up.behind", &[&clear, background], vec![]);
     let pixels = g.node("Add", "up.pixels_raw", &[&colour, &behind], vec![]);
     Ok((pixels, alpha))
-}
-
-/// Bilinear upsampling by `r` of the `c` channels of `x` as
-/// `nldf_train::upsampler::bilinear_up` computes it: a ConvTranspose of stride `r`, kernel `2
-/// r` and pads `r / 2` with [`bilinear_kernel`].
-fn bilinear_up(g: &mut GraphBuilder, name: &str, x: &str, c: usize, r: usize) -> String {
-    let k = 2 * r;
-    let w = bilinear_kernel(c, r);
-    let w = g.constant_f32(&format!("{name}.kernel"), &[c, c, k, k], &w);
-    let (r, p) = (r as i64, (r / 2) as i64);
-    g.node(
-        "ConvTranspose",
-        name,
-        &[x, &w],
-        vec![
-            attr_ints("kernel_shape", &[2 * r, 2 * r]),
-            attr_ints("strides", &[r, r]),
-            attr_ints("pads", &[p, p, p, p]),
-        ],
-    )
-}
-
-/// ONNX's DepthToSpace in its DCR order (`[1, r r c, h, w]` to `[1, c, h r, w r]`):
-/// output channel `c` at offset `(i, j)` of each block takes input channel `(i r + j) c_count
-/// + c`, as `nldf_train::upsampler::depth_to_space` computes it.
-fn depth_to_space(g: &mut GraphBuilder, name: &str, x: &str, r: usize) -> String {
-    g.node(
-        "DepthToSpace",
-        name,
-        &[x],
-        vec![
-            attr_int("blocksize", r as i64),
-            crate::graph::attr_string("mode", "DCR"),
-        ],
-    )
 }

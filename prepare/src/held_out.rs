@@ -26,8 +26,9 @@ use nldf_core::landmarks::landmarks_from_regions;
 use nldf_core::region::Region;
 
 use crate::align::{CameraPose, rotation_angle_deg};
-use crate::check::{Track, align_prepared, read_regions, read_track, truth_labels};
+use crate::check::{read_regions, truth_labels};
 use crate::error::{Error, Result};
+use crate::recording::{Track, align_prepared, read_track};
 
 /// The held-out splits carried, in this order.
 pub const HELD_OUT: [Split; 3] = [Split::Novel, Split::Voice, Split::Sweep];

@@ -21,6 +21,7 @@ use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{Part, background, head_rect, parse_frame, parsing_image};
 use crate::pose::{PoseConfig, TrackSummary, solve_track};
 use crate::resample::shrink_dataset;
+use crate::scratch::Scratch;
 use crate::video::{self, Probe, Window};
 
 /// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
@@ -548,56 +549,4 @@ fn write_heads(
         events(Event::Frames((chunk_no * 32 + chunk.len()).min(kept.len())));
     }
     Ok(())
-}
-
-/// The output folder being written: `<out>.part` beside it, renamed to `out` by
-/// [`Scratch::commit`] and removed when dropped uncommitted.
-struct Scratch {
-    dir: PathBuf,
-    out: PathBuf,
-    force: bool,
-    done: bool,
-}
-
-impl Scratch {
-    fn new(out: &Path, force: bool) -> Result<Scratch> {
-        let occupied =
-            out.exists() && std::fs::read_dir(out).map_or(true, |mut d| d.next().is_some());
-        if occupied && !force {
-            return Err(Error::invalid(
-                out,
-                "exists and is not empty (pass --force to replace it)",
-            ));
-        }
-        let dir = video::part_path(out);
-        if dir.exists() {
-            std::fs::remove_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        }
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        Ok(Scratch {
-            dir,
-            out: out.to_path_buf(),
-            force,
-            done: false,
-        })
-    }
-
-    fn commit(mut self) -> Result<()> {
-        if self.out.exists() && self.force {
-            std::fs::remove_dir_all(&self.out).map_err(|e| Error::io(&self.out, e))?;
-        } else if self.out.exists() {
-            std::fs::remove_dir(&self.out).map_err(|e| Error::io(&self.out, e))?;
-        }
-        std::fs::rename(&self.dir, &self.out).map_err(|e| Error::io(&self.out, e))?;
-        self.done = true;
-        Ok(())
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        if !self.done {
-            let _ = std::fs::remove_dir_all(&self.dir);
-        }
-    }
 }

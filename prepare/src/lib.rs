@@ -26,7 +26,9 @@ pub mod job;
 pub mod lms68;
 pub mod parsing;
 pub mod pose;
+pub(crate) mod recording;
 pub mod resample;
+pub(crate) mod scratch;
 pub mod tools;
 pub mod video;
 

@@ -2,73 +2,19 @@
 //! that say which anchor they follow. The resolved configuration is saved beside every
 //! checkpoint as `config.json` and read back by later stages.
 //!
-//! Reading is strict ([`read_config`]): an unknown key or a value of the wrong type is an
+//! Reading is strict ([`read_config`], in [`crate::config_file`]): an unknown key or a value of the wrong type is an
 //! error naming the key, and each run configuration's `check` names the key whose value is
 //! out of range, before any work starts.
 
-use std::path::Path;
-
-use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use nldf_core::checks::{MAX_WIDTH, at_least, in_range, in_range_open, positive};
 pub use nldf_core::student_config::AudioConfig;
 
+pub use crate::config_file::{
+    RunConfig, check_config, parse_checked, parse_config, read_checked, read_config,
+};
 use crate::error::{Error, Result};
-
-/// Reads a configuration file strictly: a key the configuration does not have, or a value
-/// of the wrong type, is an error that names the file and the key's path
-/// (`model.width: invalid value ...`).
-pub fn read_config<T: DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    parse_config(path, &text)
-}
-
-/// [`read_config`] on text already read; `path` names it in errors.
-pub fn parse_config<T: DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
-    let de = &mut serde_json::Deserializer::from_str(text);
-    serde_path_to_error::deserialize(de).map_err(|e| {
-        let key = e.path().to_string();
-        let inner = e.into_inner();
-        let problem = if key.is_empty() || key == "." {
-            format!("bad configuration: {inner}")
-        } else {
-            format!("bad configuration: `{key}`: {inner}")
-        };
-        Error::invalid(path, problem)
-    })
-}
-
-/// A run configuration: read strictly, then checked value by value.
-pub trait RunConfig: DeserializeOwned {
-    /// Checks every value before any work starts; the error names the key.
-    fn check(&self) -> Result<()>;
-}
-
-/// [`RunConfig::check`], its error saying "invalid configuration" and naming `file` when
-/// the configuration came from one.
-pub fn check_config<T: RunConfig>(cfg: &T, file: Option<&Path>) -> Result<()> {
-    cfg.check().map_err(|e| {
-        let problem = format!("invalid configuration: {e}");
-        match file {
-            Some(path) => Error::invalid(path, problem),
-            None => Error::Config(problem),
-        }
-    })
-}
-
-/// [`parse_config`], then [`RunConfig::check`]: either error names `path`.
-pub fn parse_checked<T: RunConfig>(path: &Path, text: &str) -> Result<T> {
-    let cfg: T = parse_config(path, text)?;
-    check_config(&cfg, Some(path))?;
-    Ok(cfg)
-}
-
-/// [`parse_checked`] on the file at `path`.
-pub fn read_checked<T: RunConfig>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    parse_checked(path, &text)
-}
 
 /// The checks of the fields the teacher's and the student's `train` sections share (same
 /// names, same meaning): batches, fractions, learning rate, Adam, logging and time budget.

@@ -12,6 +12,7 @@ pub mod audio_net;
 pub mod bench;
 pub mod checkpoint;
 pub mod config;
+pub mod config_file;
 pub mod data;
 pub mod error;
 pub mod eval;
