@@ -34,6 +34,10 @@ pub struct PrepareArgs {
     /// rotations by well under a degree.
     #[arg(long)]
     pub focal: Option<f32>,
+    /// Resample the video to this constant frame rate (AD-NeRF's datasets are 25); this
+    /// also takes a video with a variable frame rate. Default: the video's own rate.
+    #[arg(long)]
+    pub fps: Option<f64>,
     /// Seconds into the video to start at.
     #[arg(long, default_value_t = 0.0)]
     pub start: f64,
@@ -110,6 +114,7 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         force: args.force,
         pose: PoseConfig::default(),
         analysis_size: args.analysis_size,
+        fps: args.fps,
     };
     let mut bar: Option<ProgressBar> = None;
     let report = job::run(&job, &env, &ffmpeg, |event| match event {

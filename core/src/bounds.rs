@@ -69,11 +69,18 @@ pub struct HeadRange {
 const HULL_GRID: usize = 40;
 /// Training frames the carving looks at, at most.
 const HULL_VIEWS: usize = 24;
+/// The carved box grown by this share of its size on every side. The hull keeps only what
+/// every carving view calls head, and a recording's masks and poses disagree from frame to
+/// frame (a jaw that drops, a pose a degree off), so its box comes out tight. On the
+/// standard head's dataset prepared from its video, this growth raised the recipe's head
+/// PSNR on held-out frames, turned heads and a new voice by 0.18-0.61 dB (one run each).
+pub const HULL_PAD: f32 = 0.08;
 
 /// The head's bounds for a dataset: `scene.json`'s `head_bounds` when present, otherwise the
 /// box of the visual hull of the head masks (`parsing/`, or each frame's `face_rect` when
 /// there are none) over up to 24 training frames, sampled on a 40^3 grid spanning the
-/// cameras' [near, far] range, grown by one grid cell. A `scene.json` that is not JSON, or
+/// cameras' [near, far] range, grown by one grid cell and then by [`HULL_PAD`] of its size.
+/// A `scene.json` that is not JSON, or
 /// whose `head_bounds` is not two finite corners with `lo < hi`, is refused by name rather
 /// than passed over.
 pub fn dataset_bounds(ds: &Dataset) -> Result<Bounds> {
@@ -182,7 +189,8 @@ pub fn visual_hull_bounds(ds: &Dataset) -> Result<Bounds> {
     Ok(Bounds {
         lo: hull_lo - cell,
         hi: hull_hi + cell,
-    })
+    }
+    .padded(HULL_PAD))
 }
 
 #[cfg(test)]

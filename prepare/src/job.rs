@@ -56,6 +56,9 @@ pub struct PrepareJob {
     /// Replace an existing output folder.
     pub force: bool,
     pub pose: PoseConfig,
+    /// Resample the video to this constant frame rate (also taking a variable-rate one);
+    /// `None` keeps its own rate.
+    pub fps: Option<f64>,
     /// Analyse the frames (landmarks, tracks, poses, masks, background) at this size, then
     /// shrink the dataset to `size` ([`crate::resample`]). Default: the crop's side, at
     /// most [`ANALYSIS_MAX`], and never below `size`.
@@ -119,11 +122,20 @@ impl PrepareJob {
                 self.size
             )));
         }
+        if let Some(f) = self
+            .fps
+            .filter(|f| !(f.is_finite() && (1.0..=120.0).contains(f)))
+        {
+            return Err(Error::Argument(format!(
+                "--fps {f} is not a frame rate in 1..=120"
+            )));
+        }
         Ok(Window {
             start: self.start.max(0.0),
             seconds: self.seconds,
             crop,
             size: self.size,
+            fps: self.fps,
         })
     }
 
@@ -156,7 +168,11 @@ pub fn run(
         )));
     }
     let started = Instant::now();
-    let probe = video::probe(ffmpeg, &job.video)?;
+    let mut probe = video::probe(ffmpeg, &job.video)?;
+    if let Some(f) = job.fps {
+        job.window(&probe)?;
+        probe.fps = f;
+    }
     if !probe.has_audio {
         return Err(Error::invalid(
             &job.video,

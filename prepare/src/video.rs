@@ -33,6 +33,9 @@ pub struct Window {
     pub crop: [u32; 3],
     /// Output frames are `size x size`.
     pub size: u32,
+    /// Resample to this constant frame rate (ffmpeg's `fps` filter), which also takes a
+    /// variable-rate video; `None` keeps the video's own rate and refuses a variable one.
+    pub fps: Option<f64>,
 }
 
 /// Runs `ffmpeg -i path` and reads the streams from what it prints.
@@ -175,8 +178,9 @@ pub fn decode_frames(
     mut each: impl FnMut(usize, &[u8]) -> Result<()>,
 ) -> Result<usize> {
     let [x, y, side] = window.crop;
+    let resample = window.fps.map(|f| format!("fps={f},")).unwrap_or_default();
     let filter = format!(
-        "showinfo,crop={side}:{side}:{x}:{y},scale={s}:{s}:flags=area",
+        "showinfo,{resample}crop={side}:{side}:{x}:{y},scale={s}:{s}:flags=area",
         s = window.size
     );
     let mut cmd = Command::new(ffmpeg);
@@ -242,13 +246,12 @@ pub fn decode_frames(
         ));
     }
     let share = irregular_share(&parse_pts_times(&lines), probe.fps);
-    if share > 0.01 {
+    if share > 0.01 && window.fps.is_none() {
         return Err(Error::invalid(
             path,
             format!(
                 "has a variable frame rate ({:.0} % of frame gaps differ from 1/{:.3} s): \
-                 re-encode it at a constant rate first, e.g. `ffmpeg -i IN -fps_mode cfr -r 25 \
-                 OUT.mp4`",
+                 pass --fps 25 (or another rate) to resample it to a constant one",
                 share * 100.0,
                 probe.fps
             ),

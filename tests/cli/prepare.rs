@@ -312,6 +312,60 @@ fn prepare_refuses_videos_it_cannot_train_on() {
     }
 }
 
+/// `--fps` resamples to a constant rate: the 25 frames/s test video at 12.5 gives half its
+/// frames, written at 12.5 frames/s, and a variable-rate copy of it, refused without the
+/// flag, is taken with `--fps 25`.
+#[test]
+fn prepare_resamples_to_the_fps_asked_for() {
+    let Some(ff) = tools() else { return };
+    let c = clip();
+    let dir = scratch();
+    let vfr = dir.path().join("vfr.mp4");
+    ffmpeg(
+        &ff,
+        &[
+            "-i",
+            &s(&c.video),
+            "-vf",
+            "setpts='if(mod(N,2),N+0.5,N)/25/TB'",
+            "-fps_mode",
+            "passthrough",
+            "-video_track_timescale",
+            "1000",
+            &s(&vfr),
+        ],
+    );
+    let prepare = |video: &Path, name: &str, fps: &str| {
+        let out = dir.path().join(name);
+        nldf_ok(args(&[
+            "prepare",
+            "--video",
+            &s(video),
+            "--out",
+            &s(&out),
+            "--size",
+            "128",
+            "--fps",
+            fps,
+            "--min-frames",
+            "50",
+        ]));
+        nldf_core::dataset::Dataset::load(&out).unwrap()
+    };
+    let half = prepare(&c.video, "half", "12.5");
+    assert_eq!(half.train.len() + half.val.len(), 75);
+    let t =
+        nldf_core::dataset::TransformsFile::load(&dir.path().join("half/transforms_train.json"))
+            .unwrap();
+    assert_eq!(t.fps, Some(12.5));
+    let steady = prepare(&vfr, "steady", "25");
+    let n = steady.train.len() + steady.val.len();
+    assert!(
+        (148..=152).contains(&n),
+        "{n} frames from 6 s at 25 frames/s"
+    );
+}
+
 /// A face that leaves the picture for a few frames: those frames are dropped and counted,
 /// and the rest make the dataset.
 #[test]
