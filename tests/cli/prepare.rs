@@ -195,6 +195,24 @@ fn prepare_analyses_a_larger_video_at_its_own_size() {
     }
 }
 
+/// A copy of `video` whose odd frames come half a frame late: a variable frame rate.
+fn variable_rate_copy(ff: &Path, video: &Path, out: &Path) {
+    ffmpeg(
+        ff,
+        &[
+            "-i",
+            &s(video),
+            "-vf",
+            "setpts='if(mod(N,2),N+0.5,N)/25/TB'",
+            "-fps_mode",
+            "passthrough",
+            "-video_track_timescale",
+            "1000",
+            &s(out),
+        ],
+    );
+}
+
 /// Each broken video is refused in one line naming the file and what is wrong, and no
 /// dataset (nor its scratch folder) is left behind.
 #[test]
@@ -213,20 +231,7 @@ fn prepare_refuses_videos_it_cannot_train_on() {
     let bytes = std::fs::read(&c.video).unwrap();
     std::fs::write(v("corrupt.mp4"), &bytes[bytes.len() / 3..]).unwrap();
     ffmpeg(&ff, &["-i", &src, "-t", "2", &s(&v("short.mp4"))]);
-    ffmpeg(
-        &ff,
-        &[
-            "-i",
-            &src,
-            "-vf",
-            "setpts='if(mod(N,2),N+0.5,N)/25/TB'",
-            "-fps_mode",
-            "passthrough",
-            "-video_track_timescale",
-            "1000",
-            &s(&v("vfr.mp4")),
-        ],
-    );
+    variable_rate_copy(&ff, &c.video, &v("vfr.mp4"));
     let bc = s(&c.scene.join("bc.png"));
     ffmpeg(
         &ff,
@@ -321,20 +326,7 @@ fn prepare_resamples_to_the_fps_asked_for() {
     let c = clip();
     let dir = scratch();
     let vfr = dir.path().join("vfr.mp4");
-    ffmpeg(
-        &ff,
-        &[
-            "-i",
-            &s(&c.video),
-            "-vf",
-            "setpts='if(mod(N,2),N+0.5,N)/25/TB'",
-            "-fps_mode",
-            "passthrough",
-            "-video_track_timescale",
-            "1000",
-            &s(&vfr),
-        ],
-    );
+    variable_rate_copy(&ff, &c.video, &vfr);
     let prepare = |video: &Path, name: &str, fps: &str| {
         let out = dir.path().join(name);
         nldf_ok(args(&[

@@ -150,6 +150,18 @@ impl AudioEncoder {
 /// `e^3 / (e^3 + 7)`, about 0.74, over 8 frames).
 const CENTRE_LOGIT: f32 = 3.0;
 
+/// A new network's first weights: every variable of `varmap` drawn from `seed`
+/// ([`crate::nn::init_seeded`]), then the audio attention under `audio` centred
+/// ([`centre_attention`]) over its `att_frames` frames. The teacher and the student start so.
+pub fn init_with_centred_attention(
+    varmap: &candle_nn::VarMap,
+    seed: u64,
+    att_frames: usize,
+) -> Result<()> {
+    crate::nn::init_seeded(varmap, seed)?;
+    centre_attention(varmap, "audio", att_frames)
+}
+
 /// Starts AudioAttNet focused on the centre frame: its attention layer's weight at zero and
 /// its bias peaked at the centre, so that switching attention on late in training (as
 /// AD-NeRF does) changes the audio code little instead of jolting the field. `prefix` is the

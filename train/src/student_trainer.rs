@@ -34,7 +34,7 @@ use crate::config::{RunConfig, StudentRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::loss::{RayLosses, TeacherTargets, distillation_loss};
-use crate::nn::{init_seeded, new_varmap, scaled_vars, sorted_vars};
+use crate::nn::{new_varmap, scaled_vars, sorted_vars};
 use crate::pool::{BeamPool, PoolEntry};
 use crate::pool::{load_pool, save_pool};
 use crate::run_loop::{TrainingRun, finite_loss, run_fields};
@@ -232,10 +232,9 @@ impl StudentRun {
             cfg.model.attention = t.step >= t.cfg.train.att_start;
         }
         let run = Self::build(dir, cfg)?;
-        init_seeded(&run.model.varmap, run.model.cfg.train.seed)?;
-        crate::audio_net::centre_attention(
+        crate::audio_net::init_with_centred_attention(
             &run.model.varmap,
-            "audio",
+            run.model.cfg.train.seed,
             run.model.cfg.model.audio.att_frames,
         )?;
         if let Some(t) = teacher {

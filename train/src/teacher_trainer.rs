@@ -24,7 +24,7 @@ use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint
 use crate::config::{RunConfig, TeacherRunConfig, read_config};
 use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::nn::{init_seeded, new_varmap, scaled_vars};
+use crate::nn::{new_varmap, scaled_vars};
 use crate::run_loop::{Event, TrainingRun, finite_loss, run_fields, train_loop};
 use crate::scores::{Scores, score_validation_frames};
 use crate::teacher::{Teacher, teacher};
@@ -171,10 +171,9 @@ impl TeacherRun {
     pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
         cfg.model.audio.set_from(&data.dataset);
         let run = Self::build(dir, cfg)?;
-        init_seeded(&run.model.varmap, run.model.cfg.train.seed)?;
-        crate::audio_net::centre_attention(
+        crate::audio_net::init_with_centred_attention(
             &run.model.varmap,
-            "audio",
+            run.model.cfg.train.seed,
             run.model.cfg.model.audio.att_frames,
         )?;
         Ok(run)
