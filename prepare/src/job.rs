@@ -9,8 +9,7 @@ use nldf_core::audio::{
     FeatureConfig, FeatureSource, audio_windows_for_frames, n_video_frames, read_wav,
 };
 use nldf_core::camera::Intrinsics;
-use nldf_core::dataset::{FrameEntry, TransformsFile, save_audio_features};
-use nldf_core::image::Rect;
+use nldf_core::dataset::save_audio_features;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -19,9 +18,10 @@ use crate::face::{FaceEnv, FaceOutput};
 use crate::frames::{read_gray, read_rgb, save_jpeg};
 use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{Part, background, head_rect, parse_frame, parsing_image};
-use crate::pose::{PoseConfig, TrackSummary, solve_track};
+use crate::pose::{CameraTrack, PoseConfig, TrackSummary, solve_track};
 use crate::resample::shrink_dataset;
 use crate::scratch::Scratch;
+use crate::transforms::write_transforms;
 use crate::video::{self, Probe, Window};
 
 /// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
@@ -31,8 +31,6 @@ pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
 pub const ANALYSIS_MAX: u32 = 512;
 /// Frames the background median samples at most.
 const BACKGROUND_SAMPLES: usize = 150;
-/// AD-NeRF's split: the first 10/11 of the frames train, the rest are held out (`val`).
-const TRAIN_SHARE: f64 = 10.0 / 11.0;
 /// The face mesh's nose tip: a point on the head in every frame.
 const NOSE_TIP: usize = 1;
 
@@ -232,11 +230,124 @@ fn prepare_into(
         std::fs::create_dir_all(d).map_err(|e| Error::io(d, e))?;
     }
 
+    let (n, wave) = decode(job, ffmpeg, probe, window, dir, events)?;
+    lap("decode", &mut seconds);
+    events(Event::Stage {
+        name: "face landmarks",
+        total: Some(n),
+    });
+    let face_dir = dir.join("face");
+    let faces = env.run_frames(&ori, n, &face_dir, |done| events(Event::Frames(done)))?;
+    let kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
+    lap("faces", &mut seconds);
+    let (k, track) = solve_poses(job, env, &faces, &kept, events)?;
+    lap("pose", &mut seconds);
+    events(Event::Stage {
+        name: "parsing",
+        total: Some(kept.len()),
+    });
+    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, size, events)?;
+    lap("parsing", &mut seconds);
+
+    events(Event::Stage {
+        name: "background and heads",
+        total: Some(kept.len()),
+    });
+    let bc = background_of(&kept, &ori, &parsing_dir, &faces, size)?;
+    save_jpeg(&dir.join("bc.jpg"), bc.as_raw(), size)?;
+    write_heads(&kept, &ori, &parsing_dir, &heads, bc.as_raw(), size, events)?;
+    write_features(dir, &wave, probe.fps, n)?;
+    lap("background", &mut seconds);
+
+    let n_train = write_transforms(dir, &kept, &track.c2w, &rects, &k, probe.fps)?;
+    std::fs::remove_dir_all(&face_dir).map_err(|e| Error::io(&face_dir, e))?;
+    let dropped: Vec<usize> = (0..n).filter(|i| kept.binary_search(i).is_err()).collect();
+    let mut reprojection = track.reprojection_px.clone();
+    reprojection.sort_by(f32::total_cmp);
+    Ok(PrepareReport {
+        video: job.video.display().to_string(),
+        size,
+        analysed_at: size,
+        focal: k.focal,
+        fps: probe.fps,
+        frames_read: n,
+        frames_dropped: dropped.len(),
+        dropped,
+        train_frames: n_train,
+        val_frames: kept.len() - n_train,
+        bundled: track.bundled,
+        tracks: track.tracks,
+        reprojection_px: reprojection
+            .get(reprojection.len() / 2)
+            .copied()
+            .unwrap_or(0.0),
+        seconds,
+        total_seconds: 0.0,
+    })
+}
+
+/// `aud.npy` and `aud.json`: nldf's audio features of `wave`, one window per video frame.
+fn write_features(dir: &Path, wave: &nldf_core::audio::Waveform, fps: f64, n: usize) -> Result<()> {
+    let features = FeatureConfig::default();
+    let windows = audio_windows_for_frames(wave, fps as f32, &features, n)
+        .map_err(|e| Error::invalid(dir.join("aud.wav"), e.to_string()))?;
+    save_audio_features(dir, &windows, &FeatureSource::Nldf(features))
+}
+
+/// The head-pose stage: the intrinsics of `job`'s frames and the track of the kept frames.
+fn solve_poses(
+    job: &PrepareJob,
+    env: &FaceEnv,
+    faces: &FaceOutput,
+    kept: &[usize],
+    events: &mut impl FnMut(Event),
+) -> Result<(Intrinsics, CameraTrack)> {
+    let size = job.size;
+    events(Event::Stage {
+        name: "head pose",
+        total: None,
+    });
+    let k = Intrinsics {
+        focal: job.focal(),
+        cx: size as f32 / 2.0,
+        cy: size as f32 / 2.0,
+        width: size,
+        height: size,
+    };
+    let canonical = env.canonical()?;
+    let track = solve_track(
+        &faces.landmark_frames(kept),
+        &faces.tracks,
+        &canonical.vertices,
+        &canonical.rigid_weights,
+        &k,
+        &job.pose,
+    )?;
+    Ok((k, track))
+}
+
+/// Decodes the frames into `ori_imgs/` and the audio into `aud.wav`: the number of frames
+/// and the audio. Refuses audio shorter than the frames and a clip too short to train.
+fn decode(
+    job: &PrepareJob,
+    ffmpeg: &Path,
+    probe: &Probe,
+    window: &Window,
+    dir: &Path,
+    events: &mut impl FnMut(Event),
+) -> Result<(usize, nldf_core::audio::Waveform)> {
     events(Event::Stage {
         name: "decoding",
         total: probe.duration.map(|d| (d * probe.fps) as usize),
     });
-    let n = decode_to_jpegs(ffmpeg, &job.video, probe, window, &ori, events)?;
+    let n = decode_to_jpegs(
+        ffmpeg,
+        &job.video,
+        probe,
+        window,
+        &dir.join("ori_imgs"),
+        events,
+    )?;
     let wav = dir.join("aud.wav");
     video::extract_audio(ffmpeg, &job.video, window, &wav)?;
     let wave = read_wav(&wav)?;
@@ -257,133 +368,7 @@ fn prepare_into(
         probe.fps,
         "in the chosen time range",
     )?;
-    lap("decode", &mut seconds);
-
-    events(Event::Stage {
-        name: "face landmarks",
-        total: Some(n),
-    });
-    let face_dir = dir.join("face");
-    let faces = env.run_frames(&ori, n, &face_dir, |done| events(Event::Frames(done)))?;
-    let kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
-    lap("faces", &mut seconds);
-
-    events(Event::Stage {
-        name: "head pose",
-        total: None,
-    });
-    let k = Intrinsics {
-        focal: job.focal(),
-        cx: size as f32 / 2.0,
-        cy: size as f32 / 2.0,
-        width: size,
-        height: size,
-    };
-    let frames = faces.landmark_frames(&kept);
-    let canonical = env.canonical()?;
-    let track = solve_track(
-        &frames,
-        &faces.tracks,
-        &canonical.vertices,
-        &canonical.rigid_weights,
-        &k,
-        &job.pose,
-    )?;
-    lap("pose", &mut seconds);
-
-    events(Event::Stage {
-        name: "parsing",
-        total: Some(kept.len()),
-    });
-    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, size, events)?;
-    lap("parsing", &mut seconds);
-
-    events(Event::Stage {
-        name: "background and heads",
-        total: Some(kept.len()),
-    });
-    let bc = background_of(&kept, &ori, &parsing_dir, &faces, size)?;
-    let bc_path = dir.join("bc.jpg");
-    save_jpeg(&bc_path, bc.as_raw(), size)?;
-    write_heads(&kept, &ori, &parsing_dir, &heads, bc.as_raw(), size, events)?;
-    let features = FeatureConfig::default();
-    let windows = audio_windows_for_frames(&wave, probe.fps as f32, &features, n)
-        .map_err(|e| Error::invalid(&wav, e.to_string()))?;
-    save_audio_features(dir, &windows, &FeatureSource::Nldf(features))?;
-    lap("background", &mut seconds);
-
-    let entries: Vec<FrameEntry> = kept
-        .iter()
-        .zip(&track.c2w)
-        .zip(&rects)
-        .map(|((&i, c2w), rect)| FrameEntry {
-            img_id: i as i64,
-            aud_id: i as i64,
-            transform_matrix: c2w.transpose().to_cols_array_2d(),
-            face_rect: rect.map(|[x, y, w, h]| Rect {
-                x: x as i64,
-                y: y as i64,
-                w: w as i64,
-                h: h as i64,
-            }),
-            eye: None,
-        })
-        .collect();
-    let n_train =
-        ((entries.len() as f64 * TRAIN_SHARE).round() as usize).clamp(1, entries.len() - 1);
-    let (near, far) = bounds(&track.c2w);
-    for (name, part) in [
-        ("transforms_train.json", &entries[..n_train]),
-        ("transforms_val.json", &entries[n_train..]),
-    ] {
-        let file = TransformsFile {
-            focal_len: k.focal,
-            cx: k.cx,
-            cy: k.cy,
-            near: Some(near),
-            far: Some(far),
-            fps: Some(probe.fps as f32),
-            width: Some(size),
-            height: Some(size),
-            frames: part.to_vec(),
-        };
-        file.save(&dir.join(name))?;
-    }
-    std::fs::remove_dir_all(&face_dir).map_err(|e| Error::io(&face_dir, e))?;
-    let dropped: Vec<usize> = (0..n).filter(|i| kept.binary_search(i).is_err()).collect();
-    let mut reprojection = track.reprojection_px.clone();
-    reprojection.sort_by(f32::total_cmp);
-    Ok(PrepareReport {
-        video: job.video.display().to_string(),
-        size,
-        analysed_at: size,
-        focal: k.focal,
-        fps: probe.fps,
-        frames_read: n,
-        frames_dropped: dropped.len(),
-        dropped,
-        train_frames: n_train,
-        val_frames: entries.len() - n_train,
-        bundled: track.bundled,
-        tracks: track.tracks,
-        reprojection_px: reprojection
-            .get(reprojection.len() / 2)
-            .copied()
-            .unwrap_or(0.0),
-        seconds,
-        total_seconds: 0.0,
-    })
-}
-
-/// AD-NeRF's bounds about the mean camera depth of the head's origin, in metres: the head
-/// reaches 0.2 in front of the origin, and 0.4 behind it is empty.
-fn bounds(c2w: &[glam::Mat4]) -> (f32, f32) {
-    let mean = c2w
-        .iter()
-        .map(|m| m.z_axis.truncate().dot(m.w_axis.truncate()))
-        .sum::<f32>()
-        / c2w.len().max(1) as f32;
-    ((mean - 0.2).max(1e-3), mean + 0.4)
+    Ok((n, wave))
 }
 
 fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result<()> {

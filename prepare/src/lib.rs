@@ -30,6 +30,7 @@ pub(crate) mod recording;
 pub mod resample;
 pub(crate) mod scratch;
 pub mod tools;
+pub(crate) mod transforms;
 pub mod video;
 
 pub use error::{Error, Result};
