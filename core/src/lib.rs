@@ -35,5 +35,6 @@ pub mod stats;
 pub mod student_config;
 pub mod synth;
 pub mod upsampler_config;
+pub mod wav;
 
 pub use error::{Error, Result};
