@@ -9,6 +9,9 @@ pub enum TeacherPreset {
     AdNerf,
     /// 2 x 32, for tests and smoke runs.
     Tiny,
+    /// The grid teacher: a multiresolution hash grid under a 2 x 64 network, 32 samples
+    /// inside the head's bounds.
+    Grid,
 }
 
 impl TeacherPreset {
@@ -19,6 +22,7 @@ impl TeacherPreset {
             TeacherPreset::Small => TeacherConfig::small(),
             TeacherPreset::AdNerf => TeacherConfig::ad_nerf(),
             TeacherPreset::Tiny => TeacherConfig::tiny(),
+            TeacherPreset::Grid => TeacherConfig::grid(),
         }
     }
 }

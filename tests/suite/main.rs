@@ -9,6 +9,7 @@ mod export_ort;
 mod figures;
 mod frame_graph;
 mod fuzz;
+mod grid;
 mod identity;
 mod infer;
 mod jobs;

@@ -279,6 +279,8 @@ fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
         (TeacherConfig::small(), 13, 9),
         // Many blocks of whole rays, the last one partial, over several spans.
         (TeacherConfig::small(), 200, 9),
+        // The grid teacher's network: its points (the grid's encoding) get a gradient too.
+        (TeacherConfig::grid(), 200, 9),
     ] {
         let (varmap, vb) = new_varmap();
         let field = teacher_field(&cfg, vb).unwrap();
@@ -288,7 +290,7 @@ fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
             |n: usize| -> Vec<f32> { (0..n).map(|_| rng.random_range(-1.0..1.0)).collect() };
         let n = n_rays * n_samples;
         let dev = Device::Cpu;
-        let points = Tensor::from_vec(rand(n * cfg.pos_dim()), (n, cfg.pos_dim()), &dev).unwrap();
+        let points = Var::from_vec(rand(n * cfg.pos_dim()), (n, cfg.pos_dim()), &dev).unwrap();
         let codes =
             Var::from_vec(rand(n_rays * cfg.audio.dim), (n_rays, cfg.audio.dim), &dev).unwrap();
         let dirs =
@@ -322,7 +324,11 @@ fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
                     .map(|g| g.flatten_all().unwrap().to_vec1().unwrap());
                 out.push((format!("grad {name}"), g.unwrap_or_default()));
             }
-            for (name, var) in [("codes", &codes), ("dirs", &dirs)] {
+            let mut inputs = vec![("codes", &codes), ("dirs", &dirs)];
+            if cfg.grid.is_some() {
+                inputs.push(("points", &points));
+            }
+            for (name, var) in inputs {
                 let g = grads.get(var.as_tensor()).unwrap();
                 out.push((
                     format!("grad {name}"),

@@ -483,6 +483,22 @@ pub(crate) fn tiny_run_config(iters: usize) -> TeacherRunConfig {
     }
 }
 
+/// [`tiny_run_config`] with a small grid teacher: 8 levels of 2 features (4 to 64 cells,
+/// tables of 2^12) under 2 x 32.
+pub(crate) fn tiny_grid_run_config(iters: usize) -> TeacherRunConfig {
+    let mut cfg = tiny_run_config(iters);
+    cfg.model.depth = 2;
+    cfg.model.skips = vec![];
+    cfg.model.grid = Some(nldf_train::hash_grid::GridConfig {
+        levels: 8,
+        log2_table: 12,
+        base_resolution: 4,
+        max_resolution: 64,
+        ..Default::default()
+    });
+    cfg
+}
+
 /// A training run learned: every loss finite, the mean of the last 10 losses below `ratio`
 /// times the mean of the first 10, and the validation PSNR up by more than 2 dB.
 pub(crate) fn assert_learned(what: &str, losses: &[f64], ratio: f64, before: f64, after: f64) {

@@ -69,6 +69,9 @@ pub struct TeacherConfig {
     pub n_importance: usize,
     /// Transmittance below which a ray stops being sampled when rendering.
     pub min_transmittance: f32,
+    /// The grid teacher: points encoded by a multiresolution hash grid instead of
+    /// frequencies (`pos_freqs` is then unused). None: AD-NeRF's positional encoding.
+    pub grid: Option<crate::hash_grid::GridConfig>,
 }
 
 impl Default for TeacherConfig {
@@ -92,6 +95,7 @@ impl TeacherConfig {
             n_samples: 64,
             n_importance: 128,
             min_transmittance: 1e-4,
+            grid: None,
         }
     }
 
@@ -160,9 +164,27 @@ impl TeacherConfig {
         self.macs_per_sample() * self.evaluations_per_ray()
     }
 
-    /// Width of the encoded point, `3 (1 + 2 L)`.
+    /// Width of the encoded point: `3 (1 + 2 L)` frequencies, or the grid's `L F`.
     pub fn pos_dim(&self) -> usize {
-        3 * (1 + 2 * self.pos_freqs)
+        match &self.grid {
+            Some(g) => g.dim(),
+            None => 3 * (1 + 2 * self.pos_freqs),
+        }
+    }
+
+    /// The grid teacher for 2-core machines: a hash grid (16 levels of 2 features, tables
+    /// of 2^16, 16 to 512 cells across the head's box) under a 2 x 64 network with a colour
+    /// head of 64, the audio code entering the first layer; 32 samples inside the head's
+    /// bounds.
+    pub fn grid() -> TeacherConfig {
+        TeacherConfig {
+            depth: 2,
+            width: 64,
+            skips: vec![],
+            color_width: 64,
+            grid: Some(crate::hash_grid::GridConfig::default()),
+            ..TeacherConfig::small()
+        }
     }
 
     /// Width of the encoded view direction.
@@ -283,6 +305,9 @@ impl RunConfig for TeacherRunConfig {
             0.0,
             1.0,
         )?;
+        if let Some(g) = &m.grid {
+            g.check("model.grid")?;
+        }
         let t = &self.train;
         check_shared_train!(t);
         positive("train.att_lr_scale", t.att_lr_scale, 1e3)?;

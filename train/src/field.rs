@@ -33,6 +33,9 @@ pub struct TeacherField {
     color_feature: Dense,
     color_dir: Dense,
     rgb: Dense,
+    /// Its points come from a learned encoding (the grid teacher's hash grid): the backward
+    /// gives them their gradient.
+    learned_points: bool,
 }
 
 /// Builds a [`TeacherField`] under `vb`: `trunk.{i}.{hidden,points,audio}`, `density`,
@@ -68,6 +71,7 @@ pub fn teacher_field(cfg: &TeacherConfig, vb: VarBuilder) -> Result<TeacherField
         color_feature: dense(w, cfg.color_width, true, vb.pp("color_feature"))?,
         color_dir: dense(cfg.dir_dim(), cfg.color_width, false, vb.pp("color_dir"))?,
         rgb: dense(cfg.color_width, 3, true, vb.pp("rgb"))?,
+        learned_points: cfg.grid.is_some(),
     })
 }
 
@@ -170,7 +174,7 @@ impl TeacherField {
         };
         let params = pack.tensor()?;
         let rays = Tensor::cat(&ray_terms, 1)?;
-        let op = FieldOp::new(plan, train);
+        let op = FieldOp::new(plan, train).with_points_grad(train && self.learned_points);
         let points = points.contiguous()?;
         let raw = if train {
             points.apply_op3(&params, &rays, op)?

@@ -68,6 +68,9 @@ pub struct FieldOp {
     pub plan: FieldPlan,
     /// Keep activations for a backward pass (training).
     pub keep: bool,
+    /// Give the points their gradient in the backward (when they come from a learned
+    /// encoding, such as the grid teacher's hash grid).
+    pub points_grad: bool,
     stash: Mutex<Option<Stash>>,
 }
 
@@ -77,8 +80,15 @@ impl FieldOp {
         FieldOp {
             plan,
             keep,
+            points_grad: false,
             stash: Mutex::new(None),
         }
+    }
+
+    /// The same op, giving the points their gradient in the backward when `on`.
+    pub fn with_points_grad(mut self, on: bool) -> FieldOp {
+        self.points_grad = on;
+        self
     }
 }
 
@@ -404,7 +414,8 @@ impl FieldOp {
     /// The backward of one block of `rows` rows (whole rays) starting at row `r0`: adds
     /// the weight and bias gradients to `dp` and the per-ray term gradients to `dr` (the
     /// block's rays, `[rows / n_samples, ray_width]`). `g` is the block's output gradient
-    /// `[rows, 4]` and `pts` its points.
+    /// `[rows, 4]` and `pts` its points; `dx`, when given, receives the points' gradient
+    /// `[rows, pos_dim]` (zeroed by the caller).
     ///
     /// Every input gradient is stored already multiplied by the ReLU mask of the layer
     /// below (the gate of [`block_product`]), so it is never read back to be masked.
@@ -419,6 +430,7 @@ impl FieldOp {
         pts: &[f32],
         dp: &mut [f32],
         dr: &mut [f32],
+        mut dx: Option<&mut [f32]>,
         s: &mut BackScratch,
     ) -> Result<()> {
         let plan = &self.plan;
@@ -528,11 +540,18 @@ impl FieldOp {
         // The trunk, last layer first; `g_h` is the gradient of the layer's pre-activation.
         // A fed layer's per-ray term (which carries its bias) gets the group sums, a plain
         // layer's bias the column sums.
-        for (i, (step, (wh, _))) in plan.trunk.iter().zip(&w.trunk).enumerate().rev() {
+        for (i, (step, (wh, wp))) in plan.trunk.iter().zip(&w.trunk).enumerate().rev() {
             let w_out = trunk_width(step)?;
             let gh = &g_h[..rows * w_out];
             if let (Some(pa), Some(off)) = (step.points, step.ray) {
                 add_group_sums(gh, w_out, ns, dr, rw, off);
+                if let (Some(dx), Some(wp)) = (dx.as_deref_mut(), wp) {
+                    let accumulate = Epilogue {
+                        accumulate: true,
+                        ..Epilogue::default()
+                    };
+                    block_product(gh, w_out, rows, wp, dx, pa.inp, accumulate);
+                }
                 block_weight_grad(
                     gh,
                     w_out,
@@ -574,7 +593,8 @@ impl FieldOp {
 
     /// The backward on raw slices, in parallel over [`SPANS`] spans of whole blocks: each
     /// span sums its blocks' weight gradients in order into its own partial, and the
-    /// partials are added in span order. Returns the parameter and per-ray term gradients.
+    /// partials are added in span order. Returns the parameter and per-ray term gradients,
+    /// and the points' gradient when the op gives one.
     fn backward(
         &self,
         stash: &Stash,
@@ -582,7 +602,7 @@ impl FieldOp {
         params: &[f32],
         pts: &[f32],
         n_rays: usize,
-    ) -> Result<(Vec<f32>, Vec<f32>)> {
+    ) -> Result<(Vec<f32>, Vec<f32>, Option<Vec<f32>>)> {
         let plan = &self.plan;
         let pos_dim = self.pos_dim()?;
         let w = PackedPlan::new(plan, params, false);
@@ -591,10 +611,31 @@ impl FieldOp {
         let span_rays = n_blocks.div_ceil(SPANS).max(1) * rays_per_block;
         let rw = plan.ray_width;
         let mut dr = vec![0.0f32; n_rays * rw];
+        let ns = plan.n_samples;
+        let mut dx = vec![
+            0.0f32;
+            if self.points_grad {
+                n_rays * ns * pos_dim
+            } else {
+                0
+            }
+        ];
+        let span_x = if self.points_grad {
+            span_rays * ns * pos_dim
+        } else {
+            1
+        };
+        let mut dx_spans: Vec<Option<&mut [f32]>> = if self.points_grad {
+            dx.chunks_mut(span_x).map(Some).collect()
+        } else {
+            Vec::new()
+        };
+        dx_spans.resize_with(n_rays.div_ceil(span_rays), || None);
         let partials = dr
             .par_chunks_mut(span_rays * rw)
+            .zip(dx_spans.into_par_iter())
             .enumerate()
-            .map(|(span, dr)| -> Result<Vec<f32>> {
+            .map(|(span, (dr, mut dx))| -> Result<Vec<f32>> {
                 let mut dp = vec![0.0f32; plan.n_params];
                 let mut scratch = BackScratch::default();
                 let q_lo = span * span_rays;
@@ -612,6 +653,9 @@ impl FieldOp {
                         &pts[r0 * pos_dim..r1 * pos_dim],
                         &mut dp,
                         &mut dr[(q0 - q_lo) * rw..(q1 - q_lo) * rw],
+                        dx.as_deref_mut().map(|d| {
+                            &mut d[(r0 - q_lo * ns) * pos_dim..(r1 - q_lo * ns) * pos_dim]
+                        }),
                         &mut scratch,
                     )?;
                     q0 = q1;
@@ -625,7 +669,7 @@ impl FieldOp {
                 *d += v;
             }
         }
-        Ok((dp, dr))
+        Ok((dp, dr, self.points_grad.then_some(dx)))
     }
 }
 
@@ -692,7 +736,7 @@ impl CustomOp3 for FieldOp {
             })?;
         let n_rays = rays.dim(0)?;
         let dev = points.device();
-        let (dp, dr) = with_data(grad, "grad", |g| {
+        let (dp, dr, dx) = with_data(grad, "grad", |g| {
             with_data(params, "params", |p| {
                 with_data(points, "points", |pts| {
                     self.backward(&stash, g, p, pts, n_rays)
@@ -704,6 +748,10 @@ impl CustomOp3 for FieldOp {
         give_buffer(stash.color);
         let d_params = Tensor::from_vec(dp, params.shape(), dev)?;
         let d_rays = Tensor::from_vec(dr, rays.shape(), dev)?;
-        Ok((None, Some(d_params), Some(d_rays)))
+        let d_points = match dx {
+            Some(dx) => Some(Tensor::from_vec(dx, points.shape(), dev)?),
+            None => None,
+        };
+        Ok((d_points, Some(d_params), Some(d_rays)))
     }
 }

@@ -18,6 +18,7 @@ pub mod error;
 pub mod eval;
 pub mod field;
 pub mod field_op;
+pub mod hash_grid;
 pub mod job;
 pub mod kernels;
 pub mod log;

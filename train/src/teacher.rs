@@ -10,6 +10,7 @@ use nldf_core::rays::Rays;
 use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::config::TeacherConfig;
 use crate::field::{TeacherField, teacher_field};
+use crate::hash_grid::{HashGrid, hash_grid};
 use crate::render::composite;
 use crate::sampler::{RaySamples, sample_importance, sample_stratified};
 use nldf_core::bounds::{Bounds, HeadRange};
@@ -20,16 +21,28 @@ pub struct Teacher {
     pub cfg: TeacherConfig,
     pub audio: AudioEncoder,
     pub field: TeacherField,
+    /// The grid teacher's encoding of position (none: frequencies).
+    pub grid: Option<HashGrid>,
 }
 
-/// Builds a [`Teacher`] under `vb` (`audio`, `field`).
+/// Builds a [`Teacher`] under `vb` (`audio`, `field`, and `grid` for the grid teacher).
 pub fn teacher(cfg: &TeacherConfig, vb: VarBuilder) -> Result<Teacher> {
     Ok(Teacher {
         cfg: cfg.clone(),
         audio: audio_encoder(&cfg.audio, vb.pp("audio"))?,
         field: teacher_field(cfg, vb.pp("field"))?,
+        grid: match &cfg.grid {
+            Some(g) => Some(hash_grid(g, vb.pp(GRID_PREFIX))?),
+            None => None,
+        },
     })
 }
+
+/// Where the grid teacher's table lies among the teacher's variables.
+pub const GRID_PREFIX: &str = "grid";
+
+/// The name of the grid teacher's table among the teacher's variables.
+pub const GRID_TABLE: &str = "grid.table";
 
 /// Positional encoding of `n` 3-vectors, in parallel ([`nldf_core::encoding::encode_vectors`]).
 ///
@@ -106,12 +119,10 @@ impl Teacher {
                 samples,
             });
         }
-        let points = encode_vectors(&samples.points, self.cfg.pos_freqs).tensor()?;
         let dirs = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs).tensor()?;
         let ray_codes = ray_codes(&samples.hit)?;
-        let (densities, colors) = self
-            .field
-            .forward(&points, &ray_codes, &dirs, n_samples, true)?;
+        let (densities, colors) =
+            self.query(&samples.points, &ray_codes, &dirs, n_samples, true)?;
         let deltas = Tensor::from_slice(&samples.deltas, (n_hit, n_samples), &dev)?;
         let bg: Vec<f32> = samples
             .hit
@@ -130,6 +141,38 @@ impl Teacher {
 }
 
 impl Teacher {
+    /// The field at `points` (`[n_rays * n_samples, 3]` flat, world units): encoded by the
+    /// grid or by frequencies, then densities `[n_rays, n_samples]` and colours
+    /// `[n_rays, n_samples, 3]` as [`TeacherField::forward`] gives them. The grid teacher
+    /// has no density outside its box. With `train`, gradients flow to every weight.
+    ///
+    /// # Shapes
+    /// - `codes`: `[n_rays, audio_dim]`; `dirs`: `[n_rays, dir_dim]`
+    pub fn query(
+        &self,
+        points: &[f32],
+        codes: &Tensor,
+        dirs: &Tensor,
+        n_samples: usize,
+        train: bool,
+    ) -> Result<(Tensor, Tensor)> {
+        let Some(grid) = &self.grid else {
+            let encoded = encode_vectors(points, self.cfg.pos_freqs).tensor()?;
+            return self.field.forward(&encoded, codes, dirs, n_samples, train);
+        };
+        let encoded = grid.encode(points, train)?;
+        let (densities, colors) = self
+            .field
+            .forward(&encoded, codes, dirs, n_samples, train)?;
+        let inside = grid.inside(points);
+        if inside.iter().all(|&i| i) {
+            return Ok((densities, colors));
+        }
+        let mask: Vec<f32> = inside.iter().map(|&i| f32::from(u8::from(i))).collect();
+        let mask = Tensor::from_vec(mask, densities.shape(), densities.device())?;
+        Ok(((densities * mask)?, colors))
+    }
+
     /// The samples of each ray that hits `bounds`: `n_samples` stratified ones, plus
     /// `n_importance` drawn from the weights that a coarse pass of the field (no gradient)
     /// gives them. `codes_of` gives the audio codes of a list of hit rays.
@@ -203,17 +246,18 @@ impl Teacher {
         let dirs_all = encode_vectors(&samples.view_dirs, self.cfg.dir_freqs);
         for lo in (0..n_hit).step_by(EVAL_CHUNK) {
             let hi = (lo + EVAL_CHUNK).min(n_hit);
-            let points =
-                encode_vectors(&samples.points[3 * s * lo..3 * s * hi], self.cfg.pos_freqs)
-                    .tensor()?;
             let dirs = Tensor::from_slice(
                 &dirs_all.data[lo * dirs_all.width..hi * dirs_all.width],
                 (hi - lo, dirs_all.width),
                 &Device::Cpu,
             )?;
-            let (densities, colors) =
-                self.field
-                    .forward(&points, &codes_of(lo, hi)?, &dirs, s, false)?;
+            let (densities, colors) = self.query(
+                &samples.points[3 * s * lo..3 * s * hi],
+                &codes_of(lo, hi)?,
+                &dirs,
+                s,
+                false,
+            )?;
             let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
             let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
             visit(lo, &densities, &colors)?;
@@ -319,12 +363,11 @@ impl Teacher {
                         &dirs_all.data[h * dirs_all.width..(h + 1) * dirs_all.width],
                     );
                 }
-                let points = encode_vectors(&points, self.cfg.pos_freqs).tensor()?;
                 let dirs = Tensor::from_vec(dirs, (active.len(), dirs_all.width), &Device::Cpu)?;
                 let codes = code
                     .broadcast_as((active.len(), code.dim(1)?))?
                     .contiguous()?;
-                let (densities, colors) = self.field.forward(&points, &codes, &dirs, g, false)?;
+                let (densities, colors) = self.query(&points, &codes, &dirs, g, false)?;
                 let densities: Vec<f32> = densities.flatten_all()?.to_vec1()?;
                 let colors: Vec<f32> = colors.flatten_all()?.to_vec1()?;
                 for (k, &a) in active.iter().enumerate() {

@@ -170,12 +170,20 @@ impl TeacherRun {
     /// taken from the data.
     pub fn create(dir: &Path, mut cfg: TeacherRunConfig, data: &TrainData) -> Result<TeacherRun> {
         cfg.model.audio.set_from(&data.dataset);
+        if let Some(grid) = &mut cfg.model.grid {
+            // The grid spans the box the rays are sampled in.
+            grid.set_box(data.bounds.lo, data.bounds.hi);
+        }
         let run = Self::build(dir, cfg)?;
+        let seed = run.model.cfg.train.seed;
         crate::audio_net::init_with_centred_attention(
             &run.model.varmap,
-            run.model.cfg.train.seed,
+            seed,
             run.model.cfg.model.audio.att_frames,
         )?;
+        if run.model.cfg.model.grid.is_some() {
+            crate::hash_grid::init_table(&run.model.varmap, crate::teacher::GRID_TABLE, seed)?;
+        }
         Ok(run)
     }
 
@@ -380,7 +388,14 @@ impl TrainingRun for TeacherRun {
 
 fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
     let t = &cfg.train;
-    let vars = scaled_vars(varmap, "audio.att.", t.att_lr_scale)?;
+    let mut vars = scaled_vars(varmap, "audio.att.", t.att_lr_scale)?;
+    if let Some(grid) = &cfg.model.grid {
+        for (name, _, scale) in &mut vars {
+            if name == crate::teacher::GRID_TABLE {
+                *scale = grid.lr_scale;
+            }
+        }
+    }
     Ok(Adam::new(
         vars,
         AdamParams {

@@ -1,0 +1,246 @@
+//! The grid teacher: the hash grid's kernels against their f64 reference, its layout, its
+//! numerics on extreme coordinates, and a grid teacher that learns and resumes bit for bit.
+
+use candle_core::{Device, Tensor, Var};
+use nldf_train::data::TrainData;
+use nldf_train::hash_grid::{GridConfig, HashGridOp, encode_reference, table_grad_reference};
+use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+
+use crate::util::{assert_learned, tiny_grid_run_config, tiny_scene};
+
+/// A grid with dense coarse levels and hashed fine ones, over an off-centre box.
+fn small_grid() -> GridConfig {
+    GridConfig {
+        levels: 6,
+        features: 2,
+        log2_table: 10,
+        base_resolution: 3,
+        max_resolution: 64,
+        lo: [-0.3, -0.2, 0.1],
+        hi: [0.5, 0.4, 0.9],
+        ..GridConfig::default()
+    }
+}
+
+/// `n` points spread over the box and a margin around it (some outside).
+fn points_around(cfg: &GridConfig, n: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
+    (0..n)
+        .flat_map(|_| {
+            (0..3)
+                .map(|d| {
+                    let (lo, hi) = (cfg.lo[d], cfg.hi[d]);
+                    let m = 0.1 * (hi - lo);
+                    rng.random_range(lo - m..hi + m)
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// The largest difference of `a` from `b`, relative to `b`'s largest magnitude.
+fn relative_error(a: &[f32], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0, "the reference is all zeros");
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| (x as f64 - y).abs())
+        .fold(0.0, f64::max)
+        / scale
+}
+
+#[test]
+fn the_hash_grid_matches_its_f64_reference_forward_and_backward() {
+    let cfg = small_grid();
+    let layout = cfg.layout();
+    assert!(layout.levels.iter().any(|l| l.hashed));
+    assert!(layout.levels.iter().any(|l| !l.hashed));
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let n = 500;
+    let points = points_around(&cfg, n, &mut rng);
+    let table: Vec<f32> = (0..layout.entries * cfg.features)
+        .map(|_| rng.random_range(-1.0..1.0))
+        .collect();
+    let r: Vec<f32> = (0..n * cfg.dim())
+        .map(|_| rng.random_range(-1.0..1.0))
+        .collect();
+    let dev = Device::Cpu;
+    let table_var = Var::from_vec(table.clone(), (layout.entries, cfg.features), &dev).unwrap();
+    let p = Tensor::from_vec(points.clone(), (n, 3), &dev).unwrap();
+    let op = HashGridOp {
+        layout: Arc::new(layout),
+    };
+    let out = p.apply_op2(table_var.as_tensor(), op).unwrap();
+    let loss = (&out * Tensor::from_vec(r.clone(), (n, cfg.dim()), &dev).unwrap())
+        .unwrap()
+        .sum_all()
+        .unwrap();
+    let grads = loss.backward().unwrap();
+    let dt: Vec<f32> = grads
+        .get(table_var.as_tensor())
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap();
+    let f64s = |v: &[f32]| v.iter().map(|&x| x as f64).collect::<Vec<_>>();
+    let want = encode_reference(&cfg, &f64s(&points), &f64s(&table));
+    let got: Vec<f32> = out.flatten_all().unwrap().to_vec1().unwrap();
+    let fwd = relative_error(&got, &want);
+    let want_dt = table_grad_reference(&cfg, &f64s(&points), &f64s(&r));
+    let bwd = relative_error(&dt, &want_dt);
+    println!("hash grid: forward {fwd:e}, backward {bwd:e} of the largest value");
+    assert!(fwd <= 1e-4, "forward differs by {fwd:e}");
+    assert!(bwd <= 1e-4, "backward differs by {bwd:e}");
+}
+
+#[test]
+fn the_reference_gradient_is_the_adjoint_of_the_reference_encoding() {
+    // The encoding is linear in the table, so <r, enc(table + h e_k)> - <r, enc(table)>
+    // is h times entry k of the gradient, up to rounding.
+    let cfg = small_grid();
+    let entries = cfg.layout().entries * cfg.features;
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let n = 40;
+    let points: Vec<f64> = points_around(&cfg, n, &mut rng)
+        .into_iter()
+        .map(f64::from)
+        .collect();
+    let table: Vec<f64> = (0..entries).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let r: Vec<f64> = (0..n * cfg.dim())
+        .map(|_| rng.random_range(-1.0..1.0))
+        .collect();
+    let dot = |t: &[f64]| -> f64 {
+        encode_reference(&cfg, &points, t)
+            .iter()
+            .zip(&r)
+            .map(|(a, b)| a * b)
+            .sum()
+    };
+    let grad = table_grad_reference(&cfg, &points, &r);
+    let base = dot(&table);
+    let mut touched = 0;
+    for k in (0..entries).step_by(7) {
+        let mut t = table.clone();
+        t[k] += 0.5;
+        let fd = (dot(&t) - base) / 0.5;
+        assert!(
+            (fd - grad[k]).abs() <= 1e-9,
+            "entry {k}: {fd} vs {}",
+            grad[k]
+        );
+        touched += usize::from(grad[k] != 0.0);
+    }
+    assert!(touched > 10, "too few entries reached to check");
+}
+
+#[test]
+fn levels_grow_from_the_base_to_the_finest_and_dense_levels_own_every_vertex() {
+    let cfg = GridConfig::default();
+    let res = cfg.resolutions();
+    assert_eq!(res.len(), 16);
+    assert_eq!(res[0], 16);
+    assert!((510..=512).contains(&res[15]), "{res:?}");
+    assert!(res.windows(2).all(|w| w[0] < w[1]), "{res:?}");
+    let layout = small_grid().layout();
+    for level in layout.levels.iter().filter(|l| !l.hashed) {
+        let side = level.resolution + 1;
+        let mut seen = vec![false; level.entries];
+        for z in 0..side {
+            for y in 0..side {
+                for x in 0..side {
+                    let e = level.entry(x, y, z);
+                    assert!(!seen[e], "two vertices share entry {e}");
+                    seen[e] = true;
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s));
+    }
+    for level in layout.levels.iter().filter(|l| l.hashed) {
+        assert!(level.entries.is_power_of_two());
+        assert!(level.entry(123, 456, 789) < level.entries);
+    }
+}
+
+#[test]
+fn extreme_and_broken_coordinates_encode_to_finite_values_outside_the_box() {
+    let cfg = small_grid();
+    let layout = cfg.layout();
+    let table: Vec<f32> = (0..layout.entries * cfg.features)
+        .map(|i| (i % 13) as f32 - 6.0)
+        .collect();
+    let points = [
+        1e30f32,
+        -1e30,
+        1e10, //
+        f32::NAN,
+        0.0,
+        0.0, //
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        0.2, //
+        f32::MAX,
+        f32::MIN,
+        f32::MIN_POSITIVE,
+    ];
+    let out = layout.encode(&points, &table);
+    assert!(out.iter().all(|v| v.is_finite()), "{out:?}");
+    for p in points.chunks_exact(3) {
+        assert!(!layout.contains(p), "{p:?} counted inside");
+    }
+    assert!(layout.contains(&[0.1, 0.1, 0.5]));
+    let grad = vec![1.0f32; out.len()];
+    assert!(
+        layout
+            .table_grad(&points, &grad)
+            .iter()
+            .all(|v| v.is_finite())
+    );
+}
+
+#[test]
+fn a_tiny_grid_teacher_learns_the_tiny_scene() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = TeacherRun::create(dir.path(), tiny_grid_run_config(200), &data).unwrap();
+    let grid = run.model.cfg.model.grid.clone().unwrap();
+    assert_eq!(
+        grid.lo,
+        data.bounds.lo.to_array(),
+        "the grid spans the head's bounds"
+    );
+    let before = run.model.validation_scores(&data, 2).unwrap();
+    let mut losses = Vec::new();
+    for _ in 0..200 {
+        losses.push(run.train_step(&data).unwrap().0);
+    }
+    let after = run.model.validation_scores(&data, 2).unwrap();
+    assert_learned("grid teacher", &losses, 0.6, before.psnr, after.psnr);
+}
+
+#[test]
+fn a_resumed_grid_teacher_continues_bit_for_bit() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = TeacherRun::create(dir.path(), tiny_grid_run_config(20), &data).unwrap();
+    for _ in 0..6 {
+        run.train_step(&data).unwrap();
+    }
+    run.save().unwrap();
+    let (a1, _) = run.train_step(&data).unwrap();
+    let (a2, _) = run.train_step(&data).unwrap();
+    let mut resumed = TeacherRun::open(dir.path()).unwrap();
+    let (b1, _) = resumed.train_step(&data).unwrap();
+    let (b2, _) = resumed.train_step(&data).unwrap();
+    assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
+    assert_eq!(a2.to_bits(), b2.to_bits(), "{a2} vs {b2}");
+    // Without the optimizer's moments the second step differs: the check can fail.
+    let mut cold = TeacherRun::from_model(TeacherModel::open(dir.path()).unwrap()).unwrap();
+    cold.train_step(&data).unwrap();
+    let (c2, _) = cold.train_step(&data).unwrap();
+    assert_ne!(a2.to_bits(), c2.to_bits());
+}
