@@ -278,7 +278,7 @@ impl TeacherArgs {
             run: self.run.clone(),
             source: match &self.config {
                 Some(path) => TeacherSource::File(path.clone()),
-                None => TeacherSource::Preset(self.preset.config()),
+                None => TeacherSource::Preset(Box::new(self.preset.config())),
             },
             iters: self.iters,
             resume: self.resume,

@@ -392,6 +392,10 @@ fn gated(gate: &[f32]) -> Epilogue<'_> {
     }
 }
 
+/// What [`FieldOp::backward`] gives: the parameters', the per-ray terms' and (when the op
+/// gives one) the points' gradients.
+type BackwardGrads = (Vec<f32>, Vec<f32>, Option<Vec<f32>>);
+
 /// The backward's scratch for one span of blocks.
 #[derive(Default)]
 struct BackScratch {
@@ -602,7 +606,7 @@ impl FieldOp {
         params: &[f32],
         pts: &[f32],
         n_rays: usize,
-    ) -> Result<(Vec<f32>, Vec<f32>, Option<Vec<f32>>)> {
+    ) -> Result<BackwardGrads> {
         let plan = &self.plan;
         let pos_dim = self.pos_dim()?;
         let w = PackedPlan::new(plan, params, false);

@@ -324,7 +324,7 @@ impl DemoJob {
         let mut plan = TeacherJob {
             data: data.clone(),
             run: self.out.clone(),
-            source: TeacherSource::Preset(self.teacher.clone()),
+            source: TeacherSource::Preset(Box::new(self.teacher.clone())),
             iters: Some(self.teacher_iters),
             resume,
             audio: AudioChoice::Auto,

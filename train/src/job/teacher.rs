@@ -18,7 +18,7 @@ use crate::teacher_trainer::TeacherRun;
 #[derive(Debug, Clone, PartialEq)]
 pub enum TeacherSource {
     /// A preset network with the default training settings.
-    Preset(TeacherConfig),
+    Preset(Box<TeacherConfig>),
     /// A `{"model": ..., "train": ...}` file, read strictly.
     File(PathBuf),
 }
@@ -86,7 +86,7 @@ impl TeacherJob {
             TeacherSource::File(path) => (read_config::<TeacherRunConfig>(path)?, Some(path)),
             TeacherSource::Preset(model) => (
                 TeacherRunConfig {
-                    model: model.clone(),
+                    model: (**model).clone(),
                     ..TeacherRunConfig::default()
                 },
                 None,
