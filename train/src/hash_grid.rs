@@ -234,27 +234,41 @@ impl GridLayout {
     fn cell(&self, level: &Level, u: &[f32; 3]) -> Cell {
         let n = level.resolution;
         let mut base = [0u32; 3];
-        let mut frac = [0.0f32; 3];
+        // Per axis, the weights of the low and the high vertex.
+        let mut w = [[0.0f32; 2]; 3];
         for d in 0..3 {
             let s = u[d] * n as f32;
-            let i = (s.floor() as u32).min(n - 1);
+            // `u` is in [0, 1], so truncation is the floor.
+            let i = (s as u32).min(n - 1);
+            let f = (s - i as f32).clamp(0.0, 1.0);
             base[d] = i;
-            frac[d] = (s - i as f32).clamp(0.0, 1.0);
+            w[d] = [1.0 - f, f];
         }
         let mut cell = Cell::default();
+        // Per axis, the low and the high vertex's term of the index.
+        let terms: [[u32; 2]; 3] = if level.hashed {
+            let t = |d: usize| {
+                [
+                    base[d].wrapping_mul(PRIMES[d]),
+                    (base[d] + 1).wrapping_mul(PRIMES[d]),
+                ]
+            };
+            [t(0), t(1), t(2)]
+        } else {
+            let side = n + 1;
+            let t = |d: usize, stride: u32| [base[d] * stride, (base[d] + 1) * stride];
+            [t(0, 1), t(1, side), t(2, side * side)]
+        };
+        let mask = level.entries - 1;
         for c in 0..8 {
-            let bit = |d: usize| (c >> d) & 1;
-            let mut w = 1.0f32;
-            for (d, &f) in frac.iter().enumerate() {
-                w *= if bit(d) == 1 { f } else { 1.0 - f };
-            }
-            cell.weights[c] = w;
+            let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            cell.weights[c] = w[0][bx] * w[1][by] * w[2][bz];
             cell.entries[c] = level.offset
-                + level.entry(
-                    base[0] + bit(0) as u32,
-                    base[1] + bit(1) as u32,
-                    base[2] + bit(2) as u32,
-                );
+                + if level.hashed {
+                    ((terms[0][bx] ^ terms[1][by] ^ terms[2][bz]) as usize) & mask
+                } else {
+                    (terms[0][bx] + terms[1][by] + terms[2][bz]) as usize
+                };
         }
         cell
     }
@@ -297,17 +311,17 @@ impl GridLayout {
             slices.push(head);
             rest = tail;
         }
+        let units: Vec<[f32; 3]> = points.chunks_exact(3).map(|p| self.unit(p).1).collect();
         slices
             .into_par_iter()
             .zip(self.levels.par_iter().enumerate())
             .for_each(|(dst, (l, level))| {
-                for (p, g) in points.chunks_exact(3).zip(grad.chunks_exact(width)) {
+                for (u, g) in units.iter().zip(grad.chunks_exact(width)) {
                     let g = &g[l * f..(l + 1) * f];
                     if g.iter().all(|&v| v == 0.0) {
                         continue;
                     }
-                    let (_, u) = self.unit(p);
-                    let cell = self.cell(level, &u);
+                    let cell = self.cell(level, u);
                     for (e, w) in cell.entries.iter().zip(cell.weights) {
                         let e = e - level.offset;
                         for (d, v) in dst[e * f..(e + 1) * f].iter_mut().zip(g) {

@@ -22,6 +22,7 @@ pub mod hash_grid;
 pub mod job;
 pub mod kernels;
 pub mod log;
+pub mod memory;
 pub mod loss;
 pub mod nn;
 pub mod op_base;
