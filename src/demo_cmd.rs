@@ -17,7 +17,7 @@ use nldf_infer::video::{VideoJob, VideoReport};
 use nldf_train::job::JobEvent;
 use nldf_train::job::demo::{
     DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
-    DEMO_TEACHER_ITERS, DemoJob, DemoReport,
+    DemoJob, DemoReport,
 };
 
 use crate::progress::{EventPrinter, progress_bar, stop_flag};
@@ -59,7 +59,12 @@ pub struct DemoArgs {
 /// `nldf train --data`.
 #[derive(clap::Args, Debug)]
 pub struct StageArgs {
-    /// Teacher training steps [default: 1100; nldf demo --quick: 300].
+    /// The teacher: `mlp` (AD-NeRF's, frequency-encoded) or `grid` (a hash grid, sharper
+    /// in the same minutes).
+    #[arg(long, value_enum, default_value_t = crate::presets::TeacherRecipe::Mlp)]
+    pub teacher: crate::presets::TeacherRecipe,
+    /// Teacher training steps [default: 1100, the grid teacher 2400; nldf demo --quick:
+    /// 300].
     #[arg(long)]
     pub teacher_iters: Option<usize>,
     /// Student training steps (0 skips the student and the export) [default: 4500; nldf
@@ -129,13 +134,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
         scene.size = size;
         nldf_core::synth::validate(&scene)?;
     }
+    let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
     let job = DemoJob {
         scene,
-        teacher_iters: args.stages.teacher_iters.unwrap_or(if quick {
-            300
-        } else {
-            DEMO_TEACHER_ITERS
-        }),
+        teacher,
+        teacher_lr,
+        teacher_iters: args
+            .stages
+            .teacher_iters
+            .unwrap_or(if quick { 300 } else { teacher_iters }),
         teacher_cap_minutes: minutes,
         student: args.student_depth.config(),
         student_iters: args

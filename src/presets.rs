@@ -27,6 +27,27 @@ impl TeacherPreset {
     }
 }
 
+/// The teacher a recipe trains (`nldf demo --teacher`, `nldf train --data --teacher`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TeacherRecipe {
+    /// AD-NeRF's MLP on frequency-encoded points (6 x 128), 1100 steps.
+    #[default]
+    Mlp,
+    /// A multiresolution hash grid under a 2 x 64 network, 2400 steps in the same minutes.
+    Grid,
+}
+
+impl TeacherRecipe {
+    /// The library's name for it.
+    pub fn kind(self) -> nldf_train::job::demo::TeacherKind {
+        use nldf_train::job::demo::TeacherKind;
+        match self {
+            TeacherRecipe::Mlp => TeacherKind::Mlp,
+            TeacherRecipe::Grid => TeacherKind::Grid,
+        }
+    }
+}
+
 /// Student presets: the paper's depths of Table 3 (width 256), nldf's own, and a tiny one
 /// for smoke runs.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -208,9 +208,12 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
         );
     };
     let defaults = nldf_train::job::demo::DemoJob::defaults(run);
+    let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
     let job = nldf_train::job::demo::DemoJob {
         data: Some(data),
-        teacher_iters: args.stages.teacher_iters.unwrap_or(defaults.teacher_iters),
+        teacher,
+        teacher_lr,
+        teacher_iters: args.stages.teacher_iters.unwrap_or(teacher_iters),
         student_iters: args.stages.student_iters.unwrap_or(defaults.student_iters),
         teacher_cap_minutes: args.stages.minutes.unwrap_or(defaults.teacher_cap_minutes),
         student_cap_minutes: (args.stages.student_minutes).unwrap_or(defaults.student_cap_minutes),

@@ -223,10 +223,39 @@ fn a_tiny_grid_teacher_learns_the_tiny_scene() {
 }
 
 #[test]
+fn a_grid_teacher_with_region_attention_learns_the_tiny_scene() {
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = tiny_grid_run_config(200);
+    if let Some(g) = cfg.model.grid.as_mut() {
+        g.region_attention = true;
+    }
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    assert!(run.model.teacher.attention.is_some());
+    let before = run.model.validation_scores(&data, 2).unwrap();
+    let mut losses = Vec::new();
+    for _ in 0..200 {
+        losses.push(run.train_step(&data).unwrap().0);
+    }
+    let after = run.model.validation_scores(&data, 2).unwrap();
+    assert_learned(
+        "grid teacher with attention",
+        &losses,
+        0.6,
+        before.psnr,
+        after.psnr,
+    );
+}
+
+#[test]
 fn a_resumed_grid_teacher_continues_bit_for_bit() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut run = TeacherRun::create(dir.path(), tiny_grid_run_config(20), &data).unwrap();
+    let mut cfg = tiny_grid_run_config(20);
+    if let Some(g) = cfg.model.grid.as_mut() {
+        g.region_attention = true;
+    }
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
     for _ in 0..6 {
         run.train_step(&data).unwrap();
     }

@@ -398,13 +398,20 @@ pub fn bench_teacher_step(
     Timed {
         model: if cfg.model.n_importance > 0 {
             format!(
-                "teacher {}x{} ({} + {} samples/ray)",
-                cfg.model.depth, cfg.model.width, cfg.model.n_samples, cfg.model.n_importance
+                "{} {}x{} ({} + {} samples/ray)",
+                cfg.model.kind_name(),
+                cfg.model.depth,
+                cfg.model.width,
+                cfg.model.n_samples,
+                cfg.model.n_importance
             )
         } else {
             format!(
-                "teacher {}x{} ({} samples/ray)",
-                cfg.model.depth, cfg.model.width, cfg.model.n_samples
+                "{} {}x{} ({} samples/ray)",
+                cfg.model.kind_name(),
+                cfg.model.depth,
+                cfg.model.width,
+                cfg.model.n_samples
             )
         },
         batch_rays: cfg.train.batch_rays,

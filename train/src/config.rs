@@ -167,13 +167,14 @@ impl TeacherConfig {
     /// Width of the encoded point: `3 (1 + 2 L)` frequencies, or the grid's `L F`.
     pub fn pos_dim(&self) -> usize {
         match &self.grid {
+            Some(g) if g.region_attention => g.dim() + self.audio.dim,
             Some(g) => g.dim(),
             None => 3 * (1 + 2 * self.pos_freqs),
         }
     }
 
     /// The grid teacher for 2-core machines: a hash grid (16 levels of 2 features, tables
-    /// of 2^16, 16 to 512 cells across the head's box) under a 2 x 64 network with a colour
+    /// of 2^15, 16 to 512 cells across the head's box) under a 2 x 64 network with a colour
     /// head of 64, the audio code entering the first layer; 32 samples inside the head's
     /// bounds.
     pub fn grid() -> TeacherConfig {
@@ -184,6 +185,15 @@ impl TeacherConfig {
             color_width: 64,
             grid: Some(crate::hash_grid::GridConfig::default()),
             ..TeacherConfig::small()
+        }
+    }
+
+    /// What the teacher is called in tables: `teacher` (frequencies) or `grid teacher`.
+    pub fn kind_name(&self) -> &'static str {
+        if self.grid.is_some() {
+            "grid teacher"
+        } else {
+            "teacher"
         }
     }
 

@@ -127,7 +127,8 @@ impl FrameModel for TeacherModel {
     fn describe(&self) -> String {
         let m = &self.cfg.model;
         format!(
-            "teacher {}x{} ({} samples/ray)",
+            "{} {}x{} ({} samples/ray)",
+            m.kind_name(),
             m.depth,
             m.width,
             m.n_samples + m.n_importance

@@ -44,21 +44,26 @@ pub struct GridConfig {
     /// The grid's learning rate as a multiple of the network's (Instant-NGP trains both at
     /// 1e-2).
     pub lr_scale: f64,
+    /// ER-NeRF's region attention: the audio code enters every sample weighted by a
+    /// sigmoid attention computed from the sample's grid features, `a(x) ⊙ code`, beside
+    /// the features.
+    pub region_attention: bool,
 }
 
 impl Default for GridConfig {
-    /// 16 levels of 2 features in tables of 2^16 entries, 16 to 512 cells per axis, the grid
-    /// at 10 times the network's learning rate.
+    /// 16 levels of 2 features in tables of 2^15 entries, 16 to 512 cells per axis, the grid
+    /// at 10 times the network's learning rate (chosen on the tuning scene: docs/grid.md).
     fn default() -> Self {
         GridConfig {
             levels: 16,
             features: 2,
-            log2_table: 16,
+            log2_table: 15,
             base_resolution: 16,
             max_resolution: 512,
             lo: [-1.0; 3],
             hi: [1.0; 3],
             lr_scale: 10.0,
+            region_attention: false,
         }
     }
 }

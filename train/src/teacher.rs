@@ -11,6 +11,7 @@ use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::config::TeacherConfig;
 use crate::field::{TeacherField, teacher_field};
 use crate::hash_grid::{HashGrid, hash_grid};
+use crate::nn::{Dense, dense};
 use crate::render::composite;
 use crate::sampler::{RaySamples, sample_importance, sample_stratified};
 use nldf_core::bounds::{Bounds, HeadRange};
@@ -23,6 +24,8 @@ pub struct Teacher {
     pub field: TeacherField,
     /// The grid teacher's encoding of position (none: frequencies).
     pub grid: Option<HashGrid>,
+    /// The grid teacher's region attention: grid features -> one weight per audio channel.
+    pub attention: Option<Dense>,
 }
 
 /// Builds a [`Teacher`] under `vb` (`audio`, `field`, and `grid` for the grid teacher).
@@ -34,6 +37,15 @@ pub fn teacher(cfg: &TeacherConfig, vb: VarBuilder) -> Result<Teacher> {
         grid: match &cfg.grid {
             Some(g) => Some(hash_grid(g, vb.pp(GRID_PREFIX))?),
             None => None,
+        },
+        attention: match &cfg.grid {
+            Some(g) if g.region_attention => Some(dense(
+                g.dim(),
+                cfg.audio.dim,
+                true,
+                vb.pp("grid_attention"),
+            )?),
+            _ => None,
         },
     })
 }
@@ -160,7 +172,17 @@ impl Teacher {
             let encoded = encode_vectors(points, self.cfg.pos_freqs).tensor()?;
             return self.field.forward(&encoded, codes, dirs, n_samples, train);
         };
-        let encoded = grid.encode(points, train)?;
+        let mut encoded = grid.encode(points, train)?;
+        if let Some(att) = &self.attention {
+            // a(x) ⊙ code per sample: [n, audio_dim] beside the grid's features.
+            let weights = candle_nn::ops::sigmoid(&att.forward(&encoded)?)?;
+            let (n, a) = weights.dims2()?;
+            let audio = weights
+                .reshape((n / n_samples.max(1), n_samples, a))?
+                .broadcast_mul(&codes.unsqueeze(1)?)?
+                .reshape((n, a))?;
+            encoded = Tensor::cat(&[&encoded, &audio], 1)?;
+        }
         let (densities, colors) = self
             .field
             .forward(&encoded, codes, dirs, n_samples, train)?;

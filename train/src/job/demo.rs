@@ -42,6 +42,8 @@ pub struct DemoJob {
     /// Teacher training steps: the recipe is pinned in steps, so that its scores do not
     /// move with the machine.
     pub teacher_iters: usize,
+    /// The teacher's learning rate before it decays.
+    pub teacher_lr: f64,
     /// A wall-clock cap on the teacher in minutes, which only stops it (and says so).
     pub teacher_cap_minutes: f64,
     /// The student's network.
@@ -75,6 +77,42 @@ pub struct DemoReport {
 
 /// The demo's teacher steps.
 pub const DEMO_TEACHER_ITERS: usize = 1100;
+
+/// The MLP teacher's learning rate before it decays.
+pub const DEMO_TEACHER_LR: f64 = 1e-3;
+
+/// The grid teacher's steps: about as many as fit in the MLP teacher's minutes on one
+/// machine (2 vCPU AMD EPYC: 1100 MLP steps took 88.4 s; the grid teacher took 2447 and
+/// 2513 steps in as long, on the tuning scene, docs/grid.md).
+pub const DEMO_GRID_TEACHER_ITERS: usize = 2400;
+
+/// The grid teacher's learning rate before it decays (its grid learns at
+/// `GridConfig::lr_scale` times this), chosen on the tuning scene (docs/grid.md).
+pub const DEMO_GRID_TEACHER_LR: f64 = 5e-3;
+
+/// Which teacher a recipe trains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TeacherKind {
+    /// AD-NeRF's MLP on frequency-encoded points (6 x 128).
+    #[default]
+    Mlp,
+    /// A multiresolution hash grid under a 2 x 64 network.
+    Grid,
+}
+
+impl TeacherKind {
+    /// The network, steps and learning rate of this teacher in the recipe.
+    pub fn recipe(self) -> (TeacherConfig, usize, f64) {
+        match self {
+            TeacherKind::Mlp => (TeacherConfig::small(), DEMO_TEACHER_ITERS, DEMO_TEACHER_LR),
+            TeacherKind::Grid => (
+                TeacherConfig::grid(),
+                DEMO_GRID_TEACHER_ITERS,
+                DEMO_GRID_TEACHER_LR,
+            ),
+        }
+    }
+}
 
 /// The demo's cap on the teacher in minutes.
 pub const DEMO_TEACHER_CAP_MINUTES: f64 = 7.0;
@@ -183,6 +221,7 @@ impl DemoJob {
             },
             teacher: TeacherConfig::small(),
             teacher_iters: DEMO_TEACHER_ITERS,
+            teacher_lr: DEMO_TEACHER_LR,
             teacher_cap_minutes: DEMO_TEACHER_CAP_MINUTES,
             student: StudentConfig::realtime(),
             student_iters: DEMO_STUDENT_ITERS,
@@ -197,6 +236,12 @@ impl DemoJob {
     pub fn check(&self) -> Result<()> {
         if self.teacher_iters == 0 {
             return Err(Error::Config("the teacher needs at least one step".into()));
+        }
+        if !(self.teacher_lr.is_finite() && self.teacher_lr > 0.0 && self.teacher_lr <= 1.0) {
+            return Err(Error::Config(format!(
+                "the teacher's learning rate must be in (0, 1], got {}",
+                self.teacher_lr
+            )));
         }
         for (what, minutes) in [
             ("teacher", self.teacher_cap_minutes),
@@ -334,6 +379,7 @@ impl DemoJob {
         // The learning rate is held, then decays tenfold over the last 40 % of the pinned
         // steps (as the budgeted teacher's did over its minutes); the cap only stops.
         if !resume {
+            plan.run.model.cfg.train.lr = self.teacher_lr;
             let hold = (DEMO_HOLD * self.teacher_iters as f64).round() as usize;
             plan.run.model.cfg.train.lr_hold_steps = hold;
             plan.run.model.cfg.train.lr_decay_steps = (self.teacher_iters - hold).max(1);
