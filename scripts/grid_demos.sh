@@ -4,6 +4,7 @@
 # figures kept in results/grid/<machine>_<scene>_<teacher>/ and the summary rewritten.
 #
 #   scripts/grid_demos.sh WORK MACHINE [SCENE...]     SCENE: s0 | s1 | h2 (default: all)
+#   TEACHERS=grid scripts/grid_demos.sh ...            the grid teacher's runs alone
 set -euo pipefail
 work=${1:?usage: scripts/grid_demos.sh WORK MACHINE [SCENE...]}
 machine=${2:?usage: scripts/grid_demos.sh WORK MACHINE [SCENE...]}
@@ -19,7 +20,7 @@ for scene in "${scenes[@]}"; do
     h2) flags=(--head second) ;;
     *) echo "unknown scene $scene" >&2; exit 2 ;;
   esac
-  for teacher in mlp grid; do
+  for teacher in ${TEACHERS:-mlp grid}; do
     out="$work/${scene}_${teacher}"
     "$nldf" demo "${flags[@]}" --teacher "$teacher" --out "$out" > "$work/${scene}_${teacher}.log" 2>&1
     keep="results/grid/${machine}_${scene}_${teacher}"

@@ -1,16 +1,14 @@
 #!/usr/bin/env python3
 """The grid teacher against the MLP teacher on the test scenes, from the committed runs.
 
-Reads results/grid/<machine>_<scene>_<teacher>/ (metrics_{val,novel,voice}.json, timing.json,
-teacher_config.json, written by scripts/grid_demos.sh) and writes results/grid/summary.json:
-per machine and scene, each teacher's and each student's head, mouth and whole-frame PSNR
+Reads the runs named in PAIRS (metrics_{val,novel,voice}.json and timing.json; the grid
+teacher's written by scripts/grid_demos.sh) and writes results/grid/summary.json: per scene, each teacher's and each student's head, mouth and whole-frame PSNR
 per split, the differences the issue asks about (grid minus MLP, student minus its
 teacher) and the teacher's time for the student's targets. Prints a table.
 """
 
 import json
 import os
-import re
 import sys
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "results", "grid")
@@ -45,34 +43,41 @@ def diff(a, b):
     return {s: {k: a[s][k] - b[s][k] for k in METRICS} for s in SPLITS}
 
 
+# Each test scene's pair: the MLP teacher's run and the grid teacher's, relative to
+# results/grid/. The MLP recipe is pinned in steps and reproduces bit for bit across
+# machines (seed 0 rerun here matched the committed run of results/demo/kept_audio/ in
+# every printed figure), so seed 1 and the second head take the committed runs; their
+# targets' seconds come from another machine and are not compared.
+PAIRS = {
+    "s0": ("epyc_s0_mlp", "epyc_s0_grid", True),
+    "s1": ("../demo/kept_audio/xeon_s1", "epyc_s1_grid", False),
+    "h2": ("../demo/kept_audio/xeon_head2", "epyc_h2_grid", False),
+}
+
+
 def main():
-    runs = {}
-    for name in sorted(os.listdir(ROOT)):
-        m = re.fullmatch(r"(.+)_(s\d+|h2)_(mlp|grid)", name)
-        if m and os.path.isdir(os.path.join(ROOT, name)):
-            runs.setdefault((m.group(1), m.group(2)), {})[m.group(3)] = run_figures(
-                os.path.join(ROOT, name))
     summary = []
-    for (machine, scene), r in sorted(runs.items()):
-        entry = {"machine": machine, "scene": scene, "runs": r}
-        if "mlp" in r and "grid" in r:
-            g, m = r["grid"]["models"], r["mlp"]["models"]
-            entry["grid_minus_mlp"] = {
-                "teacher": diff(g["teacher"], m["teacher"]),
-                "student": diff(g["student"], m["student"]),
-            }
-            entry["student_minus_teacher"] = {
-                t: diff(r[t]["models"]["student"], r[t]["models"]["teacher"])
-                for t in ("mlp", "grid")
-            }
+    for scene, (mlp, grid, same_machine) in PAIRS.items():
+        dirs = {"mlp": os.path.join(ROOT, mlp), "grid": os.path.join(ROOT, grid)}
+        if not all(os.path.isdir(d) for d in dirs.values()):
+            continue
+        r = {t: run_figures(d) for t, d in dirs.items()}
+        entry = {"scene": scene, "sources": {"mlp": mlp, "grid": grid}, "runs": r}
+        g, m = r["grid"]["models"], r["mlp"]["models"]
+        entry["grid_minus_mlp"] = {
+            "teacher": diff(g["teacher"], m["teacher"]),
+            "student": diff(g["student"], m["student"]),
+        }
+        entry["student_minus_teacher"] = {
+            t: diff(r[t]["models"]["student"], r[t]["models"]["teacher"]) for t in ("mlp", "grid")
+        }
+        if same_machine:
             entry["targets_s_ratio"] = r["grid"]["targets_s"] / r["mlp"]["targets_s"]
         summary.append(entry)
     with open(os.path.join(ROOT, "summary.json"), "w") as f:
         json.dump({"scenes": summary}, f, indent=2)
     for e in summary:
-        if "grid_minus_mlp" not in e:
-            continue
-        print(f"{e['machine']} {e['scene']}:")
+        print(f"{e['scene']}:")
         for who in ("teacher", "student"):
             for t in ("mlp", "grid"):
                 row = e["runs"][t]["models"][who]

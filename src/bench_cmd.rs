@@ -56,6 +56,33 @@ pub enum BenchCommand {
     /// is, and how much of the true mouth the landmarks' lips cover; a table with each
     /// bar, and JSON. Exits non-zero when a bar fails.
     Prepare(PrepareBenchArgs),
+    /// Each teacher of the recipe (`mlp`, `grid`) trained on one dataset for the same
+    /// training seconds, one after the other: head PSNR on the validation frames against
+    /// training seconds, one curve per teacher on one plot, and JSON with the machine.
+    Teachers(TeachersBenchArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TeachersBenchArgs {
+    /// Dataset folder (AD-NeRF's layout).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: OUT/<teacher> (each run), OUT/curves.json, OUT/curves.png.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Training minutes of each teacher (its learning rate held for 60 % of them, then
+    /// tenfold down by the clock).
+    #[arg(long, default_value_t = 20.0)]
+    pub minutes: f64,
+    /// Seconds between two measurements.
+    #[arg(long, default_value_t = 60.0)]
+    pub every: f64,
+    /// Validation frames each measurement renders.
+    #[arg(long, default_value_t = 4)]
+    pub frames: usize,
+    /// The teachers, in order (repeat the flag) [default: mlp, then grid].
+    #[arg(long, value_enum)]
+    pub teacher: Vec<crate::presets::TeacherRecipe>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -257,7 +284,48 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Frontier(args) => crate::frontier_cmd::run(args),
         BenchCommand::Upsampler(args) => upsampler(args),
         BenchCommand::Prepare(args) => prepare(args),
+        BenchCommand::Teachers(args) => teachers(args),
     }
+}
+
+fn teachers(args: TeachersBenchArgs) -> Result<()> {
+    use crate::presets::TeacherRecipe;
+    let recipes = if args.teacher.is_empty() {
+        vec![TeacherRecipe::Mlp, TeacherRecipe::Grid]
+    } else {
+        args.teacher.clone()
+    };
+    let job = nldf_train::job::curves::CurveJob {
+        data: args.data.clone(),
+        out: args.out.clone(),
+        teachers: recipes.iter().map(|r| r.kind()).collect(),
+        seconds: args.minutes * 60.0,
+        every_s: args.every,
+        frames: args.frames,
+    };
+    let stop = crate::progress::stop_flag();
+    let mut printer = EventPrinter::default();
+    let report = job.run(&stop, &mut |e| printer.show(e))?;
+    println!("| teacher | seconds | steps | head PSNR (dB) | mouth PSNR (dB) |");
+    println!("|---|---|---|---|---|");
+    for curve in &report.curves {
+        if let Some(p) = curve.points.last() {
+            let show = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.2}"));
+            println!(
+                "| {} | {:.1} | {} | {} | {} |",
+                curve.teacher,
+                p.seconds,
+                p.step,
+                show(p.head_psnr),
+                show(p.mouth_psnr)
+            );
+        }
+    }
+    println!(
+        "machine: {}, {} threads, commit {}",
+        report.machine.cpu, report.machine.rayon_threads, report.machine.commit
+    );
+    Ok(())
 }
 
 fn prepare(args: PrepareBenchArgs) -> Result<()> {

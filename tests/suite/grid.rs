@@ -273,3 +273,48 @@ fn a_resumed_grid_teacher_continues_bit_for_bit() {
     let (c2, _) = cold.train_step(&data).unwrap();
     assert_ne!(a2.to_bits(), c2.to_bits());
 }
+
+#[test]
+fn the_teachers_curves_hold_each_teacher_measured_over_its_seconds() {
+    use nldf_train::job::curves::CurveJob;
+    use nldf_train::job::demo::TeacherKind;
+    let out = tempfile::tempdir().unwrap();
+    let job = CurveJob {
+        data: tiny_scene().to_path_buf(),
+        out: out.path().to_path_buf(),
+        teachers: vec![TeacherKind::Mlp, TeacherKind::Grid],
+        seconds: 1.5,
+        every_s: 0.5,
+        frames: 1,
+    };
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    let report = job.run(&stop, &mut |_| {}).unwrap();
+    assert_eq!(report.curves.len(), 2);
+    for (curve, name) in report.curves.iter().zip(["mlp", "grid"]) {
+        assert_eq!(curve.teacher, name);
+        assert!(
+            curve.points.len() >= 2,
+            "{name}: {} points",
+            curve.points.len()
+        );
+        assert!(
+            curve
+                .points
+                .windows(2)
+                .all(|w| w[0].seconds < w[1].seconds && w[0].step <= w[1].step)
+        );
+        let last = curve.points.last().unwrap();
+        assert!(last.seconds >= 1.5 && last.step > 0 && last.psnr.is_finite());
+        let model = out.path().join(name).join(nldf_core::run_files::MODEL_FILE);
+        assert!(model.is_file(), "{} missing", model.display());
+    }
+    for file in ["curves.json", "curves.png"] {
+        assert!(out.path().join(file).is_file(), "{file} missing");
+    }
+    // A job without seconds is refused before any work.
+    let none = CurveJob {
+        seconds: 0.0,
+        ..job
+    };
+    assert!(none.run(&stop, &mut |_| {}).is_err());
+}

@@ -308,3 +308,60 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
     // Ground truth and four models in rows, the seven sweep poses in columns.
     assert_eq!((strip.width, strip.height), (7 * 34 + 2, 5 * 34 + 2));
 }
+
+#[test]
+fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let stop = AtomicBool::new(false);
+    let mut teacher = TeacherConfig::tiny();
+    teacher.depth = 2;
+    teacher.skips = vec![];
+    teacher.grid = Some(nldf_train::hash_grid::GridConfig {
+        levels: 6,
+        log2_table: 10,
+        max_resolution: 64,
+        ..Default::default()
+    });
+    let job = DemoJob {
+        teacher,
+        teacher_lr: nldf_train::job::demo::DEMO_GRID_TEACHER_LR,
+        ..tiny_demo(&out)
+    };
+    let report = job
+        .run(&stop, &mut |_| {})
+        .unwrap()
+        .expect("the demo ran to its end");
+    let teacher = nldf_train::teacher_trainer::TeacherModel::open(&out.join("teacher")).unwrap();
+    let grid = teacher.cfg.model.grid.as_ref().expect("a grid teacher");
+    assert_eq!(
+        teacher.cfg.train.lr,
+        nldf_train::job::demo::DEMO_GRID_TEACHER_LR
+    );
+    assert!(grid.hi.iter().zip(&grid.lo).all(|(h, l)| h > l));
+    let described: Vec<&str> = report
+        .evaluation
+        .models
+        .iter()
+        .map(|m| m.model.as_str())
+        .collect();
+    assert!(
+        described[0].starts_with("grid teacher 2x32"),
+        "{described:?}"
+    );
+    for m in &report.evaluation.models {
+        assert!(
+            m.psnr.is_finite() && m.psnr > 5.0,
+            "{}: {}",
+            m.label,
+            m.psnr
+        );
+    }
+    // A learning rate out of range is refused before any work.
+    let bad = DemoJob {
+        teacher_lr: 0.0,
+        ..tiny_demo(&dir.path().join("bad"))
+    };
+    assert!(bad.run(&stop, &mut |_| {}).is_err());
+    assert!(!dir.path().join("bad").exists());
+}

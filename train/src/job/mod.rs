@@ -5,6 +5,7 @@
 //! the same jobs end to end.
 
 pub mod ablation;
+pub mod curves;
 pub mod demo;
 pub mod eval;
 pub mod posed;
