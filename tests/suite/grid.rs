@@ -318,3 +318,55 @@ fn the_teachers_curves_hold_each_teacher_measured_over_its_seconds() {
     };
     assert!(none.run(&stop, &mut |_| {}).is_err());
 }
+
+#[test]
+fn a_grid_teacher_renders_finite_colours_over_a_1e10_span_and_far_outside_its_box() {
+    use nldf_core::bounds::{Bounds, HeadRange};
+    use nldf_core::dataset::Split;
+    use nldf_core::rays::rays_for_image;
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = TeacherRun::create(dir.path(), tiny_grid_run_config(20), &data).unwrap();
+    for _ in 0..20 {
+        run.train_step(&data).unwrap();
+    }
+    let frame = &data.dataset.frames(Split::Val)[0];
+    let rays = rays_for_image(&data.dataset.camera(frame));
+    let code = run.model.audio_codes(&data, &[frame.aud_id]).unwrap();
+    let bg = &data.dataset.background.data;
+    let reach = glam::Vec3::splat(1e6);
+    for (near, far) in [(0.0, 1e10), (1e-9, 1e-6), (0.0, 1e4)] {
+        let range = HeadRange {
+            bounds: Bounds {
+                lo: -reach,
+                hi: reach,
+            },
+            near,
+            far,
+        };
+        let out = run
+            .model
+            .teacher
+            .render_eval(&rays, bg, &code, &range, 0.0)
+            .unwrap();
+        assert!(
+            out.iter().all(|v| v.is_finite()),
+            "non-finite colour over [{near}, {far}]"
+        );
+        // A ray that never enters the grid's box meets no density: it is its background.
+        let grid = &run.model.cfg.model.grid.as_ref().unwrap();
+        let grid_box = Bounds {
+            lo: glam::Vec3::from(grid.lo),
+            hi: glam::Vec3::from(grid.hi),
+        };
+        let mut misses = 0;
+        for r in 0..rays.len() {
+            let (o, d) = (rays.origin(r), rays.direction(r));
+            if grid_box.padded(0.01).intersect(o, d, near, far).is_none() {
+                misses += 1;
+                assert_eq!(&out[3 * r..3 * r + 3], &bg[3 * r..3 * r + 3], "ray {r}");
+            }
+        }
+        assert!(misses > 0, "every ray enters the grid's box");
+    }
+}

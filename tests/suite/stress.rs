@@ -278,13 +278,19 @@ fn stress_exported_model_gives_finite_output_for_far_rays_and_extreme_audio() {
     println!("exported model, 600 far rays: finite in {checked} runs ({kinds:?})");
 }
 
-/// Ten times the default learning rate: the run either finishes or stops with a one-line
-/// error, and every checkpoint it leaves holds finite weights only.
+/// Ten times the default learning rate, for the MLP and the grid teacher: the run either
+/// finishes or stops with a one-line error, and every checkpoint it leaves holds finite
+/// weights only.
 #[test]
 fn stress_training_at_ten_times_the_learning_rate_never_checkpoints_a_nan() {
+    for cfg in [tiny_run_config(60), crate::util::tiny_grid_run_config(60)] {
+        ten_times_the_learning_rate(cfg);
+    }
+}
+
+fn ten_times_the_learning_rate(mut cfg: nldf_train::config::TeacherRunConfig) {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = tiny_run_config(60);
     cfg.train.lr *= 10.0;
     cfg.train.checkpoint_every = 10;
     let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();

@@ -391,6 +391,18 @@ fn config_files_reject_unknown_keys_and_name_bad_values() {
     let e = err(r#"{"model": {"n_samples": 1}}"#);
     assert!(e.contains("`model.n_samples`"), "{e}");
     assert_eq!(err(r#"{"model": {"width": 64}}"#), "");
+    // The grid teacher's settings.
+    let e = err(r#"{"model": {"grid": {"levels": 0}}}"#);
+    assert!(e.contains("`model.grid.levels`"), "{e}");
+    let e = err(r#"{"model": {"grid": {"log2_table": 40}}}"#);
+    assert!(e.contains("`model.grid.log2_table`"), "{e}");
+    let e = err(r#"{"model": {"grid": {"base_resolution": 64, "max_resolution": 16}}}"#);
+    assert!(e.contains("`model.grid.max_resolution`"), "{e}");
+    let e = err(r#"{"model": {"grid": {"lo": [0, 0, 0], "hi": [1, 0, 1]}}}"#);
+    assert!(e.contains("`model.grid.lo`"), "{e}");
+    let e = err(r#"{"model": {"grid": {"levles": 8}}}"#);
+    assert!(e.contains("unknown field `levles`"), "{e}");
+    assert_eq!(err(r#"{"model": {"grid": {"levels": 8}}}"#), "");
     let student = config_error::<StudentRunConfig>;
     let e = student(r#"{"model": {"depth": 7}}"#);
     assert!(e.contains("`model.depth`"), "{e}");
