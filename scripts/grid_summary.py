@@ -62,7 +62,10 @@ def main():
         if not all(os.path.isdir(d) for d in dirs.values()):
             continue
         r = {t: run_figures(d) for t, d in dirs.items()}
-        entry = {"scene": scene, "sources": {"mlp": mlp, "grid": grid}, "runs": r}
+        # The run folders, from the repository's root.
+        sources = {t: os.path.normpath(os.path.join("results", "grid", d)) + "/"
+                   for t, d in (("mlp", mlp), ("grid", grid))}
+        entry = {"scene": scene, "sources": sources, "runs": r}
         g, m = r["grid"]["models"], r["mlp"]["models"]
         entry["grid_minus_mlp"] = {
             "teacher": diff(g["teacher"], m["teacher"]),
