@@ -4,12 +4,14 @@
 use candle_core::{Device, Tensor, Var};
 use nldf_train::data::TrainData;
 use nldf_train::hash_grid::{GridConfig, HashGridOp, encode_reference, table_grad_reference};
-use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
+use nldf_train::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 
-use crate::util::{assert_learned, tiny_grid_run_config, tiny_scene};
+use crate::util::{
+    assert_teacher_learns, assert_teacher_resumes_bit_for_bit, tiny_grid_run_config, tiny_scene,
+};
 
 /// A grid with dense coarse levels and hashed fine ones, over an off-centre box.
 fn small_grid() -> GridConfig {
@@ -206,72 +208,42 @@ fn extreme_and_broken_coordinates_encode_to_finite_values_outside_the_box() {
 fn a_tiny_grid_teacher_learns_the_tiny_scene() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut run = TeacherRun::create(dir.path(), tiny_grid_run_config(200), &data).unwrap();
+    let run = TeacherRun::create(dir.path(), tiny_grid_run_config(1), &data).unwrap();
     let grid = run.model.cfg.model.grid.clone().unwrap();
     assert_eq!(
         grid.lo,
         data.bounds.lo.to_array(),
         "the grid spans the head's bounds"
     );
-    let before = run.model.validation_scores(&data, 2).unwrap();
-    let mut losses = Vec::new();
-    for _ in 0..200 {
-        losses.push(run.train_step(&data).unwrap().0);
+    assert_teacher_learns("grid teacher", tiny_grid_run_config(200));
+}
+
+/// [`tiny_grid_run_config`] with region attention.
+fn with_attention(
+    mut cfg: nldf_train::config::TeacherRunConfig,
+) -> nldf_train::config::TeacherRunConfig {
+    if let Some(g) = cfg.model.grid.as_mut() {
+        g.region_attention = true;
     }
-    let after = run.model.validation_scores(&data, 2).unwrap();
-    assert_learned("grid teacher", &losses, 0.6, before.psnr, after.psnr);
+    cfg
 }
 
 #[test]
 fn a_grid_teacher_with_region_attention_learns_the_tiny_scene() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = tiny_grid_run_config(200);
-    if let Some(g) = cfg.model.grid.as_mut() {
-        g.region_attention = true;
-    }
-    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    let cfg = with_attention(tiny_grid_run_config(1));
+    let run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
     assert!(run.model.teacher.attention.is_some());
-    let before = run.model.validation_scores(&data, 2).unwrap();
-    let mut losses = Vec::new();
-    for _ in 0..200 {
-        losses.push(run.train_step(&data).unwrap().0);
-    }
-    let after = run.model.validation_scores(&data, 2).unwrap();
-    assert_learned(
+    assert_teacher_learns(
         "grid teacher with attention",
-        &losses,
-        0.6,
-        before.psnr,
-        after.psnr,
+        with_attention(tiny_grid_run_config(200)),
     );
 }
 
 #[test]
 fn a_resumed_grid_teacher_continues_bit_for_bit() {
-    let data = TrainData::load(tiny_scene()).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let mut cfg = tiny_grid_run_config(20);
-    if let Some(g) = cfg.model.grid.as_mut() {
-        g.region_attention = true;
-    }
-    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
-    for _ in 0..6 {
-        run.train_step(&data).unwrap();
-    }
-    run.save().unwrap();
-    let (a1, _) = run.train_step(&data).unwrap();
-    let (a2, _) = run.train_step(&data).unwrap();
-    let mut resumed = TeacherRun::open(dir.path()).unwrap();
-    let (b1, _) = resumed.train_step(&data).unwrap();
-    let (b2, _) = resumed.train_step(&data).unwrap();
-    assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
-    assert_eq!(a2.to_bits(), b2.to_bits(), "{a2} vs {b2}");
-    // Without the optimizer's moments the second step differs: the check can fail.
-    let mut cold = TeacherRun::from_model(TeacherModel::open(dir.path()).unwrap()).unwrap();
-    cold.train_step(&data).unwrap();
-    let (c2, _) = cold.train_step(&data).unwrap();
-    assert_ne!(a2.to_bits(), c2.to_bits());
+    assert_teacher_resumes_bit_for_bit(with_attention(tiny_grid_run_config(20)));
 }
 
 #[test]

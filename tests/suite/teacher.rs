@@ -3,7 +3,7 @@
 
 use std::sync::atomic::AtomicBool;
 
-use crate::util::{assert_learned, tiny_run_config, tiny_scene};
+use crate::util::{tiny_run_config, tiny_scene};
 use candle_core::{Device, Tensor};
 use glam::Vec3;
 use nldf_core::bounds::Bounds;
@@ -14,7 +14,7 @@ use nldf_train::data::TrainData;
 use nldf_train::nn::{conv1d, new_varmap};
 use nldf_train::render::composite;
 use nldf_train::sampler::{sample_importance, sample_stratified};
-use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
+use nldf_train::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -186,41 +186,13 @@ fn samples_lie_inside_the_bounds_and_misses_are_skipped() {
 
 #[test]
 fn a_tiny_teacher_learns_the_tiny_scene() {
-    let data = TrainData::load(tiny_scene()).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let mut run = TeacherRun::create(dir.path(), tiny_run_config(200), &data).unwrap();
-    let before = run.model.validation_scores(&data, 2).unwrap();
-    let mut losses = Vec::new();
-    for _ in 0..200 {
-        losses.push(run.train_step(&data).unwrap().0);
-    }
-    let after = run.model.validation_scores(&data, 2).unwrap();
-    assert_learned("teacher", &losses, 0.6, before.psnr, after.psnr);
+    crate::util::assert_teacher_learns("teacher", tiny_run_config(200));
 }
 
 #[test]
 fn resuming_from_a_checkpoint_gives_the_identical_next_step() {
-    let data = TrainData::load(tiny_scene()).unwrap();
-    let dir = tempfile::tempdir().unwrap();
     // Past att_start, so that AudioAttNet's weights and moments are in the state too.
-    let mut run = TeacherRun::create(dir.path(), tiny_run_config(20), &data).unwrap();
-    for _ in 0..6 {
-        run.train_step(&data).unwrap();
-    }
-    run.save().unwrap();
-    let (a1, _) = run.train_step(&data).unwrap();
-    let (a2, _) = run.train_step(&data).unwrap();
-    let mut resumed = TeacherRun::open(dir.path()).unwrap();
-    assert_eq!(resumed.model.step, 6);
-    let (b1, _) = resumed.train_step(&data).unwrap();
-    let (b2, _) = resumed.train_step(&data).unwrap();
-    assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
-    assert_eq!(a2.to_bits(), b2.to_bits(), "{a2} vs {b2}");
-    // Without the optimizer state the second step would differ: the check can fail.
-    let mut cold = TeacherRun::from_model(TeacherModel::open(dir.path()).unwrap()).unwrap();
-    cold.train_step(&data).unwrap();
-    let (c2, _) = cold.train_step(&data).unwrap();
-    assert_ne!(a2.to_bits(), c2.to_bits());
+    crate::util::assert_teacher_resumes_bit_for_bit(tiny_run_config(20));
 }
 
 #[test]

@@ -499,6 +499,46 @@ pub(crate) fn tiny_grid_run_config(iters: usize) -> TeacherRunConfig {
     cfg
 }
 
+/// A teacher of `cfg` on the tiny scene learns in 200 steps ([`assert_learned`]).
+pub(crate) fn assert_teacher_learns(what: &str, cfg: TeacherRunConfig) {
+    let data = nldf_train::data::TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = nldf_train::teacher_trainer::TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    let before = run.model.validation_scores(&data, 2).unwrap();
+    let mut losses = Vec::new();
+    for _ in 0..200 {
+        losses.push(run.train_step(&data).unwrap().0);
+    }
+    let after = run.model.validation_scores(&data, 2).unwrap();
+    assert_learned(what, &losses, 0.6, before.psnr, after.psnr);
+}
+
+/// A teacher of `cfg` (20 steps) saved after 6 steps and resumed takes the same next two
+/// steps bit for bit; one opened without its optimizer's moments does not.
+pub(crate) fn assert_teacher_resumes_bit_for_bit(cfg: TeacherRunConfig) {
+    use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
+    let data = nldf_train::data::TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    for _ in 0..6 {
+        run.train_step(&data).unwrap();
+    }
+    run.save().unwrap();
+    let (a1, _) = run.train_step(&data).unwrap();
+    let (a2, _) = run.train_step(&data).unwrap();
+    let mut resumed = TeacherRun::open(dir.path()).unwrap();
+    assert_eq!(resumed.model.step, 6);
+    let (b1, _) = resumed.train_step(&data).unwrap();
+    let (b2, _) = resumed.train_step(&data).unwrap();
+    assert_eq!(a1.to_bits(), b1.to_bits(), "{a1} vs {b1}");
+    assert_eq!(a2.to_bits(), b2.to_bits(), "{a2} vs {b2}");
+    // Without the optimizer state the second step would differ: the check can fail.
+    let mut cold = TeacherRun::from_model(TeacherModel::open(dir.path()).unwrap()).unwrap();
+    cold.train_step(&data).unwrap();
+    let (c2, _) = cold.train_step(&data).unwrap();
+    assert_ne!(a2.to_bits(), c2.to_bits());
+}
+
 /// A training run learned: every loss finite, the mean of the last 10 losses below `ratio`
 /// times the mean of the first 10, and the validation PSNR up by more than 2 dB.
 pub(crate) fn assert_learned(what: &str, losses: &[f64], ratio: f64, before: f64, after: f64) {
