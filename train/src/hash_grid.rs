@@ -454,7 +454,7 @@ impl HashGrid {
 /// Sets the table named `name` in `varmap` to seeded values uniform in `±INIT_RANGE`
 /// (after [`crate::nn::init_seeded`], which draws every variable as a layer's weight).
 pub fn init_table(varmap: &candle_nn::VarMap, name: &str, seed: u64) -> Result<()> {
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     let data = varmap
         .data()
         .lock()
@@ -463,10 +463,7 @@ pub fn init_table(varmap: &candle_nn::VarMap, name: &str, seed: u64) -> Result<(
         .get(name)
         .ok_or_else(|| candle_core::Error::Msg(format!("no `{name}` to initialise")))?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
-    let values: Vec<f32> = (0..var.elem_count())
-        .map(|_| rng.random_range(-INIT_RANGE..INIT_RANGE))
-        .collect();
-    var.set(&Tensor::from_vec(values, var.shape(), var.device())?)
+    crate::nn::set_uniform_within(var, INIT_RANGE, &mut rng)
 }
 
 /// The encoding in f64, written plainly from Eq. 2-4: the reference the op is tested

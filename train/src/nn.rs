@@ -73,7 +73,11 @@ pub fn init_seeded(varmap: &VarMap, seed: u64) -> Result<()> {
 
 /// Sets `var` to values drawn from `rng`, uniform in `±1 / sqrt(fan_in)`.
 pub fn set_uniform(var: &Var, fan_in: usize, rng: &mut ChaCha8Rng) -> Result<()> {
-    let bound = 1.0 / (fan_in.max(1) as f32).sqrt();
+    set_uniform_within(var, 1.0 / (fan_in.max(1) as f32).sqrt(), rng)
+}
+
+/// Sets `var` to values drawn from `rng`, uniform in `±bound`.
+pub fn set_uniform_within(var: &Var, bound: f32, rng: &mut ChaCha8Rng) -> Result<()> {
     let values: Vec<f32> = (0..var.elem_count())
         .map(|_| rng.random_range(-bound..bound))
         .collect();
@@ -99,12 +103,16 @@ pub fn sorted_vars(varmap: &VarMap) -> Result<Vec<(String, Var)>> {
 }
 
 /// The variables of `varmap` sorted by name, each with its learning-rate scale for
-/// [`crate::adam::Adam::new`]: `scale` where the name starts with `prefix`, 1 elsewhere.
-pub fn scaled_vars(varmap: &VarMap, prefix: &str, scale: f64) -> Result<Vec<(String, Var, f64)>> {
+/// [`crate::adam::Adam::new`]: the scale of the first `(prefix, scale)` whose prefix starts
+/// the name, 1 where none does.
+pub fn scaled_vars(varmap: &VarMap, scales: &[(&str, f64)]) -> Result<Vec<(String, Var, f64)>> {
     Ok(sorted_vars(varmap)?
         .into_iter()
         .map(|(name, var)| {
-            let s = if name.starts_with(prefix) { scale } else { 1.0 };
+            let s = scales
+                .iter()
+                .find(|(prefix, _)| name.starts_with(prefix))
+                .map_or(1.0, |&(_, scale)| scale);
             (name, var, s)
         })
         .collect())

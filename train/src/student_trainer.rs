@@ -268,7 +268,7 @@ impl StudentRun {
     fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentRun> {
         let model = StudentModel::build(dir, cfg)?;
         let t = &model.cfg.train;
-        let vars = scaled_vars(&model.varmap, "audio.", t.audio_lr_scale)?;
+        let vars = scaled_vars(&model.varmap, &[("audio.", t.audio_lr_scale)])?;
         let adam = Adam::new(
             vars,
             AdamParams {

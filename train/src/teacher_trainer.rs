@@ -388,14 +388,11 @@ impl TrainingRun for TeacherRun {
 
 fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
     let t = &cfg.train;
-    let mut vars = scaled_vars(varmap, "audio.att.", t.att_lr_scale)?;
+    let mut scales = vec![("audio.att.", t.att_lr_scale)];
     if let Some(grid) = &cfg.model.grid {
-        for (name, _, scale) in &mut vars {
-            if name == crate::teacher::GRID_TABLE {
-                *scale = grid.lr_scale;
-            }
-        }
+        scales.push((crate::teacher::GRID_TABLE, grid.lr_scale));
     }
+    let vars = scaled_vars(varmap, &scales)?;
     Ok(Adam::new(
         vars,
         AdamParams {
