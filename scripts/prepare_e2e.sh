@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The end-to-end check of `nldf prepare`: the recipe (`nldf train --data`) on each head's
+# scene with its true poses, and on the dataset prepared from the scene's 512 video at
+# `--size 128` with the scene's focal length. The truth is the scene rendered at 512 and
+# shrunk to 128 (`nldf synth --size 128 --render-size 512`), as the prepared frames are.
+# The videos come from scripts/prepare_check.sh run with the same SEED into the same WORK.
+# Each run's log, the prepared dataset's scores and every split's metrics go to
+# OUT/<head>/{truth,prepared}/ (default results/prepare/e2e_test).
+# Usage: [SEED=3] scripts/prepare_e2e.sh WORK [OUT]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+work=${1:?usage: scripts/prepare_e2e.sh WORK [OUT]}
+out=${2:-results/prepare/e2e_test}
+seed=${SEED:-3}
+nldf=target/release/nldf
+cargo build --release --quiet --bin nldf
+for head in standard second; do
+  video=$work/${head}_512.mp4
+  [ -f "$video" ] || { echo "no $video: run SEED=$seed scripts/prepare_check.sh $work first" >&2; exit 2; }
+  truth=$work/e2e_${head}_t128r512
+  [ -f "$truth/scene.json" ] || "$nldf" synth --out "$truth" --size 128 --render-size 512 \
+    --head "$head" --seed "$seed" --max-yaw-deg 20 --force >/dev/null
+  focal=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['focal_len'])" \
+    "$truth/transforms_train.json")
+  prep=$work/e2e_${head}_prepared
+  rm -rf "$prep"
+  mkdir -p "$out/$head/truth" "$out/$head/prepared"
+  "$nldf" prepare --video "$video" --out "$prep" --size 128 --focal "$focal" \
+    > "$out/$head/prepared/prepare.log"
+  "$nldf" bench prepare --truth "$truth" --prepared "$prep" --carry-held-out \
+    --out "$out/$head/prepared/bench.json" >> "$out/$head/prepared/prepare.log" || true
+  for side in truth prepared; do
+    data=$truth; [ "$side" = prepared ] && data=$prep
+    run=$work/e2e_${head}_run_$side
+    rm -rf "$run"
+    # The caps only stop a slower machine; raised, so that a busy one still runs every step.
+    "$nldf" train --data "$data" --run "$run" --minutes 30 --student-minutes 30 \
+      > "$out/$head/$side/train.log" 2>&1
+    for split in val novel voice; do
+      cp "$run/eval/$split/metrics.json" "$out/$head/$side/metrics_$split.json"
+    done
+  done
+done
+# The logs and JSON name the work folder; results/ keeps no machine paths.
+find "$out" -type f \( -name '*.log' -o -name '*.json' \) -exec sed -i "s#$work/##g" {} +
