@@ -27,6 +27,14 @@ fn small_grid() -> GridConfig {
     }
 }
 
+/// [`small_grid`] as a tri-plane.
+fn small_planes() -> GridConfig {
+    GridConfig {
+        planes: true,
+        ..small_grid()
+    }
+}
+
 /// `n` points spread over the box and a margin around it (some outside).
 fn points_around(cfg: &GridConfig, n: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
     (0..n)
@@ -56,7 +64,18 @@ fn relative_error(a: &[f32], b: &[f64]) -> f64 {
 
 #[test]
 fn the_hash_grid_matches_its_f64_reference_forward_and_backward() {
-    let cfg = small_grid();
+    assert_matches_reference(small_grid());
+}
+
+#[test]
+fn the_tri_plane_matches_its_f64_reference_forward_and_backward() {
+    let cfg = small_planes();
+    assert_eq!(cfg.dim(), 3 * small_grid().dim());
+    assert_matches_reference(cfg);
+}
+
+/// The op's forward and backward on `cfg` within 1e-4 of the f64 reference.
+fn assert_matches_reference(cfg: GridConfig) {
     let layout = cfg.layout();
     assert!(layout.levels.iter().any(|l| l.hashed));
     assert!(layout.levels.iter().any(|l| !l.hashed));
@@ -94,7 +113,10 @@ fn the_hash_grid_matches_its_f64_reference_forward_and_backward() {
     let fwd = relative_error(&got, &want);
     let want_dt = table_grad_reference(&cfg, &f64s(&points), &f64s(&r));
     let bwd = relative_error(&dt, &want_dt);
-    println!("hash grid: forward {fwd:e}, backward {bwd:e} of the largest value");
+    println!(
+        "hash grid (planes {}): forward {fwd:e}, backward {bwd:e} of the largest value",
+        cfg.planes
+    );
     assert!(fwd <= 1e-4, "forward differs by {fwd:e}");
     assert!(bwd <= 1e-4, "backward differs by {bwd:e}");
 }
@@ -103,11 +125,17 @@ fn the_hash_grid_matches_its_f64_reference_forward_and_backward() {
 fn the_reference_gradient_is_the_adjoint_of_the_reference_encoding() {
     // The encoding is linear in the table, so <r, enc(table + h e_k)> - <r, enc(table)>
     // is h times entry k of the gradient, up to rounding.
-    let cfg = small_grid();
+    for cfg in [small_grid(), small_planes()] {
+        assert_reference_adjoint(&cfg);
+    }
+}
+
+/// The f64 reference gradient of `cfg` against finite differences of its encoding.
+fn assert_reference_adjoint(cfg: &GridConfig) {
     let entries = cfg.layout().entries * cfg.features;
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let n = 40;
-    let points: Vec<f64> = points_around(&cfg, n, &mut rng)
+    let points: Vec<f64> = points_around(cfg, n, &mut rng)
         .into_iter()
         .map(f64::from)
         .collect();
@@ -116,13 +144,13 @@ fn the_reference_gradient_is_the_adjoint_of_the_reference_encoding() {
         .map(|_| rng.random_range(-1.0..1.0))
         .collect();
     let dot = |t: &[f64]| -> f64 {
-        encode_reference(&cfg, &points, t)
+        encode_reference(cfg, &points, t)
             .iter()
             .zip(&r)
             .map(|(a, b)| a * b)
             .sum()
     };
-    let grad = table_grad_reference(&cfg, &points, &r);
+    let grad = table_grad_reference(cfg, &points, &r);
     let base = dot(&table);
     let mut touched = 0;
     for k in (0..entries).step_by(7) {
@@ -166,11 +194,42 @@ fn levels_grow_from_the_base_to_the_finest_and_dense_levels_own_every_vertex() {
         assert!(level.entries.is_power_of_two());
         assert!(level.entry(123, 456, 789) < level.entries);
     }
+    // A tri-plane: each plane has every level, a dense plane level owns each of its
+    // (N + 1)^2 vertices, and the planes' levels follow one another in the table.
+    let planes = small_planes().layout();
+    assert_eq!(planes.levels.len(), 3 * layout.levels.len());
+    let mut offset = 0;
+    for level in &planes.levels {
+        assert_eq!(level.offset, offset);
+        offset += level.entries;
+        assert!(level.plane.is_some());
+        if level.hashed {
+            assert!(level.entry2(123, 456) < level.entries);
+            continue;
+        }
+        let side = level.resolution + 1;
+        assert_eq!(level.entries, (side * side) as usize);
+        let mut seen = vec![false; level.entries];
+        for b in 0..side {
+            for a in 0..side {
+                let e = level.entry2(a, b);
+                assert!(!seen[e], "two plane vertices share entry {e}");
+                seen[e] = true;
+            }
+        }
+    }
+    assert_eq!(offset, planes.entries);
 }
 
 #[test]
 fn extreme_and_broken_coordinates_encode_to_finite_values_outside_the_box() {
-    let cfg = small_grid();
+    assert_extremes_finite(small_grid());
+    assert_extremes_finite(small_planes());
+}
+
+/// Points at 1e30, NaN, infinity and the f32 limits encode to finite values and count as
+/// outside `cfg`'s box.
+fn assert_extremes_finite(cfg: GridConfig) {
     let layout = cfg.layout();
     let table: Vec<f32> = (0..layout.entries * cfg.features)
         .map(|i| (i % 13) as f32 - 6.0)
@@ -216,6 +275,15 @@ fn a_tiny_grid_teacher_learns_the_tiny_scene() {
         "the grid spans the head's bounds"
     );
     assert_teacher_learns("grid teacher", tiny_grid_run_config(200));
+}
+
+#[test]
+fn a_tiny_tri_plane_teacher_learns_the_tiny_scene() {
+    let mut cfg = tiny_grid_run_config(200);
+    if let Some(g) = cfg.model.grid.as_mut() {
+        g.planes = true;
+    }
+    assert_teacher_learns("tri-plane teacher", cfg);
 }
 
 /// [`tiny_grid_run_config`] with region attention.

@@ -9,6 +9,12 @@
 //! trilinear interpolation of its cell's 8 vertices' features, the levels side by side:
 //! `[n, 3] -> [n, L F]`.
 //!
+//! With `planes` the same levels lie over the box's three axis planes instead (the
+//! tri-plane of RAD-NeRF and ER-NeRF): a level of plane `(a, b)` has `(N_l + 1)^2` vertices,
+//! hashed as `(x_a π_1 ⊕ x_b π_2) mod T` when they do not fit, and a point takes the
+//! bilinear interpolation of the 4 vertices around its projection; the three planes' levels
+//! side by side: `[n, 3] -> [n, 3 L F]`.
+//!
 //! The backward scatters the output gradient into the tables with the same 8 weights. It
 //! runs in parallel over levels (each level owns its slice of the table, so no two threads
 //! ever add to one entry) and adds each level's points in order: bit for bit the same on
@@ -48,6 +54,10 @@ pub struct GridConfig {
     /// sigmoid attention computed from the sample's grid features, `a(x) ⊙ code`, beside
     /// the features.
     pub region_attention: bool,
+    /// Tri-plane (RAD-NeRF's and ER-NeRF's encoding): three 2D multiresolution grids over
+    /// the box's xy, xz and yz planes, each with these levels and tables, their features
+    /// side by side (`3 L F` wide), instead of one 3D grid.
+    pub planes: bool,
 }
 
 impl Default for GridConfig {
@@ -64,12 +74,17 @@ impl Default for GridConfig {
             hi: [1.0; 3],
             lr_scale: 10.0,
             region_attention: false,
+            planes: false,
         }
     }
 }
 
-/// Instant-NGP's primes of Eq. 4 (`π_1 = 1` keeps the x axis coherent in memory).
+/// Instant-NGP's primes of Eq. 4 (`π_1 = 1` keeps the x axis coherent in memory); a plane
+/// hashes its two axes with the first two.
 const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
+
+/// The axes of the tri-plane's planes: xy, xz, yz.
+pub const PLANES: [[usize; 2]; 3] = [[0, 1], [0, 2], [1, 2]];
 
 /// The largest table the checks accept (2^24 entries per level, as Instant-NGP's largest).
 pub const MAX_LOG2_TABLE: u32 = 24;
@@ -81,10 +96,13 @@ pub struct Level {
     pub resolution: u32,
     /// Whether vertices go through the hash (the dense grid would not fit the table).
     pub hashed: bool,
-    /// Entries this level uses: `(N_l + 1)^3` when dense, `T` when hashed.
+    /// Entries this level uses: `(N_l + 1)^3` (a plane's `(N_l + 1)^2`) when dense, `T`
+    /// when hashed.
     pub entries: usize,
     /// First entry of this level in the table.
     pub offset: usize,
+    /// The two axes of a tri-plane's level; `None` for a 3D level.
+    pub plane: Option<[usize; 2]>,
 }
 
 /// The levels of a [`GridConfig`], with where each lies in the table.
@@ -113,21 +131,30 @@ impl GridConfig {
             .collect()
     }
 
-    /// Width of the encoding, `L F`.
+    /// Width of the encoding, `L F` (a tri-plane's `3 L F`).
     pub fn dim(&self) -> usize {
-        self.levels * self.features
+        self.levels * self.features * if self.planes { PLANES.len() } else { 1 }
     }
 
     /// Where each level lies in the table.
     pub fn layout(&self) -> GridLayout {
         let table = 1usize << self.log2_table;
         let mut offset = 0;
-        let levels = self
-            .resolutions()
-            .into_iter()
-            .map(|resolution| {
+        let planes: Vec<Option<[usize; 2]>> = if self.planes {
+            PLANES.iter().copied().map(Some).collect()
+        } else {
+            vec![None]
+        };
+        let resolutions = self.resolutions();
+        let levels = planes
+            .iter()
+            .flat_map(|&plane| resolutions.iter().map(move |&r| (plane, r)))
+            .map(|(plane, resolution)| {
                 let side = resolution as usize + 1;
-                let dense = side.saturating_mul(side).saturating_mul(side);
+                let dense = match plane {
+                    Some(_) => side.saturating_mul(side),
+                    None => side.saturating_mul(side).saturating_mul(side),
+                };
                 let (hashed, entries) = if dense <= table {
                     (false, dense)
                 } else {
@@ -138,6 +165,7 @@ impl GridConfig {
                     hashed,
                     entries,
                     offset,
+                    plane,
                 };
                 offset += entries;
                 level
@@ -199,14 +227,27 @@ impl Level {
             x as usize + side * (y as usize + side * z as usize)
         }
     }
+
+    /// Table entry (relative to the level) of a plane's vertex `(a, b)`.
+    #[inline]
+    pub fn entry2(&self, a: u32, b: u32) -> usize {
+        if self.hashed {
+            let h = a.wrapping_mul(PRIMES[0]) ^ b.wrapping_mul(PRIMES[1]);
+            (h as usize) & (self.entries - 1)
+        } else {
+            a as usize + (self.resolution as usize + 1) * b as usize
+        }
+    }
 }
 
-/// One point's cell at one level: its 8 vertices' entries (absolute) and trilinear weights,
-/// corner `c` at offset `(c & 1, c >> 1 & 1, c >> 2 & 1)`.
+/// One point's cell at one level: its vertices' entries (absolute) and interpolation
+/// weights, the first `n` of them: 8 trilinear ones, corner `c` at offset
+/// `(c & 1, c >> 1 & 1, c >> 2 & 1)`, or a plane's 4 bilinear ones, `(c & 1, c >> 1 & 1)`.
 #[derive(Debug, Clone, Copy, Default)]
 struct Cell {
     entries: [usize; 8],
     weights: [f32; 8],
+    n: usize,
 }
 
 impl GridLayout {
@@ -237,6 +278,9 @@ impl GridLayout {
 
     #[inline]
     fn cell(&self, level: &Level, u: &[f32; 3]) -> Cell {
+        if let Some(axes) = level.plane {
+            return self.plane_cell(level, axes, u);
+        }
         let n = level.resolution;
         let mut base = [0u32; 3];
         // Per axis, the weights of the low and the high vertex.
@@ -265,6 +309,7 @@ impl GridLayout {
             [t(0, 1), t(1, side), t(2, side * side)]
         };
         let mask = level.entries - 1;
+        cell.n = 8;
         for c in 0..8 {
             let (bx, by, bz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
             cell.weights[c] = w[0][bx] * w[1][by] * w[2][bz];
@@ -274,6 +319,32 @@ impl GridLayout {
                 } else {
                     (terms[0][bx] + terms[1][by] + terms[2][bz]) as usize
                 };
+        }
+        cell
+    }
+
+    /// A plane level's cell: the 4 vertices around `u` projected on `axes`, with bilinear
+    /// weights.
+    #[inline]
+    fn plane_cell(&self, level: &Level, axes: [usize; 2], u: &[f32; 3]) -> Cell {
+        let n = level.resolution;
+        let mut base = [0u32; 2];
+        let mut w = [[0.0f32; 2]; 2];
+        for (k, &d) in axes.iter().enumerate() {
+            let s = u[d] * n as f32;
+            let i = (s as u32).min(n - 1);
+            let f = (s - i as f32).clamp(0.0, 1.0);
+            base[k] = i;
+            w[k] = [1.0 - f, f];
+        }
+        let mut cell = Cell {
+            n: 4,
+            ..Cell::default()
+        };
+        for c in 0..4 {
+            let (ba, bb) = (c & 1, (c >> 1) & 1);
+            cell.weights[c] = w[0][ba] * w[1][bb];
+            cell.entries[c] = level.offset + level.entry2(base[0] + ba as u32, base[1] + bb as u32);
         }
         cell
     }
@@ -292,7 +363,7 @@ impl GridLayout {
                     for (l, level) in self.levels.iter().enumerate() {
                         let cell = self.cell(level, &u);
                         let o = &mut o[l * f..(l + 1) * f];
-                        for (e, w) in cell.entries.iter().zip(cell.weights) {
+                        for (e, w) in cell.entries.iter().zip(cell.weights).take(cell.n) {
                             for (v, t) in o.iter_mut().zip(&table[e * f..(e + 1) * f]) {
                                 *v += w * t;
                             }
@@ -327,7 +398,7 @@ impl GridLayout {
                         continue;
                     }
                     let cell = self.cell(level, u);
-                    for (e, w) in cell.entries.iter().zip(cell.weights) {
+                    for (e, w) in cell.entries.iter().zip(cell.weights).take(cell.n) {
                         let e = e - level.offset;
                         for (d, v) in dst[e * f..(e + 1) * f].iter_mut().zip(g) {
                             *d += w * v;
@@ -503,7 +574,8 @@ pub fn table_grad_reference(cfg: &GridConfig, points: &[f64], grad: &[f64]) -> V
     dt
 }
 
-/// Visits the 8 vertices of `p`'s cell at `level` with their trilinear weights, in f64.
+/// Visits the vertices of `p`'s cell at `level` with their interpolation weights, in f64:
+/// 8 trilinear ones, or a plane level's 4 bilinear ones over its two axes.
 fn for_corners_reference(
     cfg: &GridConfig,
     level: &Level,
@@ -519,6 +591,19 @@ fn for_corners_reference(
         let i = (s.floor() as u32).min(n - 1);
         base[d] = i;
         frac[d] = s - i as f64;
+    }
+    if let Some([a, b]) = level.plane {
+        for db in 0..2u32 {
+            for da in 0..2u32 {
+                let wa = if da == 1 { frac[a] } else { 1.0 - frac[a] };
+                let wb = if db == 1 { frac[b] } else { 1.0 - frac[b] };
+                visit(
+                    level.offset + level.entry2(base[a] + da, base[b] + db),
+                    wa * wb,
+                );
+            }
+        }
+        return;
     }
     for dx in 0..2u32 {
         for dy in 0..2u32 {
