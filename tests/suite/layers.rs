@@ -1,4 +1,4 @@
-//! Layering: the module graph of every crate (core, prepare, export, train, infer, bench and
+//! Layering: the module graph of every crate (core, kernels, prepare, export, train, infer, bench and
 //! the command line) has no cycle.
 //!
 //! Each `*.rs` file under a crate's `src/` is a module (`mod.rs` is its folder's module,
@@ -14,8 +14,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The crates checked: their source folders, relative to the workspace root.
-const SOURCE_DIRS: [&str; 7] = [
+const SOURCE_DIRS: [&str; 8] = [
     "core/src",
+    "kernels/src",
     "prepare/src",
     "export/src",
     "train/src",
@@ -363,11 +364,7 @@ fn module_graphs_have_no_cycle() {
     let mut found = Vec::new();
     for dir in SOURCE_DIRS {
         let files = rust_files(&root.join(dir));
-        assert!(
-            files.len() > 5,
-            "{dir}: only {} source files found",
-            files.len()
-        );
+        assert!(!files.is_empty(), "{dir}: no source files found");
         found.extend(
             cycles(&module_graph(&files))
                 .into_iter()

@@ -20,7 +20,8 @@ pub mod field;
 pub mod field_op;
 pub mod hash_grid;
 pub mod job;
-pub mod kernels;
+/// The dense-layer kernels the fused ops are built on (the `nldf-kernels` crate).
+pub use nldf_kernels as kernels;
 pub mod log;
 pub mod loss;
 pub mod memory;

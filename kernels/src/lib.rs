@@ -1,4 +1,5 @@
-//! CPU kernels for the dense layers of training: a register-blocked matrix product with an
+//! nldf's CPU kernels for the dense layers of training, below the training crate
+//! (`nldf-train`), which builds its fused candle ops on them: a register-blocked matrix product with an
 //! AVX-512 micro-kernel, an AVX2 one that gives the same bits, and a portable one
 //! (`NLDF_KERNELS` forces one: [`KernelPath`]), the fused forward `act(x W^T + B)`, and
 //! the three backward pieces (ReLU mask with the bias gradient, input gradient, weight
