@@ -6,7 +6,8 @@
 # The videos come from scripts/prepare_check.sh run with the same SEED into the same WORK.
 # Each run's log, the prepared dataset's scores and every split's metrics go to
 # OUT/<head>/{truth,prepared}/ (default results/prepare/e2e_test).
-# Usage: [SEED=3] scripts/prepare_e2e.sh WORK [OUT]
+# HEADS picks the heads (default: standard second).
+# Usage: [SEED=3] [HEADS=second] scripts/prepare_e2e.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_e2e.sh WORK [OUT]}
@@ -14,7 +15,7 @@ out=${2:-results/prepare/e2e_test}
 seed=${SEED:-3}
 nldf=target/release/nldf
 cargo build --release --quiet --bin nldf
-for head in standard second; do
+for head in ${HEADS:-standard second}; do
   video=$work/${head}_512.mp4
   [ -f "$video" ] || { echo "no $video: run SEED=$seed scripts/prepare_check.sh $work first" >&2; exit 2; }
   truth=$work/e2e_${head}_t128r512

@@ -104,7 +104,10 @@ mod tests {
         for (k, p) in lms.points[48..60].iter().enumerate() {
             let a = k as f32 * std::f32::consts::TAU / 12.0;
             let want = [50.0 + 12.0 * a.cos(), 40.0 + 12.0 * a.sin()];
-            assert!((p[0] - want[0]).abs() < 1e-4 && (p[1] - want[1]).abs() < 1e-4, "{k}: {p:?}");
+            assert!(
+                (p[0] - want[0]).abs() < 1e-4 && (p[1] - want[1]).abs() < 1e-4,
+                "{k}: {p:?}"
+            );
         }
         for i in (0..48).chain(60..68) {
             assert_eq!(lms.points[i], [50.0, 40.0], "landmark {i}");
