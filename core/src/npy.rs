@@ -52,8 +52,8 @@ fn npy_header_shape(bytes: &[u8]) -> Option<Vec<u64>> {
         .collect()
 }
 
-/// [`load_audio_npy`] on bytes already read; `path` names them in errors.
-pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
+/// An error when the non-zero dimensions of the header's shape overflow when multiplied.
+fn refuse_overflowing_shape(path: &Path, bytes: &[u8]) -> Result<()> {
     // npyz multiplies the header's dimensions unchecked (the size, and the strides from the
     // last dimension back): a shape whose non-zero dimensions overflow when multiplied must
     // be refused before it reads the header, even when another dimension is 0.
@@ -69,6 +69,12 @@ pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
             format!("shape {shape:?} holds more values than any file can"),
         ));
     }
+    Ok(())
+}
+
+/// [`load_audio_npy`] on bytes already read; `path` names them in errors.
+pub fn parse_audio_npy(path: &Path, bytes: &[u8]) -> Result<AudioWindows> {
+    refuse_overflowing_shape(path, bytes)?;
     let npy = npyz::NpyFile::new(Cursor::new(bytes))
         .map_err(|e| Error::invalid(path, format!("not a .npy file: {e}")))?;
     let shape: Vec<u64> = npy.shape().to_vec();
