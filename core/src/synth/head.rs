@@ -1,6 +1,7 @@
-//! The synthetic head model: the shape and colours of one head ([`HeadParams`]), its animated
-//! state ([`FaceState`]), and the signed-distance field that places every part in head space,
-//! with the colour and face region of each surface point.
+//! The synthetic head model: the signed-distance field that places every part of one head
+//! ([`HeadParams`]) in one animated state ([`FaceState`]) in head space, with the colour and
+//! face region of each surface point. The parameters and their random draws live in
+//! `head_params.rs` and are re-exported here.
 //!
 //! The head is a smooth union of ellipsoids, spheres and capsules in head space (AD-NeRF's
 //! world: head near the origin, facing +z, +y up, about 0.25 units tall). Eyes with blinking
@@ -8,10 +9,11 @@
 //! onto it. [`render_head`](super::trace::render_head) and
 //! [`render_background`](super::trace::render_background) render it into images.
 
-use glam::{Vec2, Vec3};
-use rand::Rng;
-use serde::{Deserialize, Serialize};
+use glam::Vec3;
 
+use super::head_params::sanitized;
+pub use super::head_params::{FaceState, HeadParams};
+use super::head_parts::{BaseFace, K_CHEEK, K_CHIN, K_JAW, lid_normals};
 use super::sdf::{Ellipsoid, RoundBox, RoundCone, smax, smin, smoothstep};
 use crate::region::Region;
 
@@ -20,10 +22,7 @@ const BOUNDS_MARGIN: f32 = 0.01;
 /// Largest jaw drop (and mouth gap) at `mouth_open = 1`, in head units.
 const MAX_GAP: f32 = 0.024;
 
-/// Smooth-union widths of the parts.
-const K_JAW: f32 = 0.03;
-const K_CHEEK: f32 = 0.025;
-const K_CHIN: f32 = 0.025;
+/// Smooth-union widths of the parts (the featureless face's come with it).
 const K_HAIR: f32 = 0.004;
 const K_NOSE: f32 = 0.008;
 const K_EAR: f32 = 0.008;
@@ -32,259 +31,6 @@ const K_LIPS: f32 = 0.005;
 const K_SOCKET: f32 = 0.004;
 const K_CAVITY: f32 = 0.003;
 const K_LID: f32 = 0.0015;
-
-/// Shape and colour parameters of one synthetic head. Lengths are in head units (the head is
-/// about 0.25 tall); colours are linear RGB in [0, 1].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct HeadParams {
-    /// Skin colour.
-    pub skin: [f32; 3],
-    /// How much redder the cheeks are than the rest of the skin, 0..1.
-    pub blush: f32,
-    /// Hair colour (also the eyebrows, darker).
-    pub hair: [f32; 3],
-    /// Lip colour.
-    pub lips: [f32; 3],
-    /// Iris colour.
-    pub iris: [f32; 3],
-    /// Skull half-width (x radius).
-    pub head_width: f32,
-    /// Skull half-height (y radius).
-    pub head_height: f32,
-    /// Skull half-depth (z radius).
-    pub head_depth: f32,
-    /// Jaw half-width.
-    pub jaw_width: f32,
-    /// Jaw half-height.
-    pub jaw_height: f32,
-    /// Chin radius.
-    pub chin_size: f32,
-    /// Half the distance between the eye centres.
-    pub eye_spacing: f32,
-    /// Height of the eye centres.
-    pub eye_height: f32,
-    /// Eyeball radius.
-    pub eye_radius: f32,
-    /// How far the nose tip stands out of the face.
-    pub nose_length: f32,
-    /// Radius of the nose tip.
-    pub nose_width: f32,
-    /// Height of the mouth's centre line.
-    pub mouth_height: f32,
-    /// Half-width of the mouth at neutral width (`mouth_width = 0.5`).
-    pub mouth_half_width: f32,
-    /// Half-thickness of each lip.
-    pub lip_thickness: f32,
-    /// Height of the eyebrows above the eye centres.
-    pub brow_height: f32,
-    /// Rise of the outer end of each eyebrow over its inner end.
-    pub brow_tilt: f32,
-    /// Radius of the eyebrow strokes.
-    pub brow_thickness: f32,
-    /// Height of the hairline at the middle of the head (z = 0); it is higher at the front.
-    pub hairline: f32,
-    /// Thickness of the hair cap.
-    pub hair_thickness: f32,
-    /// Ear scale, about 1.
-    pub ear_size: f32,
-}
-
-impl Default for HeadParams {
-    fn default() -> Self {
-        HeadParams {
-            skin: [0.86, 0.66, 0.54],
-            blush: 0.5,
-            hair: [0.22, 0.14, 0.09],
-            lips: [0.72, 0.33, 0.33],
-            iris: [0.30, 0.45, 0.62],
-            head_width: 0.078,
-            head_height: 0.105,
-            head_depth: 0.092,
-            jaw_width: 0.058,
-            jaw_height: 0.055,
-            chin_size: 0.024,
-            eye_spacing: 0.032,
-            eye_height: 0.02,
-            eye_radius: 0.0165,
-            nose_length: 0.02,
-            nose_width: 0.0095,
-            mouth_height: -0.05,
-            mouth_half_width: 0.024,
-            lip_thickness: 0.0055,
-            brow_height: 0.026,
-            brow_tilt: 0.004,
-            brow_thickness: 0.0034,
-            hairline: 0.018,
-            hair_thickness: 0.008,
-            ear_size: 1.0,
-        }
-    }
-}
-
-impl HeadParams {
-    /// A random head: skin tone, hair, lip and iris colours and every proportion drawn around
-    /// [`HeadParams::default`], within ranges that always give a plausible face.
-    /// Deterministic for the state of `rng`.
-    pub fn random(rng: &mut impl Rng) -> HeadParams {
-        let d = HeadParams::default();
-        let mut jitter = |v: f32, rel: f32| v * (1.0 + rng.random_range(-rel..=rel));
-        let head_width = jitter(d.head_width, 0.08);
-        let head_height = jitter(d.head_height, 0.07);
-        let head_depth = jitter(d.head_depth, 0.06);
-        let jaw_width = jitter(d.jaw_width, 0.1);
-        let jaw_height = jitter(d.jaw_height, 0.08);
-        let chin_size = jitter(d.chin_size, 0.15);
-        let eye_spacing = jitter(d.eye_spacing, 0.08);
-        let eye_height = jitter(d.eye_height, 0.15);
-        let eye_radius = jitter(d.eye_radius, 0.08);
-        let nose_length = jitter(d.nose_length, 0.2);
-        let nose_width = jitter(d.nose_width, 0.15);
-        let mouth_height = jitter(d.mouth_height, 0.06);
-        let mouth_half_width = jitter(d.mouth_half_width, 0.12);
-        let lip_thickness = jitter(d.lip_thickness, 0.15);
-        let brow_height = jitter(d.brow_height, 0.1);
-        let brow_tilt = jitter(d.brow_tilt, 0.8);
-        let brow_thickness = jitter(d.brow_thickness, 0.15);
-        let hairline = jitter(d.hairline, 0.5);
-        let hair_thickness = jitter(d.hair_thickness, 0.3);
-        let ear_size = jitter(d.ear_size, 0.12);
-
-        let tone = rng.random::<f32>();
-        let light = Vec3::new(0.96, 0.80, 0.69);
-        let dark = Vec3::new(0.42, 0.27, 0.19);
-        let skin = jitter_color(rng, dark.lerp(light, tone), 0.03);
-        const HAIR: [[f32; 3]; 7] = [
-            [0.05, 0.04, 0.04],
-            [0.16, 0.10, 0.06],
-            [0.30, 0.19, 0.11],
-            [0.45, 0.20, 0.09],
-            [0.75, 0.62, 0.38],
-            [0.55, 0.53, 0.52],
-            [0.22, 0.14, 0.09],
-        ];
-        let hair_base = Vec3::from(HAIR[rng.random_range(0..HAIR.len())]);
-        let hair = jitter_color(rng, hair_base, 0.03);
-        let lip_tint = Vec3::new(
-            rng.random_range(0.78..0.88),
-            rng.random_range(0.40..0.55),
-            rng.random_range(0.42..0.58),
-        );
-        let lips = jitter_color(rng, Vec3::from(skin) * lip_tint, 0.02);
-        const IRIS: [[f32; 3]; 5] = [
-            [0.33, 0.20, 0.10],
-            [0.28, 0.45, 0.65],
-            [0.30, 0.50, 0.30],
-            [0.45, 0.38, 0.18],
-            [0.45, 0.50, 0.52],
-        ];
-        let iris_base = Vec3::from(IRIS[rng.random_range(0..IRIS.len())]);
-        let iris = jitter_color(rng, iris_base, 0.04);
-        let blush = rng.random_range(0.2..0.8);
-        HeadParams {
-            skin,
-            blush,
-            hair,
-            lips,
-            iris,
-            head_width,
-            head_height,
-            head_depth,
-            jaw_width,
-            jaw_height,
-            chin_size,
-            eye_spacing,
-            eye_height,
-            eye_radius,
-            nose_length,
-            nose_width,
-            mouth_height,
-            mouth_half_width,
-            lip_thickness,
-            brow_height,
-            brow_tilt,
-            brow_thickness,
-            hairline,
-            hair_thickness,
-            ear_size,
-        }
-    }
-}
-
-impl HeadParams {
-    /// The second head ([`super::HeadStyle::Second`]): a random head made longer and
-    /// narrower, with a long jaw, a fuller cap of light hair, a darker skin tone and larger
-    /// ears, so that a recipe tuned on the standard head meets other shapes and colours.
-    pub fn second(rng: &mut impl Rng) -> HeadParams {
-        let h = HeadParams::random(rng);
-        let tone = rng.random_range(0.0..0.35f32);
-        let light = Vec3::new(0.96, 0.80, 0.69);
-        let dark = Vec3::new(0.42, 0.27, 0.19);
-        let skin = dark.lerp(light, tone).to_array();
-        let lips = (Vec3::from(skin) * Vec3::new(0.8, 0.5, 0.52)).to_array();
-        HeadParams {
-            skin,
-            lips,
-            hair: [0.80, 0.70, 0.48],
-            head_width: h.head_width * 0.88,
-            head_height: h.head_height * 1.1,
-            jaw_width: h.jaw_width * 0.86,
-            jaw_height: h.jaw_height * 1.2,
-            hairline: h.hairline * 0.5,
-            hair_thickness: h.hair_thickness * 1.6,
-            ear_size: h.ear_size * 1.2,
-            ..h
-        }
-    }
-}
-
-fn jitter_color(rng: &mut impl Rng, c: Vec3, amount: f32) -> [f32; 3] {
-    let j = Vec3::new(
-        rng.random_range(-amount..=amount),
-        rng.random_range(-amount..=amount),
-        rng.random_range(-amount..=amount),
-    );
-    (c + j).clamp(Vec3::ZERO, Vec3::ONE).to_array()
-}
-
-/// The animated part of a face: what the audio and the blink track drive.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct FaceState {
-    /// Mouth opening: 0 closed .. 1 wide open.
-    pub mouth_open: f32,
-    /// Mouth width: 0 narrow .. 1 wide, 0.5 neutral.
-    pub mouth_width: f32,
-    /// Eyelids: 0 open .. 1 closed.
-    pub blink: f32,
-}
-
-impl Default for FaceState {
-    fn default() -> Self {
-        FaceState {
-            mouth_open: 0.0,
-            mouth_width: 0.5,
-            blink: 0.0,
-        }
-    }
-}
-
-impl FaceState {
-    /// The state with every field clamped to [0, 1] (NaN becomes the neutral value).
-    pub fn clamped(&self) -> FaceState {
-        let c = |v: f32, neutral: f32| {
-            if v.is_nan() {
-                neutral
-            } else {
-                v.clamp(0.0, 1.0)
-            }
-        };
-        FaceState {
-            mouth_open: c(self.mouth_open, 0.0),
-            mouth_width: c(self.mouth_width, 0.5),
-            blink: c(self.blink, 0.0),
-        }
-    }
-}
-
 /// Axis-aligned bounds (min, max) in head space that contain the head in every FaceState.
 pub fn head_bounds(head: &HeadParams) -> (Vec3, Vec3) {
     let mut lo = Vec3::splat(f32::INFINITY);
@@ -424,92 +170,22 @@ pub(super) struct Model {
 }
 
 impl Model {
+    /// The head of `head` in `state` (clamped to its range), with every part placed and the
+    /// bounds that hold them.
     pub(super) fn new(head: &HeadParams, state: &FaceState) -> Model {
         let st = state.clamped();
         let h = sanitized(head);
         let gap = MAX_GAP * st.mouth_open;
         let drop = 0.6 * gap;
-        let skull = Ellipsoid::new(
-            Vec3::new(0.0, 0.02, -0.005),
-            Vec3::new(h.head_width, h.head_height, h.head_depth),
-        );
-        let jaw_at = |drop: f32| {
-            Ellipsoid::new(
-                Vec3::new(0.0, -0.05 - drop, 0.012),
-                Vec3::new(h.jaw_width, h.jaw_height, 0.072),
-            )
-        };
-        let chin_at = |drop: f32| {
-            Ellipsoid::new(
-                Vec3::new(0.0, -0.084 - drop, 0.05),
-                Vec3::new(1.25 * h.chin_size, 0.9 * h.chin_size, 0.95 * h.chin_size),
-            )
-        };
-        let cheek = Ellipsoid::new(
-            Vec3::new(0.037, -0.014, 0.05),
-            Vec3::new(0.028, 0.026, 0.032),
-        );
-        let base = |p: Vec3, drop: f32| {
-            let q = Vec3::new(p.x.abs(), p.y, p.z);
-            let d = smin(skull.dist(p), jaw_at(drop).dist(p), K_JAW).0;
-            let d = smin(d, chin_at(drop).dist(p), K_CHIN).0;
-            smin(d, cheek.dist(q), K_CHEEK).0
-        };
-        // Front surface of the featureless face at (x, y), found by marching along -z.
-        let surface_z = |x: f32, y: f32, drop: f32| {
-            let mut z = 0.3;
-            for _ in 0..200 {
-                let d = base(Vec3::new(x, y, z), drop);
-                if d < 1e-6 {
-                    break;
-                }
-                z -= d.max(1e-6);
-                if z < -0.2 {
-                    return 0.0;
-                }
-            }
-            z
-        };
+        let face = BaseFace::new(&h);
 
         // Eyes, lids and brows, placed on the face at rest.
         let eye_r = h.eye_radius;
-        let ez = surface_z(h.eye_spacing, h.eye_height, 0.0);
+        let ez = face.surface_z(h.eye_spacing, h.eye_height, 0.0);
         let eye_c = Vec3::new(h.eye_spacing, h.eye_height, ez - 0.62 * eye_r);
-        let up_open = 0.42;
-        let down_open = -0.55;
-        let meet = -0.15;
-        let up = up_open + (meet - 0.03 - up_open) * st.blink;
-        let down = down_open + (meet + 0.03 - down_open) * st.blink;
-        let lid_up_n = Vec3::new(0.0, up.cos(), -up.sin());
-        let lid_down_n = Vec3::new(0.0, -down.cos(), down.sin());
-        let brow_in = Vec2::new(h.eye_spacing - 0.014, h.eye_height + h.brow_height);
-        let brow_out = Vec2::new(h.eye_spacing + 0.017, brow_in.y + h.brow_tilt);
-        let brow = RoundCone::new(
-            brow_in.extend(surface_z(brow_in.x, brow_in.y, 0.0) - 0.4 * h.brow_thickness),
-            brow_out.extend(surface_z(brow_out.x, brow_out.y, 0.0) - 0.6 * h.brow_thickness),
-            h.brow_thickness,
-            0.7 * h.brow_thickness,
-        );
-
-        // Nose: a round cone from the bridge to the tip, with two nostril wings.
-        let tip_y = h.mouth_height + 0.45 * (h.eye_height - h.mouth_height);
-        let bridge_y = h.eye_height - 0.004;
-        let bridge = Vec3::new(0.0, bridge_y, surface_z(0.0, bridge_y, 0.0) - 0.004);
-        let tip_z = surface_z(0.0, tip_y, 0.0) + h.nose_length - h.nose_width;
-        let nose = RoundCone::new(
-            bridge,
-            Vec3::new(0.0, tip_y, tip_z),
-            0.45 * h.nose_width,
-            h.nose_width,
-        );
-        let nostril = Ellipsoid::new(
-            Vec3::new(
-                0.75 * h.nose_width,
-                tip_y - 0.35 * h.nose_width,
-                tip_z - 0.6 * h.nose_width,
-            ),
-            Vec3::splat(0.55 * h.nose_width),
-        );
+        let (lid_up_n, lid_down_n) = lid_normals(st.blink);
+        let brow = face.brow();
+        let (nose, nostril) = face.nose();
 
         let ear = Ellipsoid::new(
             Vec3::new(h.head_width + 0.001, h.eye_height - 0.02, -0.014),
@@ -520,43 +196,7 @@ impl Model {
         let hair_n = Vec3::new(0.0, -1.0, 0.6).normalize();
         let hair_off = hair_n.dot(Vec3::new(0.0, h.hairline, 0.0));
 
-        // Mouth: the upper lip stays, the lower lip and the jaw drop as it opens.
-        let lt = h.lip_thickness;
-        let a = h.mouth_half_width * (0.75 + 0.5 * st.mouth_width);
-        let my = h.mouth_height;
-        let zm = surface_z(0.0, my, 0.0);
-        let y_up = my + 0.3 * gap;
-        let y_down = my - 0.7 * gap;
-        let upper_lip = Ellipsoid::new(
-            Vec3::new(0.0, y_up + 0.8 * lt, zm - 0.45 * lt),
-            Vec3::new(a, lt, 1.15 * lt),
-        );
-        let zl = surface_z(0.0, y_down - 0.9 * lt, drop);
-        let lower_lip = Ellipsoid::new(
-            Vec3::new(0.0, y_down - 0.9 * lt, zl - 0.4 * lt),
-            Vec3::new(0.95 * a, 1.15 * lt, 1.15 * lt),
-        );
-        let cavity = (gap > 1e-5).then(|| {
-            Ellipsoid::new(
-                Vec3::new(0.0, 0.5 * (y_up + y_down), zm - 0.014),
-                Vec3::new(
-                    0.85 * a,
-                    0.5 * gap + 0.3 * lt * (10.0 * st.mouth_open).min(1.0),
-                    0.024,
-                ),
-            )
-        });
-        let teeth = RoundBox::new(
-            Vec3::new(0.0, y_up - 0.0025, zm - 0.0085),
-            Vec3::new(0.55 * a, 0.0022, 0.003),
-            0.0012,
-        );
-        let mouth_c = Vec3::new(0.0, 0.5 * (y_up + y_down), zm);
-        let mouth_region = Ellipsoid::new(
-            mouth_c,
-            Vec3::new(a + 0.004, 0.5 * (y_up - y_down) + 2.0 * lt + 0.003, 0.06),
-        );
-        let mouth_group_r = (a + 0.01).max(0.5 * (y_up - y_down) + 3.0 * lt) + 0.02;
+        let mouth = face.mouth(&st, gap, drop);
 
         let skin = Vec3::from(h.skin);
         let hair = Vec3::from(h.hair);
@@ -568,10 +208,10 @@ impl Model {
             brow_colour: hair * 0.75,
             lips: Vec3::from(h.lips),
             iris: Vec3::from(h.iris),
-            skull,
-            jaw: jaw_at(drop),
-            chin: chin_at(drop),
-            cheek,
+            skull: face.skull,
+            jaw: face.jaw(drop),
+            chin: face.chin(drop),
+            cheek: face.cheek,
             hair_n,
             hair_off,
             hair_thickness: h.hair_thickness,
@@ -587,24 +227,31 @@ impl Model {
             lid_down_n,
             eye_region_r: eye_r + 0.006,
             brow,
-            upper_lip,
-            lower_lip,
-            cavity,
-            teeth,
-            mouth_c,
-            mouth_seam_y: my,
+            upper_lip: mouth.upper_lip,
+            lower_lip: mouth.lower_lip,
+            cavity: mouth.cavity,
+            teeth: mouth.teeth,
+            mouth_c: mouth.mouth_c,
+            mouth_seam_y: h.mouth_height,
             mouth_closed: 1.0 - (4.0 * st.mouth_open).min(1.0),
-            mouth_region,
-            mouth_group_c: mouth_c,
-            mouth_group_r,
+            mouth_region: mouth.mouth_region,
+            mouth_group_c: mouth.mouth_c,
+            mouth_group_r: mouth.mouth_group_r,
             eye_group_r: eye_r + 0.006,
             light: Vec3::new(-0.35, 0.5, 0.8).normalize(),
             lo: Vec3::ZERO,
             hi: Vec3::ZERO,
         };
+        (m.lo, m.hi) = m.part_bounds();
+        m
+    }
+
+    /// Bounds (min, max) that contain every part, grown by [`BOUNDS_MARGIN`].
+    fn part_bounds(&self) -> (Vec3, Vec3) {
+        let m = self;
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        let grown = Ellipsoid::new(skull.c, skull.r + Vec3::splat(h.hair_thickness));
+        let grown = Ellipsoid::new(m.skull.c, m.skull.r + Vec3::splat(m.hair_thickness));
         let mirror = |e: Ellipsoid| Ellipsoid::new(e.c * Vec3::new(-1.0, 1.0, 1.0), e.r);
         for e in [
             grown,
@@ -630,9 +277,10 @@ impl Model {
             lo = lo.min(c - Vec3::splat(m.lid_r + m.lid_half));
             hi = hi.max(c + Vec3::splat(m.lid_r + m.lid_half));
         }
-        m.lo = lo - Vec3::splat(BOUNDS_MARGIN);
-        m.hi = hi + Vec3::splat(BOUNDS_MARGIN);
-        m
+        (
+            lo - Vec3::splat(BOUNDS_MARGIN),
+            hi + Vec3::splat(BOUNDS_MARGIN),
+        )
     }
 
     /// The signed distance (a lower bound of it, Lipschitz about 1) at `p`.
@@ -654,6 +302,16 @@ impl Model {
                 part: Part::Skin,
             },
         };
+        self.add_face::<MAT>(&mut acc, p, q, skull);
+        self.add_mouth::<MAT>(&mut acc, p);
+        self.add_eyes::<MAT>(&mut acc, q);
+        acc.s
+    }
+
+    /// Adds the jaw, chin, cheeks (with their blush), hair cap, ears, nose and brows to the
+    /// field at `p` (`q` is `p` mirrored to x > 0, `skull` the skull's distance).
+    #[inline]
+    fn add_face<const MAT: bool>(&self, acc: &mut Acc<MAT>, p: Vec3, q: Vec3, skull: f32) {
         if self.jaw.bound(p) < acc.s.d + K_JAW {
             acc.union(self.jaw.dist(p), K_JAW, Part::Skin, || self.skin);
         }
@@ -703,6 +361,11 @@ impl Model {
         if self.brow.bound(q) < acc.s.d + K_BROW {
             acc.union(self.brow.dist(q), K_BROW, Part::Brow, || self.brow_colour);
         }
+    }
+
+    /// Adds the mouth to the field at `p`: lips on, cavity out, teeth in.
+    #[inline]
+    fn add_mouth<const MAT: bool>(&self, acc: &mut Acc<MAT>, p: Vec3) {
         // Mouth: lips on, cavity out, teeth in.
         if (p - self.mouth_group_c).length() - self.mouth_group_r < acc.s.d.abs() + 0.01 {
             let lip_colour = || {
@@ -731,6 +394,11 @@ impl Model {
                 }
             }
         }
+    }
+
+    /// Adds the eyes to the field at `q` (mirrored to x > 0): socket out, eyeball and lids in.
+    #[inline]
+    fn add_eyes<const MAT: bool>(&self, acc: &mut Acc<MAT>, q: Vec3) {
         // Eyes: socket out, eyeball and lids in.
         let qe = q - self.eye_c;
         let de = qe.length();
@@ -762,7 +430,6 @@ impl Model {
                 .min(shell.max(-qe.dot(self.lid_down_n)));
             acc.union(lid, K_LID, Part::Lid, || self.skin * 0.93);
         }
-        acc.s
     }
 
     pub(super) fn region(&self, p: Vec3, part: Part) -> Region {
@@ -778,48 +445,5 @@ impl Model {
             return Region::Mouth;
         }
         Region::Face
-    }
-}
-
-/// Parameters made safe to evaluate: every length finite and positive, every colour finite
-/// and in [0, 1].
-fn sanitized(head: &HeadParams) -> HeadParams {
-    let d = HeadParams::default();
-    let len = |v: f32, dv: f32| if v.is_finite() && v > 0.0 { v } else { dv };
-    let pos = |v: f32, dv: f32| if v.is_finite() { v } else { dv };
-    let col = |c: [f32; 3], dc: [f32; 3]| {
-        let v = Vec3::from(c);
-        if v.is_finite() {
-            v.clamp(Vec3::ZERO, Vec3::ONE).to_array()
-        } else {
-            dc
-        }
-    };
-    HeadParams {
-        skin: col(head.skin, d.skin),
-        blush: pos(head.blush, d.blush).clamp(0.0, 1.0),
-        hair: col(head.hair, d.hair),
-        lips: col(head.lips, d.lips),
-        iris: col(head.iris, d.iris),
-        head_width: len(head.head_width, d.head_width),
-        head_height: len(head.head_height, d.head_height),
-        head_depth: len(head.head_depth, d.head_depth),
-        jaw_width: len(head.jaw_width, d.jaw_width),
-        jaw_height: len(head.jaw_height, d.jaw_height),
-        chin_size: len(head.chin_size, d.chin_size),
-        eye_spacing: len(head.eye_spacing, d.eye_spacing),
-        eye_height: pos(head.eye_height, d.eye_height),
-        eye_radius: len(head.eye_radius, d.eye_radius),
-        nose_length: len(head.nose_length, d.nose_length),
-        nose_width: len(head.nose_width, d.nose_width),
-        mouth_height: pos(head.mouth_height, d.mouth_height),
-        mouth_half_width: len(head.mouth_half_width, d.mouth_half_width),
-        lip_thickness: len(head.lip_thickness, d.lip_thickness),
-        brow_height: pos(head.brow_height, d.brow_height),
-        brow_tilt: pos(head.brow_tilt, d.brow_tilt),
-        brow_thickness: len(head.brow_thickness, d.brow_thickness),
-        hairline: pos(head.hairline, d.hairline),
-        hair_thickness: len(head.hair_thickness, d.hair_thickness),
-        ear_size: len(head.ear_size, d.ear_size),
     }
 }

@@ -9,6 +9,8 @@
 
 mod frames;
 pub mod head;
+mod head_params;
+mod head_parts;
 mod scene;
 mod sdf;
 pub mod speech;
