@@ -90,37 +90,10 @@ impl Landmarks {
 /// no mouth label. `None` when the frame shows no mouth or no head.
 pub fn landmarks_from_regions(regions: &[Region], width: u32) -> Option<Landmarks> {
     let w = width.max(1) as usize;
-    let bbox = |keep: &dyn Fn(Region) -> bool| -> Option<[f32; 4]> {
-        let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
-        for (p, &r) in regions.iter().enumerate() {
-            if keep(r) {
-                let (x, y) = (p % w, p / w);
-                x0 = x0.min(x);
-                x1 = x1.max(x);
-                y0 = y0.min(y);
-                y1 = y1.max(y);
-            }
-        }
-        (x0 != usize::MAX).then_some([x0 as f32, x1 as f32, y0 as f32, y1 as f32])
-    };
+    let bbox = |keep: &dyn Fn(Region) -> bool| region_bbox(regions, w, keep);
     let mouth = bbox(&|r| r == Region::Mouth)?;
     let head = bbox(&|r| r.is_head())?;
     let eyes = bbox(&|r| r == Region::Eyes);
-    let ellipse = |b: [f32; 4], pad: f32, n: usize, from: f32, to: f32| -> Vec<[f32; 2]> {
-        let (cx, cy) = ((b[0] + b[1]) / 2.0, (b[2] + b[3]) / 2.0);
-        let (rx, ry) = ((b[1] - b[0]) / 2.0 + pad, (b[3] - b[2]) / 2.0 + pad);
-        (0..n)
-            .map(|k| {
-                let t = if n > 1 {
-                    k as f32 / (n - 1) as f32
-                } else {
-                    0.0
-                };
-                let a = from + (to - from) * t;
-                [cx + rx * a.cos(), cy + ry * a.sin()]
-            })
-            .collect()
-    };
     use std::f32::consts::PI;
     let (hx, hy) = ((head[0] + head[1]) / 2.0, (head[2] + head[3]) / 2.0);
     let eye_line = eyes.map_or(hy - 0.1 * (head[3] - head[2]), |e| (e[2] + e[3]) / 2.0);
@@ -128,7 +101,7 @@ pub fn landmarks_from_regions(regions: &[Region], width: u32) -> Option<Landmark
     let mut points = Vec::with_capacity(N_LANDMARKS);
     // Jaw: the lower half of the head's outline, ear to ear (image rows grow downwards, so
     // angles from pi to 0 already run below the centre).
-    points.extend(ellipse(head, 0.0, 17, PI, 0.0));
+    points.extend(ellipse_points(head, 0.0, 17, PI, 0.0));
     // Brows: five points above each eye.
     for side in [-1.0f32, 1.0] {
         let cx = hx + side * eye_half * 1.2;
@@ -158,19 +131,59 @@ pub fn landmarks_from_regions(regions: &[Region], width: u32) -> Option<Landmark
             eye_line - 1.0,
             eye_line + 1.0,
         ];
-        points.extend(ellipse(b, 0.0, 6, PI, PI + 2.0 * PI * 5.0 / 6.0));
+        points.extend(ellipse_points(b, 0.0, 6, PI, PI + 2.0 * PI * 5.0 / 6.0));
     }
     // Outer lips, around the mouth region in image order; inner lips inside them.
-    points.extend(ellipse(mouth, 0.5, 12, PI, PI + 2.0 * PI * 11.0 / 12.0));
+    points.extend(ellipse_points(
+        mouth,
+        0.5,
+        12,
+        PI,
+        PI + 2.0 * PI * 11.0 / 12.0,
+    ));
     let inner = [
         mouth[0] + 1.0,
         mouth[1] - 1.0,
         mouth[2] + 1.0,
         mouth[3] - 1.0,
     ];
-    points.extend(ellipse(inner, 0.0, 8, PI, PI + 2.0 * PI * 7.0 / 8.0));
+    points.extend(ellipse_points(inner, 0.0, 8, PI, PI + 2.0 * PI * 7.0 / 8.0));
     debug_assert_eq!(points.len(), N_LANDMARKS);
     Some(Landmarks { points })
+}
+
+/// The box `[x0, x1, y0, y1]` of the pixel centres (row-major, `w` wide) whose region
+/// `keep` accepts; `None` when it accepts none.
+fn region_bbox(regions: &[Region], w: usize, keep: &dyn Fn(Region) -> bool) -> Option<[f32; 4]> {
+    let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+    for (p, &r) in regions.iter().enumerate() {
+        if keep(r) {
+            let (x, y) = (p % w, p / w);
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+    }
+    (x0 != usize::MAX).then_some([x0 as f32, x1 as f32, y0 as f32, y1 as f32])
+}
+
+/// `n` points from angle `from` to `to` on the ellipse inscribed in the box
+/// `[x0, x1, y0, y1]` grown by `pad`.
+fn ellipse_points(b: [f32; 4], pad: f32, n: usize, from: f32, to: f32) -> Vec<[f32; 2]> {
+    let (cx, cy) = ((b[0] + b[1]) / 2.0, (b[2] + b[3]) / 2.0);
+    let (rx, ry) = ((b[1] - b[0]) / 2.0 + pad, (b[3] - b[2]) / 2.0 + pad);
+    (0..n)
+        .map(|k| {
+            let t = if n > 1 {
+                k as f32 / (n - 1) as f32
+            } else {
+                0.0
+            };
+            let a = from + (to - from) * t;
+            [cx + rx * a.cos(), cy + ry * a.sin()]
+        })
+        .collect()
 }
 
 /// Pixels (row-major) whose centre `(i, j)` lies inside `polygon` (even-odd rule).

@@ -177,30 +177,7 @@ pub fn decode_frames(
     window: &Window,
     mut each: impl FnMut(usize, &[u8]) -> Result<()>,
 ) -> Result<usize> {
-    let [x, y, side] = window.crop;
-    let resample = window.fps.map(|f| format!("fps={f},")).unwrap_or_default();
-    let filter = format!(
-        "showinfo,{resample}crop={side}:{side}:{x}:{y},scale={s}:{s}:flags=area",
-        s = window.size
-    );
-    let mut cmd = Command::new(ffmpeg);
-    cmd.args(["-hide_banner", "-nostdin", "-loglevel", "info"]);
-    time_args(&mut cmd, window);
-    cmd.arg("-i")
-        .arg(path)
-        .args(["-map", "0:v:0", "-an", "-sn", "-vf", &filter])
-        .args([
-            "-fps_mode",
-            "passthrough",
-            "-f",
-            "rawvideo",
-            "-pix_fmt",
-            "rgb24",
-            "pipe:1",
-        ])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
+    let mut cmd = decode_command(ffmpeg, path, window);
     let mut child = cmd.spawn().map_err(|e| Error::io(ffmpeg, e))?;
     let stderr = child.stderr.take();
     let log = crate::tools::collect_lines(stderr);
@@ -258,6 +235,36 @@ pub fn decode_frames(
         ));
     }
     Ok(n)
+}
+
+/// The ffmpeg command that writes the video's frames in `window`, cropped and scaled, as
+/// raw RGB to its stdout, with its log (`showinfo`'s time stamps) on stderr.
+fn decode_command(ffmpeg: &Path, path: &Path, window: &Window) -> Command {
+    let [x, y, side] = window.crop;
+    let resample = window.fps.map(|f| format!("fps={f},")).unwrap_or_default();
+    let filter = format!(
+        "showinfo,{resample}crop={side}:{side}:{x}:{y},scale={s}:{s}:flags=area",
+        s = window.size
+    );
+    let mut cmd = Command::new(ffmpeg);
+    cmd.args(["-hide_banner", "-nostdin", "-loglevel", "info"]);
+    time_args(&mut cmd, window);
+    cmd.arg("-i")
+        .arg(path)
+        .args(["-map", "0:v:0", "-an", "-sn", "-vf", &filter])
+        .args([
+            "-fps_mode",
+            "passthrough",
+            "-f",
+            "rawvideo",
+            "-pix_fmt",
+            "rgb24",
+            "pipe:1",
+        ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    cmd
 }
 
 /// Writes the audio in `window` as 16 kHz mono 16-bit WAV at `out`.

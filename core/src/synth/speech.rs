@@ -70,32 +70,7 @@ pub fn synthesize_speech(
 ) -> Waveform {
     let sr = sample_rate as f32;
     let secs = |s: f32| (s * sr) as usize;
-    let mut plan = Vec::new();
-    let mut at = secs(rng.random_range(0.15..0.4));
-    while at < n_samples {
-        let n_syllables = rng.random_range(3..=8);
-        for s in 0..n_syllables {
-            let mean = 1.0 / voice.syllable_rate;
-            let len = secs(mean * rng.random_range(0.7..1.4));
-            let consonant = if rng.random_bool(0.6) {
-                secs(rng.random_range(0.03..0.08))
-            } else {
-                0
-            };
-            let declination = 1.12 - 0.22 * s as f32 / n_syllables as f32;
-            plan.push(Syllable {
-                start: at,
-                consonant,
-                len,
-                vowel: rng.random_range(0..VOWELS.len()),
-                gain: rng.random_range(0.45..1.0),
-                pitch: voice.pitch * declination * rng.random_range(0.93..1.07),
-            });
-            at += len + secs(rng.random_range(0.0..0.03));
-        }
-        at += secs(rng.random_range(0.25..0.7));
-    }
-
+    let plan = plan_syllables(rng, voice, n_samples, sr);
     let mut out = vec![0.0f32; n_samples];
     let mut phase = 0.0f32;
     for syl in &plan {
@@ -143,6 +118,38 @@ pub fn synthesize_speech(
         sample_rate,
         samples: out,
     }
+}
+
+/// The syllables of [`synthesize_speech`] over `n_samples` samples at `sr` Hz: phrases of 3
+/// to 8 syllables with pauses between them, pitch falling over each phrase.
+fn plan_syllables(rng: &mut impl Rng, voice: &Voice, n_samples: usize, sr: f32) -> Vec<Syllable> {
+    let secs = |s: f32| (s * sr) as usize;
+    let mut plan = Vec::new();
+    let mut at = secs(rng.random_range(0.15..0.4));
+    while at < n_samples {
+        let n_syllables = rng.random_range(3..=8);
+        for s in 0..n_syllables {
+            let mean = 1.0 / voice.syllable_rate;
+            let len = secs(mean * rng.random_range(0.7..1.4));
+            let consonant = if rng.random_bool(0.6) {
+                secs(rng.random_range(0.03..0.08))
+            } else {
+                0
+            };
+            let declination = 1.12 - 0.22 * s as f32 / n_syllables as f32;
+            plan.push(Syllable {
+                start: at,
+                consonant,
+                len,
+                vowel: rng.random_range(0..VOWELS.len()),
+                gain: rng.random_range(0.45..1.0),
+                pitch: voice.pitch * declination * rng.random_range(0.93..1.07),
+            });
+            at += len + secs(rng.random_range(0.0..0.03));
+        }
+        at += secs(rng.random_range(0.25..0.7));
+    }
+    plan
 }
 
 /// A band-limited sawtooth in [-1, 1] (PolyBLEP) at phase `t` in [0, 1), step `dt`.

@@ -15,8 +15,8 @@ use std::path::Path;
 use super::frames::{Tracks, camera_at, feature_windows, stream, transforms_file};
 use super::head::FaceState;
 use super::scene::{EvalFrame, HeadPose, SynthConfig};
-use super::speech::{Voice, mouth_track, synthesize_speech};
-use crate::audio::{FeatureSource, write_wav};
+use super::speech::{MouthFrame, Voice, mouth_track, synthesize_speech};
+use crate::audio::{FeatureSource, Waveform, write_wav};
 use crate::camera::Intrinsics;
 use crate::dataset::{FrameEntry, Split, save_audio_features};
 use crate::error::{Error, Result};
@@ -59,18 +59,36 @@ impl EvalFrame {
     }
 }
 
+/// The largest absolute yaw and pitch, in degrees, of the first `n_train` frames' poses.
+fn recorded_range(tracks: &Tracks, n_train: usize) -> [f32; 2] {
+    let max_abs = |f: fn(&HeadPose) -> f32| {
+        tracks.poses[..n_train]
+            .iter()
+            .map(|p| f(p).abs())
+            .fold(0.0f32, f32::max)
+    };
+    [max_abs(|p| p.yaw_deg), max_abs(|p| p.pitch_deg)]
+}
+
+/// Another speaker's voice ([`SynthConfig::voice_seed`]), `n_frames` frames of its speech at
+/// the scene's rate, and the mouth track that speech drives.
+fn other_voice(cfg: &SynthConfig, n_frames: usize) -> (Voice, Waveform, Vec<MouthFrame>) {
+    let voice_seed = cfg.voice_seed.unwrap_or(cfg.seed.wrapping_add(1));
+    let mut rng = stream(voice_seed, 3);
+    let voice = Voice::random(&mut rng);
+    let rate = cfg.features.sample_rate;
+    let n_samples = (n_frames as f64 * rate as f64 / cfg.fps as f64).round() as usize;
+    let voice_wave = synthesize_speech(&mut rng, &voice, n_samples, rate).quantized_16bit();
+    let mouth = mouth_track(&voice_wave, cfg.fps, n_frames);
+    (voice, voice_wave, mouth)
+}
+
 impl EvalSplits {
     /// Plans the splits of a scene whose first `n_train` frames of `tracks` train.
     pub(super) fn new(cfg: &SynthConfig, tracks: &Tracks, n_train: usize) -> Result<EvalSplits> {
         let n = tracks.len();
         let held_out: Vec<usize> = (n_train..n).collect();
-        let max_abs = |f: fn(&HeadPose) -> f32| {
-            tracks.poses[..n_train]
-                .iter()
-                .map(|p| f(p).abs())
-                .fold(0.0f32, f32::max)
-        };
-        let range = [max_abs(|p| p.yaw_deg), max_abs(|p| p.pitch_deg)];
+        let range = recorded_range(tracks, n_train);
         let sign = |v: f32| if v < 0.0 { -1.0 } else { 1.0 };
         let mut frames = Vec::with_capacity(n_eval_frames(held_out.len()));
         let mut next_id = n as i64;
@@ -103,13 +121,7 @@ impl EvalSplits {
             }
         }
         // Another speaker, as long as the held-out frames, at their poses and blinks.
-        let voice_seed = cfg.voice_seed.unwrap_or(cfg.seed.wrapping_add(1));
-        let mut rng = stream(voice_seed, 3);
-        let voice = Voice::random(&mut rng);
-        let rate = cfg.features.sample_rate;
-        let n_samples = (held_out.len() as f64 * rate as f64 / cfg.fps as f64).round() as usize;
-        let voice_wave = synthesize_speech(&mut rng, &voice, n_samples, rate).quantized_16bit();
-        let mouth = mouth_track(&voice_wave, cfg.fps, held_out.len());
+        let (voice, voice_wave, mouth) = other_voice(cfg, held_out.len());
         for (k, &i) in held_out.iter().enumerate() {
             let face = FaceState {
                 mouth_open: mouth[k].mouth_open,
