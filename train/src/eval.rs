@@ -283,21 +283,11 @@ pub fn eval_models(
             let render = model.render_frame(data, frame)?;
             render_s[mi] += started.elapsed().as_secs_f64();
             macs[mi] += hits * model.macs_per_ray();
-            let f = frame_scores(&render, &truth, regions.as_deref())?;
+            let view = views.get(&frame.img_id).cloned();
+            let background = &data.dataset.background;
+            let score = score_frame(&render, &truth, regions.as_deref(), background, frame, view)?;
             non_finite[mi] += usize::from(render.non_finite_values() > 0);
-            let repainted = regions
-                .as_deref()
-                .and_then(|r| repainted_share(&render, &data.dataset.background, r));
-            scores[mi].push(FrameScore {
-                img_id: frame.img_id,
-                psnr: f.psnr,
-                ssim: f.ssim,
-                head_psnr: f.head_psnr,
-                head_ssim: f.head_ssim,
-                mouth_psnr: f.mouth_psnr,
-                repainted,
-                view: views.get(&frame.img_id).cloned(),
-            });
+            scores[mi].push(score);
             let path = out
                 .join(model.label())
                 .join(format!("{}.png", frame.img_id));
@@ -317,7 +307,41 @@ pub fn eval_models(
     let grid_path = out.join("grid.png");
     grid(&rows, 2, [1.0; 3]).save_png(&grid_path)?;
     files.push(grid_path);
-    let reports: Vec<EvalReport> = models
+    let totals = ModelTotals {
+        render_s,
+        macs,
+        non_finite,
+    };
+    let reports = model_reports(models, split, scores, &totals, n);
+    files.push(out.join("metrics.json"));
+    let evaluation = Evaluation {
+        models: reports,
+        files,
+    };
+    save_json(&out.join("metrics.json"), &evaluation)?;
+    Ok(evaluation)
+}
+
+/// Per model, what an evaluation sums over the frames besides their scores.
+struct ModelTotals {
+    /// Seconds spent rendering.
+    render_s: Vec<f64>,
+    /// Network multiply-adds.
+    macs: Vec<f64>,
+    /// Frames whose render holds a NaN or infinite value.
+    non_finite: Vec<usize>,
+}
+
+/// The reports of `models` on `split` from their frames' `scores` and `totals` over `n`
+/// frames.
+fn model_reports(
+    models: &[&dyn FrameModel],
+    split: Split,
+    scores: Vec<Vec<FrameScore>>,
+    totals: &ModelTotals,
+    n: usize,
+) -> Vec<EvalReport> {
+    models
         .iter()
         .zip(scores)
         .enumerate()
@@ -332,20 +356,37 @@ pub fn eval_models(
             head_ssim: mean(scores.iter().filter_map(|s| s.head_ssim).collect()),
             mouth_psnr: mean(scores.iter().filter_map(|s| s.mouth_psnr).collect()),
             repainted: mean(scores.iter().filter_map(|s| s.repainted).collect()),
-            render_s_per_frame: render_s[mi] / n as f64,
-            macs_per_frame: macs[mi] / n as f64,
-            non_finite_frames: non_finite[mi],
+            render_s_per_frame: totals.render_s[mi] / n as f64,
+            macs_per_frame: totals.macs[mi] / n as f64,
+            non_finite_frames: totals.non_finite[mi],
             by_view: by_view(&scores),
             frames: scores,
         })
-        .collect();
-    files.push(out.join("metrics.json"));
-    let evaluation = Evaluation {
-        models: reports,
-        files,
-    };
-    save_json(&out.join("metrics.json"), &evaluation)?;
-    Ok(evaluation)
+        .collect()
+}
+
+/// The scores of one render of `frame` against its ground truth `truth`, `view` the kind
+/// of view it is.
+fn score_frame(
+    render: &ImageRgb,
+    truth: &ImageRgb,
+    regions: Option<&[Region]>,
+    background: &ImageRgb,
+    frame: &Frame,
+    view: Option<String>,
+) -> Result<FrameScore> {
+    let f = frame_scores(render, truth, regions)?;
+    let repainted = regions.and_then(|r| repainted_share(render, background, r));
+    Ok(FrameScore {
+        img_id: frame.img_id,
+        psnr: f.psnr,
+        ssim: f.ssim,
+        head_psnr: f.head_psnr,
+        head_ssim: f.head_ssim,
+        mouth_psnr: f.mouth_psnr,
+        repainted,
+        view,
+    })
 }
 
 /// A colour change from the background above this (in [0, 1] units, 1.5/255) counts

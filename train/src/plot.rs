@@ -205,24 +205,7 @@ pub fn plot_frontier(path: &Path, title: &str, dots: &[FrontierDot]) -> Result<(
     {
         let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
-        let (x_lo, x_hi) = dots.iter().fold((f64::INFINITY, 0.0f64), |(a, b), d| {
-            (a.min(d.ms), b.max(d.ms))
-        });
-        let (x_lo, x_hi) = if x_lo.is_finite() {
-            (x_lo / 1.5, x_hi * 1.5)
-        } else {
-            (1.0, 1000.0)
-        };
-        let (lo, hi) = dots
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
-                (a.min(d.psnr), b.max(d.psnr))
-            });
-        let (lo, hi) = if lo.is_finite() {
-            ((lo - 1.0).floor(), (hi + 1.0).ceil())
-        } else {
-            (0.0, 40.0)
-        };
+        let ((x_lo, x_hi), (lo, hi)) = frontier_ranges(&dots);
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 22))
             .margin(16)
@@ -264,13 +247,7 @@ pub fn plot_frontier(path: &Path, title: &str, dots: &[FrontierDot]) -> Result<(
                     + Text::new(d.name.clone(), (10, -16), ("sans-serif", 13).into_font())
             }))
             .map_err(|e| fail(e.to_string()))?;
-        let mut groups: Vec<&str> = Vec::new();
-        for d in &dots {
-            if !groups.contains(&d.group.as_str()) {
-                groups.push(&d.group);
-            }
-        }
-        for (i, group) in groups.iter().enumerate() {
+        for (i, group) in groups_in_order(&dots).iter().enumerate() {
             let (r, g, b) = palette(i);
             let color = RGBColor(r, g, b);
             chart
@@ -287,4 +264,39 @@ pub fn plot_frontier(path: &Path, title: &str, dots: &[FrontierDot]) -> Result<(
         root.present().map_err(|e| fail(e.to_string()))?;
     }
     save_plot(path, &buf)
+}
+
+/// The frontier plot's axis ranges, milliseconds then PSNR, around `dots` (fixed ranges
+/// when there are none).
+fn frontier_ranges(dots: &[&FrontierDot]) -> ((f64, f64), (f64, f64)) {
+    let (x_lo, x_hi) = dots.iter().fold((f64::INFINITY, 0.0f64), |(a, b), d| {
+        (a.min(d.ms), b.max(d.ms))
+    });
+    let (x_lo, x_hi) = if x_lo.is_finite() {
+        (x_lo / 1.5, x_hi * 1.5)
+    } else {
+        (1.0, 1000.0)
+    };
+    let (lo, hi) = dots
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+            (a.min(d.psnr), b.max(d.psnr))
+        });
+    let (lo, hi) = if lo.is_finite() {
+        ((lo - 1.0).floor(), (hi + 1.0).ceil())
+    } else {
+        (0.0, 40.0)
+    };
+    ((x_lo, x_hi), (lo, hi))
+}
+
+/// The dots' groups, each once, in the order they first appear.
+fn groups_in_order<'a>(dots: &[&'a FrontierDot]) -> Vec<&'a str> {
+    let mut groups: Vec<&str> = Vec::new();
+    for d in dots {
+        if !groups.contains(&d.group.as_str()) {
+            groups.push(&d.group);
+        }
+    }
+    groups
 }

@@ -44,6 +44,14 @@ pub struct Schedule {
     pub time_cap_s: f64,
 }
 
+impl Schedule {
+    /// Whether `elapsed` training seconds spend the time budget or reach the cap.
+    fn spent(&self, elapsed: f64) -> bool {
+        (self.time_budget_s > 0.0 && elapsed >= self.time_budget_s)
+            || (self.time_cap_s > 0.0 && elapsed >= self.time_cap_s)
+    }
+}
+
 /// A model being trained, as [`train_loop`] sees it (the teacher and the student).
 pub trait TrainingRun {
     /// The run's folder.
@@ -167,41 +175,20 @@ pub fn train_loop_timed(
     let t = run.schedule();
     let mut last_val = None;
     let mut saved = (run.step() > 0).then_some(run.step());
-    let diverged = |step: usize, what: String, saved: Option<usize>| {
-        let kept = match saved {
-            Some(s) => format!("the checkpoint of step {s} in {} is kept", dir.display()),
-            None => "no checkpoint was written".to_string(),
-        };
-        Error::NonFinite(format!(
-            "training diverged at step {step}: {what}; {kept}; lower the learning rate (`lr`) \
-             and train again"
-        ))
-    };
-    let spent = |run: &dyn TrainingRun| {
-        let e = run.elapsed();
-        (t.time_budget_s > 0.0 && e >= t.time_budget_s) || (t.time_cap_s > 0.0 && e >= t.time_cap_s)
-    };
+    let spent = |run: &dyn TrainingRun| t.spent(run.elapsed());
     // A run resumed with its budget already spent trains no further step.
     while run.step() < t.iters && !spent(&*run) {
         if stop.load(Ordering::Relaxed) {
             checkpoint(&*run, &dir, timing, on_event)?;
             return Ok(None);
         }
-        let started = Instant::now();
-        let (loss, psnr) = match run.train_step(data) {
+        let (loss, psnr, rays_per_s) = match timed_step(run, data, timing, t.batch_rays) {
             Ok(v) => v,
-            Err(Error::NonFinite(what)) => return Err(diverged(run.step() + 1, what, saved)),
+            Err(Error::NonFinite(what)) => {
+                return Err(diverged_error(&dir, run.step() + 1, &what, saved));
+            }
             Err(e) => return Err(e),
         };
-        let step_s = started.elapsed().as_secs_f64();
-        let mut side_s = 0.0;
-        for (what, seconds, count) in run.take_side_times() {
-            timing.add(what, seconds, count);
-            side_s += seconds;
-        }
-        timing.add(STEPS_PART, step_s - side_s, 1);
-        // The step's own rate, without the side work.
-        let rays_per_s = t.batch_rays as f64 / (step_s - side_s).max(1e-9);
         let step = run.step();
         on_event(&Event::Step {
             step,
@@ -213,15 +200,13 @@ pub fn train_loop_timed(
         let last = step == t.iters || out_of_time;
         let validate_now = (t.val_every > 0 && step.is_multiple_of(t.val_every)) || last;
         let scores = if validate_now {
-            let started = Instant::now();
-            let s = run.validation_scores(data, t.val_frames)?;
-            timing.add(VALIDATION_PART, started.elapsed().as_secs_f64(), 1);
+            let s = timed_validation(&*run, data, t.val_frames, timing)?;
             if s.non_finite > 0 {
                 let what = format!(
                     "{} of {} validation renders hold NaN or infinite values",
                     s.non_finite, s.frames
                 );
-                return Err(diverged(step, what, saved));
+                return Err(diverged_error(&dir, step, &what, saved));
             }
             on_event(&Event::Validation { step, scores: s });
             last_val = Some(s);
@@ -254,6 +239,55 @@ pub fn train_loop_timed(
         checkpoint(&*run, &dir, timing, on_event)?;
     }
     Ok(last_val)
+}
+
+/// One training step of `run`, its seconds and its side work's added to `timing`.
+/// Returns the loss, the PSNR and the step's own rate in rays per second (without the
+/// side work).
+fn timed_step(
+    run: &mut dyn TrainingRun,
+    data: &TrainData,
+    timing: &mut Timing,
+    batch_rays: usize,
+) -> Result<(f64, f64, f64)> {
+    let started = Instant::now();
+    let (loss, psnr) = run.train_step(data)?;
+    let step_s = started.elapsed().as_secs_f64();
+    let mut side_s = 0.0;
+    for (what, seconds, count) in run.take_side_times() {
+        timing.add(what, seconds, count);
+        side_s += seconds;
+    }
+    timing.add(STEPS_PART, step_s - side_s, 1);
+    // The step's own rate, without the side work.
+    let rays_per_s = batch_rays as f64 / (step_s - side_s).max(1e-9);
+    Ok((loss, psnr, rays_per_s))
+}
+
+/// The validation scores of `run` on `n` frames, their seconds added to `timing`.
+fn timed_validation(
+    run: &dyn TrainingRun,
+    data: &TrainData,
+    n: usize,
+    timing: &mut Timing,
+) -> Result<Scores> {
+    let started = Instant::now();
+    let s = run.validation_scores(data, n)?;
+    timing.add(VALIDATION_PART, started.elapsed().as_secs_f64(), 1);
+    Ok(s)
+}
+
+/// The error of a run that diverged at `step` (`what` went NaN or infinite), saying which
+/// checkpoint in `dir` is kept.
+fn diverged_error(dir: &Path, step: usize, what: &str, saved: Option<usize>) -> Error {
+    let kept = match saved {
+        Some(s) => format!("the checkpoint of step {s} in {} is kept", dir.display()),
+        None => "no checkpoint was written".to_string(),
+    };
+    Error::NonFinite(format!(
+        "training diverged at step {step}: {what}; {kept}; lower the learning rate (`lr`) \
+         and train again"
+    ))
 }
 
 /// Writes `run`'s checkpoint, adds its seconds to `timing` and reports it.

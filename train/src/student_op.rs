@@ -110,16 +110,7 @@ impl StudentOp {
     /// The forward pass on raw slices: returns the raw outputs `[n, 3 M]` and the stash.
     fn run(&self, beams: &[f32], codes: &[f32], params: &[f32], n: usize) -> (Vec<f32>, Stash) {
         let plan = &self.plan;
-        let (b, c) = (plan.beam_dim, plan.code_dim);
-        let mut x = take_buffer(n * (b + c));
-        for ((row, beam), code) in x
-            .chunks_exact_mut(b + c)
-            .zip(beams.chunks_exact(b.max(1)))
-            .zip(codes.chunks_exact(c.max(1)))
-        {
-            row[..b].copy_from_slice(beam);
-            row[b..].copy_from_slice(code);
-        }
+        let x = input_rows(plan, beams, codes, n);
         let mut stash = Stash::default();
         let inp = &plan.input;
         let mut h = take_buffer(n * inp.out);
@@ -191,6 +182,22 @@ impl StudentOp {
         }
         (out, stash)
     }
+}
+
+/// The input layer's rows, `[n, beam_dim + code_dim]`: each beam's encoding followed by
+/// its audio code.
+fn input_rows(plan: &StudentPlan, beams: &[f32], codes: &[f32], n: usize) -> Vec<f32> {
+    let (b, c) = (plan.beam_dim, plan.code_dim);
+    let mut x = take_buffer(n * (b + c));
+    for ((row, beam), code) in x
+        .chunks_exact_mut(b + c)
+        .zip(beams.chunks_exact(b.max(1)))
+        .zip(codes.chunks_exact(c.max(1)))
+    {
+        row[..b].copy_from_slice(beam);
+        row[b..].copy_from_slice(code);
+    }
+    x
 }
 
 impl CustomOp3 for StudentOp {

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Tensor, Var};
 use candle_nn::VarMap;
+use nldf_core::bounds::HeadRange;
 use nldf_core::camera::Camera;
 use nldf_core::dataset::Frame;
 use nldf_core::image::ImageRgb;
@@ -35,7 +36,7 @@ use crate::upsampler::{
     CoarseBox, Upsampler, UpsamplerConfig, coarse_box_features, image_box, render_upsampled,
     upsampler,
 };
-use crate::views::training_views;
+use crate::views::{View, training_views};
 
 /// How the upsampler is trained.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -314,80 +315,17 @@ pub fn train_upsampler(
     let t = model.cfg.train.clone();
     let r = model.cfg.model.factor;
     let side = t.crop + 2 * t.halo;
-    let range = data.head_range();
-    let ds = &data.dataset;
-    let student = &model.student;
-    let margin = model.cfg.model.margin;
-    let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
-
-    // A view's coarse box, when it holds a hit and a whole crop.
-    let coarse_of = |view: &crate::views::View| -> Result<Option<CoarseBox>> {
-        let code = student.audio_codes(data, &[view.aud_id])?;
-        let coarse =
-            coarse_box_features(&student.student, &view.camera, &code, &range, (r, margin))?;
-        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
-        Ok((coarse.any_hit && bh >= side && bw >= side).then_some(coarse))
+    let cutter = CropCutter {
+        data,
+        student: &model.student,
+        t: &t,
+        r,
+        side,
+        margin: model.cfg.model.margin,
+        range: data.head_range(),
     };
-    // Recorded views: the coarse box of every training frame.
-    let views = training_views(data, &student.cfg.train, student.cfg.model.anchor_beams);
-    let mut recorded = Vec::new();
-    for (vi, view) in views.iter().filter(|v| v.recorded).enumerate() {
-        if let Some(coarse) = coarse_of(view)? {
-            recorded.push(RecordedView { coarse, image: vi });
-        }
-    }
-    // Pseudo views: crops the teacher renders once.
-    let mut pseudo = Vec::new();
-    let pseudo_views: Vec<_> = views.iter().filter(|v| !v.recorded).collect();
-    let n_pseudo = t.pseudo_views.min(pseudo_views.len());
-    for k in 0..n_pseudo {
-        let view = pseudo_views[k * pseudo_views.len() / n_pseudo.max(1)];
-        let Some(coarse) = coarse_of(view)? else {
-            continue;
-        };
-        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
-        let teacher_code = teacher.audio_codes(data, &[view.aud_id])?;
-        for _ in 0..t.pseudo_crops {
-            let (y, x) = (
-                rng.random_range(0..=bh - side),
-                rng.random_range(0..=bw - side),
-            );
-            let grid = coarse
-                .grid
-                .narrow(2, y, side)?
-                .narrow(3, x, side)?
-                .squeeze(0)?;
-            // The central rays' blocks in output pixels.
-            let row0 = (coarse.rows.0 + y + t.halo) * r;
-            let col0 = (coarse.cols.0 + x + t.halo) * r;
-            let n = t.crop * r;
-            let pixels: Vec<(u32, u32)> = (0..n * n)
-                .map(|p| ((col0 + p % n) as u32, (row0 + p / n) as u32))
-                .collect();
-            let bg: Vec<f32> = pixels
-                .iter()
-                .flat_map(|&(i, j)| ds.background.get(i, j))
-                .collect();
-            let rays = rays_for_pixels(&view.camera, &pixels);
-            let colours = teacher.teacher.render_eval(
-                &rays,
-                &bg,
-                &teacher_code,
-                &range,
-                teacher.teacher.cfg.min_transmittance,
-            )?;
-            let planar = |v: &[f32]| -> Result<Tensor> {
-                Ok(Tensor::from_vec(v.to_vec(), (n, n, 3), &Device::Cpu)?
-                    .permute((2, 0, 1))?
-                    .contiguous()?)
-            };
-            pseudo.push(Crop {
-                grid,
-                target: planar(&colours)?,
-                background: planar(&bg)?,
-            });
-        }
-    }
+    let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
+    let (recorded, pseudo) = cutter.prepare(&teacher, &mut rng)?;
     if recorded.is_empty() {
         return Err(Error::Config(format!(
             "no training frame's head box is {side} coarse rays on a side at factor {r}: \
@@ -395,26 +333,9 @@ pub fn train_upsampler(
         )));
     }
     let prepare_s = started.elapsed().as_secs_f64();
-
-    let vars: Vec<(String, Var, f64)> = sorted_vars(&model.varmap)?
-        .into_iter()
-        .map(|(n, v)| (n, v, 1.0))
-        .collect();
-    let mut adam = Adam::new(
-        vars,
-        AdamParams {
-            beta1: 0.9,
-            beta2: 0.999,
-            eps: 1e-8,
-        },
-    );
+    let mut adam = upsampler_adam(&model.varmap)?;
     let mut log = CsvLog::open(&dir.join(LOG_FILE), 0)?;
     let clock = Clock::resumed(0.0);
-    let n_pseudo_step = if pseudo.is_empty() {
-        0
-    } else {
-        ((t.batch as f64 * t.pseudo_fraction).round() as usize).min(t.batch)
-    };
     let mut last_loss = f64::NAN;
     let train_started = std::time::Instant::now();
     let mut done = 0;
@@ -422,36 +343,12 @@ pub fn train_upsampler(
         if stop.load(std::sync::atomic::Ordering::Relaxed) {
             break;
         }
-        let mut crops = Vec::with_capacity(t.batch);
-        for b in 0..t.batch {
-            if b < n_pseudo_step {
-                crops.push(pseudo[rng.random_range(0..pseudo.len())].clone());
-            } else {
-                let v = &recorded[rng.random_range(0..recorded.len())];
-                let mouth = rng.random::<f64>() < t.mouth_fraction;
-                crops.push(recorded_crop(v, data, &mut rng, mouth, &t, r)?);
-            }
-        }
-        let grid = Tensor::stack(&crops.iter().map(|c| &c.grid).collect::<Vec<_>>(), 0)?;
-        let target = Tensor::stack(&crops.iter().map(|c| &c.target).collect::<Vec<_>>(), 0)?;
-        let bg = Tensor::stack(&crops.iter().map(|c| &c.background).collect::<Vec<_>>(), 0)?;
-        let out = model.up.forward(&grid)?;
-        let (lo, n) = (t.halo * r, t.crop * r);
-        let out = out.narrow(2, lo, n)?.narrow(3, lo, n)?;
-        let pixels = Upsampler::composite(&out, &bg)?;
-        let loss = (pixels - target)?.sqr()?.mean_all()?;
-        let grads = loss.backward()?;
-        let frac = (step - 1) as f64 / t.iters.max(2).saturating_sub(1) as f64;
-        let lr = t.lr * (t.lr_final / t.lr).powf(frac);
-        adam.step(&grads, lr)?;
-        last_loss = loss.to_scalar::<f32>()? as f64;
-        if !last_loss.is_finite() {
-            return Err(Error::NonFinite(format!(
-                "the upsampler's loss became {last_loss} at step {step}"
-            )));
-        }
+        let crops = draw_crops(&recorded, &pseudo, data, &mut rng, &t, r)?;
+        let (loss, lr) = train_step(&model.up, &mut adam, &crops, &t, r, step)?;
+        last_loss = loss;
         if step % t.log_every == 0 || step == t.iters {
             let psnr = nldf_core::metrics::psnr_from_mse(last_loss);
+            let n = t.crop * r;
             let px_per_s =
                 (step * t.batch * n * n) as f64 / train_started.elapsed().as_secs_f64().max(1e-9);
             log.row(step, clock.elapsed(), last_loss, psnr, lr, px_per_s, None)?;
@@ -480,6 +377,205 @@ pub fn train_upsampler(
     };
     save_json(&dir.join(REPORT_FILE), &report)?;
     Ok(report)
+}
+
+/// Adam over every upsampler weight at the same learning rate.
+fn upsampler_adam(varmap: &VarMap) -> Result<Adam> {
+    let vars: Vec<(String, Var, f64)> = sorted_vars(varmap)?
+        .into_iter()
+        .map(|(n, v)| (n, v, 1.0))
+        .collect();
+    Ok(Adam::new(
+        vars,
+        AdamParams {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+    ))
+}
+
+/// One step's batch of crops: the pseudo views' share (`pseudo_fraction`, when there
+/// are any) drawn from `pseudo`, the rest cut from random recorded views.
+fn draw_crops(
+    recorded: &[RecordedView],
+    pseudo: &[Crop],
+    data: &TrainData,
+    rng: &mut ChaCha8Rng,
+    t: &UpsamplerTrainConfig,
+    r: usize,
+) -> Result<Vec<Crop>> {
+    let n_pseudo_step = if pseudo.is_empty() {
+        0
+    } else {
+        ((t.batch as f64 * t.pseudo_fraction).round() as usize).min(t.batch)
+    };
+    let mut crops = Vec::with_capacity(t.batch);
+    for b in 0..t.batch {
+        if b < n_pseudo_step {
+            crops.push(pseudo[rng.random_range(0..pseudo.len())].clone());
+        } else {
+            let v = &recorded[rng.random_range(0..recorded.len())];
+            let mouth = rng.random::<f64>() < t.mouth_fraction;
+            crops.push(recorded_crop(v, data, rng, mouth, t, r)?);
+        }
+    }
+    Ok(crops)
+}
+
+/// One optimizer step of the upsampler on `crops` (step `step` of the schedule): the
+/// composited pixels' mean squared error against the targets over the crops' centres.
+/// Returns the loss and the learning rate it stepped with.
+fn train_step(
+    up: &Upsampler,
+    adam: &mut Adam,
+    crops: &[Crop],
+    t: &UpsamplerTrainConfig,
+    r: usize,
+    step: usize,
+) -> Result<(f64, f64)> {
+    let grid = Tensor::stack(&crops.iter().map(|c| &c.grid).collect::<Vec<_>>(), 0)?;
+    let target = Tensor::stack(&crops.iter().map(|c| &c.target).collect::<Vec<_>>(), 0)?;
+    let bg = Tensor::stack(&crops.iter().map(|c| &c.background).collect::<Vec<_>>(), 0)?;
+    let out = up.forward(&grid)?;
+    let (lo, n) = (t.halo * r, t.crop * r);
+    let out = out.narrow(2, lo, n)?.narrow(3, lo, n)?;
+    let pixels = Upsampler::composite(&out, &bg)?;
+    let loss = (pixels - target)?.sqr()?.mean_all()?;
+    let grads = loss.backward()?;
+    let frac = (step - 1) as f64 / t.iters.max(2).saturating_sub(1) as f64;
+    let lr = t.lr * (t.lr_final / t.lr).powf(frac);
+    adam.step(&grads, lr)?;
+    let loss = loss.to_scalar::<f32>()? as f64;
+    if !loss.is_finite() {
+        return Err(Error::NonFinite(format!(
+            "the upsampler's loss became {loss} at step {step}"
+        )));
+    }
+    Ok((loss, lr))
+}
+
+/// What cutting the training crops reads: the data, the fixed student and the crops'
+/// geometry.
+struct CropCutter<'a> {
+    data: &'a TrainData,
+    student: &'a StudentModel,
+    t: &'a UpsamplerTrainConfig,
+    /// The upsampler's factor.
+    r: usize,
+    /// Coarse rays on a crop's side, halo included.
+    side: usize,
+    /// Coarse rays around the hits in a coarse box.
+    margin: usize,
+    range: HeadRange,
+}
+
+impl CropCutter<'_> {
+    /// The recorded views' coarse boxes, then the crops the teacher renders once of the
+    /// pseudo views.
+    fn prepare(
+        &self,
+        teacher: &TeacherModel,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(Vec<RecordedView>, Vec<Crop>)> {
+        let student = self.student;
+        // Recorded views: the coarse box of every training frame.
+        let views = training_views(
+            self.data,
+            &student.cfg.train,
+            student.cfg.model.anchor_beams,
+        );
+        let mut recorded = Vec::new();
+        for (vi, view) in views.iter().filter(|v| v.recorded).enumerate() {
+            if let Some(coarse) = self.coarse_of(view)? {
+                recorded.push(RecordedView { coarse, image: vi });
+            }
+        }
+        // Pseudo views: crops the teacher renders once.
+        let mut pseudo = Vec::new();
+        let pseudo_views: Vec<_> = views.iter().filter(|v| !v.recorded).collect();
+        let n_pseudo = self.t.pseudo_views.min(pseudo_views.len());
+        for k in 0..n_pseudo {
+            let view = pseudo_views[k * pseudo_views.len() / n_pseudo.max(1)];
+            let Some(coarse) = self.coarse_of(view)? else {
+                continue;
+            };
+            self.pseudo_crops(teacher, view, &coarse, rng, &mut pseudo)?;
+        }
+        Ok((recorded, pseudo))
+    }
+
+    /// A view's coarse box, when it holds a hit and a whole crop.
+    fn coarse_of(&self, view: &View) -> Result<Option<CoarseBox>> {
+        let (student, side) = (self.student, self.side);
+        let code = student.audio_codes(self.data, &[view.aud_id])?;
+        let coarse = coarse_box_features(
+            &student.student,
+            &view.camera,
+            &code,
+            &self.range,
+            (self.r, self.margin),
+        )?;
+        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
+        Ok((coarse.any_hit && bh >= side && bw >= side).then_some(coarse))
+    }
+
+    /// Cuts `pseudo_crops` random crops of a pseudo view's coarse box into `crops`, their
+    /// targets rendered by the teacher.
+    fn pseudo_crops(
+        &self,
+        teacher: &TeacherModel,
+        view: &View,
+        coarse: &CoarseBox,
+        rng: &mut ChaCha8Rng,
+        crops: &mut Vec<Crop>,
+    ) -> Result<()> {
+        let (t, r, side) = (self.t, self.r, self.side);
+        let ds = &self.data.dataset;
+        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
+        let teacher_code = teacher.audio_codes(self.data, &[view.aud_id])?;
+        for _ in 0..t.pseudo_crops {
+            let (y, x) = (
+                rng.random_range(0..=bh - side),
+                rng.random_range(0..=bw - side),
+            );
+            let grid = coarse
+                .grid
+                .narrow(2, y, side)?
+                .narrow(3, x, side)?
+                .squeeze(0)?;
+            // The central rays' blocks in output pixels.
+            let row0 = (coarse.rows.0 + y + t.halo) * r;
+            let col0 = (coarse.cols.0 + x + t.halo) * r;
+            let n = t.crop * r;
+            let pixels: Vec<(u32, u32)> = (0..n * n)
+                .map(|p| ((col0 + p % n) as u32, (row0 + p / n) as u32))
+                .collect();
+            let bg: Vec<f32> = pixels
+                .iter()
+                .flat_map(|&(i, j)| ds.background.get(i, j))
+                .collect();
+            let rays = rays_for_pixels(&view.camera, &pixels);
+            let colours = teacher.teacher.render_eval(
+                &rays,
+                &bg,
+                &teacher_code,
+                &self.range,
+                teacher.teacher.cfg.min_transmittance,
+            )?;
+            let planar = |v: &[f32]| -> Result<Tensor> {
+                Ok(Tensor::from_vec(v.to_vec(), (n, n, 3), &Device::Cpu)?
+                    .permute((2, 0, 1))?
+                    .contiguous()?)
+            };
+            crops.push(Crop {
+                grid,
+                target: planar(&colours)?,
+                background: planar(&bg)?,
+            });
+        }
+        Ok(())
+    }
 }
 
 /// A random crop of a recorded view, its target from the frame itself; with `mouth`, one

@@ -4,7 +4,7 @@
 //! held-out frames. A stage that already finished in the output folder is reused, and an
 //! interrupted one resumes.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -312,6 +312,36 @@ impl DemoJob {
         self.check()?;
         let mut own = Timing::open(&self.out.join(DEMO_TIMING_DIR))?;
         let data = self.data_dir();
+        self.prepare_scene(&data, &mut own, on_event)?;
+        self.train_teacher(&data, stop, on_event)?;
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        let mut model = None;
+        if self.student_iters > 0 {
+            self.train_student(&data, stop, on_event)?;
+            if stop.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            model = Some(self.export_onnx(&mut own, on_event)?);
+        }
+        let (splits, eval_dir) = self.evaluate(&data, &mut own, on_event)?;
+        self.save_timing(&own, on_event)?;
+        let evaluation = splits
+            .first()
+            .map(|(_, e)| e.clone())
+            .ok_or_else(|| Error::Config("the demo evaluated no split".into()))?;
+        Ok(Some(DemoReport {
+            model,
+            evaluation,
+            eval_dir,
+            splits,
+        }))
+    }
+
+    /// Announces the dataset, and renders the synthetic scene into `data` unless it is
+    /// there already (or a dataset was given), adding its seconds to `own`.
+    fn prepare_scene(&self, data: &Path, own: &mut Timing, on_event: OnEvent) -> Result<()> {
         let started = Instant::now();
         if self.data.is_some() {
             on_event(&JobEvent::Stage(format!("dataset: {}", data.display())));
@@ -330,7 +360,7 @@ impl DemoJob {
             // The scene renders on its own thread; this one reports its frames as they come.
             let summary = std::thread::scope(|scope| {
                 let synth = scope.spawn(|| {
-                    synth::generate(&self.scene, None, &data, false, &|| {
+                    synth::generate(&self.scene, None, data, false, &|| {
                         done.fetch_add(1, Ordering::Relaxed);
                     })
                 });
@@ -352,11 +382,17 @@ impl DemoJob {
                 total,
             });
             on_event(&JobEvent::Wrote {
-                dir: data.clone(),
+                dir: data.to_path_buf(),
                 files: summary.files.iter().map(|(f, _)| data.join(f)).collect(),
             });
             own.add("synthetic scene", started.elapsed().as_secs_f64(), 1);
         }
+        Ok(())
+    }
+
+    /// Trains (or resumes) the teacher on `data` with the demo's pinned steps, learning
+    /// rate schedule and time cap.
+    fn train_teacher(&self, data: &Path, stop: &AtomicBool, on_event: OnEvent) -> Result<()> {
         let teacher_dir = self.out.join(TEACHER_DIR);
         let resume = has_checkpoint(&teacher_dir);
         on_event(&JobEvent::Stage(format!(
@@ -367,7 +403,7 @@ impl DemoJob {
             teacher_dir.display()
         )));
         let mut plan = TeacherJob {
-            data: data.clone(),
+            data: data.to_path_buf(),
             run: self.out.clone(),
             source: TeacherSource::Preset(Box::new(self.teacher.clone())),
             iters: Some(self.teacher_iters),
@@ -387,68 +423,80 @@ impl DemoJob {
         plan.run.model.cfg.train.time_budget_s = 0.0;
         plan.run.model.cfg.train.time_cap_s = self.teacher_cap_minutes * 60.0;
         plan.run(stop, on_event)?;
-        if stop.load(Ordering::Relaxed) {
-            return Ok(None);
+        Ok(())
+    }
+
+    /// Trains (or resumes) the student on `data` with the demo's recipe and time cap.
+    fn train_student(&self, data: &Path, stop: &AtomicBool, on_event: OnEvent) -> Result<()> {
+        let student_dir = self.out.join(STUDENT_DIR);
+        let resume = has_checkpoint(&student_dir);
+        on_event(&JobEvent::Stage(format!(
+            "student, {} ({} steps, capped at {} min{}) -> {}",
+            if self.student_distill {
+                "distilled with pseudo views"
+            } else {
+                "pixels only"
+            },
+            self.student_iters,
+            self.student_cap_minutes,
+            if resume { ", resuming" } else { "" },
+            student_dir.display()
+        )));
+        let cfg = student_recipe(
+            &self.student,
+            self.student_distill,
+            self.pseudo,
+            self.student_iters,
+        )?;
+        // The recipe is complete before the run is built from it (a resumed run keeps
+        // its own).
+        let mut plan = StudentJob {
+            data: data.to_path_buf(),
+            run: self.out.clone(),
+            name: STUDENT_DIR.into(),
+            source: StudentSource::Config(Box::new(cfg)),
+            iters: resume.then_some(self.student_iters),
+            minutes: None,
+            resume,
         }
-        let mut model = None;
-        if self.student_iters > 0 {
-            let student_dir = self.out.join(STUDENT_DIR);
-            let resume = has_checkpoint(&student_dir);
-            on_event(&JobEvent::Stage(format!(
-                "student, {} ({} steps, capped at {} min{}) -> {}",
-                if self.student_distill {
-                    "distilled with pseudo views"
-                } else {
-                    "pixels only"
-                },
-                self.student_iters,
-                self.student_cap_minutes,
-                if resume { ", resuming" } else { "" },
-                student_dir.display()
-            )));
-            let cfg = student_recipe(
-                &self.student,
-                self.student_distill,
-                self.pseudo,
-                self.student_iters,
-            )?;
-            // The recipe is complete before the run is built from it (a resumed run keeps
-            // its own).
-            let mut plan = StudentJob {
-                data: data.clone(),
-                run: self.out.clone(),
-                name: STUDENT_DIR.into(),
-                source: StudentSource::Config(Box::new(cfg)),
-                iters: resume.then_some(self.student_iters),
-                minutes: None,
-                resume,
-            }
-            .plan(on_event)?;
-            let t = &mut plan.run.model.cfg.train;
-            t.time_budget_s = 0.0;
-            t.time_cap_s = self.student_cap_minutes * 60.0;
-            plan.run(stop, on_event)?;
-            if stop.load(Ordering::Relaxed) {
-                return Ok(None);
-            }
-            on_event(&JobEvent::Stage("ONNX export".into()));
-            let started = Instant::now();
-            let onnx = self.out.join(ONNX_FILE);
-            let report =
-                nldf_export::export_student(&student_dir, &onnx, nldf_export::WeightType::F32)?;
-            // Read it back as every loader will, so that a bad file never leaves the demo.
-            nldf_export::read_model(&onnx)?;
-            on_event(&JobEvent::Note(format!(
-                "student at step {}: {} bytes",
-                report.info.step, report.bytes
-            )));
-            on_event(&JobEvent::Wrote {
-                dir: self.out.clone(),
-                files: vec![onnx.clone()],
-            });
-            model = Some(onnx);
-            own.add("ONNX export", started.elapsed().as_secs_f64(), 1);
-        }
+        .plan(on_event)?;
+        let t = &mut plan.run.model.cfg.train;
+        t.time_budget_s = 0.0;
+        t.time_cap_s = self.student_cap_minutes * 60.0;
+        plan.run(stop, on_event)?;
+        Ok(())
+    }
+
+    /// Exports the trained student to ONNX and reads the file back; returns its path.
+    fn export_onnx(&self, own: &mut Timing, on_event: OnEvent) -> Result<PathBuf> {
+        let student_dir = self.out.join(STUDENT_DIR);
+        on_event(&JobEvent::Stage("ONNX export".into()));
+        let started = Instant::now();
+        let onnx = self.out.join(ONNX_FILE);
+        let report =
+            nldf_export::export_student(&student_dir, &onnx, nldf_export::WeightType::F32)?;
+        // Read it back as every loader will, so that a bad file never leaves the demo.
+        nldf_export::read_model(&onnx)?;
+        on_event(&JobEvent::Note(format!(
+            "student at step {}: {} bytes",
+            report.info.step, report.bytes
+        )));
+        on_event(&JobEvent::Wrote {
+            dir: self.out.clone(),
+            files: vec![onnx.clone()],
+        });
+        own.add("ONNX export", started.elapsed().as_secs_f64(), 1);
+        Ok(onnx)
+    }
+
+    /// Evaluates the demo's run on each of its splits that `data` has, adding their
+    /// seconds to `own`; returns the evaluations and the `val` split's folder.
+    fn evaluate(
+        &self,
+        data: &Path,
+        own: &mut Timing,
+        on_event: OnEvent,
+    ) -> Result<(Vec<(Split, Evaluation)>, PathBuf)> {
         let mut splits = Vec::new();
         let mut eval_dir = self.out.join("eval").join(Split::Val.name());
         for &split in &self.splits {
@@ -461,7 +509,7 @@ impl DemoJob {
             )));
             let plan = EvalJob {
                 run: self.out.clone(),
-                data: data.clone(),
+                data: data.to_path_buf(),
                 split,
                 frames: None,
                 out: None,
@@ -479,16 +527,6 @@ impl DemoJob {
             }
             splits.push((split, evaluation));
         }
-        self.save_timing(&own, on_event)?;
-        let evaluation = splits
-            .first()
-            .map(|(_, e)| e.clone())
-            .ok_or_else(|| Error::Config("the demo evaluated no split".into()))?;
-        Ok(Some(DemoReport {
-            model,
-            evaluation,
-            eval_dir,
-            splits,
-        }))
+        Ok((splits, eval_dir))
     }
 }

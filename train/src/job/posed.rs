@@ -105,111 +105,10 @@ impl PosedJob {
             .chain([Split::Sweep])
             .map(|split| TrainData::open_held_out(&self.data, false, &audio, split))
             .collect::<Result<Vec<_>>>()?;
-        let student = |name: &str, distill: bool, pseudo: usize, minutes: f64| StudentJob {
-            data: self.data.clone(),
-            run: self.run.clone(),
-            name: format!("posed_{name}"),
-            source: StudentSource::Settings {
-                model: self.model.clone(),
-                distill,
-                pool: true,
-                pseudo: PseudoSettings {
-                    frames: Some(pseudo),
-                    pose_range: Some(self.pose_range),
-                    rays: Some(self.pseudo_rays),
-                },
-            },
-            iters: Some(1_000_000),
-            minutes: Some(minutes),
-            resume: false,
-        };
-        // The pixels-only student's budget is set once the distilled ones have trained:
-        // the teacher's minutes plus the longest distilled student's own.
-        let variants = [
-            (
-                "student, distilled, with pseudo views".to_string(),
-                student("pseudo", true, self.pseudo_frames, self.minutes),
-                true,
-            ),
-            (
-                "student, distilled, recorded frames only".to_string(),
-                student("distilled", true, 0, self.minutes),
-                true,
-            ),
-            (
-                "student, pixels only".to_string(),
-                student("pixels", false, 0, 0.0),
-                false,
-            ),
-        ];
-        let mut students: Vec<(String, StudentModel, bool)> = Vec::new();
-        for (label, job, distilled) in &variants {
-            let dir = job.dir();
-            let minutes = if *distilled {
-                job.minutes
-            } else {
-                let longest = students
-                    .iter()
-                    .map(|(_, s, _)| s.trained_s / 60.0)
-                    .fold(self.minutes, f64::max);
-                Some(teacher_minutes + longest)
-            };
-            let job = StudentJob {
-                resume: has_checkpoint(&dir),
-                minutes,
-                ..job.clone()
-            };
-            on_event(&JobEvent::Stage(format!("{label} -> {}", dir.display())));
-            job.plan(on_event)?.run(stop, on_event)?;
-            if stop.load(Ordering::Relaxed) {
-                return Err(Error::Config(
-                    "stopped; run the same command again to resume".into(),
-                ));
-            }
-            let run = StudentModel::open(&dir)?;
-            // Labelled from what the run was trained with (a reused run keeps its own).
-            let t = &run.cfg.train;
-            let label = if t.pseudo_frames == 0 {
-                label.clone()
-            } else {
-                let pixels = match t.pseudo_rays {
-                    0 => String::new(),
-                    n => format!(" of {n} pixels"),
-                };
-                format!(
-                    "student, distilled, {} pseudo views{pixels} at {}x the recorded poses",
-                    t.pseudo_frames, t.pose_range
-                )
-            };
-            students.push((label, run, *distilled));
-        }
+        let students = self.train_students(teacher_minutes, stop, on_event)?;
         let mut models: Vec<&dyn FrameModel> = vec![&teacher];
         models.extend(students.iter().map(|(_, s, _)| s as &dyn FrameModel));
-        let mut reports: Vec<Vec<EvalReport>> = vec![Vec::new(); models.len()];
-        for (split, data) in SPLITS.into_iter().zip(&held_out) {
-            on_event(&JobEvent::Stage(format!(
-                "scoring the {} split",
-                split.name()
-            )));
-            let out = self.run.join("eval_posed").join(split.name());
-            let total = self
-                .frames
-                .unwrap_or(usize::MAX)
-                .min(data.dataset.val.len());
-            let mut done = 0;
-            let evaluation = eval_models(&models, data, split, self.frames, &out, &mut || {
-                done += 1;
-                on_event(&JobEvent::Progress {
-                    what: format!("{} frames", split.name()),
-                    done,
-                    total,
-                })
-            })?;
-            evaluation.check_finite()?;
-            for (k, r) in evaluation.models.into_iter().enumerate() {
-                reports[k].push(r);
-            }
-        }
+        let reports = self.score_splits(&models, &held_out, on_event)?;
         let strip = self.run.join("posed_sweep.png");
         sweep_strip(&models, &held_out[SPLITS.len()], &strip)?;
         let mut rows = vec![PosedRow {
@@ -235,6 +134,140 @@ impl PosedJob {
             });
         }
         write_reports(&self.run, rows, strip)
+    }
+
+    /// The three students' jobs, each with its label and whether it is distilled.
+    fn variants(&self) -> [(String, StudentJob, bool); 3] {
+        let student = |name: &str, distill: bool, pseudo: usize, minutes: f64| StudentJob {
+            data: self.data.clone(),
+            run: self.run.clone(),
+            name: format!("posed_{name}"),
+            source: StudentSource::Settings {
+                model: self.model.clone(),
+                distill,
+                pool: true,
+                pseudo: PseudoSettings {
+                    frames: Some(pseudo),
+                    pose_range: Some(self.pose_range),
+                    rays: Some(self.pseudo_rays),
+                },
+            },
+            iters: Some(1_000_000),
+            minutes: Some(minutes),
+            resume: false,
+        };
+        // The pixels-only student's budget is set once the distilled ones have trained:
+        // the teacher's minutes plus the longest distilled student's own.
+        [
+            (
+                "student, distilled, with pseudo views".to_string(),
+                student("pseudo", true, self.pseudo_frames, self.minutes),
+                true,
+            ),
+            (
+                "student, distilled, recorded frames only".to_string(),
+                student("distilled", true, 0, self.minutes),
+                true,
+            ),
+            (
+                "student, pixels only".to_string(),
+                student("pixels", false, 0, 0.0),
+                false,
+            ),
+        ]
+    }
+
+    /// Trains (or resumes) each student in turn and opens it: its label, model and whether
+    /// it is distilled.
+    fn train_students(
+        &self,
+        teacher_minutes: f64,
+        stop: &AtomicBool,
+        on_event: OnEvent,
+    ) -> Result<Vec<(String, StudentModel, bool)>> {
+        let mut students: Vec<(String, StudentModel, bool)> = Vec::new();
+        for (label, job, distilled) in &self.variants() {
+            let dir = job.dir();
+            let minutes = if *distilled {
+                job.minutes
+            } else {
+                let longest = students
+                    .iter()
+                    .map(|(_, s, _)| s.trained_s / 60.0)
+                    .fold(self.minutes, f64::max);
+                Some(teacher_minutes + longest)
+            };
+            let job = StudentJob {
+                resume: has_checkpoint(&dir),
+                minutes,
+                ..job.clone()
+            };
+            on_event(&JobEvent::Stage(format!("{label} -> {}", dir.display())));
+            job.plan(on_event)?.run(stop, on_event)?;
+            if stop.load(Ordering::Relaxed) {
+                return Err(Error::Config(
+                    "stopped; run the same command again to resume".into(),
+                ));
+            }
+            let run = StudentModel::open(&dir)?;
+            let label = trained_label(label, &run);
+            students.push((label, run, *distilled));
+        }
+        Ok(students)
+    }
+
+    /// Scores `models` on each split of [`SPLITS`] (`held_out`, in that order); per model,
+    /// its reports in split order.
+    fn score_splits(
+        &self,
+        models: &[&dyn FrameModel],
+        held_out: &[TrainData],
+        on_event: OnEvent,
+    ) -> Result<Vec<Vec<EvalReport>>> {
+        let mut reports: Vec<Vec<EvalReport>> = vec![Vec::new(); models.len()];
+        for (split, data) in SPLITS.into_iter().zip(held_out) {
+            on_event(&JobEvent::Stage(format!(
+                "scoring the {} split",
+                split.name()
+            )));
+            let out = self.run.join("eval_posed").join(split.name());
+            let total = self
+                .frames
+                .unwrap_or(usize::MAX)
+                .min(data.dataset.val.len());
+            let mut done = 0;
+            let evaluation = eval_models(models, data, split, self.frames, &out, &mut || {
+                done += 1;
+                on_event(&JobEvent::Progress {
+                    what: format!("{} frames", split.name()),
+                    done,
+                    total,
+                })
+            })?;
+            evaluation.check_finite()?;
+            for (k, r) in evaluation.models.into_iter().enumerate() {
+                reports[k].push(r);
+            }
+        }
+        Ok(reports)
+    }
+}
+
+/// A student's row label, from what its run was trained with (a reused run keeps its
+/// own): `label` unless it has pseudo views.
+fn trained_label(label: &str, run: &StudentModel) -> String {
+    let t = &run.cfg.train;
+    if t.pseudo_frames == 0 {
+        label.to_string()
+    } else {
+        let pixels = match t.pseudo_rays {
+            0 => String::new(),
+            n => format!(" of {n} pixels"),
+        };
+        format!(
+            "student, distilled, {} pseudo views{pixels} at {}x the recorded poses",
+            t.pseudo_frames, t.pose_range
+        )
     }
 }
 
