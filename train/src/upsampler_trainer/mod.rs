@@ -8,20 +8,23 @@
 //! that the zero padding at the crop's edge, which a rendered box only has on background,
 //! teaches nothing.
 
+mod config;
+mod crops;
+
 use std::path::{Path, PathBuf};
 
-use candle_core::{Device, Tensor, Var};
+use candle_core::{Tensor, Var};
 use candle_nn::VarMap;
-use nldf_core::bounds::HeadRange;
 use nldf_core::camera::Camera;
 use nldf_core::dataset::Frame;
 use nldf_core::image::ImageRgb;
-use nldf_core::rays::rays_for_pixels;
 use nldf_core::run_files::{CONFIG_FILE, LOG_FILE, MODEL_FILE};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
+pub use self::config::{UpsamplerRunConfig, UpsamplerTrainConfig};
+use self::crops::{Crop, CropCutter, draw_crops};
 use crate::adam::{Adam, AdamParams};
 use crate::checkpoint::{CheckpointParts, Clock, open_checkpoint, save_checkpoint, save_json};
 use crate::config::read_config;
@@ -32,102 +35,7 @@ use crate::log::CsvLog;
 use crate::nn::{new_varmap, sorted_vars};
 use crate::student_trainer::StudentModel;
 use crate::teacher_trainer::TeacherModel;
-use crate::upsampler::{
-    CoarseBox, Upsampler, UpsamplerConfig, coarse_box_features, image_box, render_upsampled,
-    upsampler,
-};
-use crate::views::{View, training_views};
-
-/// How the upsampler is trained.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct UpsamplerTrainConfig {
-    pub seed: u64,
-    /// Optimizer steps.
-    pub iters: usize,
-    /// Crops per step.
-    pub batch: usize,
-    /// Coarse rays on a side of the part of a crop the loss counts.
-    pub crop: usize,
-    /// Coarse rays of context around it on each side.
-    pub halo: usize,
-    /// Adam's learning rate at the start; it decays exponentially to `lr_final`.
-    pub lr: f64,
-    pub lr_final: f64,
-    /// Pseudo views the teacher renders crops of (their poses drawn as the student's own
-    /// pseudo views are, `pose_range` and `pseudo_zoom` of its recipe).
-    pub pseudo_views: usize,
-    /// Crops the teacher renders per pseudo view.
-    pub pseudo_crops: usize,
-    /// Share of each step's crops taken from pseudo views.
-    pub pseudo_fraction: f64,
-    /// Share of the recorded crops centred near a pixel of the frame's mouth region (its
-    /// parsing or region labels), whose detail is small and moves with the audio.
-    pub mouth_fraction: f64,
-    /// Steps between rows of `log.csv`.
-    pub log_every: usize,
-}
-
-impl Default for UpsamplerTrainConfig {
-    fn default() -> Self {
-        UpsamplerTrainConfig {
-            seed: 0,
-            iters: 2000,
-            batch: 8,
-            crop: 12,
-            halo: 2,
-            lr: 2e-3,
-            lr_final: 1e-4,
-            pseudo_views: 150,
-            pseudo_crops: 2,
-            pseudo_fraction: 0.5,
-            mouth_fraction: 0.3,
-            log_every: 25,
-        }
-    }
-}
-
-/// Everything an upsampler run needs, as saved in its `config.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(default, deny_unknown_fields)]
-pub struct UpsamplerRunConfig {
-    pub model: UpsamplerConfig,
-    /// The student's folder in the run, whose hidden layer the CNN reads.
-    pub student: String,
-    pub train: UpsamplerTrainConfig,
-}
-
-impl UpsamplerRunConfig {
-    /// Checks every setting.
-    pub fn check(&self) -> Result<()> {
-        self.model.check("model")?;
-        let t = &self.train;
-        let range = |key: &str, ok: bool| {
-            if ok {
-                Ok(())
-            } else {
-                Err(Error::Config(format!("`train.{key}` is out of range")))
-            }
-        };
-        range("iters", t.iters <= 1 << 24)?;
-        range("batch", (1..=256).contains(&t.batch))?;
-        range("crop", (1..=256).contains(&t.crop))?;
-        range("halo", t.halo <= 16)?;
-        range("lr", t.lr > 0.0 && t.lr <= 1.0)?;
-        range("lr_final", t.lr_final > 0.0 && t.lr_final <= t.lr)?;
-        range("pseudo_views", t.pseudo_views <= 1 << 16)?;
-        range("pseudo_crops", (1..=64).contains(&t.pseudo_crops))?;
-        range("pseudo_fraction", (0.0..=1.0).contains(&t.pseudo_fraction))?;
-        range("mouth_fraction", (0.0..=1.0).contains(&t.mouth_fraction))?;
-        range("log_every", t.log_every >= 1)?;
-        if self.student.is_empty() {
-            return Err(Error::Config(
-                "`student` must name the student's folder".into(),
-            ));
-        }
-        Ok(())
-    }
-}
+use crate::upsampler::{Upsampler, render_upsampled, upsampler};
 
 /// A trained upsampler with its student.
 pub struct UpsampledModel {
@@ -263,21 +171,6 @@ impl FrameModel for CoarseBilinear {
     }
 }
 
-/// One training crop: the coarse input `[C, s, s]` (`s = crop + 2 halo`) and, for the
-/// central `crop r` pixels on a side, the target and the background, `[3, crop r, crop r]`.
-#[derive(Clone)]
-struct Crop {
-    grid: Tensor,
-    target: Tensor,
-    background: Tensor,
-}
-
-/// A recorded view's coarse box and its frame, from which crops are cut at each step.
-struct RecordedView {
-    coarse: CoarseBox,
-    image: usize,
-}
-
 /// The upsampler's `report.json`: what its training run did ([`UpsamplerReport`]).
 pub const REPORT_FILE: &str = "report.json";
 
@@ -395,34 +288,6 @@ fn upsampler_adam(varmap: &VarMap) -> Result<Adam> {
     ))
 }
 
-/// One step's batch of crops: the pseudo views' share (`pseudo_fraction`, when there
-/// are any) drawn from `pseudo`, the rest cut from random recorded views.
-fn draw_crops(
-    recorded: &[RecordedView],
-    pseudo: &[Crop],
-    data: &TrainData,
-    rng: &mut ChaCha8Rng,
-    t: &UpsamplerTrainConfig,
-    r: usize,
-) -> Result<Vec<Crop>> {
-    let n_pseudo_step = if pseudo.is_empty() {
-        0
-    } else {
-        ((t.batch as f64 * t.pseudo_fraction).round() as usize).min(t.batch)
-    };
-    let mut crops = Vec::with_capacity(t.batch);
-    for b in 0..t.batch {
-        if b < n_pseudo_step {
-            crops.push(pseudo[rng.random_range(0..pseudo.len())].clone());
-        } else {
-            let v = &recorded[rng.random_range(0..recorded.len())];
-            let mouth = rng.random::<f64>() < t.mouth_fraction;
-            crops.push(recorded_crop(v, data, rng, mouth, t, r)?);
-        }
-    }
-    Ok(crops)
-}
-
 /// One optimizer step of the upsampler on `crops` (step `step` of the schedule): the
 /// composited pixels' mean squared error against the targets over the crops' centres.
 /// Returns the loss and the learning rate it stepped with.
@@ -453,172 +318,4 @@ fn train_step(
         )));
     }
     Ok((loss, lr))
-}
-
-/// What cutting the training crops reads: the data, the fixed student and the crops'
-/// geometry.
-struct CropCutter<'a> {
-    data: &'a TrainData,
-    student: &'a StudentModel,
-    t: &'a UpsamplerTrainConfig,
-    /// The upsampler's factor.
-    r: usize,
-    /// Coarse rays on a crop's side, halo included.
-    side: usize,
-    /// Coarse rays around the hits in a coarse box.
-    margin: usize,
-    range: HeadRange,
-}
-
-impl CropCutter<'_> {
-    /// The recorded views' coarse boxes, then the crops the teacher renders once of the
-    /// pseudo views.
-    fn prepare(
-        &self,
-        teacher: &TeacherModel,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<(Vec<RecordedView>, Vec<Crop>)> {
-        let student = self.student;
-        // Recorded views: the coarse box of every training frame.
-        let views = training_views(
-            self.data,
-            &student.cfg.train,
-            student.cfg.model.anchor_beams,
-        );
-        let mut recorded = Vec::new();
-        for (vi, view) in views.iter().filter(|v| v.recorded).enumerate() {
-            if let Some(coarse) = self.coarse_of(view)? {
-                recorded.push(RecordedView { coarse, image: vi });
-            }
-        }
-        // Pseudo views: crops the teacher renders once.
-        let mut pseudo = Vec::new();
-        let pseudo_views: Vec<_> = views.iter().filter(|v| !v.recorded).collect();
-        let n_pseudo = self.t.pseudo_views.min(pseudo_views.len());
-        for k in 0..n_pseudo {
-            let view = pseudo_views[k * pseudo_views.len() / n_pseudo.max(1)];
-            let Some(coarse) = self.coarse_of(view)? else {
-                continue;
-            };
-            self.pseudo_crops(teacher, view, &coarse, rng, &mut pseudo)?;
-        }
-        Ok((recorded, pseudo))
-    }
-
-    /// A view's coarse box, when it holds a hit and a whole crop.
-    fn coarse_of(&self, view: &View) -> Result<Option<CoarseBox>> {
-        let (student, side) = (self.student, self.side);
-        let code = student.audio_codes(self.data, &[view.aud_id])?;
-        let coarse = coarse_box_features(
-            &student.student,
-            &view.camera,
-            &code,
-            &self.range,
-            (self.r, self.margin),
-        )?;
-        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
-        Ok((coarse.any_hit && bh >= side && bw >= side).then_some(coarse))
-    }
-
-    /// Cuts `pseudo_crops` random crops of a pseudo view's coarse box into `crops`, their
-    /// targets rendered by the teacher.
-    fn pseudo_crops(
-        &self,
-        teacher: &TeacherModel,
-        view: &View,
-        coarse: &CoarseBox,
-        rng: &mut ChaCha8Rng,
-        crops: &mut Vec<Crop>,
-    ) -> Result<()> {
-        let (t, r, side) = (self.t, self.r, self.side);
-        let ds = &self.data.dataset;
-        let (bh, bw) = (coarse.rows.1 - coarse.rows.0, coarse.cols.1 - coarse.cols.0);
-        let teacher_code = teacher.audio_codes(self.data, &[view.aud_id])?;
-        for _ in 0..t.pseudo_crops {
-            let (y, x) = (
-                rng.random_range(0..=bh - side),
-                rng.random_range(0..=bw - side),
-            );
-            let grid = coarse
-                .grid
-                .narrow(2, y, side)?
-                .narrow(3, x, side)?
-                .squeeze(0)?;
-            // The central rays' blocks in output pixels.
-            let row0 = (coarse.rows.0 + y + t.halo) * r;
-            let col0 = (coarse.cols.0 + x + t.halo) * r;
-            let n = t.crop * r;
-            let pixels: Vec<(u32, u32)> = (0..n * n)
-                .map(|p| ((col0 + p % n) as u32, (row0 + p / n) as u32))
-                .collect();
-            let bg: Vec<f32> = pixels
-                .iter()
-                .flat_map(|&(i, j)| ds.background.get(i, j))
-                .collect();
-            let rays = rays_for_pixels(&view.camera, &pixels);
-            let colours = teacher.teacher.render_eval(
-                &rays,
-                &bg,
-                &teacher_code,
-                &self.range,
-                teacher.teacher.cfg.min_transmittance,
-            )?;
-            let planar = |v: &[f32]| -> Result<Tensor> {
-                Ok(Tensor::from_vec(v.to_vec(), (n, n, 3), &Device::Cpu)?
-                    .permute((2, 0, 1))?
-                    .contiguous()?)
-            };
-            crops.push(Crop {
-                grid,
-                target: planar(&colours)?,
-                background: planar(&bg)?,
-            });
-        }
-        Ok(())
-    }
-}
-
-/// A random crop of a recorded view, its target from the frame itself; with `mouth`, one
-/// whose loss-counted centre holds a random pixel of the frame's mouth region (when it has
-/// one).
-fn recorded_crop(
-    v: &RecordedView,
-    data: &TrainData,
-    rng: &mut ChaCha8Rng,
-    mouth: bool,
-    t: &UpsamplerTrainConfig,
-    r: usize,
-) -> Result<Crop> {
-    let (halo, crop) = (t.halo, t.crop);
-    let side = crop + 2 * halo;
-    let c = &v.coarse;
-    let (bh, bw) = (c.rows.1 - c.rows.0, c.cols.1 - c.cols.0);
-    let mouth_pixels = &data.mouth_pixels[v.image];
-    let (y, x) = if mouth && !mouth_pixels.is_empty() {
-        let (i, j) = mouth_pixels[rng.random_range(0..mouth_pixels.len())];
-        // The crop's top-left so that coarse ray (i / r, j / r) falls in its centre.
-        let mut place = |at: usize, lo: usize, n: usize| -> usize {
-            let shift = rng.random_range(0..crop);
-            at.saturating_sub(lo + halo + shift).min(n - side)
-        };
-        let y = place(j as usize / r, c.rows.0, bh);
-        let x = place(i as usize / r, c.cols.0, bw);
-        (y, x)
-    } else {
-        (
-            rng.random_range(0..=bh - side),
-            rng.random_range(0..=bw - side),
-        )
-    };
-    let grid = c.grid.narrow(2, y, side)?.narrow(3, x, side)?.squeeze(0)?;
-    let row0 = (c.rows.0 + y + halo) * r;
-    let col0 = (c.cols.0 + x + halo) * r;
-    let n = crop * r;
-    let rows = (row0, row0 + n);
-    let cols = (col0, col0 + n);
-    Ok(Crop {
-        grid,
-        target: image_box(&data.images[v.image], rows, cols)?.squeeze(0)?,
-        background: image_box(&data.dataset.background, rows, cols)?.squeeze(0)?,
-    })
 }
