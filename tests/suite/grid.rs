@@ -3,7 +3,8 @@
 
 use candle_core::{Device, Tensor, Var};
 use nldf_train::data::TrainData;
-use nldf_train::hash_grid::{GridConfig, HashGridOp, encode_reference, table_grad_reference};
+use nldf_train::hash_grid::{GridConfig, HashGridOp};
+use nldf_train::hash_grid_reference::{encode_reference, table_grad_reference};
 use nldf_train::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -19,6 +19,7 @@ pub mod eval;
 pub mod field;
 pub mod field_op;
 pub mod hash_grid;
+pub mod hash_grid_reference;
 pub mod job;
 /// The dense-layer kernels the fused ops are built on (the `nldf-kernels` crate).
 pub use nldf_kernels as kernels;
