@@ -26,6 +26,7 @@ mod points;
 pub mod report;
 mod shared;
 mod timing;
+mod upsampled_point;
 pub mod upsampler_bench;
 
 use std::cell::RefCell;
@@ -37,7 +38,7 @@ use nldf_infer::BackendKind;
 use nldf_train::data::TrainData;
 use nldf_train::eval::{EvalReport, FrameModel};
 use nldf_train::job::OnEvent;
-use nldf_train::job::eval::EvalJob;
+use nldf_train::job::eval::{EvalJob, EvalPlan};
 
 pub use front::{Point, SpeedUp, SplitScore, mark_front, speed_ups};
 pub use report::{AdNerfSetting, FrontierReport, FrontierSettings};
@@ -49,6 +50,16 @@ use points::{OnnxPoint, Timed};
 use shared::eval_split;
 pub use shared::{FrontierJob, THREADS};
 use timing::{time_adnerf_setting, time_back_to_back};
+
+/// The ways of rendering the run, in the tables' order.
+struct Ways<'a> {
+    /// The teacher with its empty-space skipping and early stop.
+    teacher: Timed<'a>,
+    /// The teacher without early stop, and without either: scored and timed on `val` only.
+    plain: [Timed<'a>; 2],
+    /// Every export in both runtimes.
+    points: Vec<OnnxPoint>,
+}
 
 impl FrontierJob {
     /// Exports, scores and times every way of rendering the run; `on_event` hears the
@@ -84,21 +95,57 @@ impl FrontierJob {
                 points.push(open_point(e, kind, THREADS, self.batch, None, 1)?);
             }
         }
-        let teacher = Timed::new(&val.teacher, true, true);
-        // The teacher without its savings: scored and timed on `val` only.
-        let plain = [
-            Timed::new(&val.teacher, true, false),
-            Timed::new(&val.teacher, false, false),
-        ];
+        let ways = Ways {
+            teacher: Timed::new(&val.teacher, true, true),
+            plain: [
+                Timed::new(&val.teacher, true, false),
+                Timed::new(&val.teacher, false, false),
+            ],
+            points,
+        };
+        let reports = self.score_splits(&splits, &val, &ways, &mut *on_event)?;
+        let table = self.table(&val.data, &reports, &ways, &exports)?;
+        let speed_up = speed_ups(&table);
+        let adnerf = self.adnerf(&val.data, &table, &speed_up, &ways, &mut *on_event)?;
+        let hires_points = match &self.hires_data {
+            Some(dir) => Some(hires::hires_points(self, dir, &exports, on_event)?),
+            None => None,
+        };
+        machine.record_end();
+        Ok(FrontierReport {
+            machine,
+            settings: self.settings(),
+            points: table,
+            speed_up,
+            adnerf_setting: adnerf,
+            hires_points,
+            splits,
+        })
+    }
+
+    /// Scores every way of rendering on each split, taking turns frame by frame: all of
+    /// them on `val`, the teacher and the onnxruntime points on the others.
+    fn score_splits(
+        &self,
+        splits: &[Split],
+        val: &EvalPlan,
+        ways: &Ways<'_>,
+        on_event: OnEvent,
+    ) -> Result<Vec<Vec<EvalReport>>> {
+        let Ways {
+            teacher,
+            plain,
+            points,
+        } = ways;
         let mut reports: Vec<Vec<EvalReport>> = Vec::new();
-        for &split in &splits {
+        for &split in splits {
             let plan = if split == Split::Val {
                 None
             } else {
                 Some(self.eval_job(split).plan(&mut *on_event)?)
             };
             let data = plan.as_ref().map_or(&val.data, |p| &p.data);
-            let mut models: Vec<&dyn FrameModel> = vec![&teacher];
+            let mut models: Vec<&dyn FrameModel> = vec![teacher];
             if split == Split::Val {
                 models.extend(plain.iter().map(|t| t as &dyn FrameModel));
             }
@@ -112,22 +159,39 @@ impl FrontierJob {
             let evaluation = eval_split(&models, data, split, self.frames, &out, &mut *on_event)?;
             reports.push(evaluation.models);
         }
+        Ok(reports)
+    }
+
+    /// The frontier's rows, the teacher first, each timed taking turns over the `val` pass,
+    /// back to back and (the exports) with 1 thread; the Pareto front marked.
+    fn table(
+        &self,
+        val_data: &TrainData,
+        reports: &[Vec<EvalReport>],
+        ways: &Ways<'_>,
+        exports: &[Export],
+    ) -> Result<Vec<Point>> {
+        let Ways {
+            teacher,
+            plain,
+            points,
+        } = ways;
         // Each point's frame times over the `val` pass: the first frames it rendered.
         let n_val = reports[0].first().map_or(0, |r| r.frames.len());
         let pass_frames =
             |s: &RefCell<Vec<f64>>| s.borrow()[..n_val.min(s.borrow().len())].to_vec();
         // Back-to-back times over `--timed-frames`, every way of rendering in turn.
-        let val_frames = val.data.dataset.frames(Split::Val);
+        let val_frames = val_data.dataset.frames(Split::Val);
         let timed = &val_frames[..self.timed_frames.min(val_frames.len())];
         let back_to_back = {
-            let models: Vec<&dyn FrameModel> = std::iter::once(&teacher)
-                .chain(&plain)
+            let models: Vec<&dyn FrameModel> = std::iter::once(teacher)
+                .chain(plain)
                 .map(|t| t as &dyn FrameModel)
                 .chain(points.iter().map(|p| p as &dyn FrameModel))
                 .collect();
-            time_back_to_back(&models, &val.data, timed)?
+            time_back_to_back(&models, val_data, timed)?
         };
-        let one_thread = self.one_thread_times(&exports, &val.data)?;
+        let one_thread = self.one_thread_times(exports, val_data)?;
         let mut table: Vec<Point> = Vec::new();
         let scores_of = |label: &str| -> Vec<SplitScore> {
             reports
@@ -136,7 +200,7 @@ impl FrontierJob {
                 .collect()
         };
         // The teacher first: `speed_ups` compares every point with the first row.
-        for (k, t) in std::iter::once(&teacher).chain(&plain).enumerate() {
+        for (k, t) in std::iter::once(teacher).chain(plain).enumerate() {
             let report = reports[0]
                 .iter()
                 .find(|r| r.label == t.label())
@@ -148,7 +212,7 @@ impl FrontierJob {
                 back_to_back: back_to_back[k],
                 one_thread: None,
             };
-            let size = val.data.dataset.intrinsics.width;
+            let size = val_data.dataset.intrinsics.width;
             table.push(Point::of_teacher(
                 t,
                 report,
@@ -174,38 +238,36 @@ impl FrontierJob {
             table.push(Point::of_export(p, report, size, times, scores_of(&label)));
         }
         mark_front(&mut table);
-        let speed_up = speed_ups(&table);
-        let adnerf = if self.adnerf_frames > 0 {
+        Ok(table)
+    }
+
+    /// AD-NeRF's own setting, timed against the speed-ups' points and the fastest export
+    /// in turns; `None` without `--adnerf-frames`.
+    fn adnerf(
+        &self,
+        val_data: &TrainData,
+        table: &[Point],
+        speed_up: &[SpeedUp],
+        ways: &Ways<'_>,
+        on_event: OnEvent,
+    ) -> Result<Option<AdNerfSetting>> {
+        if self.adnerf_frames > 0 {
             // Against the speed-ups' points and the fastest export, in turns.
-            let first_point = 1 + plain.len();
-            let listed: Vec<&dyn FrameModel> = report::adnerf_listed(&table, &speed_up)
+            let first_point = 1 + ways.plain.len();
+            let listed: Vec<&dyn FrameModel> = report::adnerf_listed(table, speed_up)
                 .into_iter()
                 .filter_map(|i| i.checked_sub(first_point))
-                .filter_map(|i| points.get(i).map(|p| p as &dyn FrameModel))
+                .filter_map(|i| ways.points.get(i).map(|p| p as &dyn FrameModel))
                 .collect();
-            Some(time_adnerf_setting(
-                &val.data,
+            Ok(Some(time_adnerf_setting(
+                val_data,
                 self.adnerf_frames,
                 &listed,
                 &mut *on_event,
-            )?)
+            )?))
         } else {
-            None
-        };
-        let hires_points = match &self.hires_data {
-            Some(dir) => Some(hires::hires_points(self, dir, &exports, on_event)?),
-            None => None,
-        };
-        machine.record_end();
-        Ok(FrontierReport {
-            machine,
-            settings: self.settings(),
-            points: table,
-            speed_up,
-            adnerf_setting: adnerf,
-            hires_points,
-            splits,
-        })
+            Ok(None)
+        }
     }
 
     /// The evaluation of the run on `split`, its renders left to the frontier's folders.

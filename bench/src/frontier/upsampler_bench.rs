@@ -13,26 +13,24 @@
 
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
-use nldf_core::audio::{Waveform, read_wav};
-use nldf_core::dataset::{AUDIO_WAV, Frame, Split, VOICE_DIR};
-use nldf_core::image::ImageRgb;
+use nldf_core::dataset::Split;
 use nldf_core::stats::median;
 use nldf_export::{FrameGraphFile, WeightType};
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_train::bench::Machine;
-use nldf_train::data::TrainData;
 use nldf_train::eval::{EvalReport, FrameModel};
-use nldf_train::job::eval::EvalJob;
+use nldf_train::job::eval::{EvalJob, EvalPlan};
 use nldf_train::job::{JobEvent, OnEvent};
+use nldf_train::upsampler_trainer::UpsampledModel;
 use serde::Serialize;
 
 use super::exports::{Export, open_point};
 use super::front::{SplitScore, paired_ratio, score};
 use super::points::{OnnxPoint, Timed};
 use super::shared::{THREADS, eval_split, precision_name};
+use super::upsampled_point::UpsampledPoint;
 use crate::error::{Error, Result, create_dir};
 use crate::load::LoadGate;
 use crate::repeats::{Ratio, cell};
@@ -111,74 +109,22 @@ pub struct UpsamplerBenchReport {
     pub precisions: Vec<PrecisionRatio>,
 }
 
-/// The frame graph with the upsampler in one runtime, timing its frames.
-struct UpsampledPoint {
-    label: String,
-    precision: WeightType,
-    kind: BackendKind,
-    step: usize,
-    graph: RefCell<FrameGraph>,
-    model: FrameGraphFile,
-    /// The split being rendered (its track is the voice split's own) and its 16 kHz track.
-    split: std::cell::Cell<Split>,
-    wave: RefCell<Option<(Split, Waveform)>>,
-    seconds: RefCell<Vec<f64>>,
+/// The graphs the benchmark renders with, exported under `models/`.
+struct Exports {
+    /// The student's ray graph in each precision.
+    students: Vec<Export>,
+    /// The upsampled frame graph in each precision.
+    frames: Vec<(WeightType, FrameGraphFile)>,
+    /// The upsampled ray graph in each precision, int8 last.
+    rays: Vec<Export>,
 }
 
-impl UpsampledPoint {
-    fn samples(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<Vec<f32>> {
-        let root = &data.dataset.root;
-        let split = self.split.get();
-        let mut wave = self.wave.borrow_mut();
-        if wave.as_ref().map(|(s, _)| *s) != Some(split) {
-            let path = if split == Split::Voice {
-                root.join(VOICE_DIR).join(AUDIO_WAV)
-            } else {
-                root.join(AUDIO_WAV)
-            };
-            *wave = Some((split, read_wav(&path)?));
-        }
-        let samples = &wave
-            .as_ref()
-            .map(|(_, w)| w.samples.as_slice())
-            .unwrap_or(&[]);
-        Ok(self.model.audio.chunk(samples, frame.aud_id))
-    }
-}
-
-impl FrameModel for UpsampledPoint {
-    fn label(&self) -> String {
-        self.label.clone()
-    }
-    fn describe(&self) -> String {
-        format!(
-            "upsampler x{} {} {}",
-            self.model.upsample,
-            precision_name(self.precision),
-            self.kind.name()
-        )
-    }
-    fn step(&self) -> usize {
-        self.step
-    }
-    fn macs_per_ray(&self) -> f64 {
-        0.0
-    }
-    fn render_frame(&self, data: &TrainData, frame: &Frame) -> nldf_train::error::Result<ImageRgb> {
-        let chunk = self.samples(data, frame)?;
-        let started = Instant::now();
-        let out = self
-            .graph
-            .borrow_mut()
-            .render(frame.c2w, &chunk)
-            .map_err(|e| {
-                nldf_train::error::Error::Config(format!("{}: {e}", self.model.path.display()))
-            })?;
-        self.seconds
-            .borrow_mut()
-            .push(started.elapsed().as_secs_f64());
-        Ok(out.image)
-    }
+/// The ways of rendering, each open in its runtimes.
+struct Points {
+    native: Vec<OnnxPoint>,
+    bilinear: Vec<OnnxPoint>,
+    upsampled: Vec<UpsampledPoint>,
+    upsampled_rays: Vec<OnnxPoint>,
 }
 
 impl UpsamplerBench {
@@ -202,8 +148,34 @@ impl UpsamplerBench {
                 ))
             })?;
         let factor = up.cfg.model.factor;
-        let student = &up.student;
         let size = plan.data.dataset.intrinsics.width;
+        let exports = self.export_models(up, &mut *on_event)?;
+        let points = self.open_points(&exports, up, size, factor)?;
+        let teacher = Timed::new(&plan.teacher, true, true);
+        let reports = self.evaluate(&first, &plan, &teacher, &points, on_event)?;
+        let mut rows = self.rows(&reports, &teacher, &points, size, factor);
+        machine.record_end();
+        let precisions = speed_ratios(&mut rows);
+        let report = UpsamplerBenchReport {
+            machine,
+            run: self.run.display().to_string(),
+            upsampler: self.upsampler.clone(),
+            factor,
+            frames: self.frames,
+            threads: THREADS,
+            rows,
+            precisions,
+        };
+        let markdown = markdown(&report, &self.splits);
+        let written = write_bench_files(&self.out, "upsampler", &report, markdown)?;
+        Ok((report, written))
+    }
+
+    /// Exports the student's ray graph and the upsampled frame and ray graphs in f32 and
+    /// f16, and the upsampled ray graph with int8 products, under `OUT/models`.
+    fn export_models(&self, up: &UpsampledModel, on_event: OnEvent) -> Result<Exports> {
+        let factor = up.cfg.model.factor;
+        let student = &up.student;
         let models_dir = self.out.join("models");
         create_dir(&models_dir)?;
         let mut exports = Vec::new();
@@ -251,10 +223,24 @@ impl UpsamplerBench {
         on_event(&JobEvent::Note(
             "exported the upsampled ray graph with int8 products".into(),
         ));
-        // The ways of rendering, in the tables' order.
+        Ok(Exports {
+            students: exports,
+            frames: graphs,
+            rays: ray_graphs,
+        })
+    }
+
+    /// Opens the ways of rendering, in the tables' order.
+    fn open_points(
+        &self,
+        exports: &Exports,
+        up: &UpsampledModel,
+        size: u32,
+        factor: usize,
+    ) -> Result<Points> {
         let mut native = Vec::new();
         let mut bilinear = Vec::new();
-        for e in &exports {
+        for e in &exports.students {
             native.push(open_point(
                 e,
                 BackendKind::Ort,
@@ -273,7 +259,7 @@ impl UpsamplerBench {
             )?);
         }
         let mut upsampled = Vec::new();
-        for (w, model) in &graphs {
+        for (w, model) in &exports.frames {
             for kind in [BackendKind::Ort, BackendKind::Tract] {
                 upsampled.push(UpsampledPoint {
                     label: format!("{}.{}.{}", self.upsampler, precision_name(*w), kind.name()),
@@ -289,12 +275,28 @@ impl UpsamplerBench {
             }
         }
         let mut upsampled_rays = Vec::new();
-        for e in &ray_graphs {
+        for e in &exports.rays {
             for kind in [BackendKind::Ort, BackendKind::Tract] {
                 upsampled_rays.push(open_point(e, kind, THREADS, self.batch, None, 1)?);
             }
         }
-        let teacher = Timed::new(&plan.teacher, true, true);
+        Ok(Points {
+            native,
+            bilinear,
+            upsampled,
+            upsampled_rays,
+        })
+    }
+
+    /// Renders and scores every split, the ways of rendering taking turns frame by frame.
+    fn evaluate(
+        &self,
+        first: &EvalJob,
+        plan: &EvalPlan,
+        teacher: &Timed<'_>,
+        points: &Points,
+        on_event: OnEvent,
+    ) -> Result<Vec<Vec<EvalReport>>> {
         let mut reports: Vec<Vec<EvalReport>> = Vec::new();
         for &split in &self.splits {
             let other;
@@ -306,22 +308,34 @@ impl UpsamplerBench {
             };
             let mut models: Vec<&dyn FrameModel> = Vec::new();
             if self.teacher {
-                models.push(&teacher);
+                models.push(teacher);
             }
-            for p in native.iter().chain(&bilinear) {
+            for p in points.native.iter().chain(&points.bilinear) {
                 models.push(p);
             }
-            for p in &upsampled {
+            for p in &points.upsampled {
                 p.split.set(split);
                 models.push(p);
             }
-            for p in &upsampled_rays {
+            for p in &points.upsampled_rays {
                 models.push(p);
             }
             let out = self.out.join(split.name());
             let evaluation = eval_split(&models, data, split, self.frames, &out, &mut *on_event)?;
             reports.push(evaluation.models);
         }
+        Ok(reports)
+    }
+
+    /// One row a way of rendering, precision and runtime, in the tables' order.
+    fn rows(
+        &self,
+        reports: &[Vec<EvalReport>],
+        teacher: &Timed<'_>,
+        points: &Points,
+        size: u32,
+        factor: usize,
+    ) -> Vec<UpsamplerRow> {
         let scores_of = |label: &str| -> Vec<SplitScore> {
             reports
                 .iter()
@@ -370,9 +384,9 @@ impl UpsamplerBench {
                 );
             }
         };
-        onnx_rows(&mut row, "native rays", size, &native);
-        onnx_rows(&mut row, "bilinear", grid, &bilinear);
-        for p in &upsampled {
+        onnx_rows(&mut row, "native rays", size, &points.native);
+        onnx_rows(&mut row, "bilinear", grid, &points.bilinear);
+        for p in &points.upsampled {
             let s = timed(&p.seconds);
             row(
                 "upsampler, frame graph",
@@ -383,22 +397,13 @@ impl UpsamplerBench {
                 s,
             );
         }
-        onnx_rows(&mut row, "upsampler, ray graph", grid, &upsampled_rays);
-        machine.record_end();
-        let precisions = speed_ratios(&mut rows);
-        let report = UpsamplerBenchReport {
-            machine,
-            run: self.run.display().to_string(),
-            upsampler: self.upsampler.clone(),
-            factor,
-            frames: self.frames,
-            threads: THREADS,
-            rows,
-            precisions,
-        };
-        let markdown = markdown(&report, &self.splits);
-        let written = write_bench_files(&self.out, "upsampler", &report, markdown)?;
-        Ok((report, written))
+        onnx_rows(
+            &mut row,
+            "upsampler, ray graph",
+            grid,
+            &points.upsampled_rays,
+        );
+        rows
     }
 
     fn eval_job(&self, split: Split) -> EvalJob {
