@@ -19,9 +19,11 @@
 //!
 //! The ray graph stays what nldf's own renderer and streaming run.
 
+mod front_end;
+
 use std::path::Path;
 
-use nldf_core::audio::{FeatureConfig, hann_window, mel_filters};
+use nldf_core::audio::FeatureConfig;
 use nldf_core::frame_audio::FrameAudio;
 
 use crate::checkpoint::StudentCheckpoint;
@@ -36,6 +38,8 @@ use crate::student::{ExportReport, model_info, model_proto, student_nodes, write
 use crate::upsampler_graph::{UpsamplerCheckpoint, upsampled_image};
 use nldf_core::camera::Intrinsics;
 use nldf_core::upsampler_config::coarse_intrinsics;
+
+use front_end::front_end;
 
 /// Name of the frame graph.
 pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
@@ -105,21 +109,7 @@ fn frame_model(
     mut g: GraphBuilder,
 ) -> Result<(ModelProto, contract::ModelInfo, usize)> {
     let spec = &ckpt.spec;
-    let cfg = spec.features.nldf().cloned().ok_or_else(|| {
-        Error::Frame(format!(
-            "it holds nldf's audio front end, but this student was trained on {}",
-            spec.features.describe()
-        ))
-    })?;
-    let s = &ckpt.shape;
-    let layout = FrameAudio::new(&cfg, spec.fps, s.audio.att_frames)
-        .map_err(|e| Error::Frame(e.to_string()))?;
-    if (cfg.window, cfg.n_mels) != (s.audio.window, s.audio.n_features) {
-        return Err(Error::Frame(format!(
-            "the features make {} x {} windows, the student takes {} x {}",
-            cfg.window, cfg.n_mels, s.audio.window, s.audio.n_features
-        )));
-    }
+    let (cfg, layout) = frame_audio(ckpt)?;
     let k = spec.intrinsics;
     let (h, w) = (k.height as usize, k.width as usize);
     let background = background_rgb8(ckpt, w, h)?;
@@ -158,6 +148,40 @@ fn frame_model(
     g.node("Identity", FRAME_OUTPUT_IMAGE, &[&image], vec![]);
     g.node("Identity", FRAME_OUTPUT_WINDOWS, &[&windows], vec![]);
     g.node("Identity", FRAME_OUTPUT_RAYS, &[&n_rays], vec![]);
+    frame_outputs(&mut g, ckpt, (h, w));
+    let n_values = g.n_initializer_values();
+    let doc = frame_doc(ckpt, &layout, up, (h, w), (hc, wc));
+    let graph = g.finish(FRAME_GRAPH_NAME, &doc);
+    let info = model_info(ckpt, &graph);
+    let metadata = frame_metadata(&info, &layout, factor);
+    Ok((model_proto(graph, doc, metadata), info, n_values))
+}
+
+/// The student's audio front end settings and the frame's audio layout; refuses a student
+/// trained on another front end's features, or whose windows the features do not make.
+fn frame_audio(ckpt: &StudentCheckpoint) -> Result<(FeatureConfig, FrameAudio)> {
+    let spec = &ckpt.spec;
+    let cfg = spec.features.nldf().cloned().ok_or_else(|| {
+        Error::Frame(format!(
+            "it holds nldf's audio front end, but this student was trained on {}",
+            spec.features.describe()
+        ))
+    })?;
+    let s = &ckpt.shape;
+    let layout = FrameAudio::new(&cfg, spec.fps, s.audio.att_frames)
+        .map_err(|e| Error::Frame(e.to_string()))?;
+    if (cfg.window, cfg.n_mels) != (s.audio.window, s.audio.n_features) {
+        return Err(Error::Frame(format!(
+            "the features make {} x {} windows, the student takes {} x {}",
+            cfg.window, cfg.n_mels, s.audio.window, s.audio.n_features
+        )));
+    }
+    Ok((cfg, layout))
+}
+
+/// Declares the frame graph's outputs: the image, the audio windows and the ray count.
+fn frame_outputs(g: &mut GraphBuilder, ckpt: &StudentCheckpoint, (h, w): (usize, usize)) {
+    let s = &ckpt.shape;
     g.output(
         FRAME_OUTPUT_IMAGE,
         DataType::Float,
@@ -173,8 +197,19 @@ fn frame_model(
         ],
     );
     g.output(FRAME_OUTPUT_RAYS, DataType::Int64, &[Dim::Fixed(1)]);
-    let n_values = g.n_initializer_values();
-    let doc = format!(
+}
+
+/// The frame graph's `doc_string`: its inputs, outputs and what it does inside.
+fn frame_doc(
+    ckpt: &StudentCheckpoint,
+    layout: &FrameAudio,
+    up: Option<&UpsamplerCheckpoint>,
+    (h, w): (usize, usize),
+    (hc, wc): (usize, usize),
+) -> String {
+    let s = &ckpt.shape;
+    let factor = up.map_or(1, |u| u.shape.factor);
+    format!(
         "NLDF frame graph: input {FRAME_INPUT_AUDIO} [{}] (16 kHz samples from frame f's \
          sample f * {} + {}; NaN off the track), {FRAME_INPUT_POSE} [4, 4] (camera to world, \
          row-major), {FRAME_INPUT_KEEP} bool [{h}, {w}] (pixels to render; the rest show the \
@@ -195,10 +230,17 @@ fn frame_model(
                 u.shape.channels
             ),
         }
-    );
-    let graph = g.finish(FRAME_GRAPH_NAME, &doc);
-    let info = model_info(ckpt, &graph);
-    let mut metadata = info.to_frame_metadata(&layout);
+    )
+}
+
+/// The frame graph's metadata: the model's, and with an upsampler its factor
+/// ([`contract::keys::FRAME_UPSAMPLE`]) before the background.
+fn frame_metadata(
+    info: &contract::ModelInfo,
+    layout: &FrameAudio,
+    factor: usize,
+) -> Vec<crate::onnx::StringStringEntryProto> {
+    let mut metadata = info.to_frame_metadata(layout);
     if factor > 1 {
         let at = metadata.len().saturating_sub(1);
         metadata.insert(
@@ -209,7 +251,7 @@ fn frame_model(
             },
         );
     }
-    Ok((model_proto(graph, doc, metadata), info, n_values))
+    metadata
 }
 
 /// The background as 8-bit RGB at the image's size, `[h * w * 3]`.
@@ -226,161 +268,6 @@ fn background_rgb8(ckpt: &StudentCheckpoint, w: usize, h: usize) -> Result<Vec<u
         )));
     }
     Ok(img.into_raw())
-}
-
-/// The front end: the chunk of samples to the audio neighbourhood, as
-/// `FrameAudio::windows` computes it.
-///
-/// # Shapes
-/// - `audio`: `[samples]`; returns `[att_frames, window, n_mels]`
-fn front_end(
-    g: &mut GraphBuilder,
-    layout: &FrameAudio,
-    cfg: &FeatureConfig,
-    audio: &str,
-) -> String {
-    let n_k = layout.n_features();
-    let (win, n_fft, n_mels) = (cfg.win, cfg.n_fft, cfg.n_mels);
-    let n_bins = n_fft / 2 + 1;
-    let off_track = g.node("IsNaN", "front.off_track", &[audio], vec![]);
-    let on_track = g.node("Not", "front.on_track", &[&off_track], vec![]);
-    let zero = g.constant_f32("front.zero", &[], &[0.0]);
-    let x = g.node(
-        "Where",
-        "front.samples",
-        &[&off_track, &zero, audio],
-        vec![],
-    );
-
-    // Framing: frame q reads samples q hop .. q hop + win.
-    let starts: Vec<i64> = (0..n_k).map(|q| layout.feature_start(q) as i64).collect();
-    let starts = g.constant_i64("front.frame_starts", &[n_k, 1], &starts);
-    let taps: Vec<i64> = (0..win as i64).collect();
-    let taps_row = g.constant_i64("front.frame_taps", &[1, win], &taps);
-    let index = g.node("Add", "front.frame_index", &[&starts, &taps_row], vec![]);
-    let frames = g.node(
-        "Gather",
-        "front.frames",
-        &[&x, &index],
-        vec![attr_int("axis", 0)],
-    );
-    let (hann, norm) = hann_window(cfg);
-    let hann = g.constant_f32("front.hann", &[1, win], &hann);
-    let frames = g.node("Mul", "front.windowed", &[&frames, &hann], vec![]);
-
-    // The DFT's cosine and sine at (n k mod n_fft), gathered from one period of each.
-    let taps_col = g.constant_i64("front.dft_taps", &[win, 1], &taps);
-    let bins: Vec<i64> = (0..n_bins as i64).collect();
-    let bins = g.constant_i64("front.dft_bins", &[1, n_bins], &bins);
-    let period = g.constant_i64("front.dft_period", &[], &[n_fft as i64]);
-    let phase = g.node("Mul", "front.dft_phase_raw", &[&taps_col, &bins], vec![]);
-    let phase = g.node("Mod", "front.dft_phase", &[&phase, &period], vec![]);
-    let angle = |m: usize| 2.0 * std::f64::consts::PI * m as f64 / n_fft as f64;
-    let cos: Vec<f32> = (0..n_fft).map(|m| angle(m).cos() as f32).collect();
-    let sin: Vec<f32> = (0..n_fft).map(|m| angle(m).sin() as f32).collect();
-    let cos = g.constant_f32("front.cos_period", &[n_fft], &cos);
-    let sin = g.constant_f32("front.sin_period", &[n_fft], &sin);
-    let cos = g.node(
-        "Gather",
-        "front.dft_cos",
-        &[&cos, &phase],
-        vec![attr_int("axis", 0)],
-    );
-    let sin = g.node(
-        "Gather",
-        "front.dft_sin",
-        &[&sin, &phase],
-        vec![attr_int("axis", 0)],
-    );
-    let re = g.node("MatMul", "front.re", &[&frames, &cos], vec![]);
-    let im = g.node("MatMul", "front.im", &[&frames, &sin], vec![]);
-    let re2 = g.node("Mul", "front.re2", &[&re, &re], vec![]);
-    let im2 = g.node("Mul", "front.im2", &[&im, &im], vec![]);
-    let power = g.node("Add", "front.power_raw", &[&re2, &im2], vec![]);
-    let norm = g.constant_f32("front.norm", &[], &[norm]);
-    let power = g.node("Mul", "front.power", &[&power, &norm], vec![]);
-    let filters = mel_filters(cfg);
-    let mut mel_t = vec![0.0f32; n_bins * n_mels];
-    for (m, filter) in filters.iter().enumerate() {
-        for (b, &v) in filter.iter().enumerate() {
-            mel_t[b * n_mels + m] = v;
-        }
-    }
-    let mel_t = g.constant_f32("front.mel_filters", &[n_bins, n_mels], &mel_t);
-    let energy = g.node("MatMul", "front.energy", &[&power, &mel_t], vec![]);
-    let floor = g.constant_f32("front.floor", &[], &[1e-10]);
-    let energy = g.node("Max", "front.energy_floored", &[&energy, &floor], vec![]);
-    let ln = g.node("Log", "front.ln", &[&energy], vec![]);
-    let ln10 = g.constant_f32("front.ln10", &[], &[std::f32::consts::LN_10]);
-    let log10 = g.node("Div", "front.log10", &[&ln, &ln10], vec![]);
-    let five = g.constant_f32("front.five", &[], &[5.0]);
-    let shifted = g.node("Add", "front.shifted", &[&log10, &five], vec![]);
-    let feats = g.node("Div", "front.features", &[&shifted, &five], vec![]);
-
-    // The track's ends: the first and last feature frame and neighbour on it.
-    let axis0 = vec![attr_int("axis", 0)];
-    let span = |g: &mut GraphBuilder, name: &str, deciding: Vec<i64>| -> (String, String) {
-        let n = deciding.len();
-        let deciding = g.constant_i64(&format!("{name}.deciding"), &[n], &deciding);
-        let on = g.node(
-            "Gather",
-            &format!("{name}.on_track"),
-            &[&on_track, &deciding],
-            axis0.clone(),
-        );
-        let index: Vec<i64> = (0..n as i64).collect();
-        let index = g.constant_i64(&format!("{name}.index"), &[n], &index);
-        let past = g.constant_i64(&format!("{name}.past"), &[], &[n as i64]);
-        let before = g.constant_i64(&format!("{name}.before"), &[], &[-1]);
-        let lo = g.node(
-            "Where",
-            &format!("{name}.lo_each"),
-            &[&on, &index, &past],
-            vec![],
-        );
-        let hi = g.node(
-            "Where",
-            &format!("{name}.hi_each"),
-            &[&on, &index, &before],
-            vec![],
-        );
-        let reduce = || vec![attr_ints("axes", &[0]), attr_int("keepdims", 0)];
-        (
-            g.node("ReduceMin", &format!("{name}.lo"), &[&lo], reduce()),
-            g.node("ReduceMax", &format!("{name}.hi"), &[&hi], reduce()),
-        )
-    };
-    let centres = (0..n_k).map(|q| layout.feature_centre(q) as i64).collect();
-    let (k_lo, k_hi) = span(g, "front.feature_span", centres);
-    let ends = (0..layout.att_frames)
-        .map(|s| layout.frame_end(s) as i64)
-        .collect();
-    let (s_lo, s_hi) = span(g, "front.frame_span", ends);
-    let none = g.constant_i64("front.index_zero", &[], &[0]);
-    let clamp = |g: &mut GraphBuilder, name: &str, x: &str, lo: &str, hi: &str| -> String {
-        let x = g.node("Max", &format!("{name}.above_lo"), &[x, lo], vec![]);
-        let x = g.node("Min", &format!("{name}.below_hi"), &[&x, hi], vec![]);
-        g.node("Max", name, &[&x, &none], vec![])
-    };
-    let neighbours: Vec<i64> = (0..layout.att_frames as i64).collect();
-    let neighbours = g.constant_i64("front.neighbours", &[layout.att_frames, 1], &neighbours);
-    let neighbours = clamp(g, "front.neighbours_clamped", &neighbours, &s_lo, &s_hi);
-    let per_frame = g.constant_i64(
-        "front.features_per_frame",
-        &[],
-        &[layout.features_per_frame as i64],
-    );
-    let first = g.node(
-        "Mul",
-        "front.window_first",
-        &[&neighbours, &per_frame],
-        vec![],
-    );
-    let entries: Vec<i64> = (0..layout.window as i64).collect();
-    let entries = g.constant_i64("front.window_entries", &[1, layout.window], &entries);
-    let which = g.node("Add", "front.window_index_raw", &[&first, &entries], vec![]);
-    let which = clamp(g, "front.window_index", &which, &k_lo, &k_hi);
-    g.node("Gather", "front.windows", &[&feats, &which], axis0)
 }
 
 /// The camera's rays through every pixel, row by row: `(origin [1, 3], directions

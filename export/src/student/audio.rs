@@ -1,0 +1,84 @@
+//! The student's audio encoder: AudioNet over the windows of the frame's neighbourhood and
+//! AudioAttNet's weighted sum (AD-NeRF).
+
+use super::ops::{conv_leaky, leaky, linear};
+use crate::checkpoint::StudentCheckpoint;
+use crate::error::Result;
+use crate::graph::{GraphBuilder, attr_int, attr_ints};
+
+/// The audio code of the frame: AudioNet over each window of the neighbourhood and
+/// AudioAttNet's weighted sum, or AudioNet over the centre window without attention.
+///
+/// # Shapes
+/// - `audio`: `[att_frames, window, n_features]`
+/// - returns `audio.code` `[1, dim]`
+pub(super) fn audio_code(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    audio: &str,
+) -> Result<String> {
+    let a = &ckpt.shape.audio;
+    let seq = a.att_frames;
+    let windows = if ckpt.shape.attention {
+        audio.to_string()
+    } else {
+        let c = (seq / 2) as i64;
+        let starts = g.constant_i64("audio.centre_start", &[1], &[c]);
+        let ends = g.constant_i64("audio.centre_end", &[1], &[c + 1]);
+        let axes = g.constant_i64("audio.centre_axis", &[1], &[0]);
+        g.node(
+            "Slice",
+            "audio.centre",
+            &[audio, &starts, &ends, &axes],
+            vec![],
+        )
+    };
+    // AudioNet: [n, window, F] -> [n, F, window] -> convs -> mean over what is left.
+    let mut x = g.node(
+        "Transpose",
+        "audio.net.input",
+        &[&windows],
+        vec![attr_ints("perm", &[0, 2, 1])],
+    );
+    let channels = [a.n_features, 32, 32, 64, 64];
+    for i in 0..4 {
+        let name = format!("audio.net.convs.{i}");
+        x = conv_leaky(g, ckpt, &name, &x, (channels[i], channels[i + 1], 2))?;
+    }
+    let x = g.node(
+        "ReduceMean",
+        "audio.net.mean",
+        &[&x],
+        vec![attr_ints("axes", &[2]), attr_int("keepdims", 0)],
+    );
+    let x = linear(g, ckpt, "audio.net.fc1", &x, 64, 64)?;
+    let x = leaky(g, "audio.net.fc1.act", &x);
+    let codes = linear(g, ckpt, "audio.net.fc2", &x, 64, a.dim)?;
+    if !ckpt.shape.attention {
+        return Ok(g.node("Identity", "audio.code", &[&codes], vec![]));
+    }
+    // AudioAttNet: [seq, dim] -> [1, dim, seq] -> convs -> [1, seq] logits -> softmax.
+    let t = g.node(
+        "Transpose",
+        "audio.att.input_t",
+        &[&codes],
+        vec![attr_ints("perm", &[1, 0])],
+    );
+    let axis0 = g.constant_i64("audio.att.axis0", &[1], &[0]);
+    let mut y = g.node("Unsqueeze", "audio.att.input", &[&t, &axis0], vec![]);
+    let channels = [a.dim, 16, 8, 4, 2, 1];
+    for i in 0..5 {
+        let name = format!("audio.att.convs.{i}");
+        y = conv_leaky(g, ckpt, &name, &y, (channels[i], channels[i + 1], 1))?;
+    }
+    let shape = g.constant_i64("audio.att.logit_shape", &[2], &[1, seq as i64]);
+    let y = g.node("Reshape", "audio.att.logits_in", &[&y, &shape], vec![]);
+    let y = linear(g, ckpt, "audio.att.attention", &y, seq, seq)?;
+    let weights = g.node(
+        "Softmax",
+        "audio.att.weights",
+        &[&y],
+        vec![attr_int("axis", 1)],
+    );
+    Ok(g.node("MatMul", "audio.code", &[&weights, &codes], vec![]))
+}
