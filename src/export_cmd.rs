@@ -1,7 +1,7 @@
 //! `nldf export`: writes a run's trained student (with its audio encoder) as one ONNX model
 //! whose metadata carries everything a foreign runtime needs to render a frame.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use nldf_export::{
@@ -67,7 +67,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
     } else {
         "model.onnx"
     };
-    let out = args.out.unwrap_or_else(|| args.run.join(default_name));
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.run.join(default_name));
     let weights = if args.fp16 {
         WeightType::F16
     } else if args.int8 {
@@ -75,18 +78,30 @@ pub fn run(args: ExportArgs) -> Result<()> {
     } else {
         WeightType::F32
     };
-    let report = match (&args.data, weights) {
+    let report = export(&args, &student, &out, weights)?;
+    read_back(args.frame, &out)?;
+    print_summary(&report, weights);
+    Ok(())
+}
+
+/// Exports the student in `student` to `out` as the flags ask: a ray or frame graph, with
+/// or without the upsampler, in `weights` (int8 calibrated on `--data`).
+fn export(
+    args: &ExportArgs,
+    student: &Path,
+    out: &Path,
+    weights: WeightType,
+) -> Result<ExportReport> {
+    Ok(match (&args.data, weights) {
         (Some(data), WeightType::Int8) => {
             let export = || -> nldf_infer::Result<ExportReport> {
-                let ranges = calibrated_ranges(&student, data, args.calibration_frames)?;
+                let ranges = calibrated_ranges(student, data, args.calibration_frames)?;
                 let up = args.upsampler.as_ref().map(|name| args.run.join(name));
                 Ok(match (&up, args.frame) {
-                    (Some(up), true) => export_frame_upsampled_int8(&student, up, &out, &ranges)?,
-                    (Some(up), false) => {
-                        export_student_upsampled_int8(&student, up, &out, &ranges)?
-                    }
-                    (None, true) => export_frame_int8(&student, &out, &ranges)?,
-                    (None, false) => export_student_int8(&student, &out, &ranges)?,
+                    (Some(up), true) => export_frame_upsampled_int8(student, up, out, &ranges)?,
+                    (Some(up), false) => export_student_upsampled_int8(student, up, out, &ranges)?,
+                    (None, true) => export_frame_int8(student, out, &ranges)?,
+                    (None, false) => export_student_int8(student, out, &ranges)?,
                 })
             };
             export().with_context(|| {
@@ -105,7 +120,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
             } else {
                 nldf_export::export_student_upsampled
             };
-            export(&student, &dir, &out, weights).with_context(|| {
+            export(student, &dir, out, weights).with_context(|| {
                 format!(
                     "exporting the student in {} with the upsampler in {} as a {} graph",
                     student.display(),
@@ -114,18 +129,22 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 )
             })?
         }
-        _ if args.frame => export_frame(&student, &out, weights).with_context(|| {
+        _ if args.frame => export_frame(student, out, weights).with_context(|| {
             format!(
                 "exporting the student in {} as a frame graph",
                 student.display()
             )
         })?,
-        _ => export_student(&student, &out, weights)
+        _ => export_student(student, out, weights)
             .with_context(|| format!("exporting the student in {}", student.display()))?,
-    };
+    })
+}
+
+/// Reads the written model back as every loader will; a frame graph's inputs are printed.
+fn read_back(frame: bool, out: &Path) -> Result<()> {
     // Read it back as every loader will, so that a bad file never leaves this command.
-    if args.frame {
-        let model = read_frame_model(&out)?;
+    if frame {
+        let model = read_frame_model(out)?;
         let a = &model.audio;
         println!(
             "frame graph: audio [{}] at {} Hz from sample {} + frame x {} (NaN off the \
@@ -138,8 +157,13 @@ pub fn run(args: ExportArgs) -> Result<()> {
             model.info.spec.intrinsics.width
         );
     } else {
-        read_model(&out)?;
+        read_model(out)?;
     }
+    Ok(())
+}
+
+/// Prints what was exported: the student's shape, its upsampler and the file written.
+fn print_summary(report: &ExportReport, weights: WeightType) {
     let info = &report.info;
     let k = &info.spec.intrinsics;
     println!(
@@ -183,5 +207,4 @@ pub fn run(args: ExportArgs) -> Result<()> {
             WeightType::Int8 => "int8 for the per-ray products, f32 elsewhere",
         }
     );
-    Ok(())
 }

@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 use glam::Mat4;
 use nldf_core::audio::{FeatureConfig, Waveform};
 use nldf_core::audio_stream::{FeatureStream, WavStreamDecoder};
+use nldf_export::contract::ModelInfo;
 use serde::Serialize;
 
 use crate::backend::{BackendKind, BackendOptions, backend_for};
@@ -284,7 +285,7 @@ impl StreamPlan {
     /// Frames already written stay when the stream breaks (each is a whole PNG); the report
     /// `stream.json` is written only at a clean end.
     pub fn run(
-        self,
+        mut self,
         source: Box<dyn Read + Send>,
         stream_name: &str,
         mut on_frame: impl FnMut(&StreamFrame, usize),
@@ -310,26 +311,10 @@ impl StreamPlan {
         let mut next = 0usize;
         let mut dropped = 0usize;
         let mut frames = Vec::new();
-        let mut renderer = self.renderer;
-        let (lock, cond) = &*shared;
         loop {
             // Take what has arrived; wait only when no frame can be rendered.
             let can_render = mel.as_ref().is_some_and(|m| next < renderable(m, ahead));
-            let (samples, ended, rate) = {
-                let mut r = lock
-                    .lock()
-                    .map_err(|_| bad("the stream reader failed".into()))?;
-                while !can_render && r.samples.is_empty() && !r.ended && r.error.is_none() {
-                    r = cond
-                        .wait(r)
-                        .map_err(|_| bad("the stream reader failed".into()))?;
-                }
-                if let Some(e) = r.error.take() {
-                    return Err(bad(e));
-                }
-                arrivals.append(&mut r.arrivals);
-                (std::mem::take(&mut r.samples), r.ended, r.sample_rate)
-            };
+            let (samples, ended, rate) = take_arrived(&shared, can_render, &mut arrivals, &bad)?;
             if mel.is_none()
                 && let Some(rate) = rate
             {
@@ -341,46 +326,13 @@ impl StreamPlan {
                 }
                 continue;
             };
-            if !samples.is_empty() {
-                m.push(&samples)?;
-            }
-            if ended && !m.ended() {
-                m.finish()?;
-                if m.n_ready() == 0 {
-                    return Err(bad(format!(
-                        "{:.3} s of audio is shorter than one video frame (1/{fps} s)",
-                        m.n_samples() as f64 / m.input_rate() as f64
-                    )));
-                }
-            }
+            feed(m, &samples, ended, fps, &bad)?;
             // The stream's end makes its last frames (those whose windows reach past it)
             // renderable at once: waiting for the end is not falling behind, so the frames
             // still to render then are all rendered.
             let slack = self.drop_behind.filter(|_| !m.ended());
             if let Some((f, skipped)) = next_frame(next, renderable(m, ahead), slack) {
-                let t0 = Instant::now();
-                let audio = neighbourhood_of(m.n_ready(), f, att, |g| m.window(g));
-                let pose = match &self.poses {
-                    Some(p) => pose_at(p, f),
-                    None => default_pose(&info, f),
-                };
-                let frame = renderer.render(pose, &audio)?;
-                frame.image.save_png(&self.out.join(frame_file_name(f)))?;
-                let written = Instant::now();
-                let instant_sample =
-                    (f as f64 * m.input_rate() as f64 / fps as f64).ceil() as usize;
-                // The read that brought the frame's instant (the last one if it never came).
-                let k = arrivals.partition_point(|(n, _)| *n <= instant_sample);
-                let heard = arrivals
-                    .get(k)
-                    .or(arrivals.last())
-                    .map_or(started, |(_, t)| *t);
-                let record = StreamFrame {
-                    index: f,
-                    latency_s: written.duration_since(heard).as_secs_f64(),
-                    render_s: written.duration_since(t0).as_secs_f64(),
-                    head_pixels: frame.head_pixels,
-                };
+                let record = self.render_frame(m, f, &info, (started, &arrivals))?;
                 dropped += skipped;
                 next = f + 1;
                 frames.push(record);
@@ -393,14 +345,63 @@ impl StreamPlan {
         }
         let _ = reader.join();
         let m = mel.ok_or_else(|| bad("holds no audio".into()))?;
+        let report = self.report(&m, frames, dropped, started, (fps, ahead));
+        nldf_core::files::write_json(&self.out.join(STREAM_REPORT_FILE), &report)?;
+        Ok(report)
+    }
+
+    /// Renders frame `f` of `m` and writes its PNG; its latency runs from the read that
+    /// brought the frame's instant (`clock`: the stream's start and its reads).
+    fn render_frame(
+        &mut self,
+        m: &FeatureStream,
+        f: usize,
+        info: &ModelInfo,
+        (started, arrivals): (Instant, &[(usize, Instant)]),
+    ) -> Result<StreamFrame> {
+        let fps = info.spec.fps;
+        let att = info.audio.att_frames;
+        let t0 = Instant::now();
+        let audio = neighbourhood_of(m.n_ready(), f, att, |g| m.window(g));
+        let pose = match &self.poses {
+            Some(p) => pose_at(p, f),
+            None => default_pose(info, f),
+        };
+        let frame = self.renderer.render(pose, &audio)?;
+        frame.image.save_png(&self.out.join(frame_file_name(f)))?;
+        let written = Instant::now();
+        let instant_sample = (f as f64 * m.input_rate() as f64 / fps as f64).ceil() as usize;
+        // The read that brought the frame's instant (the last one if it never came).
+        let k = arrivals.partition_point(|(n, _)| *n <= instant_sample);
+        let heard = arrivals
+            .get(k)
+            .or(arrivals.last())
+            .map_or(started, |(_, t)| *t);
+        Ok(StreamFrame {
+            index: f,
+            latency_s: written.duration_since(heard).as_secs_f64(),
+            render_s: written.duration_since(t0).as_secs_f64(),
+            head_pixels: frame.head_pixels,
+        })
+    }
+
+    /// The stream's report: its audio, frames, drops and latencies.
+    fn report(
+        &self,
+        m: &FeatureStream,
+        frames: Vec<StreamFrame>,
+        dropped: usize,
+        started: Instant,
+        (fps, ahead): (f32, usize),
+    ) -> StreamReport {
         let rate = m.input_rate();
-        let k = renderer.intrinsics();
+        let k = self.renderer.intrinsics();
         let latencies: Vec<f64> = frames.iter().map(|f| f.latency_s).collect();
         // The lookahead of a frame far from the start, in seconds past its instant.
         let probe = 100;
         let lookahead_s =
             m.samples_needed(probe + ahead) as f64 / rate as f64 - probe as f64 / fps as f64;
-        let report = StreamReport {
+        StreamReport {
             out: self.out.clone(),
             sample_rate: rate,
             audio_seconds: m.n_samples() as f64 / rate as f64,
@@ -408,16 +409,62 @@ impl StreamPlan {
             dropped,
             width: k.width,
             height: k.height,
-            backend: renderer.backend().kind(),
+            backend: self.renderer.backend().kind(),
             drop_behind: self.drop_behind,
             lookahead_s,
             latency: LatencyStats::of(&latencies),
             wall_seconds: started.elapsed().as_secs_f64(),
             frames,
-        };
-        nldf_core::files::write_json(&self.out.join(STREAM_REPORT_FILE), &report)?;
-        Ok(report)
+        }
     }
+}
+
+/// The samples, end and sample rate that have arrived since the last take (their reads
+/// appended to `arrivals`), waiting for more only when no frame can be rendered.
+fn take_arrived(
+    shared: &Shared,
+    can_render: bool,
+    arrivals: &mut Vec<(usize, Instant)>,
+    bad: &impl Fn(String) -> Error,
+) -> Result<(Vec<f32>, bool, Option<u32>)> {
+    let (lock, cond) = &**shared;
+    let mut r = lock
+        .lock()
+        .map_err(|_| bad("the stream reader failed".into()))?;
+    while !can_render && r.samples.is_empty() && !r.ended && r.error.is_none() {
+        r = cond
+            .wait(r)
+            .map_err(|_| bad("the stream reader failed".into()))?;
+    }
+    if let Some(e) = r.error.take() {
+        return Err(bad(e));
+    }
+    arrivals.append(&mut r.arrivals);
+    Ok((std::mem::take(&mut r.samples), r.ended, r.sample_rate))
+}
+
+/// Pushes the new samples into the front end, and at the stream's end finishes it; a
+/// stream shorter than one video frame is an error.
+fn feed(
+    m: &mut FeatureStream,
+    samples: &[f32],
+    ended: bool,
+    fps: f32,
+    bad: &impl Fn(String) -> Error,
+) -> Result<()> {
+    if !samples.is_empty() {
+        m.push(samples)?;
+    }
+    if ended && !m.ended() {
+        m.finish()?;
+        if m.n_ready() == 0 {
+            return Err(bad(format!(
+                "{:.3} s of audio is shorter than one video frame (1/{fps} s)",
+                m.n_samples() as f64 / m.input_rate() as f64
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Frames of `m` that can be rendered: those whose whole neighbourhood is final.
