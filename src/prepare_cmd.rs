@@ -1,6 +1,6 @@
 //! `nldf prepare`: a video of one person speaking as an AD-NeRF dataset, on a CPU.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
@@ -143,7 +143,12 @@ pub fn run(args: PrepareArgs) -> Result<()> {
     if let Some(b) = bar.take() {
         b.finish();
     }
-    let report = report?;
+    print_summary(&report?, &out);
+    Ok(())
+}
+
+/// Says what the preparation kept, dropped and wrote, and what to run next.
+fn print_summary(report: &job::PrepareReport, out: &Path) {
     println!(
         "prepared {} frames ({} train, {} val) of {} read, {} dropped without one whole face; \
          {:.1} s ({:.1} frames/s){}",
@@ -173,5 +178,4 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         "next: nldf train --data {} --run runs/<name>",
         out.display()
     );
-    Ok(())
 }

@@ -27,7 +27,6 @@ impl EventPrinter {
     /// Shows one event.
     pub fn show(&mut self, event: &nldf_train::job::JobEvent) {
         use nldf_train::job::JobEvent;
-        use nldf_train::run_loop::Event;
         match event {
             JobEvent::Stage(line) => println!("== {line}"),
             JobEvent::Note(line) => eprintln!("{line}"),
@@ -38,59 +37,13 @@ impl EventPrinter {
                 self.last_val.clear();
                 self.bar = Some(bar);
             }
-            JobEvent::Training { stage, event } => {
-                let Some(bar) = &self.bar else { return };
-                match event {
-                    Event::Step {
-                        step,
-                        loss,
-                        psnr,
-                        rays_per_s,
-                    } => {
-                        bar.set_position(*step as u64);
-                        bar.set_message(format!(
-                            "{stage} loss {loss:.2e} psnr {psnr:.2} dB {rays_per_s:.0} rays/s{}",
-                            self.last_val
-                        ));
-                    }
-                    Event::Validation { step, scores } => {
-                        let head = scores
-                            .head_psnr
-                            .map_or(String::new(), |h| format!("head {h:.2} dB, "));
-                        self.last_val = format!(" | val {head}{:.2} dB", scores.psnr);
-                        bar.println(format!(
-                            "step {step}: validation {head}whole frame {:.2} dB, SSIM {:.4}{}",
-                            scores.psnr,
-                            scores.ssim,
-                            scores
-                                .mouth_psnr
-                                .map_or(String::new(), |m| format!(", mouth {m:.2} dB"))
-                        ));
-                    }
-                    Event::Checkpoint { .. } => {}
-                }
-            }
+            JobEvent::Training { stage, event } => self.show_training(stage, event),
             JobEvent::TrainingEnds {
                 stage,
                 step,
                 interrupted,
                 scores,
-            } => {
-                if let Some(bar) = self.bar.take() {
-                    bar.finish_and_clear();
-                }
-                if *interrupted {
-                    println!(
-                        "interrupted at step {step}; checkpoint written, continue with --resume"
-                    );
-                }
-                if let Some(s) = scores {
-                    println!(
-                        "{}",
-                        serde_json::json!({"stage": stage, "step": step, "val": s})
-                    );
-                }
-            }
+            } => self.training_ends(stage, *step, *interrupted, scores.as_ref()),
             JobEvent::Progress { what, done, total } => {
                 let bar = self
                     .bar
@@ -111,6 +64,63 @@ impl EventPrinter {
                     println!("  {}", f.display());
                 }
             }
+        }
+    }
+
+    /// Shows a training stage's step or validation on its bar.
+    fn show_training(&mut self, stage: &str, event: &nldf_train::run_loop::Event) {
+        use nldf_train::run_loop::Event;
+        let Some(bar) = &self.bar else { return };
+        match event {
+            Event::Step {
+                step,
+                loss,
+                psnr,
+                rays_per_s,
+            } => {
+                bar.set_position(*step as u64);
+                bar.set_message(format!(
+                    "{stage} loss {loss:.2e} psnr {psnr:.2} dB {rays_per_s:.0} rays/s{}",
+                    self.last_val
+                ));
+            }
+            Event::Validation { step, scores } => {
+                let head = scores
+                    .head_psnr
+                    .map_or(String::new(), |h| format!("head {h:.2} dB, "));
+                self.last_val = format!(" | val {head}{:.2} dB", scores.psnr);
+                bar.println(format!(
+                    "step {step}: validation {head}whole frame {:.2} dB, SSIM {:.4}{}",
+                    scores.psnr,
+                    scores.ssim,
+                    scores
+                        .mouth_psnr
+                        .map_or(String::new(), |m| format!(", mouth {m:.2} dB"))
+                ));
+            }
+            Event::Checkpoint { .. } => {}
+        }
+    }
+
+    /// Closes a training stage's bar, says how it ended and prints its last scores.
+    fn training_ends(
+        &mut self,
+        stage: &str,
+        step: usize,
+        interrupted: bool,
+        scores: Option<&nldf_train::scores::Scores>,
+    ) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish_and_clear();
+        }
+        if interrupted {
+            println!("interrupted at step {step}; checkpoint written, continue with --resume");
+        }
+        if let Some(s) = scores {
+            println!(
+                "{}",
+                serde_json::json!({"stage": stage, "step": step, "val": s})
+            );
         }
     }
 }

@@ -12,7 +12,7 @@ use nldf_train::job::{JobEvent, OnEvent};
 
 use super::exports::{Export, open_point};
 use super::front::{Point, Times, mark_front, score};
-use super::points::Timed;
+use super::points::{OnnxPoint, Timed};
 use super::shared::{FrontierJob, THREADS, eval_counted};
 use super::timing::time_back_to_back;
 use crate::error::{Error, Result};
@@ -36,29 +36,7 @@ pub(crate) fn hires_points(
     .plan(&mut *on_event)?;
     let size = plan.data.dataset.intrinsics.width;
     let teacher = Timed::new(&plan.teacher, true, true);
-    let mut points = Vec::new();
-    for e in exports {
-        let own = nldf_export::read_model(&e.path)?.info.spec.intrinsics.width;
-        points.push(open_point(
-            e,
-            BackendKind::Ort,
-            THREADS,
-            job.batch,
-            Some(size),
-            1,
-        )?);
-        if own < size && size % own == 0 {
-            let factor = size / own;
-            points.push(open_point(
-                e,
-                BackendKind::Ort,
-                THREADS,
-                job.batch,
-                Some(size),
-                factor,
-            )?);
-        }
-    }
+    let points = open_at(job, exports, size)?;
     let mut models: Vec<&dyn FrameModel> = vec![&teacher];
     models.extend(points.iter().map(|p| p as &dyn FrameModel));
     let n = job
@@ -116,4 +94,33 @@ pub(crate) fn hires_points(
     }
     mark_front(&mut table);
     Ok(table)
+}
+
+/// Each export opened in onnxruntime at `size` pixels: its rays at that size and, where
+/// `size` is a multiple of its own, its own size upscaled.
+fn open_at(job: &FrontierJob, exports: &[Export], size: u32) -> Result<Vec<OnnxPoint>> {
+    let mut points = Vec::new();
+    for e in exports {
+        let own = nldf_export::read_model(&e.path)?.info.spec.intrinsics.width;
+        points.push(open_point(
+            e,
+            BackendKind::Ort,
+            THREADS,
+            job.batch,
+            Some(size),
+            1,
+        )?);
+        if own < size && size % own == 0 {
+            let factor = size / own;
+            points.push(open_point(
+                e,
+                BackendKind::Ort,
+                THREADS,
+                job.batch,
+                Some(size),
+                factor,
+            )?);
+        }
+    }
+    Ok(points)
 }
