@@ -110,7 +110,7 @@ fn open_at(job: &FrontierJob, exports: &[Export], size: u32) -> Result<Vec<OnnxP
             Some(size),
             1,
         )?);
-        if own < size && size % own == 0 {
+        if own < size && size.is_multiple_of(own) {
             let factor = size / own;
             points.push(open_point(
                 e,
