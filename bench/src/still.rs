@@ -7,7 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
+use glam::Mat4;
 use nldf_core::audio::neighbourhood;
+use nldf_export::contract::ModelInfo;
 use nldf_infer::frame::FrameRenderer;
 use nldf_infer::poses::{default_pose, default_track};
 use nldf_infer::still::{SkipConfig, StillTrack, bench_track, probe_frames};
@@ -111,17 +113,7 @@ impl StillBenchJob {
         let frames = ((self.seconds * info.spec.fps as f64).round() as usize)
             .clamp(1, windows.n_frames.max(1));
         let att = info.audio.att_frames;
-        let configs = self
-            .thresholds
-            .iter()
-            .map(|&t| {
-                let c = SkipConfig {
-                    threshold: t / 255.0,
-                    ..SkipConfig::default()
-                };
-                c.validate().map(|_| c)
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+        let configs = skip_configs(&self.thresholds)?;
         let config = configs[0];
         let audio = |f: usize| neighbourhood(&windows, f, att);
         let probes: Vec<Vec<f32>> = probe_frames(frames, config.probes)
@@ -131,16 +123,7 @@ impl StillBenchJob {
         let kind = self.backend;
         let mut full = FrameRenderer::new(backend_for(&model, kind, options)?, None)?;
         let mut skipping = FrameRenderer::new(backend_for(&model, kind, options)?, None)?;
-        let moving = default_track(&info, frames);
-        let hold = (2.0 * info.spec.fps).round().max(1.0) as usize;
-        let tracks = [
-            ("still pose", vec![default_pose(&info, 0); frames]),
-            (
-                "pose held 2 s at a time",
-                (0..frames).map(|f| moving[f - f % hold]).collect(),
-            ),
-            ("moving pose (the default sway)", moving.clone()),
-        ];
+        let tracks = pose_tracks(&info, frames);
         // Every threshold on the still and the held tracks; the moving track never skips,
         // so it runs once a round.
         let mut rounds: Vec<Vec<StillTrack>> = Vec::new();
@@ -172,26 +155,7 @@ impl StillBenchJob {
             rounds.push(rows);
         }
         machine.record_end();
-        let rows = (0..rounds[0].len())
-            .map(|k| {
-                let full_ms_means: Vec<f64> = rounds.iter().map(|r| r[k].full_ms_mean).collect();
-                let skip_ms_means: Vec<f64> = rounds.iter().map(|r| r[k].skip_ms_mean).collect();
-                let pairs: Vec<(f64, f64)> = full_ms_means
-                    .iter()
-                    .copied()
-                    .zip(skip_ms_means.iter().copied())
-                    .collect();
-                let speed_up = Ratio::of_pairs(&pairs)?;
-                let mut track = rounds[0][k].clone();
-                track.speedup = speed_up.median;
-                Ok(StillRow {
-                    track,
-                    full_ms_means,
-                    skip_ms_means,
-                    speed_up,
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let rows = paired_rows(&rounds)?;
         Ok(StillReport {
             bench: "still",
             machine,
@@ -215,6 +179,60 @@ impl StillBenchJob {
             },
         })
     }
+}
+
+/// The three head tracks of `frames` frames: still, the default sway held 2 s at a time,
+/// and the default sway.
+fn pose_tracks(info: &ModelInfo, frames: usize) -> [(&'static str, Vec<Mat4>); 3] {
+    let moving = default_track(info, frames);
+    let hold = (2.0 * info.spec.fps).round().max(1.0) as usize;
+    [
+        ("still pose", vec![default_pose(info, 0); frames]),
+        (
+            "pose held 2 s at a time",
+            (0..frames).map(|f| moving[f - f % hold]).collect(),
+        ),
+        ("moving pose (the default sway)", moving.clone()),
+    ]
+}
+/// The skipping settings of each threshold (in 1/255 steps), each checked.
+fn skip_configs(thresholds: &[f32]) -> Result<Vec<SkipConfig>> {
+    thresholds
+        .iter()
+        .map(|&t| {
+            let c = SkipConfig {
+                threshold: t / 255.0,
+                ..SkipConfig::default()
+            };
+            c.validate().map(|_| c)
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(Into::into)
+}
+
+/// Each track's rows of every round joined: its mean frame times per round and the
+/// skipping's speed-up from those pairs.
+fn paired_rows(rounds: &[Vec<StillTrack>]) -> Result<Vec<StillRow>> {
+    (0..rounds[0].len())
+        .map(|k| {
+            let full_ms_means: Vec<f64> = rounds.iter().map(|r| r[k].full_ms_mean).collect();
+            let skip_ms_means: Vec<f64> = rounds.iter().map(|r| r[k].skip_ms_mean).collect();
+            let pairs: Vec<(f64, f64)> = full_ms_means
+                .iter()
+                .copied()
+                .zip(skip_ms_means.iter().copied())
+                .collect();
+            let speed_up = Ratio::of_pairs(&pairs)?;
+            let mut track = rounds[0][k].clone();
+            track.speedup = speed_up.median;
+            Ok(StillRow {
+                track,
+                full_ms_means,
+                skip_ms_means,
+                speed_up,
+            })
+        })
+        .collect()
 }
 
 impl StillReport {
