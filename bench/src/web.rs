@@ -144,31 +144,7 @@ impl WebBenchJob {
             .iter()
             .zip(&models)
             .enumerate()
-            .map(|(i, (path, model))| {
-                let k = model.info.spec.intrinsics;
-                WebRow {
-                    model: path.clone(),
-                    bytes: model.bytes.len() as u64,
-                    width: k.width,
-                    height: k.height,
-                    ort_fps: f64::NAN,
-                    tract_fps: f64::NAN,
-                    browser_fps: None,
-                    browser_skip_fps: None,
-                    browser_skip_rays: None,
-                    browser: None,
-                    ray_model: self.ray_models.get(i).cloned(),
-                    ort_skip: None,
-                    ort_skip_fps: None,
-                    rounds_ort_fps: Vec::new(),
-                    rounds_tract_fps: Vec::new(),
-                    rounds_browser_fps: Vec::new(),
-                    rounds_browser_skip_fps: Vec::new(),
-                    rounds_ort_skip_fps: Vec::new(),
-                    browser_over_ort: None,
-                    browser_over_ort_skipping: None,
-                }
-            })
+            .map(|(i, (path, model))| WebRow::empty(path, model, self.ray_models.get(i).cloned()))
             .collect();
         for round in 0..self.pairs {
             let of = format!("round {} of {}", round + 1, self.pairs);
@@ -198,23 +174,7 @@ impl WebBenchJob {
             }
             if let Some(web) = &self.web {
                 let lines = browser_fps(web, &self.models, &wav, self.frames, self.threads)?;
-                for (row, value) in rows.iter_mut().zip(lines) {
-                    let get = |key: &str| value.get(key).and_then(|v| v.as_f64());
-                    if let Some(fps) = get("fps") {
-                        row.rounds_browser_fps.push(fps);
-                    }
-                    if let Some(fps) = get("skip_fps") {
-                        row.rounds_browser_skip_fps.push(fps);
-                    }
-                    row.browser_skip_rays = row.browser_skip_rays.or(get("skip_ray_share"));
-                    note(&format!(
-                        "{of}: {}: browser {:.1} frames/s, skipping still pixels {:.1}",
-                        row.model.display(),
-                        get("fps").unwrap_or(f64::NAN),
-                        get("skip_fps").unwrap_or(f64::NAN)
-                    ));
-                    row.browser.get_or_insert(value);
-                }
+                record_browser(&mut rows, lines, &of, note);
             }
         }
         machine.record_end();
@@ -234,6 +194,61 @@ impl WebBenchJob {
     }
 }
 
+impl WebRow {
+    /// A row for the frame graph at `path`, before any round: no figure yet.
+    fn empty(path: &Path, model: &FrameGraphFile, ray_model: Option<PathBuf>) -> WebRow {
+        let k = model.info.spec.intrinsics;
+        WebRow {
+            model: path.to_path_buf(),
+            bytes: model.bytes.len() as u64,
+            width: k.width,
+            height: k.height,
+            ort_fps: f64::NAN,
+            tract_fps: f64::NAN,
+            browser_fps: None,
+            browser_skip_fps: None,
+            browser_skip_rays: None,
+            browser: None,
+            ray_model,
+            ort_skip: None,
+            ort_skip_fps: None,
+            rounds_ort_fps: Vec::new(),
+            rounds_tract_fps: Vec::new(),
+            rounds_browser_fps: Vec::new(),
+            rounds_browser_skip_fps: Vec::new(),
+            rounds_ort_skip_fps: Vec::new(),
+            browser_over_ort: None,
+            browser_over_ort_skipping: None,
+        }
+    }
+}
+
+/// One round's browser figures (a line of the page's benchmark per frame graph) added to
+/// the rows, each said in `note`.
+fn record_browser(
+    rows: &mut [WebRow],
+    lines: Vec<serde_json::Value>,
+    of: &str,
+    note: &mut dyn FnMut(&str),
+) {
+    for (row, value) in rows.iter_mut().zip(lines) {
+        let get = |key: &str| value.get(key).and_then(|v| v.as_f64());
+        if let Some(fps) = get("fps") {
+            row.rounds_browser_fps.push(fps);
+        }
+        if let Some(fps) = get("skip_fps") {
+            row.rounds_browser_skip_fps.push(fps);
+        }
+        row.browser_skip_rays = row.browser_skip_rays.or(get("skip_ray_share"));
+        note(&format!(
+            "{of}: {}: browser {:.1} frames/s, skipping still pixels {:.1}",
+            row.model.display(),
+            get("fps").unwrap_or(f64::NAN),
+            get("skip_fps").unwrap_or(f64::NAN)
+        ));
+        row.browser.get_or_insert(value);
+    }
+}
 impl WebRow {
     /// The medians over the rounds and the browser's ratios, from a figure of every one of
     /// the `pairs` rounds (a figure some round lacks is left out, with its ratio).
