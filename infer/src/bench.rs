@@ -135,6 +135,75 @@ fn focal_for_coverage(
     Ok(f)
 }
 
+/// A timing of `rays` network rays in `seconds` by `r` at the pose `c2w`, with the share of
+/// the frame's `n_pixels` that meet the head there.
+fn frame_timing(
+    label: &str,
+    r: &FrameRenderer,
+    c2w: Mat4,
+    n_pixels: f64,
+    seconds: f64,
+    rays: usize,
+) -> FrameTiming {
+    FrameTiming {
+        label: label.to_string(),
+        focal: r.intrinsics().focal,
+        network_rays: rays,
+        head_fraction: r.rays(c2w).pixels.len() as f64 / n_pixels,
+        seconds,
+        rays_per_s: rays as f64 / seconds.max(1e-12),
+    }
+}
+
+/// The frame timed with the head covering each of `cfg.coverages` of the pixels (the focal
+/// that gives it recorded in each timing); `ort`'s own focal is put back after.
+fn coverage_runs(
+    ort: &mut FrameRenderer,
+    c2w: Mat4,
+    n_pixels: f64,
+    cfg: &RenderBenchConfig,
+    audio: &[f32],
+    progress: &mut impl FnMut(&str),
+) -> Result<Vec<FrameTiming>> {
+    let own_focal = ort.intrinsics().focal;
+    let mut coverage = Vec::new();
+    for &target in &cfg.coverages {
+        progress(&format!(
+            "ort: head covering {:.0} % of the pixels",
+            100.0 * target
+        ));
+        let focal = focal_for_coverage(ort, c2w, own_focal, target)?;
+        let rays = ort.rays(c2w).pixels.len();
+        let s = median_seconds(cfg.warmup, cfg.reps, || ort.render(c2w, audio).map(|_| ()))?;
+        let mut t = frame_timing(
+            &format!("ort, {:.0} % target", 100.0 * target),
+            ort,
+            c2w,
+            n_pixels,
+            s,
+            rays,
+        );
+        t.focal = focal;
+        coverage.push(t);
+    }
+    ort.set_focal(own_focal)?;
+    Ok(coverage)
+}
+
+/// The coverage run whose head share is nearest 30 % (within 5 points): that share and its
+/// time over the frame with every pixel through the network (`full_seconds`).
+fn near_30_percent(coverage: &[FrameTiming], full_seconds: f64) -> Option<(f64, f64)> {
+    coverage
+        .iter()
+        .min_by(|a, b| {
+            (a.head_fraction - 0.3)
+                .abs()
+                .total_cmp(&(b.head_fraction - 0.3).abs())
+        })
+        .filter(|t| (t.head_fraction - 0.3).abs() < 0.05)
+        .map(|t| (t.head_fraction, t.seconds / full_seconds))
+}
+
 /// Times `model`'s frames: see the module documentation.
 pub fn bench_render(
     model: &ExportedModel,
@@ -153,14 +222,8 @@ pub fn bench_render(
     let mut tract = FrameRenderer::new(backend_for(model, BackendKind::Tract, cfg.options)?, None)?;
     let k = ort.intrinsics();
     let n_pixels = k.n_pixels() as f64;
-    let head_share = |r: &FrameRenderer, c2w: Mat4| r.rays(c2w).pixels.len() as f64 / n_pixels;
-    let timing = |label: &str, r: &FrameRenderer, seconds: f64, rays: usize| FrameTiming {
-        label: label.to_string(),
-        focal: r.intrinsics().focal,
-        network_rays: rays,
-        head_fraction: head_share(r, c2w),
-        seconds,
-        rays_per_s: rays as f64 / seconds.max(1e-12),
+    let timing = |label: &str, r: &FrameRenderer, seconds: f64, rays: usize| {
+        frame_timing(label, r, c2w, n_pixels, seconds, rays)
     };
 
     progress("ort: whole frames against bare onnxruntime");
@@ -202,34 +265,8 @@ pub fn bench_render(
     full_frame.head_fraction = ort_frame.head_fraction;
     ort.set_skip_rays(true);
 
-    let mut coverage = Vec::new();
-    for &target in &cfg.coverages {
-        progress(&format!(
-            "ort: head covering {:.0} % of the pixels",
-            100.0 * target
-        ));
-        let focal = focal_for_coverage(&mut ort, c2w, k.focal, target)?;
-        let rays = ort.rays(c2w).pixels.len();
-        let s = median_seconds(cfg.warmup, cfg.reps, || ort.render(c2w, &audio).map(|_| ()))?;
-        let mut t = timing(
-            &format!("ort, {:.0} % target", 100.0 * target),
-            &ort,
-            s,
-            rays,
-        );
-        t.focal = focal;
-        coverage.push(t);
-    }
-    ort.set_focal(k.focal)?;
-    let at_30_percent = coverage
-        .iter()
-        .min_by(|a, b| {
-            (a.head_fraction - 0.3)
-                .abs()
-                .total_cmp(&(b.head_fraction - 0.3).abs())
-        })
-        .filter(|t| (t.head_fraction - 0.3).abs() < 0.05)
-        .map(|t| (t.head_fraction, t.seconds / full_frame.seconds));
+    let coverage = coverage_runs(&mut ort, c2w, n_pixels, cfg, &audio, &mut progress)?;
+    let at_30_percent = near_30_percent(&coverage, full_frame.seconds);
     Ok(RenderBench {
         depth: info.network.depth,
         width: info.network.width,
