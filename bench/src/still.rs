@@ -192,7 +192,7 @@ fn pose_tracks(info: &ModelInfo, frames: usize) -> [(&'static str, Vec<Mat4>); 3
             "pose held 2 s at a time",
             (0..frames).map(|f| moving[f - f % hold]).collect(),
         ),
-        ("moving pose (the default sway)", moving.clone()),
+        ("moving pose (the default sway)", moving),
     ]
 }
 /// The skipping settings of each threshold (in 1/255 steps), each checked.

@@ -286,12 +286,7 @@ impl GridLayout {
         // Per axis, the weights of the low and the high vertex.
         let mut w = [[0.0f32; 2]; 3];
         for d in 0..3 {
-            let s = u[d] * n as f32;
-            // `u` is in [0, 1], so truncation is the floor.
-            let i = (s as u32).min(n - 1);
-            let f = (s - i as f32).clamp(0.0, 1.0);
-            base[d] = i;
-            w[d] = [1.0 - f, f];
+            (base[d], w[d]) = axis_cell(u[d], n);
         }
         let mut cell = Cell::default();
         // Per axis, the low and the high vertex's term of the index.
@@ -331,11 +326,7 @@ impl GridLayout {
         let mut base = [0u32; 2];
         let mut w = [[0.0f32; 2]; 2];
         for (k, &d) in axes.iter().enumerate() {
-            let s = u[d] * n as f32;
-            let i = (s as u32).min(n - 1);
-            let f = (s - i as f32).clamp(0.0, 1.0);
-            base[k] = i;
-            w[k] = [1.0 - f, f];
+            (base[k], w[k]) = axis_cell(u[d], n);
         }
         let mut cell = Cell {
             n: 4,
@@ -408,6 +399,17 @@ impl GridLayout {
             });
         dt
     }
+}
+
+/// Along one axis of a level of `n` cells: the low vertex of the cell holding `u` (in
+/// `[0, 1]`) and the weights of its low and high vertex.
+#[inline]
+fn axis_cell(u: f32, n: u32) -> (u32, [f32; 2]) {
+    let s = u * n as f32;
+    // `u` is in [0, 1], so truncation is the floor.
+    let i = (s as u32).min(n - 1);
+    let f = (s - i as f32).clamp(0.0, 1.0);
+    (i, [1.0 - f, f])
 }
 
 /// Points encoded together by one task of [`GridLayout::encode`].
