@@ -6,8 +6,10 @@
 # The videos come from scripts/prepare_check.sh run with the same SEED into the same WORK.
 # Each run's log, the prepared dataset's scores and every split's metrics go to
 # OUT/<head>/{truth,prepared}/ (default results/prepare/e2e_test).
-# HEADS picks the heads (default: standard second).
-# Usage: [SEED=3] [HEADS=second] scripts/prepare_e2e.sh WORK [OUT]
+# HEADS picks the heads (default: standard second), SIDES the runs (default: truth prepared;
+# the truth's runs repeat bit for bit, so after a change to `nldf prepare` alone
+# SIDES=prepared suffices).
+# Usage: [SEED=3] [HEADS=second] [SIDES=prepared] scripts/prepare_e2e.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_e2e.sh WORK [OUT]}
@@ -30,7 +32,7 @@ for head in ${HEADS:-standard second}; do
     > "$out/$head/prepared/prepare.log"
   "$nldf" bench prepare --truth "$truth" --prepared "$prep" --carry-held-out \
     --out "$out/$head/prepared/bench.json" >> "$out/$head/prepared/prepare.log" || true
-  for side in truth prepared; do
+  for side in ${SIDES:-truth prepared}; do
     data=$truth; [ "$side" = prepared ] && data=$prep
     run=$work/e2e_${head}_run_$side
     rm -rf "$run"

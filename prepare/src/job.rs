@@ -17,7 +17,9 @@ use crate::error::{Error, Result};
 use crate::face::{FaceEnv, FaceOutput};
 use crate::frames::{read_gray, read_rgb, save_jpeg};
 use crate::lms68::{jaw_line, landmarks_68};
-use crate::parsing::{Part, background, head_rect, parse_frame, parsing_image};
+use crate::parsing::{
+    Part, Plate, background, hang_below_jaw, head_rect, parse_frame, parsing_image,
+};
 use crate::pose::{CameraTrack, PoseConfig, TrackSummary, solve_track};
 use crate::resample::shrink_dataset;
 use crate::scratch::Scratch;
@@ -242,22 +244,23 @@ fn prepare_into(
     lap("faces", &mut seconds);
     let (k, track) = solve_poses(job, env, &faces, &kept, events)?;
     lap("pose", &mut seconds);
+    let bc = background_of(&kept, &ori, &faces, size)?;
+    save_jpeg(&dir.join("bc.jpg"), bc.as_raw(), size)?;
+    lap("background", &mut seconds);
     events(Event::Stage {
         name: "parsing",
         total: Some(kept.len()),
     });
-    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, size, events)?;
+    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, bc.as_raw(), size, events)?;
     lap("parsing", &mut seconds);
 
     events(Event::Stage {
-        name: "background and heads",
+        name: "heads",
         total: Some(kept.len()),
     });
-    let bc = background_of(&kept, &ori, &parsing_dir, &faces, size)?;
-    save_jpeg(&dir.join("bc.jpg"), bc.as_raw(), size)?;
     write_heads(&kept, &ori, &parsing_dir, &heads, bc.as_raw(), size, events)?;
     write_features(dir, &wave, probe.fps, n)?;
-    lap("background", &mut seconds);
+    lap("heads", &mut seconds);
 
     let n_train = write_transforms(dir, &kept, &track.c2w, &rects, &k, probe.fps)?;
     std::fs::remove_dir_all(&face_dir).map_err(|e| Error::io(&face_dir, e))?;
@@ -470,6 +473,7 @@ fn write_parsing(
     kept: &[usize],
     ori: &Path,
     parsing_dir: &Path,
+    bc: &[u8],
     size: u32,
     events: &mut impl FnMut(Event),
 ) -> Result<Vec<Option<[u32; 4]>>> {
@@ -485,7 +489,13 @@ fn write_parsing(
                 let lms_path = ori.join(format!("{i}.lms"));
                 std::fs::write(&lms_path, lms.to_text()).map_err(|e| Error::io(&lms_path, e))?;
                 let person = read_gray(&faces.mask_dir.join(format!("{i}.png")), size)?;
-                let parts = parse_frame(&person, &jaw, mesh[NOSE_TIP], size, size);
+                let frame = read_rgb(&ori.join(format!("{i}.jpg")), size)?;
+                let mut parts = parse_frame(&person, &jaw, mesh[NOSE_TIP], size, size);
+                let plate = Plate {
+                    frame: &frame,
+                    background: bc,
+                };
+                hang_below_jaw(&mut parts, &person, plate, &jaw, size, size);
                 let png = parsing_dir.join(format!("{i}.png"));
                 parsing_image(&parts, size, size)
                     .save(&png)
@@ -503,7 +513,6 @@ fn write_parsing(
 fn background_of(
     kept: &[usize],
     ori: &Path,
-    _parsing: &Path,
     faces: &FaceOutput,
     size: u32,
 ) -> Result<image::RgbImage> {
