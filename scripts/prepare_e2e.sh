@@ -7,7 +7,7 @@
 # Each run's log, the prepared dataset's scores and every split's metrics go to
 # OUT/<head>/{truth,prepared}/ (default results/prepare/e2e_test).
 # HEADS picks the heads (default: standard second), SIDES the runs (default: truth prepared;
-# the truth's runs repeat bit for bit, so after a change to `nldf prepare` alone
+# the truth's runs do not read anything `nldf prepare` writes, so after a change to it alone
 # SIDES=prepared suffices).
 # Usage: [SEED=3] [HEADS=second] [SIDES=prepared] scripts/prepare_e2e.sh WORK [OUT]
 set -euo pipefail
