@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 use nldf_prepare::face::{self, FaceEnv};
 use nldf_prepare::job::{self, Event, PrepareJob};
+use nldf_prepare::parsing::ParsingConfig;
 use nldf_prepare::pose::PoseConfig;
 use nldf_prepare::tools;
 
@@ -51,6 +52,19 @@ pub struct PrepareArgs {
     /// Fewest frames with one face needed to train (100 is 4 s at 25 frames/s).
     #[arg(long, default_value_t = 100)]
     pub min_frames: usize,
+    /// How far the head's cut lies past the face's jaw line, as a share of the line's size
+    /// (the segmenter's person above the cut is the head).
+    #[arg(long, default_value_t = ParsingConfig::default().jaw_margin, value_parser = share)]
+    pub jaw_margin: f32,
+    /// How far below the jaw cut a chin may hang, as a share of the jaw's depth: a run of
+    /// pixels below the cut that differ from the background and end in background within
+    /// it is head. 0 turns it off.
+    #[arg(long, default_value_t = ParsingConfig::default().hang_depth, value_parser = share)]
+    pub hang_depth: f32,
+    /// The smallest difference from the background image (0-255, the largest channel) that
+    /// counts as foreground for --hang-depth.
+    #[arg(long, default_value_t = ParsingConfig::default().foreground_diff)]
+    pub foreground_diff: u8,
     /// Replace the output folder if it exists.
     #[arg(long)]
     pub force: bool,
@@ -73,6 +87,14 @@ fn parse_crop(text: &str) -> std::result::Result<Crop, String> {
     match v.as_slice() {
         [x, y, s] if *s > 0 => Ok(Crop([*x, *y, *s])),
         _ => Err(format!("`{text}` is not X,Y,SIDE with SIDE > 0")),
+    }
+}
+
+/// A share between 0 and 1 (`--jaw-margin`, `--hang-depth`).
+fn share(text: &str) -> std::result::Result<f32, String> {
+    match text.trim().parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{text}` is not a number from 0 to 1")),
     }
 }
 
@@ -115,6 +137,11 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         pose: PoseConfig::default(),
         analysis_size: args.analysis_size,
         fps: args.fps,
+        parsing: ParsingConfig {
+            jaw_margin: args.jaw_margin,
+            hang_depth: args.hang_depth,
+            foreground_diff: args.foreground_diff,
+        },
     };
     let mut bar: Option<ProgressBar> = None;
     let report = job::run(&job, &env, &ffmpeg, |event| match event {

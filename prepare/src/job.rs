@@ -18,7 +18,7 @@ use crate::face::{FaceEnv, FaceOutput};
 use crate::frames::{read_gray, read_rgb, save_jpeg};
 use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{
-    Part, Plate, background, hang_below_jaw, head_rect, parse_frame, parsing_image,
+    ParsingConfig, Part, Plate, background, hang_below_jaw, head_rect, parse_frame, parsing_image,
 };
 use crate::pose::{CameraTrack, PoseConfig, TrackSummary, solve_track};
 use crate::resample::shrink_dataset;
@@ -63,6 +63,8 @@ pub struct PrepareJob {
     /// shrink the dataset to `size` ([`crate::resample`]). Default: the crop's side, at
     /// most [`ANALYSIS_MAX`], and never below `size`.
     pub analysis_size: Option<u32>,
+    /// Where the person splits into head, neck and torso.
+    pub parsing: ParsingConfig,
 }
 
 /// Progress of a [`PrepareJob`].
@@ -98,6 +100,8 @@ pub struct PrepareReport {
     pub reprojection_px: f32,
     /// Whether the poses come from feature tracks, how many, and how well they fit.
     pub tracks: TrackSummary,
+    /// The parsing's settings.
+    pub parsing: ParsingConfig,
     /// Seconds per stage and in all.
     pub seconds: Vec<(String, f64)>,
     pub total_seconds: f64,
@@ -251,7 +255,16 @@ fn prepare_into(
         name: "parsing",
         total: Some(kept.len()),
     });
-    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, bc.as_raw(), size, events)?;
+    let rects = write_parsing(
+        &faces,
+        &kept,
+        &ori,
+        &parsing_dir,
+        bc.as_raw(),
+        &job.parsing,
+        size,
+        events,
+    )?;
     lap("parsing", &mut seconds);
 
     events(Event::Stage {
@@ -284,6 +297,7 @@ fn prepare_into(
             .get(reprojection.len() / 2)
             .copied()
             .unwrap_or(0.0),
+        parsing: job.parsing,
         seconds,
         total_seconds: 0.0,
     })
@@ -474,6 +488,7 @@ fn write_parsing(
     ori: &Path,
     parsing_dir: &Path,
     bc: &[u8],
+    parsing: &ParsingConfig,
     size: u32,
     events: &mut impl FnMut(Event),
 ) -> Result<Vec<Option<[u32; 4]>>> {
@@ -490,12 +505,12 @@ fn write_parsing(
                 std::fs::write(&lms_path, lms.to_text()).map_err(|e| Error::io(&lms_path, e))?;
                 let person = read_gray(&faces.mask_dir.join(format!("{i}.png")), size)?;
                 let frame = read_rgb(&ori.join(format!("{i}.jpg")), size)?;
-                let mut parts = parse_frame(&person, &jaw, mesh[NOSE_TIP], size, size);
+                let mut parts = parse_frame(parsing, &person, &jaw, mesh[NOSE_TIP], size, size);
                 let plate = Plate {
                     frame: &frame,
                     background: bc,
                 };
-                hang_below_jaw(&mut parts, &person, plate, &jaw, size, size);
+                hang_below_jaw(parsing, &mut parts, &person, plate, &jaw, size, size);
                 let png = parsing_dir.join(format!("{i}.png"));
                 parsing_image(&parts, size, size)
                     .save(&png)

@@ -9,6 +9,7 @@
 //! a chin or jaw corner the landmarks' jaw line does not reach.
 
 use image::{Rgb, RgbImage};
+use serde::{Deserialize, Serialize};
 
 /// AD-NeRF's parsing labels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -45,9 +46,10 @@ pub const JAW_MARGIN: f32 = 0.15;
 /// The parts of a `width x height` frame from its person probability (0-255, row-major),
 /// its jaw line (pixels, image left to right; the chin is its middle point) and a point on
 /// the face (`seed`, the nose, say): the head is the part above the cut (the jaw line
-/// widened by [`JAW_MARGIN`]) that holds the seed; person pixels above the cut but apart
+/// widened by `config.jaw_margin`) that holds the seed; person pixels above the cut but apart
 /// from it are torso.
 pub fn parse_frame(
+    config: &ParsingConfig,
     person: &[u8],
     jaw: &[[f32; 2]],
     seed: [f32; 2],
@@ -59,7 +61,7 @@ pub fn parse_frame(
     if jaw.len() < 3 || person.len() != w * h {
         return parts;
     }
-    let jaw = &widened(jaw, JAW_MARGIN);
+    let jaw = &widened(jaw, config.jaw_margin);
     let chin = jaw[jaw.len() / 2];
     let top = jaw.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
     let neck_depth = 0.6 * (chin[1] - top).max(1.0);
@@ -96,8 +98,9 @@ pub fn parse_frame(
 /// How far below the jaw cut a hanging part of the head may reach, as a share of the jaw's
 /// depth (from its highest point to the chin): a run of foreground pixels longer than this
 /// below the cut is a neck, not a chin. Chosen on the tuning videos (seed 0, the 512 videos
-/// prepared at 128): pooled head IoU, standard / second head, 0.9664 / 0.9797 without the
-/// step, 0.9678 / 0.9866 at 0.25, 0.9680 / 0.9871 at 0.4 and at 0.6.
+/// prepared at 128; `scripts/prepare_chin_sweep.sh`): pooled head IoU, standard / second
+/// head, 0.9664 / 0.9797 without the step, 0.9678 / 0.9866 at 0.25, 0.9680 / 0.9871 at 0.4
+/// and at 0.6.
 pub const HANG_DEPTH: f32 = 0.4;
 
 /// The smallest difference from the background plate (0-255, the largest of the three
@@ -105,6 +108,31 @@ pub const HANG_DEPTH: f32 = 0.4;
 /// videos with [`HANG_DEPTH`]: at 0.4, 12 / 24 / 40 give pooled IoU 0.9682 / 0.9680 / 0.9675
 /// (standard) and 0.9869 / 0.9871 / 0.9867 (second head).
 pub const FOREGROUND_DIFF: u8 = 24;
+
+/// Where a frame's person splits into head, neck and torso: the settings of [`parse_frame`]
+/// and [`hang_below_jaw`], saved in `prepare.json`. Each default is its constant's.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ParsingConfig {
+    /// How far the head's cut lies past the jaw line, as a share of the line's size
+    /// (default [`JAW_MARGIN`], 0.15).
+    pub jaw_margin: f32,
+    /// How far below the cut a hanging chin may reach, as a share of the jaw's depth
+    /// (default [`HANG_DEPTH`], 0.4); 0 turns [`hang_below_jaw`] off.
+    pub hang_depth: f32,
+    /// The smallest difference from the background plate that is foreground (default
+    /// [`FOREGROUND_DIFF`], 24 of 255).
+    pub foreground_diff: u8,
+}
+
+impl Default for ParsingConfig {
+    fn default() -> Self {
+        Self {
+            jaw_margin: JAW_MARGIN,
+            hang_depth: HANG_DEPTH,
+            foreground_diff: FOREGROUND_DIFF,
+        }
+    }
+}
 
 /// A frame's colours and its background plate (RGB, row-major, the parsing's size), for
 /// [`hang_below_jaw`].
@@ -116,12 +144,13 @@ pub struct Plate<'a> {
 
 /// Turns into head what hangs below the jaw cut and ends in background: in each column of
 /// the (widened) jaw line, the run of pixels straight below the cut that are person and
-/// differ from the background by at least [`FOREGROUND_DIFF`], when the run ends within
-/// [`HANG_DEPTH`] of the jaw's depth. A run that goes on is a neck and stays as it is. The
-/// landmarks' jaw line misses a chin when the mouth opens wider than the face tracker
-/// follows; a segmenter that draws a neck below every head cannot show where the chin ends,
-/// the background plate can.
+/// differ from the background by at least `config.foreground_diff`, when the run ends
+/// within `config.hang_depth` of the jaw's depth. A run that goes on is a neck and stays as
+/// it is. The landmarks' jaw line misses a chin when the mouth opens wider than the face
+/// tracker follows; a segmenter that draws a neck below every head cannot show where the
+/// chin ends, the background plate can.
 pub fn hang_below_jaw(
+    config: &ParsingConfig,
     parts: &mut [Part],
     person: &[u8],
     plate: Plate,
@@ -137,10 +166,10 @@ pub fn hang_below_jaw(
     if plate.background.len() != 3 * n {
         return;
     }
-    let jaw = &widened(jaw, JAW_MARGIN);
+    let jaw = &widened(jaw, config.jaw_margin);
     let chin = jaw[jaw.len() / 2];
     let top = jaw.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
-    let reach = (HANG_DEPTH * (chin[1] - top).max(1.0)).ceil() as usize;
+    let reach = (config.hang_depth.max(0.0) * (chin[1] - top).max(1.0)).ceil() as usize;
     let x_min = jaw.iter().map(|p| p[0]).fold(f32::INFINITY, f32::min);
     let x_max = jaw.iter().map(|p| p[0]).fold(f32::NEG_INFINITY, f32::max);
     let foreground = |i: usize| {
@@ -148,7 +177,7 @@ pub fn hang_below_jaw(
             .map(|c| plate.frame[3 * i + c].abs_diff(plate.background[3 * i + c]))
             .max()
             .unwrap_or(0);
-        person[i] >= 128 && d >= FOREGROUND_DIFF
+        person[i] >= 128 && d >= config.foreground_diff
     };
     for x in 0..w {
         let xc = x as f32 + 0.5;
@@ -379,7 +408,14 @@ mod tests {
     fn the_person_splits_at_the_jaw_into_head_neck_and_torso() {
         let (w, h) = (60u32, 80u32);
         let person = vec![255u8; (w * h) as usize];
-        let parts = parse_frame(&person, &jaw(), [30.0, 10.0], w, h);
+        let parts = parse_frame(
+            &ParsingConfig::default(),
+            &person,
+            &jaw(),
+            [30.0, 10.0],
+            w,
+            h,
+        );
         let at = |x: u32, y: u32| parts[(y * w + x) as usize];
         // The jaw widened by JAW_MARGIN (0.15) about (30, 20): the chin at (30, 43), the
         // ends at (7, 20) and (53, 20).
@@ -400,7 +436,7 @@ mod tests {
         );
         let none = vec![0u8; (w * h) as usize];
         assert!(
-            parse_frame(&none, &jaw(), [30.0, 10.0], w, h)
+            parse_frame(&ParsingConfig::default(), &none, &jaw(), [30.0, 10.0], w, h)
                 .iter()
                 .all(|p| *p == Part::Background)
         );
@@ -411,14 +447,22 @@ mod tests {
     fn a_chin_that_hangs_below_the_jaw_into_background_is_head() {
         // The segmenter draws a person everywhere (a neck below every head); the frame is
         // the background's grey but for the head above the cut, a chin under it (columns
-        // 26..35, to row 48, ending in background within HANG_DEPTH = 0.4 of the widened jaw's depth 23, so 10
-        // rows), a neck that goes on to the frame's bottom (columns 36..40) and a faint
-        // patch (column 24, to row 48) too close to the background's colour to be foreground.
+        // 26..35, to row 48, ending in background within HANG_DEPTH = 0.4 of the widened
+        // jaw's depth 23, so 10 rows), a neck that goes on to the frame's bottom (columns
+        // 36..40) and a faint patch (column 24, to row 48) too close to the background's
+        // colour to be foreground.
         let (w, h) = (60u32, 80u32);
         let n = (w * h) as usize;
         let person = vec![255u8; n];
         let background = vec![50u8; 3 * n];
-        let mut parts = parse_frame(&person, &jaw(), [30.0, 10.0], w, h);
+        let mut parts = parse_frame(
+            &ParsingConfig::default(),
+            &person,
+            &jaw(),
+            [30.0, 10.0],
+            w,
+            h,
+        );
         let before = parts.clone();
         let mut frame = background.clone();
         let mut paint = |x: u32, y: u32, v: u8| {
@@ -441,7 +485,15 @@ mod tests {
             frame: &frame,
             background: &background,
         };
-        hang_below_jaw(&mut parts, &person, plate, &jaw(), w, h);
+        hang_below_jaw(
+            &ParsingConfig::default(),
+            &mut parts,
+            &person,
+            plate,
+            &jaw(),
+            w,
+            h,
+        );
         let at = |x: u32, y: u32| parts[(y * w + x) as usize];
         assert_eq!(at(30, 44), Part::Head, "the chin under the cut");
         assert_eq!(at(30, 48), Part::Head, "the chin's last row");
@@ -471,10 +523,24 @@ mod tests {
                 }
             }
         }
-        let parts = parse_frame(&person, &jaw(), [30.0, 10.0], w, h);
+        let parts = parse_frame(
+            &ParsingConfig::default(),
+            &person,
+            &jaw(),
+            [30.0, 10.0],
+            w,
+            h,
+        );
         assert_eq!(parts[(28 * w + 2) as usize], Part::Torso);
         assert_eq!(parts[(21 * w + 9) as usize], Part::Head);
-        let unseeded = parse_frame(&person, &jaw(), [2.0, 70.0], w, h);
+        let unseeded = parse_frame(
+            &ParsingConfig::default(),
+            &person,
+            &jaw(),
+            [2.0, 70.0],
+            w,
+            h,
+        );
         assert!(
             unseeded.iter().all(|p| *p != Part::Head),
             "a seed off the head keeps no head"
