@@ -65,6 +65,10 @@ pub struct PrepareArgs {
     /// counts as foreground for --hang-depth.
     #[arg(long, default_value_t = ParsingConfig::default().foreground_diff)]
     pub foreground_diff: u8,
+    /// Beside the jaw line's arms (the ears, the side of the head), the head reaches down to
+    /// the height of the arm's point this many from its end (of 8); 0 cuts along the arms.
+    #[arg(long, default_value_t = ParsingConfig::default().ear_points)]
+    pub ear_points: usize,
     /// Replace the output folder if it exists.
     #[arg(long)]
     pub force: bool,
@@ -141,6 +145,7 @@ pub fn run(args: PrepareArgs) -> Result<()> {
             jaw_margin: args.jaw_margin,
             hang_depth: args.hang_depth,
             foreground_diff: args.foreground_diff,
+            ear_points: args.ear_points,
         },
     };
     let mut bar: Option<ProgressBar> = None;

@@ -69,6 +69,17 @@ pub fn parse_frame(
     let x_max = jaw.iter().map(|p| p[0]).fold(f32::NEG_INFINITY, f32::max);
     let inner_min = jaw[jaw.len() / 4][0].min(jaw[3 * jaw.len() / 4][0]);
     let inner_max = jaw[jaw.len() / 4][0].max(jaw[3 * jaw.len() / 4][0]);
+    let mid = jaw.len() / 2;
+    let side = config.ear_points.min(mid);
+    let (left, right) = (&jaw[..=mid], &jaw[mid..]);
+    // Beside the jaw's upper points (outside its arms, down to the height of point `side`
+    // from each end) the head goes on: the ears and the side of the head.
+    let beside = |xc: f32, yc: f32| {
+        let outside_left = yc <= jaw[side][1] && arm_x(left, yc).is_some_and(|a| xc < a);
+        let right_floor = jaw[jaw.len() - 1 - side][1];
+        let outside_right = yc <= right_floor && arm_x(right, yc).is_some_and(|a| xc > a);
+        side > 0 && (outside_left || outside_right)
+    };
     for x in 0..w {
         let xc = x as f32 + 0.5;
         let cut = if xc >= x_min && xc <= x_max {
@@ -82,7 +93,7 @@ pub fn parse_frame(
                 continue;
             }
             let yc = y as f32 + 0.5;
-            parts[i] = if yc <= cut {
+            parts[i] = if yc <= cut || beside(xc, yc) {
                 Part::Head
             } else if xc >= inner_min && xc <= inner_max && yc <= chin[1] + neck_depth {
                 Part::Neck
@@ -98,7 +109,7 @@ pub fn parse_frame(
 /// How far below the jaw cut a hanging part of the head may reach, as a share of the jaw's
 /// depth (from its highest point to the chin): a run of foreground pixels longer than this
 /// below the cut is a neck, not a chin. Chosen on the tuning videos (seed 0, the 512 videos
-/// prepared at 128; `scripts/prepare_chin_sweep.sh`): pooled head IoU, standard / second
+/// prepared at 128; `scripts/prepare_parsing_sweep.sh`): pooled head IoU, standard / second
 /// head, 0.9664 / 0.9797 without the step, 0.9678 / 0.9866 at 0.25, 0.9680 / 0.9871 at 0.4
 /// and at 0.6.
 pub const HANG_DEPTH: f32 = 0.4;
@@ -122,6 +133,9 @@ pub struct ParsingConfig {
     /// The smallest difference from the background plate that is foreground (default
     /// [`FOREGROUND_DIFF`], 24 of 255).
     pub foreground_diff: u8,
+    /// Beside the jaw line's arms, the head reaches down to the height of this point from
+    /// each end (default [`EAR_POINTS`]); 0 cuts the head at the arms.
+    pub ear_points: usize,
 }
 
 impl Default for ParsingConfig {
@@ -130,9 +144,18 @@ impl Default for ParsingConfig {
             jaw_margin: JAW_MARGIN,
             hang_depth: HANG_DEPTH,
             foreground_diff: FOREGROUND_DIFF,
+            ear_points: EAR_POINTS,
         }
     }
 }
+
+/// Beside the jaw line's arms the head reaches down to the height of the arm's point
+/// `EAR_POINTS` from its end: a head that turns shows an ear outside the jaw line, and a cut
+/// along the arm drops it from the head. Chosen on the tuning videos
+/// (`scripts/prepare_parsing_sweep.sh`): pooled head IoU, standard / second head, 0.9680 /
+/// 0.9871 along the arms (0), 0.9681 / 0.9875 at 2 and at 3, 0.9549 / 0.9875 at 4 (where
+/// the standard head's worst frame fell to 0.79: the segmenter's shoulders joined the head).
+pub const EAR_POINTS: usize = 2;
 
 /// A frame's colours and its background plate (RGB, row-major, the parsing's size), for
 /// [`hang_below_jaw`].
@@ -250,6 +273,24 @@ fn keep_connected_head(parts: &mut [Part], seed: [f32; 2], w: usize, h: usize) {
             *p = Part::Torso;
         }
     }
+}
+
+/// Where one arm of the jaw line (a polyline from an end to the chin, or back) is at height
+/// `y`: the x of its first segment from the top that spans `y`.
+fn arm_x(arm: &[[f32; 2]], y: f32) -> Option<f32> {
+    arm.windows(2).find_map(|s| {
+        let ([x0, y0], [x1, y1]) = (s[0], s[1]);
+        let (lo, hi) = (y0.min(y1), y0.max(y1));
+        if y < lo || y > hi {
+            return None;
+        }
+        let t = if hi - lo < 1e-6 {
+            0.5
+        } else {
+            (y - y0) / (y1 - y0)
+        };
+        Some(x0 + t * (x1 - x0))
+    })
 }
 
 /// The largest y at which the polyline crosses the vertical line at `x`.
@@ -408,14 +449,11 @@ mod tests {
     fn the_person_splits_at_the_jaw_into_head_neck_and_torso() {
         let (w, h) = (60u32, 80u32);
         let person = vec![255u8; (w * h) as usize];
-        let parts = parse_frame(
-            &ParsingConfig::default(),
-            &person,
-            &jaw(),
-            [30.0, 10.0],
-            w,
-            h,
-        );
+        let along_the_arms = ParsingConfig {
+            ear_points: 0,
+            ..ParsingConfig::default()
+        };
+        let parts = parse_frame(&along_the_arms, &person, &jaw(), [30.0, 10.0], w, h);
         let at = |x: u32, y: u32| parts[(y * w + x) as usize];
         // The jaw widened by JAW_MARGIN (0.15) about (30, 20): the chin at (30, 43), the
         // ends at (7, 20) and (53, 20).
@@ -441,6 +479,41 @@ mod tests {
                 .all(|p| *p == Part::Background)
         );
         assert_eq!(head_rect(&parts, w), Some([0, 0, 60, 43]));
+    }
+
+    #[test]
+    fn an_ear_beside_the_jaws_upper_arm_is_head() {
+        // A 9-point jaw from (10, 20) down to a chin at (30, 44) and up to (50, 20); widened
+        // by JAW_MARGIN about (30, 20), its left arm runs (7, 20), (9.3, 29.2),
+        // (12.75, 36.1), (18.5, 41.85), (30, 47.6), and EAR_POINTS = 2 puts the ears' floor
+        // at y = 36.1.
+        let jaw = [
+            [10.0, 20.0],
+            [12.0, 28.0],
+            [15.0, 34.0],
+            [20.0, 39.0],
+            [30.0, 44.0],
+            [40.0, 39.0],
+            [45.0, 34.0],
+            [48.0, 28.0],
+            [50.0, 20.0],
+        ];
+        let (w, h) = (60u32, 80u32);
+        let person = vec![255u8; (w * h) as usize];
+        let parse = |config: &ParsingConfig| parse_frame(config, &person, &jaw, [30.0, 10.0], w, h);
+        let ears = parse(&ParsingConfig::default());
+        let along_the_arms = parse(&ParsingConfig {
+            ear_points: 0,
+            ..ParsingConfig::default()
+        });
+        let at = |parts: &[Part], x: u32, y: u32| parts[(y * w + x) as usize];
+        // (9.5, 33.5): left of the arm (x 11.45 at that height), below its crossing (29.6).
+        assert_eq!(at(&ears, 9, 33), Part::Head, "an ear");
+        assert_eq!(at(&ears, 50, 33), Part::Head, "the other ear");
+        assert_eq!(at(&along_the_arms, 9, 33), Part::Torso, "cut along the arm");
+        // (14.5, 40.5): below the ears' floor and the arm's crossing (37.85).
+        assert_ne!(at(&ears, 14, 40), Part::Head, "below the ears");
+        assert_eq!(at(&ears, 30, 40), Part::Head, "the face");
     }
 
     #[test]
