@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use nldf_export::{
     ExportReport, WeightType, export_frame, export_frame_int8, export_frame_upsampled_int8,
-    export_student, export_student_int8, export_student_upsampled_int8, read_frame_model,
-    read_model,
+    export_student, export_student_int8, export_student_upsampled_int8,
 };
 use nldf_infer::quantize::calibrated_ranges;
+use nldf_model::{read_frame_model, read_model};
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {

@@ -119,7 +119,7 @@ pub fn landmarks(bytes: &[u8]) -> Verdict {
 
 /// An `.onnx` file as every loader checks it first (protobuf, metadata, graph, checksum).
 pub fn onnx(bytes: &[u8]) -> Verdict {
-    match nldf_export::load::check_model(Path::new("model.onnx"), bytes) {
+    match nldf_model::load::check_model(Path::new("model.onnx"), bytes) {
         Ok((_, info)) => {
             if info.spec.check().is_err() {
                 return Err("accepted metadata whose render spec fails its check".into());

@@ -10,9 +10,12 @@ pub enum Error {
     /// Loading data, training, evaluating or plotting failed.
     #[error(transparent)]
     Train(#[from] nldf_train::Error),
-    /// Exporting a student or reading an exported model failed.
+    /// Exporting a student failed.
     #[error(transparent)]
     Export(#[from] nldf_export::Error),
+    /// Reading an exported model failed.
+    #[error(transparent)]
+    Model(#[from] nldf_model::Error),
     /// Loading a model in its runtime or rendering with it failed.
     #[error(transparent)]
     Infer(#[from] nldf_infer::Error),

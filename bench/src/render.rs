@@ -7,9 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
-use nldf_export::ExportedModel;
 use nldf_infer::BackendOptions;
 use nldf_infer::bench::{RenderBench, RenderBenchConfig, bench_render};
+use nldf_model::ExportedModel;
 use nldf_train::bench::Machine;
 use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::plot::{Series, palette, plot_xy};
@@ -53,7 +53,7 @@ impl RenderBenchPlan {
     /// Reads the exported model at `path`, if the machine's load admits the benchmark.
     pub fn open(path: &Path, load: LoadGate) -> Result<RenderBenchPlan> {
         let machine = load.admit()?;
-        let model = nldf_export::read_model(path)?;
+        let model = nldf_model::read_model(path)?;
         Ok(RenderBenchPlan {
             machine,
             path: path.to_path_buf(),

@@ -9,11 +9,11 @@ use std::path::{Path, PathBuf};
 
 use glam::Mat4;
 use nldf_core::audio::neighbourhood;
-use nldf_export::contract::ModelInfo;
 use nldf_infer::frame::FrameRenderer;
 use nldf_infer::poses::{default_pose, default_track};
 use nldf_infer::still::{SkipConfig, StillTrack, bench_track, probe_frames};
 use nldf_infer::{BackendKind, BackendOptions, backend_for};
+use nldf_model::contract::ModelInfo;
 use nldf_train::bench::Machine;
 use nldf_train::job::{JobEvent, OnEvent};
 use serde::Serialize;
@@ -107,7 +107,7 @@ impl StillBenchJob {
         // The full and the skipping renderer take turns: neither pool may spin beside the
         // other.
         options.spin = false;
-        let model = nldf_export::read_model(&self.model)?;
+        let model = nldf_model::read_model(&self.model)?;
         let info = model.info.clone();
         let windows = nldf_infer::audio::windows_from_wav(&info, &self.model, &self.audio)?;
         let frames = ((self.seconds * info.spec.fps as f64).round() as usize)

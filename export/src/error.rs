@@ -1,24 +1,14 @@
 //! The error type of nldf-export. File problems reuse nldf-core's variants, so that every
 //! message names the file the same way across the workspace.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-/// Errors from exporting a student and from reading an exported model.
+/// Errors from exporting a student.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// Reading or writing a file failed, or a checkpoint file's content is wrong.
     #[error(transparent)]
     Core(#[from] nldf_core::Error),
-    /// The file is not a readable ONNX model: cut short, damaged, or not ONNX at all.
-    #[error("{}: not a readable ONNX model (corrupt or truncated?): {reason}", path.display())]
-    Corrupt { path: PathBuf, reason: String },
-    /// The file is an ONNX model, but not one that `nldf export` wrote.
-    #[error("{}: not an nldf model ({reason}); make one with `nldf export`", path.display())]
-    Foreign { path: PathBuf, reason: String },
-    /// The file is an nldf model of the other kind (a frame graph where a ray graph is
-    /// wanted, or the reverse).
-    #[error("{}: {reason}", path.display())]
-    WrongKind { path: PathBuf, reason: String },
     /// The student cannot be exported as a frame graph.
     #[error("frame graph: {0}")]
     Frame(String),
@@ -39,21 +29,5 @@ impl Error {
     /// A content error in `path`.
     pub fn invalid(path: impl AsRef<Path>, problem: impl Into<String>) -> Self {
         Error::Core(nldf_core::Error::invalid(path, problem))
-    }
-
-    /// A model file that cannot be decoded or is incomplete.
-    pub fn corrupt(path: impl AsRef<Path>, reason: impl Into<String>) -> Self {
-        Error::Corrupt {
-            path: path.as_ref().to_path_buf(),
-            reason: reason.into(),
-        }
-    }
-
-    /// An ONNX model that is not an nldf student.
-    pub fn foreign(path: impl AsRef<Path>, reason: impl Into<String>) -> Self {
-        Error::Foreign {
-            path: path.as_ref().to_path_buf(),
-            reason: reason.into(),
-        }
     }
 }

@@ -3,7 +3,8 @@
 //! checkpoint's weight paths (`mlp.body.3.fc1`), so a name reads the same in a checkpoint, a
 //! graph and a profile.
 
-use crate::onnx::{
+use nldf_model::contract::INT8_WEIGHT_MAX;
+use nldf_model::onnx::{
     AttributeProto, AttributeType, DataType, GraphProto, NodeProto, TensorProto, TensorShapeProto,
     TypeProto, ValueInfoProto, tensor_shape_proto, type_proto,
 };
@@ -155,19 +156,6 @@ pub fn tensor_i8(name: &str, dims: &[usize], data: &[i8]) -> TensorProto {
         raw_data: Some(data.iter().map(|&v| v as u8).collect()),
         ..Default::default()
     }
-}
-
-/// The largest magnitude of a quantized weight: 7 bits, not 8. `MatMulInteger` multiplies
-/// uint8 activations (up to 255) by these weights. On x86 CPUs without VNNI, onnxruntime's
-/// u8 x s8 kernel (AVX2 `vpmaddubsw`) adds each pair of neighbouring products in a
-/// saturating 16-bit lane: with 8-bit weights a pair reaches 2 x 255 x 127 = 64770 and
-/// clips at 32767. With 7-bit weights it reaches at most 2 x 255 x [`INT8_WEIGHT_MAX`] =
-/// 32130 < 32767, so no pair can saturate on any CPU (onnxruntime's `reduce_range`).
-pub const INT8_WEIGHT_MAX: i8 = 63;
-
-/// The largest sum of two neighbouring u8 x s8 products that an int8 graph's weights allow.
-pub const fn int8_pair_sum_max() -> i32 {
-    2 * 255 * INT8_WEIGHT_MAX as i32
 }
 
 /// Symmetric quantization of a weight matrix `w` `[out, in]` to integers in
@@ -455,6 +443,7 @@ impl GraphBuilder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nldf_model::contract::int8_pair_sum_max;
 
     #[test]
     fn no_pair_of_u8_by_s8_products_can_saturate_16_bits() {

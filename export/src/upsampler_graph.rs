@@ -23,17 +23,17 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
 use nldf_core::upsampler_config::{MISS_LOGIT, UpsamplerConfig};
-
-use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
-use crate::contract::{
+use nldf_model::contract::{
     BOX_COLS, BOX_HEIGHT, BOX_ROWS, BOX_WIDTH, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS,
     INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_RGB,
     OUTPUT_SEGMENTS, RAY_AXIS, UpsampleInfo,
 };
+use nldf_model::onnx::{DataType, ModelProto};
+
+use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::layers::{self, bilinear_up, depth_to_space};
-use crate::onnx::{DataType, ModelProto};
 use crate::student::{
     ExportReport, model_info, model_proto, ray_inputs, student_nodes, write_model,
 };
@@ -107,7 +107,7 @@ pub(crate) fn open_pair(
 
 /// Exports the student in `student_dir` with the learned upsampler in `upsampler_dir` as an
 /// upsampled ray graph to `out` (written atomically): the coarse rays of a box of the
-/// upsampler's coarse grid in, the box's pixels out ([`crate::contract::UpsampleInfo`]).
+/// upsampler's coarse grid in, the box's pixels out ([`nldf_model::contract::UpsampleInfo`]).
 /// nldf's renderer (`nldf_infer::FrameRenderer`) finds the box and its rays.
 pub fn export_student_upsampled(
     student_dir: &Path,
@@ -198,7 +198,7 @@ fn upsampled_ray_model(
          {OUTPUT_BOX_OPACITY} [{BOX_HEIGHT}, {BOX_WIDTH}, 1].",
         s.depth, s.width, up.shape.channels, s.segments,
     );
-    let graph = g.finish(crate::contract::GRAPH_NAME, &doc);
+    let graph = g.finish(nldf_model::contract::GRAPH_NAME, &doc);
     let mut info = model_info(ckpt, &graph);
     info.upsample = Some(UpsampleInfo {
         factor: r,

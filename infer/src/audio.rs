@@ -7,7 +7,7 @@ use std::path::Path;
 
 use nldf_core::audio::{AudioWindows, FeatureConfig, FeatureSource, audio_windows, read_wav};
 use nldf_core::dataset::load_audio_npy;
-use nldf_export::contract::ModelInfo;
+use nldf_model::contract::ModelInfo;
 
 use crate::error::{Error, Result};
 

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use nldf_export::ExportedModel;
+use nldf_model::ExportedModel;
 
 #[cfg(not(feature = "ort"))]
 use crate::error::Error;
@@ -15,13 +15,13 @@ pub use crate::runtime::{
     Backend, BackendKind, BackendOptions, RayOutputs, batch_background, check_inputs,
 };
 
-/// Opens the model at `path` (checked by `nldf_export::read_model`) in the runtime `kind`.
+/// Opens the model at `path` (checked by `nldf_model::read_model`) in the runtime `kind`.
 pub fn open_backend(
     path: &Path,
     kind: BackendKind,
     options: BackendOptions,
 ) -> Result<Box<dyn Backend>> {
-    let model = nldf_export::read_model(path)?;
+    let model = nldf_model::read_model(path)?;
     backend_for(&model, kind, options)
 }
 

@@ -16,7 +16,7 @@
 use std::time::Instant;
 
 use glam::Mat4;
-use nldf_export::ExportedModel;
+use nldf_model::ExportedModel;
 use serde::Serialize;
 
 use crate::backend::{BackendKind, BackendOptions, backend_for};

@@ -92,7 +92,7 @@ fn int8_path() -> String {
     let bound = format!(
         "nldf's int8 weights are 7-bit: a pair of products reaches at most {}, within the \
          32767 of a 16-bit sum",
-        nldf_export::graph::int8_pair_sum_max()
+        nldf_model::contract::int8_pair_sum_max()
     );
     #[cfg(target_arch = "x86_64")]
     {

@@ -11,7 +11,10 @@ pub enum Error {
     Core(#[from] nldf_core::Error),
     /// The model file is not an nldf model (corrupt, truncated or foreign).
     #[error(transparent)]
-    Model(#[from] nldf_export::Error),
+    Model(#[from] nldf_model::Error),
+    /// Writing an int8 model failed (`nldf export --int8`, [`crate::quantize`]).
+    #[error(transparent)]
+    Export(#[from] nldf_export::Error),
     /// The onnxruntime library cannot be found or loaded.
     #[error("onnxruntime: {0}")]
     OrtLibrary(String),

@@ -14,7 +14,7 @@ use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
 use nldf_core::upsampler_config::{coarse_box, coarse_intrinsics, receptive_halo};
-use nldf_export::contract::{ModelInfo, UpsampleInfo};
+use nldf_model::contract::{ModelInfo, UpsampleInfo};
 
 use crate::error::{Error, Result};
 use crate::runtime::{Backend, BoxInput, RayOutputs};

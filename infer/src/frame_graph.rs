@@ -7,8 +7,8 @@
 
 use glam::Mat4;
 use nldf_core::image::ImageRgb;
-use nldf_export::FrameGraphFile;
-use nldf_export::contract::{
+use nldf_model::FrameGraphFile;
+use nldf_model::contract::{
     FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE, FRAME_OUTPUT_RAYS,
     FRAME_OUTPUT_WINDOWS,
 };

@@ -1,7 +1,8 @@
 //! nldf-infer: renders talking-head frames and video from an exported ONNX model on the CPU,
 //! with tract (default, pure Rust) or onnxruntime (the `ort` crate, loaded at run time).
-//! Builds on nldf-core for rays, bounds and audio features and on nldf-export for the ONNX
-//! contract; never depends on candle.
+//! Builds on nldf-core for rays, bounds and audio features and on nldf-model for the ONNX
+//! contract and the checked model loaders; it needs nldf-export only to write int8 models
+//! ([`quantize`]). Never depends on candle.
 //!
 //! [`runtime`] is the network behind one trait ([`tract_backend`], [`ort_backend`] with the
 //! `ort` feature, the library found by [`ort_library`]), and [`backend`] opens a model in

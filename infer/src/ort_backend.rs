@@ -5,8 +5,8 @@
 
 use std::sync::OnceLock;
 
-use nldf_export::ExportedModel;
-use nldf_export::contract::{
+use nldf_model::ExportedModel;
+use nldf_model::contract::{
     INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo,
     OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS,
 };

@@ -8,7 +8,7 @@ use std::path::Path;
 use glam::Mat4;
 use nldf_core::camera::{rigid_problem, turn_about};
 use nldf_core::dataset::{RIGID_TOL, TransformsFile};
-use nldf_export::contract::ModelInfo;
+use nldf_model::contract::ModelInfo;
 
 use crate::error::{Error, Result};
 

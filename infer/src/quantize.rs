@@ -14,8 +14,8 @@ use nldf_core::audio::neighbourhood;
 use nldf_core::camera::Camera;
 use nldf_core::dataset::Dataset;
 use nldf_core::rays::head_rays;
-use nldf_export::contract::{ModelInfo, input_names};
 use nldf_export::{ActivationRanges, ExportReport, Tap, calibration_model, export_student_int8};
+use nldf_model::contract::{ModelInfo, input_names};
 use tract_onnx::prelude::*;
 
 use crate::error::{Error, Result};

@@ -3,7 +3,7 @@
 //! Rust, the default) or the onnxruntime backend (cargo feature `ort`). The runtimes build
 //! on this module; [`crate::backend`] opens a model in the one a [`BackendKind`] names.
 
-use nldf_export::contract::ModelInfo;
+use nldf_model::contract::ModelInfo;
 
 use crate::error::{Error, Result};
 
@@ -139,7 +139,7 @@ pub trait Backend {
     /// # Shapes
     /// - `origins`, `directions`: `[n_rays, 3]` flat, `1 <= n_rays <= batch_size`
     /// - `background`: `[n_rays, 3]` flat for a model with opacity, else ignored
-    /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_export::contract`)
+    /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_model::contract`)
     /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
     fn run_batch(
         &mut self,

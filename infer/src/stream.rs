@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 use glam::Mat4;
 use nldf_core::audio::{FeatureConfig, Waveform};
 use nldf_core::audio_stream::{FeatureStream, WavStreamDecoder};
-use nldf_export::contract::ModelInfo;
+use nldf_model::contract::ModelInfo;
 use serde::Serialize;
 
 use crate::backend::{BackendKind, BackendOptions, backend_for};
@@ -165,7 +165,7 @@ impl StreamJob {
     /// Checks the model, the poses, the size and the output folder, loads the model in its
     /// runtime and makes the output folder; no audio is read yet.
     pub fn plan(&self) -> Result<StreamPlan> {
-        let model = nldf_export::read_model(&self.model)?;
+        let model = nldf_model::read_model(&self.model)?;
         let features = crate::audio::wav_features(&model.info, &self.model)?.clone();
         let poses = match &self.poses {
             Some(path) => Some(poses_from_transforms(path)?),

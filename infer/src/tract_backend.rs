@@ -8,8 +8,8 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use nldf_export::ExportedModel;
-use nldf_export::contract::{
+use nldf_model::ExportedModel;
+use nldf_model::contract::{
     BOX_COLS, BOX_ROWS, ModelInfo, RAY_AXIS, model_input_names, model_output_names,
 };
 use tract_onnx::prelude::*;

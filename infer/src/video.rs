@@ -117,7 +117,7 @@ impl VideoJob {
     /// Checks every input and the output folder, loads the model in its runtime and makes
     /// the audio features and poses; nothing is rendered yet.
     pub fn plan(&self) -> Result<VideoPlan> {
-        let model = nldf_export::read_model(&self.model)?;
+        let model = nldf_model::read_model(&self.model)?;
         let windows = match (&self.features, &self.audio) {
             (Some(npy), _) => windows_from_npy(&model.info, npy)?,
             (None, Some(wav)) => windows_from_wav(&model.info, &self.model, wav)?,

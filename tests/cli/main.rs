@@ -659,7 +659,7 @@ fn bad_models_and_audio_for_render_are_refused() {
             "an ONNX model nldf did not write",
             {
                 use prost::Message;
-                let proto = nldf_export::onnx::ModelProto {
+                let proto = nldf_model::onnx::ModelProto {
                     ir_version: Some(8),
                     graph: Some(Default::default()),
                     ..Default::default()

@@ -21,12 +21,12 @@ use std::process::Command;
 use glam::Mat4;
 use nldf_core::audio::neighbourhood;
 use nldf_core::camera::turn_about;
-use nldf_export::{read_frame_model, read_model};
 use nldf_infer::FrameRenderer;
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_infer::still::{FrameKind, SkipConfig, StillSkipper, probe_frames};
+use nldf_model::{read_frame_model, read_model};
 
 use crate::util::{ort_available, write_test_wav};
 
@@ -335,7 +335,7 @@ fn psnr_8bit(sq: f64, values: usize) -> f64 {
 fn check_skipping(
     result: &serde_json::Value,
     out: &Path,
-    model: &nldf_export::ExportedModel,
+    model: &nldf_model::ExportedModel,
     windows: &nldf_core::audio::AudioWindows,
     renderer: &mut FrameRenderer,
 ) {
@@ -509,7 +509,7 @@ fn the_page_draws_an_upsampled_frame_graph() {
 }
 
 /// nldf's renderer on `model` in tract, 2 threads.
-fn tract_renderer(model: &nldf_export::ExportedModel) -> FrameRenderer {
+fn tract_renderer(model: &nldf_model::ExportedModel) -> FrameRenderer {
     let options = BackendOptions {
         batch_size: 4096,
         threads: 2,

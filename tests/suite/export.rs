@@ -17,9 +17,10 @@ use nldf_core::dataset::save_audio_npy;
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{Rays, head_rays};
 use nldf_core::render_spec::BACKGROUND_FILE;
-use nldf_export::contract::{self, ModelInfo};
-use nldf_export::onnx::StringStringEntryProto;
-use nldf_export::{Error, WeightType, export_student, read_model};
+use nldf_export::{WeightType, export_student};
+use nldf_model::contract::{self, ModelInfo};
+use nldf_model::onnx::StringStringEntryProto;
+use nldf_model::{Error, read_model};
 use nldf_train::student::StudentConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -132,7 +133,7 @@ fn export_writes_the_contract() {
     assert_eq!(opset.len(), 1);
     assert_eq!(opset[0].version, Some(17));
     let graph = model.proto.graph.as_ref().unwrap();
-    let names = |v: &[nldf_export::onnx::ValueInfoProto]| -> Vec<String> {
+    let names = |v: &[nldf_model::onnx::ValueInfoProto]| -> Vec<String> {
         v.iter().map(|i| i.name.clone().unwrap()).collect()
     };
     // The tiny student has opacity: it composites over a background input.

@@ -13,9 +13,10 @@ use crate::util::{
 };
 use nldf_core::audio::neighbourhood;
 use nldf_core::rays::Rays;
-use nldf_export::{WeightType, export_student_int8, read_model};
+use nldf_export::{WeightType, export_student_int8};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
+use nldf_model::read_model;
 use nldf_train::student::StudentConfig;
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.

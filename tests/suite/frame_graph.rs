@@ -16,10 +16,11 @@ use nldf_core::camera::{look_at, turn_about};
 use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
 use nldf_core::student_config::StudentConfig;
-use nldf_export::{WeightType, export_frame, read_frame_model, read_model};
+use nldf_export::{WeightType, export_frame};
 use nldf_infer::FrameRenderer;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
+use nldf_model::{read_frame_model, read_model};
 
 use crate::util::{
     camera_at, configs, max_diff, python, read_npy, run_python, runtimes, spec_for, write_npy,
@@ -64,7 +65,7 @@ np.save(f"{folder}/images.npy", np.stack(out))
 "#;
 
 /// nldf's renderer on the ray graph `model` in the runtime `kind`: the reference frames.
-fn nldf_renderer(model: &nldf_export::ExportedModel, kind: BackendKind) -> FrameRenderer {
+fn nldf_renderer(model: &nldf_model::ExportedModel, kind: BackendKind) -> FrameRenderer {
     let options = BackendOptions {
         batch_size: 4096,
         threads: 2,

@@ -6,10 +6,11 @@
 use crate::util::tiny_scene;
 use nldf_core::audio::neighbourhood;
 use nldf_core::dataset::Split;
-use nldf_export::{WeightType, export_student, read_model};
+use nldf_export::{WeightType, export_student};
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::FrameRenderer;
+use nldf_model::read_model;
 use nldf_train::config::StudentRunConfig;
 use nldf_train::data::TrainData;
 use nldf_train::student::StudentConfig;

@@ -16,7 +16,6 @@ use nldf_core::audio::{Waveform, n_video_frames, write_wav};
 use nldf_core::image::ImageRgb;
 use nldf_core::metrics::psnr;
 use nldf_export::WeightType;
-use nldf_export::read_model;
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::{FrameRenderer, background_at};
@@ -24,6 +23,7 @@ use nldf_infer::ort_library::find_ort_library_in;
 use nldf_infer::poses::{default_track, pose_at};
 use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob, next_frame, paced_wav_stream};
 use nldf_infer::video::{VideoJob, frame_file_name};
+use nldf_model::read_model;
 use nldf_train::student::StudentConfig;
 
 /// The parity bound between any two renderers' frames: 20 dB (10x in RMS error) under the

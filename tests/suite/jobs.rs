@@ -97,7 +97,7 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
         );
     }
     assert_eq!(report.model.as_deref(), Some(out.join(ONNX_FILE).as_path()));
-    nldf_export::read_model(&out.join(ONNX_FILE)).unwrap();
+    nldf_model::read_model(&out.join(ONNX_FILE)).unwrap();
     let models: Vec<&str> = report
         .evaluation
         .models

@@ -6,11 +6,11 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::audio::neighbourhood;
 use nldf_core::metrics::psnr;
-use nldf_export::read_model;
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::FrameRenderer;
 use nldf_infer::poses::default_track;
+use nldf_model::read_model;
 use sha2::{Digest, Sha256};
 
 use crate::util::{runtimes, write_test_wav};
@@ -49,7 +49,7 @@ fn the_shipped_model_matches_its_card_and_renders_finite_frames() {
             entry.key.as_deref().unwrap_or_default(),
             entry.value.as_deref().unwrap_or_default(),
         );
-        if key == nldf_export::contract::keys::BACKGROUND_FILE || value.len() > 200 {
+        if key == nldf_model::contract::keys::BACKGROUND_FILE || value.len() > 200 {
             continue;
         }
         let row = format!("| `{key}` | `{value}` |");

@@ -13,12 +13,11 @@ use nldf_core::frame_audio::FrameAudio;
 use nldf_core::image::ImageRgb;
 use nldf_core::student_config::StudentConfig;
 use nldf_core::upsampler_config::UpsamplerConfig;
-use nldf_export::{
-    WeightType, export_frame_upsampled, export_student_upsampled, read_frame_model, read_model,
-};
+use nldf_export::{WeightType, export_frame_upsampled, export_student_upsampled};
 use nldf_infer::FrameRenderer;
 use nldf_infer::backend::{BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
+use nldf_model::{read_frame_model, read_model};
 use nldf_train::checkpoint::{save_tensors, weights};
 use nldf_train::nn::{init_seeded, new_varmap};
 use nldf_train::upsampler::{Upsampler, render_upsampled, upsampler};
@@ -630,7 +629,7 @@ fn frames_for_upscaling_cast_rays_through_block_centres() {
     let mut spec = spec_for(&cfg);
     spec.intrinsics = camera_at(48, 32);
     let run = write_run_with(&cfg, 95, spec.clone());
-    let model = nldf_export::read_model(&run.export(WeightType::F32)).unwrap();
+    let model = nldf_model::read_model(&run.export(WeightType::F32)).unwrap();
     let options = nldf_infer::backend::BackendOptions {
         batch_size: 256,
         threads: 1,

@@ -17,9 +17,9 @@ use nldf_core::image::ImageRgb;
 use nldf_core::rays::{Rays, head_rays};
 use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
 use nldf_core::synth::{SynthConfig, generate};
-use nldf_export::onnx::{ModelProto, StringStringEntryProto};
 use nldf_export::{WeightType, export_student};
 use nldf_infer::ort_library::find_ort_library;
+use nldf_model::onnx::{ModelProto, StringStringEntryProto};
 use nldf_train::checkpoint::{save_tensors, weights};
 use nldf_train::config::{TeacherConfig, TeacherRunConfig, TeacherTrainConfig};
 use nldf_train::nn::{init_seeded, new_varmap, sorted_vars};
@@ -299,7 +299,7 @@ pub(crate) fn configs() -> Vec<StudentConfig> {
 /// A valid ONNX model (an Identity) with the given metadata.
 pub(crate) fn foreign_model(metadata: Vec<StringStringEntryProto>) -> Vec<u8> {
     use nldf_export::graph::{Dim, GraphBuilder};
-    use nldf_export::onnx::{DataType, OperatorSetIdProto};
+    use nldf_model::onnx::{DataType, OperatorSetIdProto};
     let mut g = GraphBuilder::new(WeightType::F32);
     g.input("x", DataType::Float, &[Dim::Fixed(2)]);
     g.node("Identity", "y", &["x"], vec![]);

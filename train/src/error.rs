@@ -25,6 +25,9 @@ pub enum Error {
     /// Exporting the student failed.
     #[error(transparent)]
     Export(#[from] nldf_export::Error),
+    /// The exported student does not read back as an nldf model.
+    #[error(transparent)]
+    Model(#[from] nldf_model::Error),
 }
 
 /// Result with [`Error`].

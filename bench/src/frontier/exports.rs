@@ -87,7 +87,7 @@ pub(crate) fn open_point(
     size: Option<u32>,
     upscale: u32,
 ) -> Result<OnnxPoint> {
-    let model = nldf_export::read_model(&e.path)?;
+    let model = nldf_model::read_model(&e.path)?;
     // The points take turns frame by frame: a pool left spinning after its call would run
     // beside the next point's.
     let backend = backend_for(

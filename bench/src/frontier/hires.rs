@@ -101,7 +101,7 @@ pub(crate) fn hires_points(
 fn open_at(job: &FrontierJob, exports: &[Export], size: u32) -> Result<Vec<OnnxPoint>> {
     let mut points = Vec::new();
     for e in exports {
-        let own = nldf_export::read_model(&e.path)?.info.spec.intrinsics.width;
+        let own = nldf_model::read_model(&e.path)?.info.spec.intrinsics.width;
         points.push(open_point(
             e,
             BackendKind::Ort,

@@ -7,9 +7,10 @@ use std::time::Instant;
 use nldf_core::audio::{Waveform, read_wav};
 use nldf_core::dataset::{AUDIO_WAV, Frame, Split, VOICE_DIR};
 use nldf_core::image::ImageRgb;
-use nldf_export::{FrameGraphFile, WeightType};
+use nldf_export::WeightType;
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
+use nldf_model::FrameGraphFile;
 use nldf_train::data::TrainData;
 use nldf_train::eval::FrameModel;
 

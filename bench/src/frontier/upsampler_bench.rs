@@ -16,9 +16,10 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
 use nldf_core::stats::median;
-use nldf_export::{FrameGraphFile, WeightType};
+use nldf_export::WeightType;
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
+use nldf_model::FrameGraphFile;
 use nldf_train::bench::Machine;
 use nldf_train::eval::{EvalReport, FrameModel};
 use nldf_train::job::eval::{EvalJob, EvalPlan};
@@ -206,7 +207,7 @@ impl UpsamplerBench {
             });
             let frame = models_dir.join(format!("{}.frame.{p}.onnx", self.upsampler));
             nldf_export::export_frame_upsampled(&student.dir, &up.dir, &frame, w)?;
-            graphs.push((w, nldf_export::read_frame_model(&frame)?));
+            graphs.push((w, nldf_model::read_frame_model(&frame)?));
             let rays = models_dir.join(format!("{}.rays.{p}.onnx", self.upsampler));
             nldf_export::export_student_upsampled(&student.dir, &up.dir, &rays, w)?;
             ray_graphs.push(ray_export(w, rays));

@@ -25,15 +25,15 @@ use std::path::Path;
 
 use nldf_core::audio::FeatureConfig;
 use nldf_core::frame_audio::FrameAudio;
-
-use crate::checkpoint::StudentCheckpoint;
-use crate::contract::{
+use nldf_model::contract::{
     self, FRAME_INPUT_AUDIO, FRAME_INPUT_KEEP, FRAME_INPUT_POSE, FRAME_OUTPUT_IMAGE,
     FRAME_OUTPUT_RAYS, FRAME_OUTPUT_WINDOWS, OUTPUT_RGB,
 };
+use nldf_model::onnx::{DataType, ModelProto};
+
+use crate::checkpoint::StudentCheckpoint;
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
-use crate::onnx::{DataType, ModelProto};
 use crate::student::{ExportReport, model_info, model_proto, student_nodes, write_model};
 use crate::upsampler_graph::{UpsamplerCheckpoint, upsampled_image};
 use nldf_core::camera::Intrinsics;
@@ -239,14 +239,14 @@ fn frame_metadata(
     info: &contract::ModelInfo,
     layout: &FrameAudio,
     factor: usize,
-) -> Vec<crate::onnx::StringStringEntryProto> {
+) -> Vec<nldf_model::onnx::StringStringEntryProto> {
     let mut metadata = info.to_frame_metadata(layout);
     if factor > 1 {
         let at = metadata.len().saturating_sub(1);
         metadata.insert(
             at,
-            crate::onnx::StringStringEntryProto {
-                key: Some(crate::contract::keys::FRAME_UPSAMPLE.to_string()),
+            nldf_model::onnx::StringStringEntryProto {
+                key: Some(nldf_model::contract::keys::FRAME_UPSAMPLE.to_string()),
                 value: Some(factor.to_string()),
             },
         );

@@ -3,10 +3,10 @@
 
 use nldf_core::beam::{BeamAnchor, MIN_DIRECTION_LENGTH};
 use nldf_core::encoding::MAX_COORD;
+use nldf_model::onnx::DataType;
 
 use crate::checkpoint::StudentCheckpoint;
 use crate::graph::{GraphBuilder, attr_int};
-use crate::onnx::DataType;
 
 /// Beam encoding: points `x_k = o + t_k d` at the K evenly spaced `t_k` of
 /// `BeamSpec::t_value`, flattened to `[x_0, y_0, z_0, x_1, ...]`, clamped to

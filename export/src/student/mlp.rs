@@ -1,8 +1,9 @@
 //! The student's residual MLP on `[beam | code]` and the segment sum (paper Eq. 7).
 
+use nldf_model::contract::{OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS};
+
 use super::ops::{linear, ray_linear};
 use crate::checkpoint::StudentCheckpoint;
-use crate::contract::{OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS};
 use crate::error::{Error, Result};
 use crate::graph::{GraphBuilder, WeightType, attr_int};
 use nldf_core::student_config::StudentConfig;

@@ -7,16 +7,16 @@ mod beam;
 mod mlp;
 mod ops;
 
-use std::path::{Path, PathBuf};
-
-use crate::checkpoint::StudentCheckpoint;
-use crate::contract::{
+use nldf_model::contract::{
     self, AudioInput, GRAPH_NAME, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_DIRECTIONS, INPUT_ORIGINS,
     ModelInfo, NetworkShape, OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS, RAY_AXIS,
 };
+use nldf_model::onnx::{DataType, GraphProto, ModelProto, OperatorSetIdProto};
+use std::path::{Path, PathBuf};
+
+use crate::checkpoint::StudentCheckpoint;
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, Tap, WeightType};
-use crate::onnx::{DataType, GraphProto, ModelProto, OperatorSetIdProto};
 use audio::audio_code;
 use beam::encode_beams;
 use mlp::residual_mlp;
@@ -261,7 +261,7 @@ pub(crate) fn ray_inputs(
 pub(crate) fn model_proto(
     graph: GraphProto,
     doc: String,
-    metadata: Vec<crate::onnx::StringStringEntryProto>,
+    metadata: Vec<nldf_model::onnx::StringStringEntryProto>,
 ) -> ModelProto {
     ModelProto {
         ir_version: Some(contract::IR_VERSION),

@@ -476,7 +476,7 @@ impl DemoJob {
         let report =
             nldf_export::export_student(&student_dir, &onnx, nldf_export::WeightType::F32)?;
         // Read it back as every loader will, so that a bad file never leaves the demo.
-        nldf_export::read_model(&onnx)?;
+        nldf_model::read_model(&onnx)?;
         on_event(&JobEvent::Note(format!(
             "student at step {}: {} bytes",
             report.info.step, report.bytes

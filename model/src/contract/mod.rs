@@ -38,13 +38,19 @@
 //! [`keys::WEIGHTS_CHECKSUM`] and [`keys::BACKGROUND_PNG`] (base64 of an 8-bit RGB PNG the
 //! size of the image), which are plain strings. Rays that miss the head's bounds (within
 //! `[near, far]`) take the background pixel instead of the network's colour.
+//!
+//! # Int8
+//! An int8 graph's quantized weights lie within [`INT8_WEIGHT_MAX`] (7 bits), so that no
+//! runtime's u8 x s8 kernel saturates a pair of products ([`int8_pair_sum_max`]).
 
+mod int8;
 /// `metadata_props` keys.
 pub mod keys;
 mod metadata;
 mod model_info;
 mod names;
 
+pub use int8::{INT8_WEIGHT_MAX, int8_pair_sum_max};
 pub use metadata::MetadataError;
 pub use model_info::{
     AudioInput, ModelInfo, NetworkShape, UpsampleInfo, front_end, model_input_names,
