@@ -1,7 +1,13 @@
-//! Layering: the module graph of every crate (core, kernels, prepare, export, train, infer, bench and
-//! the command line) has no cycle.
+//! Layering: the crates depend downward, and the module graph of every crate (core, kernels,
+//! prepare, model, export, train, infer, bench and the command line) has no cycle.
 //!
-//! Each `*.rs` file under a crate's `src/` is a module (`mod.rs` is its folder's module,
+//! Crates: what each crate reaches through its dependencies, direct or not, is read from
+//! `Cargo.lock`: of nldf's crates only those below it, and none of the ML frameworks it must
+//! stay clear of (candle, tract, onnxruntime). The lock lists a member's dev-dependencies
+//! with its others, so a crate's tests keep its layering too, and a crate that uses another
+//! also answers for that one's dev-dependencies.
+//!
+//! Modules: each `*.rs` file under a crate's `src/` is a module (`mod.rs` is its folder's module,
 //! `lib.rs` the crate root). A module depends on another that it names in a path:
 //! `crate::a::b`, `super::b` (from the file, or from the inline module it is written in),
 //! `self::b`, or a child module by its bare name (`b::f()` beside `mod b;`), with `use`
@@ -14,16 +20,93 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The crates checked: their source folders, relative to the workspace root.
-const SOURCE_DIRS: [&str; 8] = [
+const SOURCE_DIRS: [&str; 9] = [
     "core/src",
     "kernels/src",
     "prepare/src",
+    "model/src",
     "export/src",
     "train/src",
     "infer/src",
     "bench/src",
     "src",
 ];
+
+/// The crates whose dependencies are checked: each with the nldf crates it may reach and
+/// the frameworks it must not (a framework is a package of that name or starting with it
+/// and `-`: `tract` is every `tract-*`).
+const CRATE_RULES: [(&str, &[&str], &[&str]); 4] = [
+    ("nldf-core", &[], &["candle", "tract", "ort"]),
+    ("nldf-model", &["nldf-core"], &["candle", "tract", "ort"]),
+    (
+        "nldf-export",
+        &["nldf-core", "nldf-model"],
+        &["candle", "tract", "ort"],
+    ),
+    (
+        "nldf-infer",
+        &["nldf-core", "nldf-model", "nldf-export"],
+        &["candle"],
+    ),
+];
+
+/// Each package of a `Cargo.lock` with the names of the packages it depends on (the
+/// versions of one name merged).
+fn lock_dependencies(lock: &str) -> BTreeMap<String, BTreeSet<String>> {
+    let mut deps: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for package in lock.split("[[package]]").skip(1) {
+        let name = package
+            .lines()
+            .find_map(|l| l.strip_prefix("name = "))
+            .unwrap()
+            .trim_matches('"');
+        let list = package
+            .split_once("dependencies = [")
+            .map_or("", |(_, rest)| rest.split(']').next().unwrap_or(""));
+        let entry = deps.entry(name.to_string()).or_default();
+        // An entry is `"name"`, or `"name version"` where two versions are locked.
+        for dep in list.split(',') {
+            if let Some(n) = dep.trim().trim_matches('"').split_whitespace().next() {
+                entry.insert(n.to_string());
+            }
+        }
+    }
+    deps
+}
+
+/// Every package that `from` reaches through its dependencies.
+fn reachable(deps: &BTreeMap<String, BTreeSet<String>>, from: &str) -> BTreeSet<String> {
+    let mut seen = BTreeSet::new();
+    let mut todo = vec![from.to_string()];
+    while let Some(p) = todo.pop() {
+        for d in deps.get(&p).into_iter().flatten() {
+            if seen.insert(d.clone()) {
+                todo.push(d.clone());
+            }
+        }
+    }
+    seen
+}
+
+/// The dependencies that break `rules` (see [`CRATE_RULES`]) in the `Cargo.lock` text
+/// `lock`, as `crate -> package`.
+fn forbidden_dependencies(lock: &str, rules: &[(&str, &[&str], &[&str])]) -> Vec<String> {
+    let deps = lock_dependencies(lock);
+    let mut found = Vec::new();
+    for &(krate, allowed, banned) in rules {
+        assert!(deps.contains_key(krate), "{krate}: not in Cargo.lock");
+        for dep in reachable(&deps, krate) {
+            let nldf = dep.starts_with("nldf") && !allowed.contains(&dep.as_str());
+            let framework = banned
+                .iter()
+                .any(|b| dep == *b || dep.starts_with(&format!("{b}-")));
+            if nldf || framework {
+                found.push(format!("{krate} -> {dep}"));
+            }
+        }
+    }
+    found
+}
 
 /// Every `*.rs` file under `dir` with its text, by its path relative to `dir`.
 fn rust_files(dir: &Path) -> BTreeMap<PathBuf, String> {
@@ -356,6 +439,66 @@ fn cycles_of(files: &[(&str, &str)]) -> Vec<String> {
         .map(|&(p, s)| (PathBuf::from(p), s.to_string()))
         .collect();
     cycles(&module_graph(&files))
+}
+
+#[test]
+fn crates_depend_only_downward() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let lock = std::fs::read_to_string(root.join("Cargo.lock")).unwrap();
+    let found = forbidden_dependencies(&lock, &CRATE_RULES);
+    assert!(
+        found.is_empty(),
+        "crates that reach what they must not:\n{}",
+        found.join("\n")
+    );
+}
+
+#[test]
+fn a_planted_dependency_is_named() {
+    // nldf-model reaches candle-core through `tool` and tract-onnx as a dev-dependency;
+    // nldf-core is allowed, `tractor` is not tract.
+    let lock = r#"
+version = 4
+
+[[package]]
+name = "nldf-model"
+version = "0.1.0"
+dependencies = [
+ "nldf-core",
+ "tool 1.0.0",
+ "tract-onnx",
+ "tractor",
+]
+
+[[package]]
+name = "tool"
+version = "1.0.0"
+dependencies = [
+ "candle-core",
+]
+
+[[package]]
+name = "nldf-core"
+version = "0.1.0"
+
+[[package]]
+name = "candle-core"
+version = "0.11.0"
+
+[[package]]
+name = "tract-onnx"
+version = "0.23.0"
+
+[[package]]
+name = "tractor"
+version = "0.1.0"
+"#;
+    let rules: [(&str, &[&str], &[&str]); 1] =
+        [("nldf-model", &["nldf-core"], &["candle", "tract", "ort"])];
+    assert_eq!(
+        forbidden_dependencies(lock, &rules),
+        ["nldf-model -> candle-core", "nldf-model -> tract-onnx"]
+    );
 }
 
 #[test]
