@@ -2,7 +2,7 @@
 """Render one frame of an exported nldf model with numpy and onnxruntime alone.
 
 Everything besides the graph comes from the model's own metadata (the keys of
-export/src/contract.rs): image size, intrinsics, near/far, the head's bounds, the default
+model/src/contract/keys.rs): image size, intrinsics, near/far, the head's bounds, the default
 camera pose, the audio input's shape and the background image. Rays go through every pixel as
 AD-NeRF's get_rays makes them; rays that miss the head's bounds within [near, far] take the
 background, the others the network's colour.

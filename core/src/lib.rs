@@ -7,8 +7,8 @@
 //! rules training and rendering share (the student's shape in [`student_config`], the rays that
 //! meet the head in [`rays::head_rays`], a frame's audio neighbourhood in
 //! [`audio::neighbourhood`], the run folder's files in [`run_files`]) and a procedural talking head whose ground truth is
-//! known exactly ([`synth`]). `nldf-train` (candle), `nldf-export` (prost) and `nldf-infer`
-//! (tract / onnxruntime) build on it; it never depends on them.
+//! known exactly ([`synth`]). `nldf-train` (candle), `nldf-model` and `nldf-export` (prost)
+//! and `nldf-infer` (tract / onnxruntime) build on it; it never depends on them.
 
 pub mod audio;
 pub mod audio_stream;
