@@ -255,16 +255,7 @@ fn prepare_into(
         name: "parsing",
         total: Some(kept.len()),
     });
-    let rects = write_parsing(
-        &faces,
-        &kept,
-        &ori,
-        &parsing_dir,
-        bc.as_raw(),
-        &job.parsing,
-        size,
-        events,
-    )?;
+    let rects = write_parsing(&faces, &kept, &ori, &parsing_dir, bc.as_raw(), job, events)?;
     lap("parsing", &mut seconds);
 
     events(Event::Stage {
@@ -488,10 +479,10 @@ fn write_parsing(
     ori: &Path,
     parsing_dir: &Path,
     bc: &[u8],
-    parsing: &ParsingConfig,
-    size: u32,
+    job: &PrepareJob,
     events: &mut impl FnMut(Event),
 ) -> Result<Vec<Option<[u32; 4]>>> {
+    let (parsing, size) = (&job.parsing, job.size);
     let mut rects = Vec::with_capacity(kept.len());
     for (chunk_no, chunk) in kept.chunks(32).enumerate() {
         let part: Vec<Option<[u32; 4]>> = chunk
