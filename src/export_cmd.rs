@@ -8,8 +8,8 @@ use nldf_export::{
     ExportReport, WeightType, export_frame, export_frame_int8, export_frame_upsampled_int8,
     export_student, export_student_int8, export_student_upsampled_int8,
 };
-use nldf_infer::quantize::calibrated_ranges;
 use nldf_model::{read_frame_model, read_model};
+use nldf_pipeline::quantize::calibrated_ranges;
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {
@@ -94,7 +94,7 @@ fn export(
 ) -> Result<ExportReport> {
     Ok(match (&args.data, weights) {
         (Some(data), WeightType::Int8) => {
-            let export = || -> nldf_infer::Result<ExportReport> {
+            let export = || -> nldf_pipeline::Result<ExportReport> {
                 let ranges = calibrated_ranges(student, data, args.calibration_frames)?;
                 let up = args.upsampler.as_ref().map(|name| args.run.join(name));
                 Ok(match (&up, args.frame) {

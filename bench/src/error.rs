@@ -19,6 +19,9 @@ pub enum Error {
     /// Loading a model in its runtime or rendering with it failed.
     #[error(transparent)]
     Infer(#[from] nldf_infer::Error),
+    /// Calibrating and writing an int8 model failed.
+    #[error(transparent)]
+    Pipeline(#[from] nldf_pipeline::Error),
     /// A report could not be serialised.
     #[error(transparent)]
     Json(#[from] serde_json::Error),

@@ -12,9 +12,6 @@ pub enum Error {
     /// The model file is not an nldf model (corrupt, truncated or foreign).
     #[error(transparent)]
     Model(#[from] nldf_model::Error),
-    /// Writing an int8 model failed (`nldf export --int8`, [`crate::quantize`]).
-    #[error(transparent)]
-    Export(#[from] nldf_export::Error),
     /// The onnxruntime library cannot be found or loaded.
     #[error("onnxruntime: {0}")]
     OrtLibrary(String),

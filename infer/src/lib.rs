@@ -1,8 +1,8 @@
 //! nldf-infer: renders talking-head frames and video from an exported ONNX model on the CPU,
 //! with tract (default, pure Rust) or onnxruntime (the `ort` crate, loaded at run time).
 //! Builds on nldf-core for rays, bounds and audio features and on nldf-model for the ONNX
-//! contract and the checked model loaders; it needs nldf-export only to write int8 models
-//! ([`quantize`]). Never depends on candle.
+//! contract and the checked model loaders. Never depends on candle, nor on nldf-export:
+//! writing int8 models, which runs a model to calibrate it, is nldf-pipeline's job.
 //!
 //! [`runtime`] is the network behind one trait ([`tract_backend`], [`ort_backend`] with the
 //! `ort` feature, the library found by [`ort_library`]), and [`backend`] opens a model in
@@ -26,7 +26,6 @@ pub mod ort_backend;
 pub mod ort_library;
 pub mod output;
 pub mod poses;
-pub mod quantize;
 pub mod runtime;
 pub mod still;
 pub mod stream;

@@ -15,8 +15,8 @@ use nldf_core::audio::neighbourhood;
 use nldf_core::rays::Rays;
 use nldf_export::{WeightType, export_student_int8};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
-use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
 use nldf_model::read_model;
+use nldf_pipeline::quantize::{CalibrationFrame, activation_ranges};
 use nldf_train::student::StudentConfig;
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.
@@ -306,7 +306,7 @@ fn int8_stays_near_fp32_on_a_trained_students_val_and_novel_frames() {
     let f32_path = dir.path().join("f32.onnx");
     let int8_path = dir.path().join("int8.onnx");
     nldf_export::export_student(dir.path(), &f32_path, WeightType::F32).unwrap();
-    nldf_infer::quantize::export_int8(dir.path(), scene, 4, &int8_path).unwrap();
+    nldf_pipeline::quantize::export_int8(dir.path(), scene, 4, &int8_path).unwrap();
     let renderer = |path: &Path| {
         let model = read_model(path).unwrap();
         let att = model.info.audio.att_frames;

@@ -405,7 +405,7 @@ fn python_example_renders_frames_with_numpy_and_onnxruntime_alone() {
 #[test]
 fn fp16_and_int8_frame_graphs_match_their_ray_graphs() {
     use nldf_export::export_frame_int8;
-    use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
+    use nldf_pipeline::quantize::{CalibrationFrame, activation_ranges};
     let cfg = StudentConfig::realtime();
     let mut spec = spec_for(&cfg);
     spec.intrinsics = camera_at(64, 64);

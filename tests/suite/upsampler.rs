@@ -659,7 +659,7 @@ fn frames_for_upscaling_cast_rays_through_block_centres() {
 /// the two runtimes within a relative RMS of 4e-3 (and 5e-2 at most) of each other.
 #[test]
 fn an_int8_upsampled_ray_graph_stays_near_the_f32_one() {
-    use nldf_infer::quantize::{CalibrationFrame, activation_ranges};
+    use nldf_pipeline::quantize::{CalibrationFrame, activation_ranges};
     let mut cfg = StudentConfig::realtime();
     cfg.beam.anchor = Some(nldf_core::beam::BeamAnchor {
         centre: [0.02, 0.05, -0.01],

@@ -45,7 +45,7 @@ pub(crate) fn export_all(
             let path = dir.join(format!("{name}.{}.onnx", precision_name(w)));
             let report = match w {
                 WeightType::Int8 => {
-                    nldf_infer::quantize::export_int8(&s.dir, data, calibration_frames, &path)
+                    nldf_pipeline::quantize::export_int8(&s.dir, data, calibration_frames, &path)
                         .map(|_| ())
                         .map_err(Error::from)
                 }

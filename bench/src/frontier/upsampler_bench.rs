@@ -217,7 +217,7 @@ impl UpsamplerBench {
         }
         // The upsampled ray graph with the student's products in int8, calibrated as the
         // frontier calibrates (16 training frames).
-        let ranges = nldf_infer::quantize::calibrated_ranges(&student.dir, &self.data, 16)?;
+        let ranges = nldf_pipeline::quantize::calibrated_ranges(&student.dir, &self.data, 16)?;
         let rays = models_dir.join(format!("{}.rays.int8.onnx", self.upsampler));
         nldf_export::export_student_upsampled_int8(&student.dir, &up.dir, &rays, &ranges)?;
         ray_graphs.push(ray_export(WeightType::Int8, rays));

@@ -1,10 +1,11 @@
 //! Quantization: `nldf export --int8` (for the ray graph and the frame graph) is written
-//! here, beside the runtimes, because calibrating it means running the model. The
-//! student's f32 graph with the input of every int8 product as an extra output
+//! here, above both export and the runtimes, because calibrating it means running the
+//! model. The student's f32 graph with the input of every int8 product as an extra output
 //! ([`nldf_export::calibration_model`]) runs in tract on the rays of training frames, each
 //! with its own recorded audio, and the range of every such input becomes the fixed uint8
-//! step and zero point of its product ([`nldf_export::export_student_int8`]). Fixed ranges keep a ray's colour independent
-//! of the rays that share its batch, which ranges measured per call would not.
+//! step and zero point of its product ([`nldf_export::export_student_int8`]). Fixed ranges
+//! keep a ray's colour independent of the rays that share its batch, which ranges measured
+//! per call would not.
 
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
@@ -21,6 +22,11 @@ use tract_onnx::prelude::*;
 use crate::error::{Error, Result};
 
 const NAME: &str = "tract (calibration)";
+
+/// A failure of tract while calibrating, as nldf-infer reports a runtime's failure.
+fn backend(e: impl std::fmt::Display) -> Error {
+    nldf_infer::Error::backend(NAME, e).into()
+}
 
 /// Rays per calibration call.
 const CALIBRATION_BATCH: usize = 4096;
@@ -99,11 +105,11 @@ fn ranges_of(
 ) -> Result<ActivationRanges> {
     let mut parsed = tract_onnx::onnx()
         .model_for_read(&mut &bytes[..])
-        .map_err(|e| Error::backend(NAME, e))?;
+        .map_err(backend)?;
     parsed
         .set_input_names(input_names(info.opacity))
         .and_then(|()| parsed.select_outputs_by_name(taps.iter().map(|t| t.tensor.as_str())))
-        .map_err(|e| Error::backend(NAME, e))?;
+        .map_err(backend)?;
     let mut plans: HashMap<usize, std::sync::Arc<TypedRunnableModel>> = HashMap::new();
     let mut ranges = ActivationRanges::default();
     let audio_shape = info.audio.shape();
@@ -132,7 +138,7 @@ fn ranges_of(
                         })
                         .and_then(|m| m.into_optimized())
                         .and_then(|m| m.into_runnable())
-                        .map_err(|e| Error::backend(NAME, e))?,
+                        .map_err(backend)?,
                 ),
             };
             let inputs = (|| -> TractResult<TVec<TValue>> {
@@ -147,16 +153,14 @@ fn ranges_of(
                 }
                 Ok(inputs)
             })()
-            .map_err(|e| Error::backend(NAME, e))?;
+            .map_err(backend)?;
             let outputs =
                 tract_linalg::multithread::multithread_tract_scope(executor.clone(), || {
                     plan.run(inputs)
                 })
-                .map_err(|e| Error::backend(NAME, e))?;
+                .map_err(backend)?;
             for (tap, out) in taps.iter().zip(&outputs) {
-                let view = out
-                    .to_plain_array_view::<f32>()
-                    .map_err(|e| Error::backend(NAME, e))?;
+                let view = out.to_plain_array_view::<f32>().map_err(backend)?;
                 let values: Vec<f32> = view.iter().copied().collect();
                 ranges.observe(&tap.product, &values);
             }
