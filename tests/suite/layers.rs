@@ -1,5 +1,5 @@
 //! Layering: the crates depend downward, and the module graph of every crate (core, kernels,
-//! prepare, model, export, train, infer, bench and the command line) has no cycle.
+//! prepare, model, export, train, infer, pipeline, bench and the command line) has no cycle.
 //!
 //! Crates: what each crate reaches through its dependencies, direct or not, is read from
 //! `Cargo.lock`: of nldf's crates only those below it, and none of the ML frameworks it must
@@ -20,7 +20,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The crates checked: their source folders, relative to the workspace root.
-const SOURCE_DIRS: [&str; 9] = [
+const SOURCE_DIRS: [&str; 10] = [
     "core/src",
     "kernels/src",
     "prepare/src",
@@ -28,6 +28,7 @@ const SOURCE_DIRS: [&str; 9] = [
     "export/src",
     "train/src",
     "infer/src",
+    "pipeline/src",
     "bench/src",
     "src",
 ];
@@ -35,7 +36,7 @@ const SOURCE_DIRS: [&str; 9] = [
 /// The crates whose dependencies are checked: each with the nldf crates it may reach and
 /// the frameworks it must not (a framework is a package of that name or starting with it
 /// and `-`: `tract` is every `tract-*`).
-const CRATE_RULES: [(&str, &[&str], &[&str]); 4] = [
+const CRATE_RULES: [(&str, &[&str], &[&str]); 5] = [
     ("nldf-core", &[], &["candle", "tract", "ort"]),
     ("nldf-model", &["nldf-core"], &["candle", "tract", "ort"]),
     (
@@ -43,10 +44,11 @@ const CRATE_RULES: [(&str, &[&str], &[&str]); 4] = [
         &["nldf-core", "nldf-model"],
         &["candle", "tract", "ort"],
     ),
+    ("nldf-infer", &["nldf-core", "nldf-model"], &["candle"]),
     (
-        "nldf-infer",
-        &["nldf-core", "nldf-model", "nldf-export"],
-        &["candle"],
+        "nldf-pipeline",
+        &["nldf-core", "nldf-model", "nldf-export", "nldf-infer"],
+        &[],
     ),
 ];
 
