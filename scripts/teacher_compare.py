@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 
-# The demo's teacher recipe (train/src/job/demo.rs): 1100 steps of 1024 rays from 4 frames,
+# The demo's teacher recipe (train/src/job/recipe.rs): 1100 steps of 1024 rays from 4 frames,
 # the learning rate 1e-3 held for 60 % of them, then tenfold down.
 RECIPE_TRAIN = {
     "seed": 0,

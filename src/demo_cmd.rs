@@ -14,10 +14,10 @@ use nldf_core::run_files::{CURVE_FILE, STUDENT_DIR, TEACHER_DIR};
 use nldf_core::synth::SynthConfig;
 use nldf_infer::backend::{BackendKind, BackendOptions};
 use nldf_infer::video::{VideoJob, VideoReport};
+use nldf_pipeline::demo::{DemoJob, DemoReport};
 use nldf_train::job::JobEvent;
-use nldf_train::job::demo::{
+use nldf_train::job::recipe::{
     DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
-    DemoJob, DemoReport,
 };
 
 use crate::progress::{EventPrinter, progress_bar, stop_flag};

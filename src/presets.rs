@@ -39,8 +39,8 @@ pub enum TeacherRecipe {
 
 impl TeacherRecipe {
     /// The library's name for it.
-    pub fn kind(self) -> nldf_train::job::demo::TeacherKind {
-        use nldf_train::job::demo::TeacherKind;
+    pub fn kind(self) -> nldf_train::job::recipe::TeacherKind {
+        use nldf_train::job::recipe::TeacherKind;
         match self {
             TeacherRecipe::Mlp => TeacherKind::Mlp,
             TeacherRecipe::Grid => TeacherKind::Grid,

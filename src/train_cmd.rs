@@ -207,9 +207,9 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
              for the whole recipe"
         );
     };
-    let defaults = nldf_train::job::demo::DemoJob::defaults(run);
+    let defaults = nldf_pipeline::demo::DemoJob::defaults(run);
     let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
-    let job = nldf_train::job::demo::DemoJob {
+    let job = nldf_pipeline::demo::DemoJob {
         data: Some(data),
         teacher,
         teacher_lr,
@@ -235,8 +235,8 @@ impl StudentArgs {
         let source = match &self.config {
             Some(path) => StudentSource::File(path.clone()),
             None if !plain => {
-                let defaults = nldf_train::job::demo::DemoJob::defaults(self.run.clone());
-                let cfg = nldf_train::job::demo::student_recipe(
+                let defaults = nldf_pipeline::demo::DemoJob::defaults(self.run.clone());
+                let cfg = nldf_train::job::recipe::student_recipe(
                     &defaults.student,
                     true,
                     defaults.pseudo,
@@ -420,8 +420,8 @@ mod tests {
     /// `nldf train --data` trains; a preset or a switch asks for the plain settings.
     #[test]
     fn a_student_without_flags_is_the_recipes() {
-        let defaults = nldf_train::job::demo::DemoJob::defaults("r".into());
-        let recipe = nldf_train::job::demo::student_recipe(
+        let defaults = nldf_pipeline::demo::DemoJob::defaults("r".into());
+        let recipe = nldf_train::job::recipe::student_recipe(
             &defaults.student,
             true,
             defaults.pseudo,

@@ -318,7 +318,7 @@ fn a_resumed_grid_teacher_continues_bit_for_bit() {
 #[test]
 fn the_teachers_curves_hold_each_teacher_measured_over_its_seconds() {
     use nldf_train::job::curves::CurveJob;
-    use nldf_train::job::demo::TeacherKind;
+    use nldf_train::job::recipe::TeacherKind;
     let out = tempfile::tempdir().unwrap();
     let job = CurveJob {
         data: tiny_scene().to_path_buf(),

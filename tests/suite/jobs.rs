@@ -10,10 +10,10 @@ use nldf_core::run_files::{
     TEACHER_FILES,
 };
 use nldf_core::synth::SynthConfig;
+use nldf_pipeline::demo::DemoJob;
 use nldf_train::config::TeacherConfig;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
-use nldf_train::job::demo::DemoJob;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::job::posed::PosedJob;
 use nldf_train::job::student::{StudentJob, StudentSource};
@@ -325,7 +325,7 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
     });
     let job = DemoJob {
         teacher,
-        teacher_lr: nldf_train::job::demo::DEMO_GRID_TEACHER_LR,
+        teacher_lr: nldf_train::job::recipe::DEMO_GRID_TEACHER_LR,
         ..tiny_demo(&out)
     };
     let report = job
@@ -336,7 +336,7 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
     let grid = teacher.cfg.model.grid.as_ref().expect("a grid teacher");
     assert_eq!(
         teacher.cfg.train.lr,
-        nldf_train::job::demo::DEMO_GRID_TEACHER_LR
+        nldf_train::job::recipe::DEMO_GRID_TEACHER_LR
     );
     assert!(grid.hi.iter().zip(&grid.lo).all(|(h, l)| h > l));
     let described: Vec<&str> = report

@@ -424,8 +424,8 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
     };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let defaults = nldf_train::job::demo::DemoJob::defaults(out.clone());
-    let demo = nldf_train::job::demo::DemoJob {
+    let defaults = nldf_pipeline::demo::DemoJob::defaults(out.clone());
+    let demo = nldf_pipeline::demo::DemoJob {
         scene: nldf_core::synth::SynthConfig {
             seconds: 2.0,
             size: 32,

@@ -22,12 +22,6 @@ pub enum Error {
     /// Another error, with what was being done when it happened.
     #[error("{what}: {source}")]
     Context { what: String, source: Box<Error> },
-    /// Exporting the student failed.
-    #[error(transparent)]
-    Export(#[from] nldf_export::Error),
-    /// The exported student does not read back as an nldf model.
-    #[error(transparent)]
-    Model(#[from] nldf_model::Error),
 }
 
 /// Result with [`Error`].

@@ -1,7 +1,9 @@
 //! nldf-train: training with candle. The audio encoder (AD-NeRF's AudioNet and AudioAttNet),
 //! the audio-conditioned NeRF teacher, the NLDF light-segment ResMLP student, their losses,
 //! the active beam pool and the trainers, with safetensors checkpoints and their configs.
-//! Builds on nldf-core (rays, beams, data); nldf-export reads what it writes.
+//! Builds on nldf-core (rays, beams, data) and nldf-kernels; nldf-export reads what it
+//! writes, and nldf-pipeline's demo joins its jobs to the export. It never depends on
+//! nldf-export or nldf-infer.
 //!
 //! The teacher follows nerfstudio's split: [`sampler`] (where rays are sampled), [`field`]
 //! (the network), [`render`] (compositing), joined by [`teacher`] and trained by

@@ -11,7 +11,7 @@ use serde::Serialize;
 use crate::bench::Machine;
 use crate::config::{TeacherRunConfig, TeacherTrainConfig};
 use crate::error::{Error, Result};
-use crate::job::demo::TeacherKind;
+use crate::job::recipe::TeacherKind;
 use crate::job::{JobEvent, OnEvent, load_data};
 use crate::plot::{Series, palette, plot_xy};
 use crate::teacher_trainer::TeacherRun;

@@ -1,14 +1,14 @@
 //! Training jobs: what a user asks for (train a teacher, distil a student, evaluate a run,
-//! run the ablation, the whole demo), checked and loaded into a plan before any work
-//! starts, then run with progress events, as nldf-infer's `VideoJob -> VideoPlan` is. The
-//! command line only turns flags into jobs and events into progress bars; the tests run
-//! the same jobs end to end.
+//! run the ablation), checked and loaded into a plan before any work starts, then run with
+//! progress events, as nldf-infer's `VideoJob -> VideoPlan` is. The command line only turns
+//! flags into jobs and events into progress bars; the tests run the same jobs end to end.
+//! The whole demo, which also exports, is nldf-pipeline's job; its recipe is [`recipe`].
 
 pub mod ablation;
 pub mod curves;
-pub mod demo;
 pub mod eval;
 pub mod posed;
+pub mod recipe;
 pub mod student;
 pub mod teacher;
 

@@ -12,15 +12,20 @@ use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{ONNX_FILE, STUDENT_DIR, TEACHER_DIR, has_checkpoint};
 use nldf_core::synth::{self, SynthConfig};
 
-use crate::config::{StudentRunConfig, TeacherConfig};
+use nldf_train::config::TeacherConfig;
+use nldf_train::eval::Evaluation;
+use nldf_train::job::eval::EvalJob;
+use nldf_train::job::recipe::{
+    DEMO_HOLD, DEMO_PSEUDO, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
+    DEMO_TEACHER_ITERS, DEMO_TEACHER_LR, student_recipe,
+};
+use nldf_train::job::student::{PseudoSettings, StudentJob, StudentSource};
+use nldf_train::job::teacher::{TeacherJob, TeacherSource};
+use nldf_train::job::{JobEvent, OnEvent};
+use nldf_train::student::StudentConfig;
+use nldf_train::timing::{TIMING_FILE, Timing};
+
 use crate::error::{Error, Result};
-use crate::eval::Evaluation;
-use crate::job::eval::EvalJob;
-use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
-use crate::job::teacher::{TeacherJob, TeacherSource};
-use crate::job::{JobEvent, OnEvent};
-use crate::student::StudentConfig;
-use crate::timing::{TIMING_FILE, Timing};
 
 /// Where the demo keeps its own parts of the breakdown (scene, export, evaluation).
 const DEMO_TIMING_DIR: &str = "eval";
@@ -75,134 +80,6 @@ pub struct DemoReport {
     pub splits: Vec<(Split, Evaluation)>,
 }
 
-/// The demo's teacher steps.
-pub const DEMO_TEACHER_ITERS: usize = 1100;
-
-/// The MLP teacher's learning rate before it decays.
-pub const DEMO_TEACHER_LR: f64 = 1e-3;
-
-/// The grid teacher's steps: about as many as fit in the MLP teacher's minutes on one
-/// machine (2 vCPU AMD EPYC: 1100 MLP steps took 88.4 s; the grid teacher took 2447 and
-/// 2513 steps in as long, on the tuning scene, docs/grid.md).
-pub const DEMO_GRID_TEACHER_ITERS: usize = 2400;
-
-/// The grid teacher's learning rate before it decays (its grid learns at
-/// `GridConfig::lr_scale` times this), chosen on the tuning scene (docs/grid.md).
-pub const DEMO_GRID_TEACHER_LR: f64 = 5e-3;
-
-/// Which teacher a recipe trains.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum TeacherKind {
-    /// AD-NeRF's MLP on frequency-encoded points (6 x 128).
-    #[default]
-    Mlp,
-    /// A multiresolution hash grid under a 2 x 64 network.
-    Grid,
-}
-
-impl TeacherKind {
-    /// The network, steps and learning rate of this teacher in the recipe.
-    pub fn recipe(self) -> (TeacherConfig, usize, f64) {
-        match self {
-            TeacherKind::Mlp => (TeacherConfig::small(), DEMO_TEACHER_ITERS, DEMO_TEACHER_LR),
-            TeacherKind::Grid => (
-                TeacherConfig::grid(),
-                DEMO_GRID_TEACHER_ITERS,
-                DEMO_GRID_TEACHER_LR,
-            ),
-        }
-    }
-}
-
-/// The demo's cap on the teacher in minutes.
-pub const DEMO_TEACHER_CAP_MINUTES: f64 = 7.0;
-
-/// The demo's student steps.
-pub const DEMO_STUDENT_ITERS: usize = 4500;
-
-/// The demo's cap on the student in minutes.
-pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
-
-/// The pixels-only student's steps (`nldf demo --pixels-only`, the comparison): 4096 rays
-/// a step, as many as fit in the distilled recipe's measured teacher and student minutes
-/// together on one machine, so that it is given the same total time (docs/demo.md, "Against
-/// the pixels-only student", has the measurement).
-pub const DEMO_PIXELS_ITERS: usize = 5300;
-
-/// The demo's pseudo views: how many, how far (a factor of the recorded yaw and pitch
-/// range), how many hit pixels the teacher renders in each.
-pub const DEMO_PSEUDO: PseudoSettings = PseudoSettings {
-    frames: Some(600),
-    pose_range: Some(2.0),
-    rays: Some(1024),
-};
-
-/// Share of a distilled demo student's batch frames drawn from the pseudo views.
-pub const DEMO_PSEUDO_FRACTION: f32 = 0.75;
-
-/// Rays per demo student step: half the paper's 4096, for twice the steps in the same
-/// minutes.
-pub const DEMO_STUDENT_BATCH: usize = 2048;
-
-/// Hit pixels of each recorded frame a demo student learns from (and the teacher renders
-/// targets for).
-pub const DEMO_RECORDED_RAYS: usize = 4096;
-
-/// Share of a demo student's rays drawn from the mouth, and a mouth ray's weight in its
-/// loss.
-pub const DEMO_MOUTH: (f32, f32) = (0.2, 2.0);
-
-/// A distilled demo student's learning rate before it decays: R2L's. Twice that scored
-/// higher on the tuning scene and lower on a test scene, within the seeds' spread; how the
-/// choice was made, and its figures, are in docs/tuning.md.
-pub const DEMO_STUDENT_LR: f64 = 5e-4;
-
-/// A distilled demo student's audio encoder learns at this multiple of its rate: 0 keeps
-/// the teacher's encoder as it is. Fine-tuned, it let the same recipe end far apart on the
-/// student's seed alone; docs/tuning.md has the figures, and says that this choice was made
-/// on the test scenes.
-pub const DEMO_AUDIO_LR_SCALE: f64 = 0.0;
-
-/// Share of each demo stage's steps at the full learning rate before it decays tenfold
-/// over the rest.
-pub const DEMO_HOLD: f64 = 0.6;
-
-/// The recipe's student run for `iters` steps: `model` distilled from the teacher with
-/// `pseudo` views (the demo's settings: [`DEMO_PSEUDO_FRACTION`], [`DEMO_STUDENT_LR`],
-/// [`DEMO_AUDIO_LR_SCALE`], [`DEMO_MOUTH`], [`DEMO_STUDENT_BATCH`], [`DEMO_RECORDED_RAYS`]),
-/// or, with `distill` off, the pixels-only comparison (4096 rays a step from every pixel).
-/// Either way the learning rate is held for [`DEMO_HOLD`] of the steps, then falls tenfold.
-/// `nldf demo`, `nldf train --data` and `nldf train student` without shape flags train it.
-pub fn student_recipe(
-    model: &StudentConfig,
-    distill: bool,
-    pseudo: PseudoSettings,
-    iters: usize,
-) -> Result<StudentRunConfig> {
-    let mut cfg = StudentSource::Settings {
-        model: model.clone(),
-        distill,
-        pool: true,
-        pseudo,
-    }
-    .config()?
-    .0;
-    let t = &mut cfg.train;
-    t.iters = iters;
-    let hold = (DEMO_HOLD * iters as f64).round() as usize;
-    t.lr_hold_steps = hold;
-    t.lr_decay_steps = iters.saturating_sub(hold).max(1);
-    if distill {
-        t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
-        t.lr = DEMO_STUDENT_LR;
-        t.audio_lr_scale = DEMO_AUDIO_LR_SCALE;
-        (t.mouth_fraction, t.mouth_weight) = DEMO_MOUTH;
-        t.batch_rays = DEMO_STUDENT_BATCH;
-        t.recorded_rays = DEMO_RECORDED_RAYS;
-    }
-    Ok(cfg)
-}
-
 impl DemoJob {
     /// The demo as `nldf demo` runs it by default, into `out`: the synthetic scene of seed
     /// 0 at 128 x 128 (supersampled 3x), the small teacher (6 x 128) for
@@ -235,10 +112,12 @@ impl DemoJob {
     /// Checks the steps, caps and the scene's settings; nothing is made yet.
     pub fn check(&self) -> Result<()> {
         if self.teacher_iters == 0 {
-            return Err(Error::Config("the teacher needs at least one step".into()));
+            return Err(Error::Argument(
+                "the teacher needs at least one step".into(),
+            ));
         }
         if !(self.teacher_lr.is_finite() && self.teacher_lr > 0.0 && self.teacher_lr <= 1.0) {
-            return Err(Error::Config(format!(
+            return Err(Error::Argument(format!(
                 "the teacher's learning rate must be in (0, 1], got {}",
                 self.teacher_lr
             )));
@@ -248,18 +127,18 @@ impl DemoJob {
             ("student", self.student_cap_minutes),
         ] {
             if !(minutes.is_finite() && minutes > 0.0) {
-                return Err(Error::Config(format!(
+                return Err(Error::Argument(format!(
                     "the {what}'s wall-clock cap must be positive, got {minutes} minutes"
                 )));
             }
         }
         if self.splits.first() != Some(&Split::Val) {
-            return Err(Error::Config(
+            return Err(Error::Argument(
                 "the demo evaluates `val` first; other splits follow it".into(),
             ));
         }
         match &self.data {
-            Some(data) if !data.is_dir() => Err(Error::Config(format!(
+            Some(data) if !data.is_dir() => Err(Error::Argument(format!(
                 "{}: no such dataset folder",
                 data.display()
             ))),
@@ -330,7 +209,7 @@ impl DemoJob {
         let evaluation = splits
             .first()
             .map(|(_, e)| e.clone())
-            .ok_or_else(|| Error::Config("the demo evaluated no split".into()))?;
+            .ok_or_else(|| Error::Argument("the demo evaluated no split".into()))?;
         Ok(Some(DemoReport {
             model,
             evaluation,
@@ -374,7 +253,7 @@ impl DemoJob {
                 }
                 synth
                     .join()
-                    .map_err(|_| Error::Config("the synthetic scene's thread panicked".into()))
+                    .map_err(|_| Error::Argument("the synthetic scene's thread panicked".into()))
             })??;
             on_event(&JobEvent::Progress {
                 what: "synthetic frames".into(),
