@@ -36,7 +36,7 @@ const SOURCE_DIRS: [&str; 10] = [
 /// The crates whose dependencies are checked: each with the nldf crates it may reach and
 /// the frameworks it must not (a framework is a package of that name or starting with it
 /// and `-`: `tract` is every `tract-*`).
-const CRATE_RULES: [(&str, &[&str], &[&str]); 5] = [
+const CRATE_RULES: [(&str, &[&str], &[&str]); 6] = [
     ("nldf-core", &[], &["candle", "tract", "ort"]),
     ("nldf-model", &["nldf-core"], &["candle", "tract", "ort"]),
     (
@@ -46,8 +46,20 @@ const CRATE_RULES: [(&str, &[&str], &[&str]); 5] = [
     ),
     ("nldf-infer", &["nldf-core", "nldf-model"], &["candle"]),
     (
+        "nldf-train",
+        &["nldf-core", "nldf-kernels"],
+        &["tract", "ort"],
+    ),
+    (
         "nldf-pipeline",
-        &["nldf-core", "nldf-model", "nldf-export", "nldf-infer"],
+        &[
+            "nldf-core",
+            "nldf-kernels",
+            "nldf-model",
+            "nldf-export",
+            "nldf-infer",
+            "nldf-train",
+        ],
         &[],
     ),
 ];
