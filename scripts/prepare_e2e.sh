@@ -9,7 +9,8 @@
 # HEADS picks the heads (default: standard second), SIDES the runs (default: truth prepared;
 # the truth's runs do not read anything `nldf prepare` writes, so after a change to it alone
 # SIDES=prepared suffices).
-# Usage: [SEED=3] [HEADS=second] [SIDES=prepared] scripts/prepare_e2e.sh WORK [OUT]
+# PREPARE_FLAGS are added to `nldf prepare` (a setting under test, say `--ear-points 0`).
+# Usage: [SEED=3] [HEADS=second] [SIDES=prepared] [PREPARE_FLAGS=...] scripts/prepare_e2e.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_e2e.sh WORK [OUT]}
@@ -28,8 +29,9 @@ for head in ${HEADS:-standard second}; do
   prep=$work/e2e_${head}_prepared
   rm -rf "$prep"
   mkdir -p "$out/$head/truth" "$out/$head/prepared"
+  # shellcheck disable=SC2086 # PREPARE_FLAGS is a list of flags.
   "$nldf" prepare --video "$video" --out "$prep" --size 128 --focal "$focal" \
-    > "$out/$head/prepared/prepare.log"
+    ${PREPARE_FLAGS:-} > "$out/$head/prepared/prepare.log"
   "$nldf" bench prepare --truth "$truth" --prepared "$prep" --carry-held-out \
     --out "$out/$head/prepared/bench.json" >> "$out/$head/prepared/prepare.log" || true
   for side in ${SIDES:-truth prepared}; do
