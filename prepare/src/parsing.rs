@@ -61,12 +61,15 @@ pub fn parse_frame(
     if jaw.len() < 3 || person.len() != w * h {
         return parts;
     }
-    let jaw = &widened(jaw, config.jaw_margin);
-    let chin = jaw[jaw.len() / 2];
-    let top = jaw.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
-    let neck_depth = 0.6 * (chin[1] - top).max(1.0);
-    let x_min = jaw.iter().map(|p| p[0]).fold(f32::INFINITY, f32::min);
-    let x_max = jaw.iter().map(|p| p[0]).fold(f32::NEG_INFINITY, f32::max);
+    let Cut {
+        jaw,
+        chin,
+        depth,
+        x_min,
+        x_max,
+    } = Cut::new(jaw, config.jaw_margin);
+    let jaw = &jaw;
+    let neck_depth = 0.6 * depth;
     let inner_min = jaw[jaw.len() / 4][0].min(jaw[3 * jaw.len() / 4][0]);
     let inner_max = jaw[jaw.len() / 4][0].max(jaw[3 * jaw.len() / 4][0]);
     let mid = jaw.len() / 2;
@@ -189,12 +192,15 @@ pub fn hang_below_jaw(
     if plate.background.len() != 3 * n {
         return;
     }
-    let jaw = &widened(jaw, config.jaw_margin);
-    let chin = jaw[jaw.len() / 2];
-    let top = jaw.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
-    let reach = (config.hang_depth.max(0.0) * (chin[1] - top).max(1.0)).ceil() as usize;
-    let x_min = jaw.iter().map(|p| p[0]).fold(f32::INFINITY, f32::min);
-    let x_max = jaw.iter().map(|p| p[0]).fold(f32::NEG_INFINITY, f32::max);
+    let Cut {
+        jaw,
+        depth,
+        x_min,
+        x_max,
+        ..
+    } = Cut::new(jaw, config.jaw_margin);
+    let jaw = &jaw;
+    let reach = (config.hang_depth.max(0.0) * depth).ceil() as usize;
     let foreground = |i: usize| {
         let d = (0..3)
             .map(|c| plate.frame[3 * i + c].abs_diff(plate.background[3 * i + c]))
@@ -225,6 +231,34 @@ pub fn hang_below_jaw(
             for y in first..first + run {
                 parts[y * w + x] = Part::Head;
             }
+        }
+    }
+}
+
+/// The head's cut of a frame: the jaw line widened by a margin ([`widened`]), its chin (the
+/// middle point), its depth from its highest point to the chin (at least 1 pixel) and its
+/// horizontal span.
+struct Cut {
+    jaw: Vec<[f32; 2]>,
+    chin: [f32; 2],
+    depth: f32,
+    x_min: f32,
+    x_max: f32,
+}
+
+impl Cut {
+    fn new(jaw: &[[f32; 2]], margin: f32) -> Self {
+        let jaw = widened(jaw, margin);
+        let chin = jaw[jaw.len() / 2];
+        let top = jaw.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
+        let x_min = jaw.iter().map(|p| p[0]).fold(f32::INFINITY, f32::min);
+        let x_max = jaw.iter().map(|p| p[0]).fold(f32::NEG_INFINITY, f32::max);
+        Self {
+            chin,
+            depth: (chin[1] - top).max(1.0),
+            x_min,
+            x_max,
+            jaw,
         }
     }
 }
