@@ -343,11 +343,62 @@ pub(crate) fn upsampled_image(
     background: &str,
     (hc, wc): (usize, usize),
 ) -> Result<String> {
-    let width = ckpt.shape.width;
-    let cfg = &up.shape;
-    let r = cfg.factor;
-    let channels = width + 4;
+    let r = up.shape.factor;
     let (h, w) = (hc * r, wc * r);
+    let canvas = coarse_canvas(g, ckpt, hits, (hc, wc))?;
+    let b = coarse_box(g, hit, n_hit, (hc, wc), up.shape.margin);
+    // The box by index lists (NonZero, Gather) rather than a Slice of computed bounds:
+    // runtimes size a NonZero's output when it runs, a Slice's not always.
+    let rows = index_range(g, "up.box_rows", hc, &b.r0, &b.r1, 1);
+    let cols = index_range(g, "up.box_cols", wc, &b.c0, &b.c1, 1);
+    let x = g.node(
+        "Gather",
+        "up.box_band",
+        &[&canvas, &rows],
+        vec![attr_int("axis", 0)],
+    );
+    let x = g.node("Gather", "up.box", &[&x, &cols], vec![attr_int("axis", 1)]);
+
+    // The box's background.
+    let rows_px = index_range(g, "up.pixel_rows", h, &b.r0, &b.r1, r);
+    let cols_px = index_range(g, "up.pixel_cols", w, &b.c0, &b.c1, r);
+    let image_shape = g.constant_i64("up.image_shape", &[3], &[h as i64, w as i64, 3]);
+    let bg = g.node(
+        "Reshape",
+        "up.background_image",
+        &[background, &image_shape],
+        vec![],
+    );
+    let bg_box = g.node(
+        "Gather",
+        "up.background_band",
+        &[&bg, &rows_px],
+        vec![attr_int("axis", 0)],
+    );
+    let bg_box = g.node(
+        "Gather",
+        "up.background_box",
+        &[&bg_box, &cols_px],
+        vec![attr_int("axis", 1)],
+    );
+    let (pixels, _) = box_pixels(g, ckpt, up, &x, &bg_box)?;
+    let pixels = g.node("Where", "up.pixels", &[&b.any, &pixels, &bg_box], vec![]);
+    Ok(scatter_box(g, (&rows_px, &cols_px), &b.zero, &bg, &pixels))
+}
+
+/// The coarse grid's rows: the student's rows (hidden layer, colour, logit) of the coarse
+/// rays `hits` at their cells, the miss row elsewhere.
+///
+/// # Shapes
+/// - returns `[hc, wc, width + 4]`
+fn coarse_canvas(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    hits: &str,
+    (hc, wc): (usize, usize),
+) -> Result<String> {
+    let width = ckpt.shape.width;
+    let channels = width + 4;
     let rows = student_rows(g, ckpt)?;
     let miss = miss_row(g, width);
     let canvas_shape = g.constant_i64(
@@ -369,9 +420,29 @@ pub(crate) fn upsampled_image(
         &[3],
         &[hc as i64, wc as i64, channels as i64],
     );
-    let canvas = g.node("Reshape", "up.canvas", &[&canvas, &grid_shape], vec![]);
+    Ok(g.node("Reshape", "up.canvas", &[&canvas, &grid_shape], vec![]))
+}
 
-    // The box.
+/// The hits' box on the coarse grid, grown by `margin` cells, as node names: whether any
+/// ray hit (`any`, bool `[1]`), the int64 zero `[1]`, and the box's first and past-the-end
+/// rows and columns (int64 `[1]`; the 1 x 1 box at the origin without hits).
+struct CoarseBox {
+    any: String,
+    zero: String,
+    r0: String,
+    r1: String,
+    c0: String,
+    c1: String,
+}
+
+/// The [`CoarseBox`] of the hits' mask `hit` (bool `[hc wc]`) with `n_hit` hits.
+fn coarse_box(
+    g: &mut GraphBuilder,
+    hit: &str,
+    n_hit: &str,
+    (hc, wc): (usize, usize),
+    margin: usize,
+) -> CoarseBox {
     let mask_shape = g.constant_i64("up.mask_shape", &[2], &[hc as i64, wc as i64]);
     let mask = g.node("Reshape", "up.mask", &[hit, &mask_shape], vec![]);
     let mask = g.node(
@@ -383,8 +454,8 @@ pub(crate) fn upsampled_image(
     let reduce = |axis: i64| vec![attr_ints("axes", &[axis]), attr_int("keepdims", 0)];
     let row_any = g.node("ReduceMax", "up.row_any", &[&mask], reduce(1));
     let col_any = g.node("ReduceMax", "up.col_any", &[&mask], reduce(0));
-    let (r0, r1) = span(g, "up.box_rows", &row_any, hc, cfg.margin);
-    let (c0, c1) = span(g, "up.box_cols", &col_any, wc, cfg.margin);
+    let (r0, r1) = span(g, "up.box_rows", &row_any, hc, margin);
+    let (c0, c1) = span(g, "up.box_cols", &col_any, wc, margin);
     let zero = g.constant_i64("up.count_zero", &[1], &[0]);
     let one_i = g.constant_i64("up.count_one", &[1], &[1]);
     let any = g.node("Greater", "up.any_hit", &[n_hit, &zero], vec![]);
@@ -393,50 +464,33 @@ pub(crate) fn upsampled_image(
     let r1 = g.node("Where", "up.row1", &[&any, &r1, &one_i], vec![]);
     let c0 = g.node("Where", "up.col0", &[&any, &c0, &zero], vec![]);
     let c1 = g.node("Where", "up.col1", &[&any, &c1, &one_i], vec![]);
-    // The box by index lists (NonZero, Gather) rather than a Slice of computed bounds:
-    // runtimes size a NonZero's output when it runs, a Slice's not always.
-    let rows = index_range(g, "up.box_rows", hc, &r0, &r1, 1);
-    let cols = index_range(g, "up.box_cols", wc, &c0, &c1, 1);
-    let x = g.node(
-        "Gather",
-        "up.box_band",
-        &[&canvas, &rows],
-        vec![attr_int("axis", 0)],
-    );
-    let x = g.node("Gather", "up.box", &[&x, &cols], vec![attr_int("axis", 1)]);
+    CoarseBox {
+        any,
+        zero,
+        r0,
+        r1,
+        c0,
+        c1,
+    }
+}
 
-    // The box's background.
-    let rows_px = index_range(g, "up.pixel_rows", h, &r0, &r1, r);
-    let cols_px = index_range(g, "up.pixel_cols", w, &c0, &c1, r);
-    let image_shape = g.constant_i64("up.image_shape", &[3], &[h as i64, w as i64, 3]);
-    let bg = g.node(
-        "Reshape",
-        "up.background_image",
-        &[background, &image_shape],
-        vec![],
-    );
-    let bg_box = g.node(
-        "Gather",
-        "up.background_band",
-        &[&bg, &rows_px],
-        vec![attr_int("axis", 0)],
-    );
-    let bg_box = g.node(
-        "Gather",
-        "up.background_box",
-        &[&bg_box, &cols_px],
-        vec![attr_int("axis", 1)],
-    );
-    let (pixels, _) = box_pixels(g, ckpt, up, &x, &bg_box)?;
-    let pixels = g.node("Where", "up.pixels", &[&any, &pixels, &bg_box], vec![]);
-
+/// The frame image: the box's `pixels` (`[bh, bw, 3]`) scattered into the background image
+/// `bg` (`[H, W, 3]`) at the pixel rows and columns `rows_px`, `cols_px` (int64 `[bh]`,
+/// `[bw]`); `zero` is the int64 zero `[1]`.
+fn scatter_box(
+    g: &mut GraphBuilder,
+    (rows_px, cols_px): (&str, &str),
+    zero: &str,
+    bg: &str,
+    pixels: &str,
+) -> String {
     // Indices `[bh, bw, 2]` of the box's pixels.
     let axes12 = g.constant_i64("up.axes12", &[2], &[1, 2]);
     let axes02 = g.constant_i64("up.axes02", &[2], &[0, 2]);
-    let rows_b = g.node("Unsqueeze", "up.rows_col", &[&rows_px, &axes12], vec![]);
-    let cols_b = g.node("Unsqueeze", "up.cols_row", &[&cols_px, &axes02], vec![]);
-    let zero_r = g.node("Mul", "up.rows_zero", &[&rows_b, &zero], vec![]);
-    let zero_c = g.node("Mul", "up.cols_zero", &[&cols_b, &zero], vec![]);
+    let rows_b = g.node("Unsqueeze", "up.rows_col", &[rows_px, &axes12], vec![]);
+    let cols_b = g.node("Unsqueeze", "up.cols_row", &[cols_px, &axes02], vec![]);
+    let zero_r = g.node("Mul", "up.rows_zero", &[&rows_b, zero], vec![]);
+    let zero_c = g.node("Mul", "up.cols_zero", &[&cols_b, zero], vec![]);
     let rows_b = g.node("Add", "up.rows_grid", &[&rows_b, &zero_c], vec![]);
     let cols_b = g.node("Add", "up.cols_grid", &[&cols_b, &zero_r], vec![]);
     let index = g.node(
@@ -445,7 +499,7 @@ pub(crate) fn upsampled_image(
         &[&rows_b, &cols_b],
         vec![attr_int("axis", 2)],
     );
-    Ok(g.node("ScatterND", "frame.image", &[&bg, &index, &pixels], vec![]))
+    g.node("ScatterND", "frame.image", &[bg, &index, pixels], vec![])
 }
 
 /// The upsampled ray graph's box: the student's rows of the given coarse rays placed at the
