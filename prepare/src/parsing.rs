@@ -186,10 +186,8 @@ pub fn hang_below_jaw(
 ) {
     let (w, h) = (width as usize, height as usize);
     let n = w * h;
-    if jaw.len() < 3 || person.len() != n || plate.frame.len() != 3 * n {
-        return;
-    }
-    if plate.background.len() != 3 * n {
+    let planes = [plate.frame.len(), plate.background.len()];
+    if jaw.len() < 3 || person.len() != n || planes != [3 * n, 3 * n] {
         return;
     }
     let Cut {
@@ -312,38 +310,32 @@ fn keep_connected_head(parts: &mut [Part], seed: [f32; 2], w: usize, h: usize) {
 /// Where one arm of the jaw line (a polyline from an end to the chin, or back) is at height
 /// `y`: the x of its first segment from the top that spans `y`.
 fn arm_x(arm: &[[f32; 2]], y: f32) -> Option<f32> {
-    arm.windows(2).find_map(|s| {
-        let ([x0, y0], [x1, y1]) = (s[0], s[1]);
-        let (lo, hi) = (y0.min(y1), y0.max(y1));
-        if y < lo || y > hi {
+    crossings(arm, 1, y).next()
+}
+
+/// The largest y at which the polyline crosses the vertical line at `x`.
+fn lowest_crossing(line: &[[f32; 2]], x: f32) -> Option<f32> {
+    crossings(line, 0, x).reduce(f32::max)
+}
+
+/// Where the polyline's segments cross the line on which coordinate `axis` (0 for x, 1 for
+/// y) is `at`: the other coordinate, segment by segment in order (a segment that lies along
+/// the line gives its middle).
+fn crossings(line: &[[f32; 2]], axis: usize, at: f32) -> impl Iterator<Item = f32> + '_ {
+    let other = 1 - axis;
+    line.windows(2).filter_map(move |s| {
+        let (a0, a1) = (s[0][axis], s[1][axis]);
+        let (lo, hi) = (a0.min(a1), a0.max(a1));
+        if at < lo || at > hi {
             return None;
         }
         let t = if hi - lo < 1e-6 {
             0.5
         } else {
-            (y - y0) / (y1 - y0)
+            (at - a0) / (a1 - a0)
         };
-        Some(x0 + t * (x1 - x0))
+        Some(s[0][other] + t * (s[1][other] - s[0][other]))
     })
-}
-
-/// The largest y at which the polyline crosses the vertical line at `x`.
-fn lowest_crossing(line: &[[f32; 2]], x: f32) -> Option<f32> {
-    line.windows(2)
-        .filter_map(|s| {
-            let ([x0, y0], [x1, y1]) = (s[0], s[1]);
-            let (lo, hi) = (x0.min(x1), x0.max(x1));
-            if x < lo || x > hi {
-                return None;
-            }
-            let t = if hi - lo < 1e-6 {
-                0.5
-            } else {
-                (x - x0) / (x1 - x0)
-            };
-            Some(y0 + t * (y1 - y0))
-        })
-        .reduce(f32::max)
 }
 
 /// The parts drawn in AD-NeRF's colours.
