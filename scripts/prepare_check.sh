@@ -6,15 +6,17 @@
 # 512 video again as a 128 dataset, scored against the 128 scene.
 # SEED picks the scenes: 0 (the default) for the tuning videos every prepare setting was
 # chosen on, 3 for the test videos the tables report (never used to choose anything).
-# Usage: [SEED=3] scripts/prepare_check.sh WORK [OUT]
+# PREPARE_FLAGS are added to every `nldf prepare` (a setting under test, say
+# `--track-reach 0.5`); NLDF names the binary to run (default: a release build of this tree).
+# Usage: [SEED=3] [PREPARE_FLAGS=...] [NLDF=...] scripts/prepare_check.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_check.sh WORK [OUT]}
 out=${2:-results/prepare/videos}
 seed=${SEED:-0}
 mkdir -p "$work" "$out"
-nldf=target/release/nldf
-cargo build --release --quiet --bin nldf
+nldf=${NLDF:-target/release/nldf}
+[ -n "${NLDF:-}" ] || cargo build --release --quiet --bin nldf
 for size in 128 512; do
   for head in standard second; do
     name=${head}_${size}
@@ -24,11 +26,13 @@ for size in 128 512; do
         --video "$scene.mp4" --force >/dev/null
     fi
     rm -rf "$work/prepared_$name"
+    # shellcheck disable=SC2086 # PREPARE_FLAGS is a list of flags.
     "$nldf" prepare --video "$scene.mp4" --out "$work/prepared_$name" --size "$size" \
-      | tee "$out/$name.log"
+      ${PREPARE_FLAGS:-} | tee "$out/$name.log"
     cp "$work/prepared_$name/prepare.json" "$out/${name}_prepare.json"
     "$nldf" bench prepare --truth "$scene" --prepared "$work/prepared_$name" \
       --out "$out/$name.json" | tee -a "$out/$name.log" || true
+    python3 scripts/turn_slopes.py "$scene" "$work/prepared_$name" | tee -a "$out/$name.log"
   done
 done
 # The 512 videos prepared as 128 datasets (analysed at 512, then shrunk), scored against the
@@ -36,11 +40,14 @@ done
 for head in standard second; do
   name=${head}_512_as_128
   rm -rf "$work/prepared_$name"
+  # shellcheck disable=SC2086 # PREPARE_FLAGS is a list of flags.
   "$nldf" prepare --video "$work/${head}_512.mp4" --out "$work/prepared_$name" --size 128 \
-    | tee "$out/$name.log"
+    ${PREPARE_FLAGS:-} | tee "$out/$name.log"
   cp "$work/prepared_$name/prepare.json" "$out/${name}_prepare.json"
   "$nldf" bench prepare --truth "$work/${head}_128" --prepared "$work/prepared_$name" \
     --out "$out/$name.json" | tee -a "$out/$name.log" || true
+  python3 scripts/turn_slopes.py "$work/${head}_128" "$work/prepared_$name" \
+    | tee -a "$out/$name.log"
 done
 # The logs and JSON name the work folder; results/ keeps no machine paths.
 sed -i "s#$work/##g" "$out"/*.log "$out"/*.json

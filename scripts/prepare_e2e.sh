@@ -10,14 +10,15 @@
 # the truth's runs do not read anything `nldf prepare` writes, so after a change to it alone
 # SIDES=prepared suffices).
 # PREPARE_FLAGS are added to `nldf prepare` (a setting under test, say `--ear-points 0`).
-# Usage: [SEED=3] [HEADS=second] [SIDES=prepared] [PREPARE_FLAGS=...] scripts/prepare_e2e.sh WORK [OUT]
+# NLDF names the binary to run (default: a release build of this tree).
+# Usage: [SEED=3] [NLDF=...] [HEADS=second] [SIDES=prepared] [PREPARE_FLAGS=...] scripts/prepare_e2e.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_e2e.sh WORK [OUT]}
 out=${2:-results/prepare/e2e_test}
 seed=${SEED:-3}
-nldf=target/release/nldf
-cargo build --release --quiet --bin nldf
+nldf=${NLDF:-target/release/nldf}
+[ -n "${NLDF:-}" ] || cargo build --release --quiet --bin nldf
 for head in ${HEADS:-standard second}; do
   video=$work/${head}_512.mp4
   [ -f "$video" ] || { echo "no $video: run SEED=$seed scripts/prepare_check.sh $work first" >&2; exit 2; }

@@ -69,6 +69,11 @@ pub struct PrepareArgs {
     /// the height of the arm's point this many from its end (of 8); 0 cuts along the arms.
     #[arg(long, default_value_t = ParsingConfig::default().ear_points)]
     pub ear_points: usize,
+    /// How far above the face's outline (up to the hairline) features are tracked for the
+    /// head pose, as a share of the face's height; 0 keeps them off the hair, which slides
+    /// and sways over the head.
+    #[arg(long, default_value_t = PoseConfig::default().track_reach, value_parser = share)]
+    pub track_reach: f32,
     /// Replace the output folder if it exists.
     #[arg(long)]
     pub force: bool,
@@ -138,7 +143,10 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         crop: args.crop.map(|c| c.0),
         min_frames: args.min_frames,
         force: args.force,
-        pose: PoseConfig::default(),
+        pose: PoseConfig {
+            track_reach: args.track_reach,
+            ..PoseConfig::default()
+        },
         analysis_size: args.analysis_size,
         fps: args.fps,
         parsing: ParsingConfig {

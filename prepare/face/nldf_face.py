@@ -41,8 +41,9 @@ FOREHEAD, UPPER_LIP, CHIN = 10, 0, 152
 class Tracker:
     """Corner features on the rigid part of the head, tracked frame to frame.
 
-    The region: the hull of the 468 landmarks grown upward by half the face's height (the
-    forehead and the hair), inside the person mask shrunk away from the silhouette (whose
+    The region: the hull of the 468 landmarks grown upward by `reach` times the face's
+    height (0 keeps the face's own outline, the forehead up to the hairline; hair slides and
+    sways, and its tracks turn the head too little), inside the person mask shrunk away from the silhouette (whose
     points slide over the surface), less the eyes' and the lips' hulls grown by a margin and
     everything below the upper lip (the jaw moves with the mouth). Tracks follow by
     pyramidal Lucas-Kanade from the previous frame, kept when tracking back lands within
@@ -53,10 +54,11 @@ class Tracker:
     than `least` are alive, at most every `detect_every` frames.
     """
 
-    def __init__(self, size):
+    def __init__(self, size, reach):
         import cv2
         import numpy as np
         self.cv2 = cv2
+        self.reach = reach
         self.scale = size / 512.0
         self.least, self.most = 150, 300
         self.min_distance = max(3, int(round(8 * self.scale)))
@@ -84,7 +86,7 @@ class Tracker:
         cv2 = self.cv2
         h, w = person.shape
         up = pts[FOREHEAD] - pts[CHIN]
-        grown = np.concatenate([pts, pts + 0.5 * up])
+        grown = np.concatenate([pts, pts + self.reach * up])
         mask = np.zeros((h, w), np.uint8)
         cv2.fillConvexPoly(mask, cv2.convexHull(grown.astype(np.int32)), 255)
         inside = (person > 127).astype(np.uint8) * 255
@@ -240,7 +242,7 @@ def run_frames(args):
         mask = np.clip(prob * 255.0 + 0.5, 0, 255).astype(np.uint8)
         cv2.imwrite(os.path.join(args.out, "mask", "%d.png" % i), mask)
         if tracker is None:
-            tracker = Tracker(min(h, w))
+            tracker = Tracker(min(h, w), args.track_reach)
         one = landmarks[i, :, :2] if faces[i] == 1 else None
         tracker.step(i, cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), one, mask)
         print("done %d" % i, flush=True)
@@ -345,6 +347,7 @@ def main():
     f.add_argument("--frames", required=True)
     f.add_argument("--count", type=int, required=True)
     f.add_argument("--out", required=True)
+    f.add_argument("--track-reach", type=float, required=True)
     c = sub.add_parser("canonical")
     c.add_argument("--assets", required=True)
     c.add_argument("--loader", required=True)

@@ -95,13 +95,16 @@ impl FaceEnv {
         })
     }
 
-    /// Runs the landmarker and the segmentation over `frames/<i>.jpg`, `i < count`, into
-    /// `out`, calling `progress(done)` after each frame.
+    /// Runs the landmarker, the segmentation and the feature tracker over
+    /// `frames/<i>.jpg`, `i < count`, into `out`, calling `progress(done)` after each frame.
+    /// The tracks' region reaches `track_reach` times the face's height above its outline
+    /// ([`crate::pose::PoseConfig::track_reach`]).
     pub fn run_frames(
         &self,
         frames: &Path,
         count: usize,
         out: &Path,
+        track_reach: f32,
         mut progress: impl FnMut(usize),
     ) -> Result<FaceOutput> {
         let script = self.dir.join("nldf_face.py");
@@ -112,6 +115,8 @@ impl FaceEnv {
             .arg(frames)
             .arg("--out")
             .arg(out)
+            .arg("--track-reach")
+            .arg(track_reach.to_string())
             .env("GLOG_minloglevel", "2")
             .env("TF_CPP_MIN_LOG_LEVEL", "3")
             .stdin(Stdio::null())

@@ -102,6 +102,8 @@ pub struct PrepareReport {
     pub tracks: TrackSummary,
     /// The parsing's settings.
     pub parsing: ParsingConfig,
+    /// The pose solver's settings (the tracks' reach among them).
+    pub pose: PoseConfig,
     /// Seconds per stage and in all.
     pub seconds: Vec<(String, f64)>,
     pub total_seconds: f64,
@@ -165,6 +167,7 @@ pub fn run(
     ffmpeg: &Path,
     mut events: impl FnMut(Event),
 ) -> Result<PrepareReport> {
+    job.pose.validate()?;
     let focal = job.focal();
     if !(focal.is_finite() && focal > 0.0) {
         return Err(Error::Argument(format!(
@@ -243,7 +246,9 @@ fn prepare_into(
         total: Some(n),
     });
     let face_dir = dir.join("face");
-    let faces = env.run_frames(&ori, n, &face_dir, |done| events(Event::Frames(done)))?;
+    let faces = env.run_frames(&ori, n, &face_dir, job.pose.track_reach, |done| {
+        events(Event::Frames(done))
+    })?;
     let kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
     lap("faces", &mut seconds);
     let (k, track) = solve_poses(job, env, &faces, &kept, events)?;
@@ -289,6 +294,7 @@ fn prepare_into(
             .copied()
             .unwrap_or(0.0),
         parsing: job.parsing,
+        pose: job.pose.clone(),
         seconds,
         total_seconds: 0.0,
     })

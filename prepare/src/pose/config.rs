@@ -50,6 +50,12 @@ pub struct PoseConfig {
     pub track_reject_factor: f32,
     /// ... and this many pixels (default 0.2).
     pub track_reject_floor_px: f32,
+    /// How far above the face's outline (the hull of mediapipe's 468 landmarks, up to the
+    /// hairline) features are tracked, as a share of the face's height (default 0.5: the
+    /// forehead and the hair). 0 keeps them off the hair, which slides and sways over the
+    /// head; that posed the tuning videos at 512 pixels better and the test videos worse
+    /// (docs/prepare.md), so the default stays.
+    pub track_reach: f32,
 }
 
 impl Default for PoseConfig {
@@ -68,6 +74,7 @@ impl Default for PoseConfig {
             track_huber_px: 1.0,
             track_reject_factor: 2.0,
             track_reject_floor_px: 0.2,
+            track_reach: 0.5,
         }
     }
 }
@@ -145,6 +152,11 @@ impl PoseConfig {
             Some(format!(
                 "track_reject_floor_px {} is not a finite length > 0",
                 self.track_reject_floor_px
+            ))
+        } else if !(0.0..=2.0).contains(&self.track_reach) {
+            Some(format!(
+                "track_reach {} is not a share of the face's height in 0..=2",
+                self.track_reach
             ))
         } else {
             None

@@ -156,6 +156,14 @@ fn config_defaults_round_trip_and_bad_fields_are_named() {
         .unwrap_err()
         .to_string();
     assert!(message.contains("bundle_frames"), "{message}");
+    for reach in [-0.1, 2.5, f32::NAN] {
+        let message = with(|c| c.track_reach = reach)
+            .validate()
+            .unwrap_err()
+            .to_string();
+        assert!(message.contains("track_reach"), "{reach}: {message}");
+    }
+    assert!(with(|c| c.track_reach = 0.0).validate().is_ok());
 }
 
 #[test]
