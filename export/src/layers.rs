@@ -1,5 +1,6 @@
 //! ONNX layers the graphs share, each written once: a padded convolution, bilinear
-//! upsampling as a transposed convolution with fixed weights, and depth-to-space.
+//! upsampling as a transposed convolution with fixed weights, depth-to-space, a slice of
+//! channels, and the index helpers that cut a box of hits out of a grid.
 
 use nldf_core::upsampler_config::bilinear_kernel;
 
@@ -60,4 +61,80 @@ pub(crate) fn depth_to_space(g: &mut GraphBuilder, name: &str, x: &str, r: usize
             crate::graph::attr_string("mode", "DCR"),
         ],
     )
+}
+
+/// The first and one-past-last index of a true entry of `any` (int64 `[n]`, 0 or 1),
+/// widened by `margin` within `[0, n)`: int64 `[1]` each.
+pub(crate) fn span(
+    g: &mut GraphBuilder,
+    name: &str,
+    any: &str,
+    n: usize,
+    margin: usize,
+) -> (String, String) {
+    let up: Vec<i64> = (1..=n as i64).collect();
+    let down: Vec<i64> = (0..n as i64).map(|i| n as i64 - i).collect();
+    let up = g.constant_i64(&format!("{name}.rank_up"), &[n], &up);
+    let down = g.constant_i64(&format!("{name}.rank_down"), &[n], &down);
+    let keep = || vec![attr_int("keepdims", 1)];
+    let last = g.node("Mul", &format!("{name}.last_each"), &[any, &up], vec![]);
+    let end = g.node("ReduceMax", &format!("{name}.end_raw"), &[&last], keep());
+    let first = g.node("Mul", &format!("{name}.first_each"), &[any, &down], vec![]);
+    let first = g.node(
+        "ReduceMax",
+        &format!("{name}.first_rank"),
+        &[&first],
+        keep(),
+    );
+    let n_c = g.constant_i64(&format!("{name}.n"), &[1], &[n as i64]);
+    let start = g.node("Sub", &format!("{name}.start_raw"), &[&n_c, &first], vec![]);
+    let m = g.constant_i64(&format!("{name}.margin"), &[1], &[margin as i64]);
+    let zero = g.constant_i64(&format!("{name}.zero"), &[1], &[0]);
+    let start = g.node("Sub", &format!("{name}.start_wide"), &[&start, &m], vec![]);
+    let start = g.node("Max", &format!("{name}.start"), &[&start, &zero], vec![]);
+    let end = g.node("Add", &format!("{name}.end_wide"), &[&end, &m], vec![]);
+    let end = g.node("Min", &format!("{name}.end"), &[&end, &n_c], vec![]);
+    (start, end)
+}
+
+/// Entries `from..to` of `x` along the axis `axis` names (an int64 `[1]` constant).
+pub(crate) fn channels_of(
+    g: &mut GraphBuilder,
+    name: &str,
+    x: &str,
+    axis: &str,
+    (from, to): (i64, i64),
+) -> String {
+    let a = g.constant_i64(&format!("{name}.start"), &[1], &[from]);
+    let b = g.constant_i64(&format!("{name}.end"), &[1], &[to]);
+    g.node("Slice", name, &[x, &a, &b, axis], vec![])
+}
+
+/// The indices `[k]` of `0..n` within `[start r, end r)` (`start`, `end`: int64 `[1]`).
+pub(crate) fn index_range(
+    g: &mut GraphBuilder,
+    name: &str,
+    n: usize,
+    start: &str,
+    end: &str,
+    r: usize,
+) -> String {
+    let all: Vec<i64> = (0..n as i64).collect();
+    let all = g.constant_i64(&format!("{name}.all"), &[n], &all);
+    let (start, end) = if r > 1 {
+        let rr = g.constant_i64(&format!("{name}.factor"), &[1], &[r as i64]);
+        (
+            g.node("Mul", &format!("{name}.start"), &[start, &rr], vec![]),
+            g.node("Mul", &format!("{name}.end"), &[end, &rr], vec![]),
+        )
+    } else {
+        (start.to_string(), end.to_string())
+    };
+    let before = g.node("Less", &format!("{name}.before"), &[&all, &start], vec![]);
+    let from = g.node("Not", &format!("{name}.from"), &[&before], vec![]);
+    let to = g.node("Less", &format!("{name}.to"), &[&all, &end], vec![]);
+    let inside = g.node("And", &format!("{name}.inside"), &[&from, &to], vec![]);
+    let at = g.node("NonZero", &format!("{name}.at"), &[&inside], vec![]);
+    let flat = g.constant_i64(&format!("{name}.flat"), &[1], &[-1]);
+    g.node("Reshape", name, &[&at, &flat], vec![])
 }

@@ -241,14 +241,8 @@ fn prepare_into(
 
     let (n, wave) = decode(job, ffmpeg, probe, window, dir, events)?;
     lap("decode", &mut seconds);
-    events(Event::Stage {
-        name: "face landmarks",
-        total: Some(n),
-    });
     let face_dir = dir.join("face");
-    let faces = env.run_frames(&ori, n, &face_dir, job.pose.track_reach, |done| {
-        events(Event::Frames(done))
-    })?;
+    let faces = find_faces(job, env, &ori, n, &face_dir, events)?;
     let kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
     lap("faces", &mut seconds);
     let (k, track) = solve_poses(job, env, &faces, &kept, events)?;
@@ -297,6 +291,25 @@ fn prepare_into(
         pose: job.pose.clone(),
         seconds,
         total_seconds: 0.0,
+    })
+}
+
+/// The face stage: the face helper's landmarks, masks and feature tracks of the `n` frames
+/// in `ori` (see [`FaceEnv::run_frames`]), written into `face_dir`.
+fn find_faces(
+    job: &PrepareJob,
+    env: &FaceEnv,
+    ori: &Path,
+    n: usize,
+    face_dir: &Path,
+    events: &mut impl FnMut(Event),
+) -> Result<FaceOutput> {
+    events(Event::Stage {
+        name: "face landmarks",
+        total: Some(n),
+    });
+    env.run_frames(ori, n, face_dir, job.pose.track_reach, |done| {
+        events(Event::Frames(done))
     })
 }
 

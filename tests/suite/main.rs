@@ -21,6 +21,7 @@ mod prepare_check;
 mod rendering;
 mod results_cited;
 mod shipped;
+mod sizes;
 mod stress;
 mod student;
 mod synth;
