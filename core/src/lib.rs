@@ -33,6 +33,7 @@ pub mod render_spec;
 pub mod run_files;
 pub mod stats;
 pub mod student_config;
+pub mod student_network;
 pub mod synth;
 pub mod upsampler_config;
 pub mod wav;

@@ -22,6 +22,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
+use nldf_core::student_network::MlpLayout;
 use nldf_core::upsampler_config::{MISS_LOGIT, UpsamplerConfig};
 use nldf_model::contract::{
     BOX_COLS, BOX_HEIGHT, BOX_ROWS, BOX_WIDTH, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS,
@@ -234,11 +235,10 @@ fn student_rows(g: &mut GraphBuilder, ckpt: &StudentCheckpoint) -> Result<String
             "the upsampler needs a student with opacity (its logit is an input)".into(),
         ));
     }
-    let hidden = if s.n_blocks() == 0 {
-        "mlp.input.act".to_string()
-    } else {
-        format!("mlp.body.{}.act", s.n_blocks() - 1)
-    };
+    // The last hidden layer's activation, as the MLP's builder names it.
+    let layout = MlpLayout::of(s);
+    let last = layout.body.last().map_or(layout.input.path(), |b| b.path());
+    let hidden = format!("{last}.act");
     Ok(g.node(
         "Concat",
         "up.rows",

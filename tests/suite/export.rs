@@ -427,3 +427,73 @@ fn export_metadata_round_trips_and_rejects_disagreement() {
     let err = ModelInfo::from_metadata(&missing).unwrap_err().to_string();
     assert!(err.contains(contract::keys::NEAR), "{err}");
 }
+
+/// The student's MLP is described once (`nldf_core::student_network::MlpLayout`): the
+/// candle builder's weights are exactly the description's tensors, the ONNX builder's graph
+/// computes each described layer under its name with the weights of that name, and the
+/// graph so built renders what candle renders.
+#[test]
+fn the_student_graph_follows_the_shared_network_description() {
+    use std::collections::BTreeMap;
+
+    use nldf_core::student_network::MlpLayout;
+
+    for (c, cfg) in configs().into_iter().enumerate() {
+        let layout = MlpLayout::of(&cfg);
+        let run = write_run(&cfg, 21 + c as u64);
+        // candle: the checkpoint's MLP tensors are the description's, name for name.
+        let tensors = candle_core::safetensors::load(
+            run.student_dir().join("model.safetensors"),
+            &candle_core::Device::Cpu,
+        )
+        .unwrap();
+        let built: BTreeMap<String, Vec<usize>> = tensors
+            .iter()
+            .filter(|(name, _)| name.starts_with("mlp."))
+            .map(|(name, t)| (name.clone(), t.dims().to_vec()))
+            .collect();
+        let described: BTreeMap<String, Vec<usize>> =
+            layout.layers().iter().flat_map(|l| l.tensors()).collect();
+        assert_eq!(
+            built, described,
+            "config {c}: candle's MLP is not the description's"
+        );
+        // ONNX: a node and the weights of each described layer (the input layer's weight
+        // split into its beam and audio columns).
+        let path = run.export(WeightType::F32);
+        let graph = read_model(&path).unwrap().proto.graph.unwrap();
+        let nodes: Vec<&str> = graph
+            .node
+            .iter()
+            .filter_map(|n| n.name.as_deref())
+            .collect();
+        let weights: BTreeMap<&str, Vec<i64>> = graph
+            .initializer
+            .iter()
+            .filter_map(|t| Some((t.name.as_deref()?, t.dims.clone())))
+            .collect();
+        for layer in layout.layers() {
+            let name = layer.path();
+            assert!(nodes.contains(&name.as_str()), "config {c}: no node {name}");
+            let bias = weights.get(format!("{name}.bias").as_str());
+            assert_eq!(
+                bias,
+                Some(&vec![layer.fan_out as i64]),
+                "config {c}: {name}.bias"
+            );
+            if layer.name != "input" {
+                let w = weights.get(format!("{name}.weight").as_str());
+                let want = vec![layer.fan_out as i64, layer.fan_in as i64];
+                assert_eq!(w, Some(&want), "config {c}: {name}.weight");
+            }
+        }
+        // And the graph renders what candle renders.
+        let rays = random_rays(500, 5);
+        let audio = neighbourhood(&random_audio(&cfg, 12, 4), 3, cfg.audio.att_frames);
+        let (want_rgb, want_seg) = candle_render(&run, &rays, &audio);
+        let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
+        let (rgb, seg) = tract_render(&path, &rays, &audio, shape);
+        let (d_rgb, d_seg) = (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg));
+        assert!(d_rgb <= TOL && d_seg <= TOL, "config {c}: {d_rgb} {d_seg}");
+    }
+}

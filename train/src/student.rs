@@ -7,6 +7,7 @@ use candle_core::{D, Device, Result, Tensor};
 use candle_nn::{Linear, Module, VarBuilder, linear};
 use nldf_core::beam::encode_beams;
 use nldf_core::rays::Rays;
+use nldf_core::student_network::{LinearLayer, MLP_PREFIX, MlpLayout};
 
 use crate::audio_net::{AudioEncoder, audio_encoder};
 use crate::student_op::{StudentOp, StudentPlan};
@@ -85,22 +86,26 @@ pub struct ResidualMlp {
     opacity: bool,
 }
 
-/// Builds a [`ResidualMlp`] for `cfg` under `vb`.
+/// Builds a [`ResidualMlp`] for `cfg` under `vb`, layer by layer as its
+/// [`MlpLayout`] lists them (the blocks created first, as the weights' initial draws
+/// have always been made).
 pub fn residual_mlp(cfg: &StudentConfig, vb: VarBuilder) -> Result<ResidualMlp> {
-    let w = cfg.width;
-    let body = (0..cfg.n_blocks())
-        .map(|i| {
-            let vb = vb.pp("body").pp(i);
+    let layout = MlpLayout::of(cfg);
+    let layer = |l: &LinearLayer| linear(l.fan_in, l.fan_out, vb.pp(&l.name));
+    let body = layout
+        .body
+        .iter()
+        .map(|b| {
             Ok(ResidualBlock {
-                fc1: linear(w, w, vb.pp("fc1"))?,
-                fc2: linear(w, w, vb.pp("fc2"))?,
+                fc1: layer(&b.fc1)?,
+                fc2: layer(&b.fc2)?,
             })
         })
         .collect::<Result<Vec<_>>>()?;
     Ok(ResidualMlp {
-        input: linear(cfg.input_dim(), w, vb.pp("input"))?,
+        input: layer(&layout.input)?,
         body,
-        output: linear(w, cfg.output_dim(), vb.pp("output"))?,
+        output: layer(&layout.output)?,
         segments: cfg.segments,
         opacity: cfg.opacity,
     })
@@ -188,7 +193,7 @@ pub fn student(cfg: &StudentConfig, vb: VarBuilder) -> Result<Student> {
     Ok(Student {
         cfg: cfg.clone(),
         audio: audio_encoder(&cfg.audio, vb.pp("audio"))?,
-        mlp: residual_mlp(cfg, vb.pp("mlp"))?,
+        mlp: residual_mlp(cfg, vb.pp(MLP_PREFIX))?,
     })
 }
 

@@ -7,6 +7,7 @@ use crate::checkpoint::StudentCheckpoint;
 use crate::error::{Error, Result};
 use crate::graph::{GraphBuilder, WeightType, attr_int};
 use nldf_core::student_config::StudentConfig;
+use nldf_core::student_network::{LinearLayer, MlpLayout};
 
 /// The residual MLP on `[beam | code]` and the segment sum. The input layer's weight is
 /// split by columns into its beam part and its audio part, so that the audio term is
@@ -26,20 +27,29 @@ pub(super) fn residual_mlp(
     background: Option<&str>,
 ) -> Result<()> {
     let s = &ckpt.shape;
-    let w = s.width;
-    let x = input_layer(g, ckpt, beams, code)?;
-    let mut h = g.node("Relu", "mlp.input.act", &[&x], vec![]);
-    for i in 0..s.n_blocks() {
-        let p = format!("mlp.body.{i}");
-        let y = ray_linear(g, ckpt, &format!("{p}.fc1"), &h, w, w)?;
-        let y = g.node("Relu", &format!("{p}.fc1.act"), &[&y], vec![]);
-        let y = ray_linear(g, ckpt, &format!("{p}.fc2"), &y, w, w)?;
+    let layout = MlpLayout::of(s);
+    let x = input_layer(g, ckpt, &layout.input, beams, code)?;
+    let mut h = g.node(
+        "Relu",
+        &format!("{}.act", layout.input.path()),
+        &[&x],
+        vec![],
+    );
+    let dense = |g: &mut GraphBuilder, l: &LinearLayer, x: &str| {
+        ray_linear(g, ckpt, &l.path(), x, l.fan_in, l.fan_out)
+    };
+    for b in &layout.body {
+        let p = b.path();
+        let y = dense(g, &b.fc1, &h)?;
+        let y = g.node("Relu", &format!("{}.act", b.fc1.path()), &[&y], vec![]);
+        let y = dense(g, &b.fc2, &y)?;
         let sum = g.node("Add", &format!("{p}.skip"), &[&h, &y], vec![]);
         h = g.node("Relu", &format!("{p}.act"), &[&sum], vec![]);
     }
     // The output layer stays in f32 under int8: its 3 M outputs are the colours
     // themselves, and it costs a twentieth of a hidden layer.
-    let out = linear(g, ckpt, "mlp.output", &h, w, s.output_dim())?;
+    let o = &layout.output;
+    let out = linear(g, ckpt, &o.path(), &h, o.fan_in, o.fan_out)?;
     let colours = segment_colours(g, s, out);
     segment_sum(g, s, &colours, background);
     Ok(())
@@ -50,15 +60,15 @@ pub(super) fn residual_mlp(
 fn input_layer(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
+    layer: &LinearLayer,
     beams: &str,
     code: &str,
 ) -> Result<String> {
     let s = &ckpt.shape;
-    let w = s.width;
+    let (w, in_dim, name) = (layer.fan_out, layer.fan_in, layer.path());
     let beam_dim = s.beam.encoded_len();
-    let in_dim = beam_dim + s.audio.dim;
-    let weight = ckpt.weight("mlp.input.weight", &[w, in_dim])?;
-    let bias = ckpt.weight("mlp.input.bias", &[w])?;
+    let weight = ckpt.weight(&format!("{name}.weight"), &[w, in_dim])?;
+    let bias = ckpt.weight(&format!("{name}.bias"), &[w])?;
     let (mut w_beam, mut w_code) = (
         Vec::with_capacity(w * beam_dim),
         Vec::with_capacity(w * s.audio.dim),
@@ -67,25 +77,25 @@ fn input_layer(
         w_beam.extend_from_slice(&row[..beam_dim]);
         w_code.extend_from_slice(&row[beam_dim..]);
     }
-    let w_code = g.weight("mlp.input.weight.audio", &[w, s.audio.dim], &w_code);
-    let bias = g.weight("mlp.input.bias", &[w], bias);
+    let w_code = g.weight(&format!("{name}.weight.audio"), &[w, s.audio.dim], &w_code);
+    let bias = g.weight(&format!("{name}.bias"), &[w], bias);
     let audio_term = g.node(
         "Gemm",
-        "mlp.input.audio",
+        &format!("{name}.audio"),
         &[code, &w_code, &bias],
         vec![attr_int("transB", 1)],
     );
-    g.tap("mlp.input.beam", beams, beam_dim);
+    g.tap(&format!("{name}.beam"), beams, beam_dim);
     let x = if g.weight_type() == WeightType::Int8 {
         let product = g
-            .matmul_int8("mlp.input.beam", beams, &w_beam, w, beam_dim)
+            .matmul_int8(&format!("{name}.beam"), beams, &w_beam, w, beam_dim)
             .map_err(Error::Calibration)?;
-        g.node("Add", "mlp.input", &[&product, &audio_term], vec![])
+        g.node("Add", &name, &[&product, &audio_term], vec![])
     } else {
-        let w_beam = g.weight("mlp.input.weight.beam", &[w, beam_dim], &w_beam);
+        let w_beam = g.weight(&format!("{name}.weight.beam"), &[w, beam_dim], &w_beam);
         g.node(
             "Gemm",
-            "mlp.input",
+            &name,
             &[beams, &w_beam, &audio_term],
             vec![attr_int("transB", 1)],
         )
