@@ -4,7 +4,8 @@ and track points, Huber loss of 1 px, as `nldf prepare` solves it) started from 
 poses with every turn scaled by 0.9, 1.0 and 1.1, run to the same number of evaluations.
 If the tracks held the turn, every start would end near the true turn (slope 1) and the
 starts that end elsewhere would cost more. Writes, per video, the three ends (cost, slopes
-of the turn against the truth's, as scripts/turn_slopes.py measures them) to OUT.
+of the turn against the truth's) and the prepared dataset's own slopes (its camera track
+against the truth, as scripts/turn_slopes.py measures them) to OUT.
 
 The tracks are the face helper's own (`prepare/face/nldf_face.py frames`, run on the
 prepared dataset's `ori_imgs/`, so on the frames `nldf prepare` analysed); the true poses and
@@ -116,6 +117,20 @@ def slopes(true_r, got_r, step):
     return [float((a[:, k] * b[:, k]).sum() / (a[:, k] ** 2).sum()) for k in range(3)]
 
 
+def prepared_slopes(truth, prepared):
+    """scripts/turn_slopes.py's slopes of PREPARED's track against TRUTH's: the rotation
+    between frames 50 apart (every 5th frame), least squares per axis."""
+    want, got = true_poses(truth)[0], true_poses(prepared)[0]
+    ids = sorted(set(want) & set(got))
+    a, b = [], []
+    for i in ids[::5]:
+        if i + 50 in want and i + 50 in got:
+            a.append(Rotation.from_matrix(want[i][0] @ want[i + 50][0].T).as_rotvec())
+            b.append(Rotation.from_matrix(got[i][0] @ got[i + 50][0].T).as_rotvec())
+    a, b = np.array(a), np.array(b)
+    return [float((a[:, k] * b[:, k]).sum() / (a[:, k] ** 2).sum()) for k in range(3)]
+
+
 def video(truth, prepared, reach):
     """The three ends of one video's bundle."""
     poses, f, cx, cy = true_poses(truth)
@@ -146,9 +161,13 @@ def video(truth, prepared, reach):
               f"yaw {yaw:.3f} roll {roll:.3f}", flush=True)
     with open(os.path.join(truth, "scene.json")) as fh:
         scene = json.load(fh)["config"]
+    pitch, yaw, roll = prepared_slopes(truth, prepared)
+    print(f"{truth}: prepared track's slopes pitch {pitch:.3f} yaw {yaw:.3f} roll {roll:.3f}")
     return {"head": scene["head"], "seed": scene["seed"], "size": scene["size"],
-            "focal_len": f, "frames": count, "key_frames": KEYS, "tracks": n_points,
-            "observations": len(obs), "huber_px": 1.0, "ends": ends}
+            "focal_len": f, "camera_distance": scene["camera_distance"], "frames": count,
+            "key_frames": KEYS, "tracks": n_points, "observations": len(obs), "huber_px": 1.0,
+            "ends": ends, "prepared_slope_pitch": pitch, "prepared_slope_yaw": yaw,
+            "prepared_slope_roll": roll}
 
 
 def main():

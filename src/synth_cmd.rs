@@ -44,6 +44,14 @@ pub struct SynthArgs {
     /// Seed of the `voice` evaluation split's speaker (default: --seed + 1).
     #[arg(long)]
     pub voice_seed: Option<u64>,
+    /// The camera's focal length in pixels of a 128-pixel frame (scaled with --size); a
+    /// shorter one widens the view (330: 22 degrees across).
+    #[arg(long, default_value_t = SynthConfig::default().focal_at_128)]
+    pub focal_at_128: f32,
+    /// The camera's distance from the head's centre (at least 0.5); with --focal-at-128 it
+    /// sets how large the head is and how strong the perspective.
+    #[arg(long, default_value_t = SynthConfig::default().camera_distance)]
+    pub camera_distance: f32,
     /// Largest head turn (yaw) in degrees, at most 45; the largest pitch and roll are 0.6
     /// and 0.4 of it.
     #[arg(long, default_value_t = SynthConfig::default().max_yaw_deg)]
@@ -100,6 +108,8 @@ pub fn run(args: SynthArgs) -> Result<()> {
         novel_turn: args.novel_turn,
         voice_seed: args.voice_seed,
         max_yaw_deg: args.max_yaw_deg,
+        focal_at_128: args.focal_at_128,
+        camera_distance: args.camera_distance,
         head: args.head.style(),
         ..default
     };

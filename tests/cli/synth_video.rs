@@ -161,6 +161,20 @@ fn synth_video_with_an_odd_size_or_a_folder_is_refused() {
         &["--video", "is a folder"],
         &[&scene],
     );
+    // The camera's settings are the scene's: a camera inside the head's reach, or no focal
+    // length, is refused before a frame is drawn.
+    refused(
+        "synth --camera-distance inside the head",
+        &args(&["synth", "--out", &s(&scene), "--camera-distance", "0.3"]),
+        &["camera_distance 0.3", ">= 0.5"],
+        &[&scene],
+    );
+    refused(
+        "synth --focal-at-128 0",
+        &args(&["synth", "--out", &s(&scene), "--focal-at-128", "0"]),
+        &["focal_at_128", "positive"],
+        &[&scene],
+    );
 }
 
 /// `--render-size` renders the scene at the larger size and shrinks it: every split's
