@@ -428,15 +428,16 @@ fn export_metadata_round_trips_and_rejects_disagreement() {
     assert!(err.contains(contract::keys::NEAR), "{err}");
 }
 
-/// The student's MLP is described once (`nldf_core::student_network::MlpLayout`): the
-/// candle builder's weights are exactly the description's tensors, the ONNX builder's graph
-/// computes each described layer under its name with the weights of that name, and the
-/// graph so built renders what candle renders.
+/// The student's networks are described once (`nldf_core::student_network`: the MLP's
+/// `MlpLayout`, the audio encoder's `AudioLayout`): the candle builders' weights are exactly
+/// the descriptions' tensors, the ONNX builder's graph computes each described layer under
+/// its name with the weights of that name, and the graph so built renders what candle
+/// renders.
 #[test]
 fn the_student_graph_follows_the_shared_network_description() {
     use std::collections::BTreeMap;
 
-    use nldf_core::student_network::MlpLayout;
+    use nldf_core::student_network::{AudioLayout, MlpLayout};
 
     for (c, cfg) in configs().into_iter().enumerate() {
         let layout = MlpLayout::of(&cfg);
@@ -449,14 +450,18 @@ fn the_student_graph_follows_the_shared_network_description() {
         .unwrap();
         let built: BTreeMap<String, Vec<usize>> = tensors
             .iter()
-            .filter(|(name, _)| name.starts_with("mlp."))
             .map(|(name, t)| (name.clone(), t.dims().to_vec()))
             .collect();
-        let described: BTreeMap<String, Vec<usize>> =
-            layout.layers().iter().flat_map(|l| l.tensors()).collect();
+        let audio = AudioLayout::of(&cfg.audio);
+        let described: BTreeMap<String, Vec<usize>> = layout
+            .layers()
+            .iter()
+            .flat_map(|l| l.tensors())
+            .chain(audio.tensors())
+            .collect();
         assert_eq!(
             built, described,
-            "config {c}: candle's MLP is not the description's"
+            "config {c}: candle's student is not the description"
         );
         // ONNX: a node and the weights of each described layer (the input layer's weight
         // split into its beam and audio columns).
@@ -472,6 +477,14 @@ fn the_student_graph_follows_the_shared_network_description() {
             .iter()
             .filter_map(|t| Some((t.name.as_deref()?, t.dims.clone())))
             .collect();
+        let convs = audio.net_convs.iter().chain(&audio.att_convs);
+        for conv in convs.filter(|l| cfg.attention || l.prefix == "audio.net") {
+            let name = conv.path();
+            assert!(nodes.contains(&name.as_str()), "config {c}: no node {name}");
+            let w = weights.get(format!("{name}.weight").as_str());
+            let want = vec![conv.c_out as i64, conv.c_in as i64, conv.kernel as i64];
+            assert_eq!(w, Some(&want), "config {c}: {name}.weight");
+        }
         for layer in layout.layers() {
             let name = layer.path();
             assert!(nodes.contains(&name.as_str()), "config {c}: no node {name}");

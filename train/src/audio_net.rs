@@ -7,6 +7,7 @@ use candle_nn::{Linear, VarBuilder, linear};
 use crate::nn::{Conv1d, conv1d};
 
 use nldf_core::student_config::AudioConfig;
+use nldf_core::student_network::{AudioLayout, Conv1dLayer, LinearLayer};
 
 /// AD-NeRF's LeakyReLU slope.
 const SLOPE: f64 = 0.02;
@@ -21,25 +22,38 @@ pub struct AudioNet {
     fc2: Linear,
 }
 
-/// Builds an [`AudioNet`] under `vb` (`convs.{i}`, `fc1`, `fc2`).
+/// Builds an [`AudioNet`] under `vb` (`convs.{i}`, `fc1`, `fc2`), as its [`AudioLayout`]
+/// lists them.
 pub fn audio_net(cfg: &AudioConfig, vb: VarBuilder) -> Result<AudioNet> {
-    let channels = [cfg.n_features, 32, 32, 64, 64];
-    let mut convs = Vec::new();
-    for i in 0..4 {
-        convs.push(conv1d(
-            channels[i],
-            channels[i + 1],
-            3,
-            2,
-            1,
-            vb.pp("convs").pp(i),
-        )?);
-    }
+    let layout = AudioLayout::of(cfg);
+    let convs = convs_of(&layout.net_convs, &vb)?;
     Ok(AudioNet {
         convs,
-        fc1: linear(64, 64, vb.pp("fc1"))?,
-        fc2: linear(64, cfg.dim, vb.pp("fc2"))?,
+        fc1: linear_of(&layout.net_fc1, &vb)?,
+        fc2: linear_of(&layout.net_fc2, &vb)?,
     })
+}
+
+/// The described convolutions under their network's `vb`, in order.
+fn convs_of(layers: &[Conv1dLayer], vb: &VarBuilder) -> Result<Vec<Conv1d>> {
+    layers.iter().map(|c| conv_of(c, vb)).collect()
+}
+
+/// The described convolution under its network's `vb`.
+fn conv_of(c: &Conv1dLayer, vb: &VarBuilder) -> Result<Conv1d> {
+    conv1d(
+        c.c_in,
+        c.c_out,
+        c.kernel,
+        c.stride,
+        c.padding(),
+        vb.pp(&c.name),
+    )
+}
+
+/// The described linear layer under its network's `vb`.
+fn linear_of(l: &LinearLayer, vb: &VarBuilder) -> Result<Linear> {
+    linear(l.fan_in, l.fan_out, vb.pp(&l.name))
 }
 
 impl AudioNet {
@@ -69,23 +83,14 @@ pub struct AudioAttNet {
     attention: Linear,
 }
 
-/// Builds an [`AudioAttNet`] under `vb` (`convs.{i}`, `attention`).
+/// Builds an [`AudioAttNet`] under `vb` (`convs.{i}`, `attention`), as its
+/// [`AudioLayout`] lists them.
 pub fn audio_att_net(cfg: &AudioConfig, vb: VarBuilder) -> Result<AudioAttNet> {
-    let channels = [cfg.dim, 16, 8, 4, 2, 1];
-    let mut convs = Vec::new();
-    for i in 0..5 {
-        convs.push(conv1d(
-            channels[i],
-            channels[i + 1],
-            3,
-            1,
-            1,
-            vb.pp("convs").pp(i),
-        )?);
-    }
+    let layout = AudioLayout::of(cfg);
+    let convs = convs_of(&layout.att_convs, &vb)?;
     Ok(AudioAttNet {
         convs,
-        attention: linear(cfg.att_frames, cfg.att_frames, vb.pp("attention"))?,
+        attention: linear_of(&layout.attention, &vb)?,
     })
 }
 

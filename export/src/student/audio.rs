@@ -5,6 +5,7 @@ use super::ops::{conv_leaky, leaky, linear};
 use crate::checkpoint::StudentCheckpoint;
 use crate::error::Result;
 use crate::graph::{GraphBuilder, attr_int, attr_ints};
+use nldf_core::student_network::{AudioLayout, LinearLayer};
 
 /// The audio code of the frame: AudioNet over each window of the neighbourhood and
 /// AudioAttNet's weighted sum, or AudioNet over the centre window without attention.
@@ -40,10 +41,9 @@ pub(super) fn audio_code(
         &[&windows],
         vec![attr_ints("perm", &[0, 2, 1])],
     );
-    let channels = [a.n_features, 32, 32, 64, 64];
-    for i in 0..4 {
-        let name = format!("audio.net.convs.{i}");
-        x = conv_leaky(g, ckpt, &name, &x, (channels[i], channels[i + 1], 2))?;
+    let layout = AudioLayout::of(a);
+    for c in &layout.net_convs {
+        x = conv_leaky(g, ckpt, c, &x)?;
     }
     let x = g.node(
         "ReduceMean",
@@ -51,9 +51,12 @@ pub(super) fn audio_code(
         &[&x],
         vec![attr_ints("axes", &[2]), attr_int("keepdims", 0)],
     );
-    let x = linear(g, ckpt, "audio.net.fc1", &x, 64, 64)?;
-    let x = leaky(g, "audio.net.fc1.act", &x);
-    let codes = linear(g, ckpt, "audio.net.fc2", &x, 64, a.dim)?;
+    let dense = |g: &mut GraphBuilder, l: &LinearLayer, x: &str| {
+        linear(g, ckpt, &l.path(), x, l.fan_in, l.fan_out)
+    };
+    let x = dense(g, &layout.net_fc1, &x)?;
+    let x = leaky(g, &format!("{}.act", layout.net_fc1.path()), &x);
+    let codes = dense(g, &layout.net_fc2, &x)?;
     if !ckpt.shape.attention {
         return Ok(g.node("Identity", "audio.code", &[&codes], vec![]));
     }
@@ -66,14 +69,12 @@ pub(super) fn audio_code(
     );
     let axis0 = g.constant_i64("audio.att.axis0", &[1], &[0]);
     let mut y = g.node("Unsqueeze", "audio.att.input", &[&t, &axis0], vec![]);
-    let channels = [a.dim, 16, 8, 4, 2, 1];
-    for i in 0..5 {
-        let name = format!("audio.att.convs.{i}");
-        y = conv_leaky(g, ckpt, &name, &y, (channels[i], channels[i + 1], 1))?;
+    for c in &layout.att_convs {
+        y = conv_leaky(g, ckpt, c, &y)?;
     }
     let shape = g.constant_i64("audio.att.logit_shape", &[2], &[1, seq as i64]);
     let y = g.node("Reshape", "audio.att.logits_in", &[&y, &shape], vec![]);
-    let y = linear(g, ckpt, "audio.att.attention", &y, seq, seq)?;
+    let y = dense(g, &layout.attention, &y)?;
     let weights = g.node(
         "Softmax",
         "audio.att.weights",

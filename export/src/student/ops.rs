@@ -3,6 +3,7 @@
 use crate::checkpoint::StudentCheckpoint;
 use crate::error::{Error, Result};
 use crate::graph::{GraphBuilder, WeightType, attr_float, attr_int, attr_ints};
+use nldf_core::student_network::Conv1dLayer;
 
 /// AD-NeRF's LeakyReLU slope.
 const SLOPE: f32 = 0.02;
@@ -46,27 +47,29 @@ pub(super) fn linear(
     Ok(g.node("Gemm", name, &[x, &w, &b], vec![attr_int("transB", 1)]))
 }
 
-/// The checkpoint's Conv1d `name` (`weight` `[out, in, 3]`, padding 1) followed by
-/// LeakyReLU 0.02.
+/// The checkpoint's Conv1d of the described layer `c` (`weight` `[c_out, c_in, kernel]`)
+/// followed by LeakyReLU 0.02.
 pub(super) fn conv_leaky(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
-    name: &str,
+    c: &Conv1dLayer,
     x: &str,
-    (in_dim, out_dim, stride): (usize, usize, usize),
 ) -> Result<String> {
-    let w = ckpt.weight(&format!("{name}.weight"), &[out_dim, in_dim, 3])?;
-    let b = ckpt.weight(&format!("{name}.bias"), &[out_dim])?;
-    let w = g.weight(&format!("{name}.weight"), &[out_dim, in_dim, 3], w);
-    let b = g.weight(&format!("{name}.bias"), &[out_dim], b);
+    let name = c.path();
+    let shape = [c.c_out, c.c_in, c.kernel];
+    let w = ckpt.weight(&format!("{name}.weight"), &shape)?;
+    let b = ckpt.weight(&format!("{name}.bias"), &[c.c_out])?;
+    let w = g.weight(&format!("{name}.weight"), &shape, w);
+    let b = g.weight(&format!("{name}.bias"), &[c.c_out], b);
+    let pad = c.padding() as i64;
     let y = g.node(
         "Conv",
-        name,
+        &name,
         &[x, &w, &b],
         vec![
-            attr_ints("kernel_shape", &[3]),
-            attr_ints("strides", &[stride as i64]),
-            attr_ints("pads", &[1, 1]),
+            attr_ints("kernel_shape", &[c.kernel as i64]),
+            attr_ints("strides", &[c.stride as i64]),
+            attr_ints("pads", &[pad, pad]),
             attr_ints("dilations", &[1]),
             attr_int("group", 1),
         ],
