@@ -19,6 +19,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
+use crate::source::blank;
+
 /// The crates checked: their source folders, relative to the workspace root.
 const SOURCE_DIRS: [&str; 10] = [
     "core/src",
@@ -178,83 +180,6 @@ fn skip_ws(t: &[u8], mut i: usize) -> usize {
     i
 }
 
-/// `src` with comments, strings and character literals blanked (a literal becomes `""` or
-/// `' '`), so that neither the paths nor the braces inside them count.
-fn strip(src: &str) -> Vec<u8> {
-    let s = src.as_bytes();
-    let mut out = Vec::with_capacity(s.len());
-    let mut i = 0;
-    while i < s.len() {
-        let rest = &s[i..];
-        let after_ident = i > 0 && is_ident(s[i - 1]);
-        let raw_prefix = match rest {
-            [b'b', b'r', ..] => 2,
-            [b'r', ..] => 1,
-            _ => 0,
-        };
-        let hashes = rest[raw_prefix..]
-            .iter()
-            .take_while(|&&c| c == b'#')
-            .count();
-        if rest.starts_with(b"//") {
-            i += rest.iter().position(|&c| c == b'\n').unwrap_or(rest.len());
-        } else if rest.starts_with(b"/*") {
-            let mut depth = 0usize;
-            while i < s.len() {
-                if s[i..].starts_with(b"/*") {
-                    depth += 1;
-                    i += 2;
-                } else if s[i..].starts_with(b"*/") {
-                    depth -= 1;
-                    i += 2;
-                    if depth == 0 {
-                        break;
-                    }
-                } else {
-                    i += 1;
-                }
-            }
-            out.push(b' ');
-        } else if raw_prefix > 0 && !after_ident && rest.get(raw_prefix + hashes) == Some(&b'"') {
-            let close: Vec<u8> = std::iter::once(b'"')
-                .chain(std::iter::repeat_n(b'#', hashes))
-                .collect();
-            let body = i + raw_prefix + hashes + 1;
-            let end = s[body..]
-                .windows(close.len())
-                .position(|w| w == close.as_slice());
-            i = end.map_or(s.len(), |e| body + e + close.len());
-            out.extend_from_slice(b"\"\"");
-        } else if rest[0] == b'"' {
-            i += 1;
-            while i < s.len() && s[i] != b'"' {
-                i += if s[i] == b'\\' { 2 } else { 1 };
-            }
-            i += 1;
-            out.extend_from_slice(b"\"\"");
-        } else if rest[0] == b'\'' && rest.get(1) == Some(&b'\\') {
-            let end = s
-                .get(i + 3..)
-                .and_then(|r| r.iter().position(|&c| c == b'\''));
-            i = end.map_or(s.len(), |e| i + 3 + e + 1);
-            out.extend_from_slice(b"' '");
-        } else if rest[0] == b'\''
-            && src[i + 1..]
-                .chars()
-                .next()
-                .is_some_and(|c| s.get(i + 1 + c.len_utf8()) == Some(&b'\''))
-        {
-            let width = src[i + 1..].chars().next().map_or(1, char::len_utf8);
-            i += width + 2;
-            out.extend_from_slice(b"' '");
-        } else {
-            out.push(rest[0]);
-            i += 1;
-        }
-    }
-    out
-}
-
 /// Parses the path or `use` tree at `t[i..]` below `prefix`, adding each whole path to
 /// `paths`; returns where it ends.
 fn parse_tree(t: &[u8], mut i: usize, prefix: &[String], paths: &mut Vec<Vec<String>>) -> usize {
@@ -306,7 +231,7 @@ fn dependencies(
     src: &str,
     modules: &BTreeSet<Vec<String>>,
 ) -> BTreeSet<Vec<String>> {
-    let t = strip(src);
+    let t = blank(src);
     let mut paths = Vec::new();
     // Inline modules (`mod tests { .. }`) open at a brace depth: `super` starts from them.
     let mut inline: Vec<(String, usize)> = Vec::new();

@@ -22,6 +22,7 @@ mod rendering;
 mod results_cited;
 mod shipped;
 mod sizes;
+mod source;
 mod stress;
 mod student;
 mod synth;
