@@ -15,6 +15,52 @@ use crate::error::{Error, Result};
 /// the head's bounds (it was not evaluated; `sigmoid(-MISS_LOGIT)` is 0 in f32).
 pub const MISS_LOGIT: f32 = -30.0;
 
+/// One square convolution of the upsampler's CNN: `weight` `[c_out, c_in, kernel, kernel]`,
+/// zero padding `kernel / 2`; named as in the upsampler's weights (`stages.0`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Conv2dLayer {
+    pub name: String,
+    pub c_in: usize,
+    pub c_out: usize,
+    pub kernel: usize,
+}
+
+impl Conv2dLayer {
+    /// Its tensors among the upsampler's weights: `(name, shape)` of the weight, then the
+    /// bias.
+    pub fn tensors(&self) -> [(String, Vec<usize>); 2] {
+        let k = self.kernel;
+        [
+            (
+                format!("{}.weight", self.name),
+                vec![self.c_out, self.c_in, k, k],
+            ),
+            (format!("{}.bias", self.name), vec![self.c_out]),
+        ]
+    }
+}
+
+/// The upsampler's CNN ([`UpsamplerConfig::layout`]): `reduce` (1 x 1, the student's
+/// `width + 4` features to `channels[0]`), then per x2 stage `stages.s` (3 x 3 to
+/// `4 channels[s + 1]`, depth-to-space 2, ReLU), then `head` (3 x 3 to 4: colour and
+/// opacity logit).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UpsamplerLayout {
+    pub reduce: Conv2dLayer,
+    pub stages: Vec<Conv2dLayer>,
+    pub head: Conv2dLayer,
+}
+
+impl UpsamplerLayout {
+    /// Every layer in the order the grid passes through them.
+    pub fn layers(&self) -> Vec<&Conv2dLayer> {
+        std::iter::once(&self.reduce)
+            .chain(&self.stages)
+            .chain(std::iter::once(&self.head))
+            .collect()
+    }
+}
+
 /// The upsampler's shape.
 ///
 /// Input, per coarse ray: the student's last hidden layer (`width` values, zero for a ray
@@ -71,6 +117,27 @@ impl UpsamplerConfig {
     /// Number of x2 stages, `log2(factor)`.
     pub fn stages(&self) -> usize {
         self.factor.trailing_zeros() as usize
+    }
+
+    /// The CNN layer by layer over a student `width` wide: the one description that the
+    /// candle builder (`nldf_train::upsampler`) and the ONNX builder (`nldf_export`'s
+    /// upsampler graph) follow.
+    pub fn layout(&self, width: usize) -> UpsamplerLayout {
+        let c = &self.channels;
+        let layer = |name: String, c_in: usize, c_out: usize, kernel: usize| Conv2dLayer {
+            name,
+            c_in,
+            c_out,
+            kernel,
+        };
+        let n = self.stages();
+        UpsamplerLayout {
+            reduce: layer("reduce".into(), width + 4, c[0], 1),
+            stages: (0..n)
+                .map(|s| layer(format!("stages.{s}"), c[s], 4 * c[s + 1], 3))
+                .collect(),
+            head: layer("head".into(), c[n], 4, 3),
+        }
     }
 
     /// Checks the shape; `at` prefixes the keys (`model`).
@@ -208,6 +275,18 @@ pub fn receptive_halo(factor: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_layout_follows_the_config() {
+        let cfg = UpsamplerConfig::with_factor(8);
+        let layout = cfg.layout(128);
+        assert_eq!((layout.reduce.c_in, layout.reduce.kernel), (132, 1));
+        assert_eq!(layout.stages.len(), 3);
+        assert_eq!(layout.stages[2].name, "stages.2");
+        assert_eq!(layout.stages[0].c_out, 4 * cfg.channels[1]);
+        assert_eq!((layout.head.c_in, layout.head.c_out), (cfg.channels[3], 4));
+        assert_eq!(layout.layers().len(), 5);
+    }
 
     #[test]
     fn coarse_rays_pass_through_block_centres() {

@@ -23,7 +23,7 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
 use nldf_core::student_network::MlpLayout;
-use nldf_core::upsampler_config::{MISS_LOGIT, UpsamplerConfig};
+use nldf_core::upsampler_config::{Conv2dLayer, MISS_LOGIT, UpsamplerConfig};
 use nldf_model::contract::{
     BOX_COLS, BOX_HEIGHT, BOX_ROWS, BOX_WIDTH, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS,
     INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_RGB,
@@ -209,15 +209,15 @@ fn upsampled_ray_model(
     Ok((model_proto(graph, doc, metadata), info, n_values))
 }
 
-/// A convolution of the checkpoint's `name` (`[c_out, c_in, k, k]`), zero-padded by `k /
-/// 2`.
+/// The checkpoint's convolution of the described layer `l` (`[c_out, c_in, k, k]`),
+/// zero-padded by `k / 2`.
 fn conv(
     g: &mut GraphBuilder,
     up: &UpsamplerCheckpoint,
-    name: &str,
+    l: &Conv2dLayer,
     x: &str,
-    (c_in, c_out, k): (usize, usize, usize),
 ) -> Result<String> {
+    let (name, c_in, c_out, k) = (&l.name, l.c_in, l.c_out, l.kernel);
     let w = up.weight(&format!("{name}.weight"), &[c_out, c_in, k, k])?;
     let b = up.weight(&format!("{name}.bias"), &[c_out])?;
     let w = g.weight(&format!("up.{name}.weight"), &[c_out, c_in, k, k], w);
@@ -496,16 +496,16 @@ fn box_pixels(
     let x = g.node("Unsqueeze", "up.input", &[&x, &axis0], vec![]);
 
     // The CNN.
-    let c = &cfg.channels;
-    let mut y = conv(g, up, "reduce", &x, (channels, c[0], 1))?;
+    let layout = cfg.layout(width);
+    let mut y = conv(g, up, &layout.reduce, &x)?;
     y = g.node("Relu", "up.reduce.act", &[&y], vec![]);
-    for st in 0..cfg.stages() {
-        let name = format!("stages.{st}");
-        y = conv(g, up, &name, &y, (c[st], 4 * c[st + 1], 3))?;
+    for stage in &layout.stages {
+        let name = &stage.name;
+        y = conv(g, up, stage, &y)?;
         y = depth_to_space(g, &format!("up.{name}.shuffle"), &y, 2);
         y = g.node("Relu", &format!("up.{name}.act"), &[&y], vec![]);
     }
-    let head = conv(g, up, "head", &y, (c[cfg.stages()], 4, 3))?;
+    let head = conv(g, up, &layout.head, &y)?;
     let base = channels_of(g, "up.base", &x, &axis1, (width as i64, channels as i64));
     let base = bilinear_up(g, "up.base_bilinear", &base, 4, r);
     let base_colour = channels_of(g, "up.base_colour", &base, &axis1, (0, 3));

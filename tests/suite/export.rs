@@ -8,7 +8,8 @@ use std::process::Command;
 
 use crate::util::{
     PYTHON_PARITY, Run, TOL, candle_frame, candle_render, configs, foreign_model, max_diff, python,
-    random_audio, random_rays, ray_background, read_npy, run_python, write_npy, write_run,
+    random_audio, random_rays, ray_background, read_npy, run_python, tensor_shapes, write_npy,
+    write_run,
 };
 use glam::Mat4;
 use nldf_core::audio::neighbourhood;
@@ -443,15 +444,7 @@ fn the_student_graph_follows_the_shared_network_description() {
         let layout = MlpLayout::of(&cfg);
         let run = write_run(&cfg, 21 + c as u64);
         // candle: the checkpoint's MLP tensors are the description's, name for name.
-        let tensors = candle_core::safetensors::load(
-            run.student_dir().join("model.safetensors"),
-            &candle_core::Device::Cpu,
-        )
-        .unwrap();
-        let built: BTreeMap<String, Vec<usize>> = tensors
-            .iter()
-            .map(|(name, t)| (name.clone(), t.dims().to_vec()))
-            .collect();
+        let built = tensor_shapes(&run.student_dir().join("model.safetensors"));
         let audio = AudioLayout::of(&cfg.audio);
         let described: BTreeMap<String, Vec<usize>> = layout
             .layers()

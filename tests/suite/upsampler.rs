@@ -22,7 +22,9 @@ use nldf_train::checkpoint::{save_tensors, weights};
 use nldf_train::nn::{init_seeded, new_varmap};
 use nldf_train::upsampler::{Upsampler, render_upsampled, upsampler};
 
-use crate::util::{camera_at, configs, max_diff, runtimes, spec_for, write_run_with};
+use crate::util::{
+    camera_at, configs, max_diff, runtimes, spec_for, tensor_shapes, write_run_with,
+};
 
 /// The parity bar, relative to the largest output value (both graphs, parts of the box).
 /// Measured worst about 9.1e-7.
@@ -774,5 +776,30 @@ fn an_int8_upsampled_ray_graph_stays_near_the_f32_one() {
                 "tract against ort, pose {i}: {d}, {rel}"
             );
         }
+    }
+}
+
+/// The upsampler's CNN is described once (`UpsamplerConfig::layout`): the candle builder's
+/// weights are exactly the description's tensors (the ONNX builder reads each described
+/// convolution by its name, and the graphs so built match candle in the tests above).
+#[test]
+fn the_upsampler_follows_its_described_layout() {
+    use std::collections::BTreeMap;
+
+    let dir = tempfile::tempdir().unwrap();
+    for factor in [2, 4, 8] {
+        let cfg = UpsamplerConfig::with_factor(factor);
+        let width = 24;
+        let up_dir = dir.path().join(format!("x{factor}"));
+        write_upsampler(&up_dir, &cfg, width, 7 + factor as u64);
+        let built = tensor_shapes(&up_dir.join("model.safetensors"));
+        let layout = cfg.layout(width);
+        let described: BTreeMap<String, Vec<usize>> =
+            layout.layers().iter().flat_map(|l| l.tensors()).collect();
+        assert_eq!(
+            built, described,
+            "x{factor}: candle's CNN is not the description"
+        );
+        assert_eq!(layout.stages.len(), cfg.stages());
     }
 }

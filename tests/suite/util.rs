@@ -572,3 +572,12 @@ pub(crate) fn files_under(root: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     }
     out
 }
+
+/// The name and shape of every tensor in the safetensors file at `path`.
+pub(crate) fn tensor_shapes(path: &Path) -> std::collections::BTreeMap<String, Vec<usize>> {
+    candle_core::safetensors::load(path, &candle_core::Device::Cpu)
+        .unwrap()
+        .iter()
+        .map(|(name, t)| (name.clone(), t.dims().to_vec()))
+        .collect()
+}

@@ -14,7 +14,9 @@ use nldf_core::camera::Camera;
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::head_rays;
 pub use nldf_core::upsampler_config::UpsamplerConfig;
-use nldf_core::upsampler_config::{MISS_LOGIT, bilinear_kernel, coarse_box, coarse_intrinsics};
+use nldf_core::upsampler_config::{
+    Conv2dLayer, MISS_LOGIT, bilinear_kernel, coarse_box, coarse_intrinsics,
+};
 
 use crate::student::Student;
 
@@ -49,12 +51,15 @@ fn conv(c_in: usize, c_out: usize, k: usize, vb: VarBuilder) -> Result<Conv2d> {
 /// Builds an [`Upsampler`] for `cfg` over a student whose hidden layer is `width` wide, its
 /// weights zero (training draws them with [`init_upsampler_seeded`]).
 pub fn upsampler(cfg: &UpsamplerConfig, width: usize, vb: VarBuilder) -> Result<Upsampler> {
-    let c = &cfg.channels;
-    let reduce = conv(width + 4, c[0], 1, vb.pp("reduce"))?;
-    let stages = (0..cfg.stages())
-        .map(|s| conv(c[s], 4 * c[s + 1], 3, vb.pp("stages").pp(s)))
+    let layout = cfg.layout(width);
+    let layer = |l: &Conv2dLayer| conv(l.c_in, l.c_out, l.kernel, vb.pp(&l.name));
+    let reduce = layer(&layout.reduce)?;
+    let stages = layout
+        .stages
+        .iter()
+        .map(layer)
         .collect::<Result<Vec<_>>>()?;
-    let head = conv(c[cfg.stages()], 4, 3, vb.pp("head"))?;
+    let head = layer(&layout.head)?;
     Ok(Upsampler {
         cfg: cfg.clone(),
         width,
