@@ -70,6 +70,21 @@ fn tract_render(
     (flat(&out[0]), flat(&out[1]))
 }
 
+/// The model at `path` (exported from `run`) in tract against candle on `rays`: the largest
+/// pixel and segment differences, and tract's pixels.
+fn tract_against_candle(
+    run: &Run,
+    path: &Path,
+    cfg: &StudentConfig,
+    rays: &Rays,
+    audio: &[f32],
+) -> (f32, f32, Vec<f32>) {
+    let (want_rgb, want_seg) = candle_render(run, rays, audio);
+    let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
+    let (rgb, seg) = tract_render(path, rays, audio, shape);
+    (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg), rgb)
+}
+
 #[test]
 fn export_tract_matches_candle_on_10000_rays() {
     for (c, cfg) in configs().into_iter().enumerate() {
@@ -77,10 +92,7 @@ fn export_tract_matches_candle_on_10000_rays() {
         let path = run.export(WeightType::F32);
         let rays = random_rays(10_000, 3);
         let audio = neighbourhood(&random_audio(&cfg, 12, 4), 5, cfg.audio.att_frames);
-        let (want_rgb, want_seg) = candle_render(&run, &rays, &audio);
-        let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
-        let (rgb, seg) = tract_render(&path, &rays, &audio, shape);
-        let (d_rgb, d_seg) = (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg));
+        let (d_rgb, d_seg, rgb) = tract_against_candle(&run, &path, &cfg, &rays, &audio);
         println!(
             "config {c} (K {}, L {}, attention {}): tract vs candle, 10000 rays: max |rgb diff| \
              {d_rgb:.2e}, max |segment diff| {d_seg:.2e}",
@@ -89,6 +101,7 @@ fn export_tract_matches_candle_on_10000_rays() {
         assert!(d_rgb <= TOL && d_seg <= TOL, "{d_rgb} {d_seg}");
         // The outputs must depend on the audio: another frame gives other colours.
         let other = neighbourhood(&random_audio(&cfg, 12, 4), 9, cfg.audio.att_frames);
+        let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
         let (rgb2, _) = tract_render(&path, &rays, &other, shape);
         assert!(
             max_diff(&rgb, &rgb2) > 1e-5,
@@ -496,10 +509,7 @@ fn the_student_graph_follows_the_shared_network_description() {
         // And the graph renders what candle renders.
         let rays = random_rays(500, 5);
         let audio = neighbourhood(&random_audio(&cfg, 12, 4), 3, cfg.audio.att_frames);
-        let (want_rgb, want_seg) = candle_render(&run, &rays, &audio);
-        let shape = [cfg.audio.att_frames, cfg.audio.window, cfg.audio.n_features];
-        let (rgb, seg) = tract_render(&path, &rays, &audio, shape);
-        let (d_rgb, d_seg) = (max_diff(&rgb, &want_rgb), max_diff(&seg, &want_seg));
+        let (d_rgb, d_seg, _) = tract_against_candle(&run, &path, &cfg, &rays, &audio);
         assert!(d_rgb <= TOL && d_seg <= TOL, "config {c}: {d_rgb} {d_seg}");
     }
 }

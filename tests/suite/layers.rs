@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use crate::source::blank;
 
 /// The crates checked: their source folders, relative to the workspace root.
-const SOURCE_DIRS: [&str; 10] = [
+pub(crate) const SOURCE_DIRS: [&str; 10] = [
     "core/src",
     "kernels/src",
     "prepare/src",
