@@ -184,15 +184,17 @@ def main() -> int:
     audio = neighbourhood(meta, args.audio, args.frame)
 
     frame = (background.reshape(-1, 3).astype(np.float32) / np.float32(255.0)).astype(np.float32)
-    # A model with opacity (nldf.opacity true) composites over the background itself: it
-    # takes each ray's background colour as the input "background".
-    opacity = bool(meta.get("nldf.opacity", False))
+    # The model composites over the background itself (nldf.opacity is true): it takes each
+    # ray's background colour as the input "background".
     index = np.flatnonzero(hit)
     for start in range(0, len(index), CHUNK):
         rows = index[start : start + CHUNK]
-        feeds = {"rays_o": origins[rows], "rays_d": directions[rows], "audio": audio}
-        if opacity:
-            feeds["background"] = frame[rows].copy()
+        feeds = {
+            "rays_o": origins[rows],
+            "rays_d": directions[rows],
+            "audio": audio,
+            "background": frame[rows].copy(),
+        }
         (rgb,) = session.run(["rgb"], feeds)
         frame[rows] = rgb
     frame = frame.reshape(height, width, 3)

@@ -59,3 +59,54 @@ pub fn teacher_dir(run: &Path) -> PathBuf {
 pub fn has_checkpoint(dir: &Path) -> bool {
     dir.join(MODEL_FILE).is_file()
 }
+
+/// The metadata key of a checkpoint's safetensors files ([`MODEL_FILE`], [`STATE_FILE`])
+/// that holds its format's version.
+pub const CHECKPOINT_VERSION_KEY: &str = "nldf.checkpoint";
+
+/// The checkpoint format this build writes and reads: 2, every student with opacity and
+/// anchored beams (its `config.json` without the retired `opacity` and `anchor_beams`).
+/// Checkpoints without [`CHECKPOINT_VERSION_KEY`] are version 1, made before it.
+pub const CHECKPOINT_VERSION: u32 = 2;
+
+/// The one version check of a checkpoint's weights: `found` is the metadata's
+/// [`CHECKPOINT_VERSION_KEY`]. Returns why the checkpoint cannot be read, if it cannot.
+pub fn checkpoint_version_problem(found: Option<&str>) -> Option<String> {
+    let version = match found {
+        None => 1,
+        Some(v) => match v.parse::<u32>() {
+            Ok(v) => v,
+            Err(_) => return Some(format!("its checkpoint version `{v}` is not a number")),
+        },
+    };
+    match version.cmp(&CHECKPOINT_VERSION) {
+        std::cmp::Ordering::Equal => None,
+        std::cmp::Ordering::Less => Some(format!(
+            "made by an older nldf (checkpoint version {version}, this build reads \
+             {CHECKPOINT_VERSION}): train again or re-export"
+        )),
+        std::cmp::Ordering::Greater => Some(format!(
+            "made by a newer nldf (checkpoint version {version}, this build reads \
+             {CHECKPOINT_VERSION}): update nldf"
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_this_checkpoint_version_is_read() {
+        assert_eq!(checkpoint_version_problem(Some("2")), None);
+        let older = checkpoint_version_problem(None).unwrap();
+        assert!(older.contains("made by an older nldf"), "{older}");
+        assert!(older.contains("train again or re-export"), "{older}");
+        let older = checkpoint_version_problem(Some("1")).unwrap();
+        assert!(older.contains("version 1"), "{older}");
+        let newer = checkpoint_version_problem(Some("3")).unwrap();
+        assert!(newer.contains("newer nldf"), "{newer}");
+        let bad = checkpoint_version_problem(Some("two")).unwrap();
+        assert!(bad.contains("`two`"), "{bad}");
+    }
+}

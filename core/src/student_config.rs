@@ -72,6 +72,19 @@ impl AudioConfig {
     }
 }
 
+/// A retired switch (`opacity`, `anchor_beams`) read from a config written before checkpoint
+/// version 2: `true`, the only behaviour left, is accepted; `false` is refused.
+fn retired_on<'de, D: serde::Deserializer<'de>>(de: D) -> std::result::Result<(), D::Error> {
+    if bool::deserialize(de)? {
+        Ok(())
+    } else {
+        Err(serde::de::Error::custom(
+            "switched off by a config of an older nldf: every student now predicts opacity \
+             and anchors its beams (remove the key, and train again)",
+        ))
+    }
+}
+
 /// The student's shape.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -89,19 +102,28 @@ pub struct StudentConfig {
     /// Fuse the codes of `audio.att_frames` neighbouring frames with AudioAttNet (AD-NeRF's
     /// smoothing); without, only the frame's own window is encoded.
     pub attention: bool,
-    /// Predict the ray's opacity beside its segment colours: how much of the ray the head
-    /// covers, distilled from the teacher's accumulated weight. The pixel is then
-    /// `sum_i c_i + (1 - opacity) * background[pixel]` (the teacher's compositing in
-    /// screen space), so the student never has to paint the background itself. Off in
-    /// checkpoints made before it existed (their last segment holds the background).
-    #[serde(default)]
-    pub opacity: bool,
-    /// Anchor the beams at the head ([`crate::beam::BeamAnchor`]): the trainer sets
-    /// `beam.anchor` from the training cameras when it is not set, so that a ray's beam
-    /// depends on its line alone and a closer or farther camera asks nothing new. Off in
-    /// checkpoints made before it existed.
-    #[serde(default)]
-    pub anchor_beams: bool,
+    /// `opacity` of configs written before checkpoint version 2: every student now predicts
+    /// its rays' opacity (how much of the ray the head covers, distilled from the teacher's
+    /// accumulated weight) and composites `sum_i c_i + (1 - opacity) * background[pixel]`.
+    /// Read when `true` (what it always means now), refused when `false`; never written.
+    #[serde(
+        rename = "opacity",
+        default,
+        skip_serializing,
+        deserialize_with = "retired_on"
+    )]
+    pub retired_opacity: (),
+    /// `anchor_beams` of configs written before checkpoint version 2: the trainer now always
+    /// anchors the beams at the head ([`crate::beam::BeamAnchor`], `beam.anchor` set from
+    /// the training cameras when a config leaves it out). Read when `true`, refused when
+    /// `false`; never written.
+    #[serde(
+        rename = "anchor_beams",
+        default,
+        skip_serializing,
+        deserialize_with = "retired_on"
+    )]
+    pub retired_anchor_beams: (),
 }
 
 impl Default for StudentConfig {
@@ -119,8 +141,8 @@ impl StudentConfig {
             width: 256,
             segments: 4,
             attention: true,
-            opacity: true,
-            anchor_beams: true,
+            retired_opacity: (),
+            retired_anchor_beams: (),
         }
     }
 
@@ -169,8 +191,8 @@ impl StudentConfig {
             width: 32,
             segments: 4,
             attention: true,
-            opacity: true,
-            anchor_beams: true,
+            retired_opacity: (),
+            retired_anchor_beams: (),
         }
     }
 
@@ -184,10 +206,9 @@ impl StudentConfig {
         self.beam.encoded_len() + self.audio.dim
     }
 
-    /// Width of the network's output: `3 M` segment colours, then the opacity's logit
-    /// when it has one.
+    /// Width of the network's output: `3 M` segment colours, then the opacity's logit.
     pub fn output_dim(&self) -> usize {
-        3 * self.segments + usize::from(self.opacity)
+        3 * self.segments + 1
     }
 
     /// Multiply-adds per ray of the network.

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::image::ImageRgb;
 use nldf_core::render_spec::RenderSpec;
-use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE, RENDER_SPEC_FILE};
+use nldf_core::run_files::{
+    CHECKPOINT_VERSION_KEY, CONFIG_FILE, MODEL_FILE, RENDER_SPEC_FILE, checkpoint_version_problem,
+};
 use nldf_core::student_config::StudentConfig;
 
 use crate::error::{Error, Result};
@@ -178,6 +180,11 @@ pub fn parse_weights_of(
     let (_, meta) = safetensors::SafeTensors::read_metadata(bytes)
         .map_err(|e| Error::invalid(path, format!("not a safetensors file: {e}")))?;
     let metadata = meta.metadata().clone().unwrap_or_default();
+    if let Some(problem) =
+        checkpoint_version_problem(metadata.get(CHECKPOINT_VERSION_KEY).map(String::as_str))
+    {
+        return Err(Error::invalid(path, problem));
+    }
     if let Some(kind) = metadata.get("kind")
         && kind != expected
     {

@@ -230,11 +230,6 @@ fn conv(
 /// already be in `g` (run without a background, so that [`OUTPUT_RGB`] is its own colour).
 fn student_rows(g: &mut GraphBuilder, ckpt: &StudentCheckpoint) -> Result<String> {
     let s = &ckpt.shape;
-    if !s.opacity {
-        return Err(Error::Frame(
-            "the upsampler needs a student with opacity (its logit is an input)".into(),
-        ));
-    }
     // The last hidden layer's activation, as the MLP's builder names it.
     let layout = MlpLayout::of(s);
     let last = layout.body.last().map_or(layout.input.path(), |b| b.path());

@@ -11,9 +11,7 @@ use nldf_model::ExportedModel;
 #[cfg(not(feature = "ort"))]
 use crate::error::Error;
 use crate::error::Result;
-pub use crate::runtime::{
-    Backend, BackendKind, BackendOptions, RayOutputs, batch_background, check_inputs,
-};
+pub use crate::runtime::{Backend, BackendKind, BackendOptions, RayOutputs, check_inputs};
 
 /// Opens the model at `path` (checked by `nldf_model::read_model`) in the runtime `kind`.
 pub fn open_backend(

@@ -229,12 +229,9 @@ pub fn bench_render(
     progress("ort: whole frames against bare onnxruntime");
     let rays = ort.rays(c2w);
     let n_rays = rays.pixels.len();
-    let background = if ort.info().opacity {
+    let background =
         crate::frame::background_at(ort.info(), ort.intrinsics().width, ort.intrinsics().height)?
-            .gather(&rays.pixels)
-    } else {
-        Vec::new()
-    };
+            .gather(&rays.pixels);
     // One block after the other, never alternating: a session that has just run keeps its
     // pool spinning for a while, and two sessions taking turns fight over the cores (on
     // 2 cores that made the bare session look 20-50 % slower than onnxruntime from Python).

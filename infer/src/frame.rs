@@ -386,7 +386,7 @@ impl FrameRenderer {
     }
 
     /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),
-    /// composited over the renderer's background for a model with opacity.
+    /// composited over the renderer's background.
     ///
     /// # Shapes
     /// - `audio`: `[att_frames, window, n_features]` flat
@@ -395,11 +395,7 @@ impl FrameRenderer {
         if rays.pixels.is_empty() {
             return Ok(RayOutputs::default());
         }
-        let background = if self.backend.info().opacity {
-            self.background.gather(&rays.pixels)
-        } else {
-            Vec::new()
-        };
+        let background = self.background.gather(&rays.pixels);
         self.backend.run(
             &rays.rays.origins,
             &rays.rays.directions,

@@ -108,20 +108,13 @@ impl OrtBackend {
     ) -> Result<R> {
         let n = origins.len() / 3;
         let fail = |e: ort::Error| Error::backend(NAME, e);
-        let mut inputs = ort::inputs![
+        let inputs = ort::inputs![
             INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
             INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
             INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
                 .map_err(fail)?,
+            INPUT_BACKGROUND => TensorRef::from_array_view(([n, 3], background)).map_err(fail)?,
         ];
-        if self.info.opacity {
-            inputs.push((
-                INPUT_BACKGROUND.into(),
-                TensorRef::from_array_view(([n, 3], background))
-                    .map_err(fail)?
-                    .into(),
-            ));
-        }
         let outputs = self.session.run(inputs).map_err(fail)?;
         take(&outputs)
     }
@@ -140,11 +133,12 @@ impl OrtBackend {
         let n = origins.len() / 3;
         for start in (0..n).step_by(self.batch_size) {
             let end = (start + self.batch_size).min(n);
-            let (o, d) = (
-                &origins[3 * start..3 * end],
-                &directions[3 * start..3 * end],
+            let rows = 3 * start..3 * end;
+            let (o, d, b) = (
+                &origins[rows.clone()],
+                &directions[rows.clone()],
+                &background[rows],
             );
-            let b = crate::runtime::batch_background(&self.info, background, start..end);
             self.run_session(o, d, b, audio, |_| Ok(()))?;
         }
         Ok(())
@@ -174,7 +168,6 @@ impl Backend for OrtBackend {
         refuse_boxed(&self.info)?;
         let n = rays_o.len() / 3;
         let m = self.info.segments;
-        let opacity = self.info.opacity;
         self.run_session(rays_o, rays_d, background, audio, |outputs| {
             let take = |name: &str, per_ray: usize| -> Result<Vec<f32>> {
                 let value = outputs
@@ -198,11 +191,7 @@ impl Backend for OrtBackend {
             Ok(RayOutputs {
                 rgb: take(OUTPUT_RGB, 3)?,
                 segments: take(OUTPUT_SEGMENTS, 3 * m)?,
-                opacity: if opacity {
-                    take(OUTPUT_OPACITY, 1)?
-                } else {
-                    Vec::new()
-                },
+                opacity: take(OUTPUT_OPACITY, 1)?,
             })
         })
     }

@@ -92,11 +92,9 @@ impl BackendOptions {
 pub struct RayOutputs {
     /// Pixel colours, `[n_rays, 3]` (paper Eq. 7).
     pub rgb: Vec<f32>,
-    /// Segment colours, `[n_rays, M, 3]`, summing to `rgb` (to `rgb` less the background's
-    /// share for a model with opacity).
+    /// Segment colours, `[n_rays, M, 3]`, summing to `rgb` less the background's share.
     pub segments: Vec<f32>,
-    /// How much of each ray the head covers, `[n_rays]`; empty for a model without
-    /// opacity.
+    /// How much of each ray the head covers, `[n_rays]`.
     pub opacity: Vec<f32>,
 }
 
@@ -138,7 +136,7 @@ pub trait Backend {
     ///
     /// # Shapes
     /// - `origins`, `directions`: `[n_rays, 3]` flat, `1 <= n_rays <= batch_size`
-    /// - `background`: `[n_rays, 3]` flat for a model with opacity, else ignored
+    /// - `background`: `[n_rays, 3]` flat
     /// - `audio`: `[att_frames, window, n_features]` flat (see `nldf_model::contract`)
     /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
     fn run_batch(
@@ -222,8 +220,7 @@ pub trait Backend {
     ///
     /// # Shapes
     /// - `origins`, `directions`: `[n_rays, 3]` flat
-    /// - `background`: `[n_rays, 3]` flat, the background behind each ray, for a model
-    ///   with opacity (see [`ModelInfo::opacity`]); ignored (may be empty) otherwise
+    /// - `background`: `[n_rays, 3]` flat, the background behind each ray
     /// - `audio`: `[att_frames, window, n_features]` flat
     /// - returns `rgb` `[n_rays, 3]`, `segments` `[n_rays, M, 3]` and `opacity` `[n_rays]`
     fn run(
@@ -236,11 +233,10 @@ pub trait Backend {
         check_inputs(self.info(), origins, directions, background, audio)?;
         let n = origins.len() / 3;
         let m = self.info().segments;
-        let opacity = self.info().opacity;
         let mut out = RayOutputs {
             rgb: Vec::with_capacity(3 * n),
             segments: Vec::with_capacity(3 * m * n),
-            opacity: Vec::with_capacity(if opacity { n } else { 0 }),
+            opacity: Vec::with_capacity(n),
         };
         let batch = self.batch_size();
         for start in (0..n).step_by(batch) {
@@ -248,7 +244,7 @@ pub trait Backend {
             let part = self.run_batch(
                 &origins[3 * start..3 * end],
                 &directions[3 * start..3 * end],
-                batch_background(self.info(), background, start..end),
+                &background[3 * start..3 * end],
                 audio,
             )?;
             out.rgb.extend_from_slice(&part.rgb);
@@ -256,20 +252,6 @@ pub trait Backend {
             out.opacity.extend_from_slice(&part.opacity);
         }
         Ok(out)
-    }
-}
-
-/// The background colours of rays `rays` (`[rays.len(), 3]` flat) for a model with
-/// opacity; none for one without, which takes no background input.
-pub fn batch_background<'a>(
-    info: &ModelInfo,
-    background: &'a [f32],
-    rays: std::ops::Range<usize>,
-) -> &'a [f32] {
-    if info.opacity {
-        &background[3 * rays.start..3 * rays.end]
-    } else {
-        &[]
     }
 }
 
@@ -283,7 +265,7 @@ pub fn check_inputs(
 ) -> Result<()> {
     refuse_boxed(info)?;
     check_rays(origins, directions)?;
-    if info.opacity && background.len() != origins.len() {
+    if background.len() != origins.len() {
         return Err(Error::Argument(format!(
             "rays: the model composites over the background, which holds {} values for {} \
              rays (expected 3 per ray)",

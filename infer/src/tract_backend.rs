@@ -102,18 +102,15 @@ impl TractBackend {
             return Ok(plan.clone());
         }
         let audio = self.info.audio.shape();
-        let opacity = self.info.opacity;
         let compile = || -> TractResult<Arc<TypedRunnableModel>> {
-            let mut model = self
-                .model
+            self.model
                 .clone()
                 .with_input_fact(0, f32::fact([n_rays, 3]).into())?
                 .with_input_fact(1, f32::fact([n_rays, 3]).into())?
-                .with_input_fact(2, f32::fact(audio).into())?;
-            if opacity {
-                model = model.with_input_fact(3, f32::fact([n_rays, 3]).into())?;
-            }
-            model.into_optimized()?.into_runnable()
+                .with_input_fact(2, f32::fact(audio).into())?
+                .with_input_fact(3, f32::fact([n_rays, 3]).into())?
+                .into_optimized()?
+                .into_runnable()
         };
         let plan = compile().map_err(|e| Error::backend(NAME, format!("compiling: {e}")))?;
         self.plans.insert(n_rays, plan.clone());
@@ -186,14 +183,12 @@ impl Backend for TractBackend {
         let tensor = |shape: &[usize], data: &[f32]| {
             Tensor::from_shape(shape, data).map_err(|e| Error::backend(NAME, e))
         };
-        let mut inputs: TVec<TValue> = tvec!(
+        let inputs: TVec<TValue> = tvec!(
             tensor(&[padded, 3], &pad(origins))?.into(),
             tensor(&[padded, 3], &pad(directions))?.into(),
             tensor(&self.info.audio.shape(), audio)?.into(),
+            tensor(&[padded, 3], &pad(background))?.into(),
         );
-        if self.info.opacity {
-            inputs.push(tensor(&[padded, 3], &pad(background))?.into());
-        }
         let outputs =
             tract_linalg::multithread::multithread_tract_scope(self.executor.clone(), || {
                 plan.run(inputs)
@@ -229,10 +224,7 @@ impl Backend for TractBackend {
         Ok(RayOutputs {
             rgb: take(&outputs[0], 3)?,
             segments: take(&outputs[1], 3 * m)?,
-            opacity: match outputs.get(2) {
-                Some(alpha) => take(alpha, 1)?,
-                None => Vec::new(),
-            },
+            opacity: take(&outputs[2], 1)?,
         })
     }
 

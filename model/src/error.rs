@@ -20,6 +20,10 @@ pub enum Error {
     /// wanted, or the reverse).
     #[error("{}: {reason}", path.display())]
     WrongKind { path: PathBuf, reason: String },
+    /// The file is an nldf model made by an older nldf, whose models this build no longer
+    /// reads (the reason says "made by an older nldf ...").
+    #[error("{}: {reason}", path.display())]
+    Older { path: PathBuf, reason: String },
 }
 
 /// Result with [`Error`].

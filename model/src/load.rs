@@ -125,6 +125,10 @@ fn metadata_error(path: &Path, e: MetadataError) -> Error {
             path: path.to_path_buf(),
             reason,
         },
+        older @ MetadataError::Older(_) => Error::Older {
+            path: path.to_path_buf(),
+            reason: older.to_string(),
+        },
         other => Error::corrupt(path, other.to_string()),
     }
 }

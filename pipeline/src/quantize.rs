@@ -107,7 +107,7 @@ fn ranges_of(
         .model_for_read(&mut &bytes[..])
         .map_err(backend)?;
     parsed
-        .set_input_names(input_names(info.opacity))
+        .set_input_names(input_names())
         .and_then(|()| parsed.select_outputs_by_name(taps.iter().map(|t| t.tensor.as_str())))
         .map_err(backend)?;
     let mut plans: HashMap<usize, std::sync::Arc<TypedRunnableModel>> = HashMap::new();
@@ -129,29 +129,20 @@ fn ranges_of(
                         .with_input_fact(0, f32::fact([rays, 3]).into())
                         .and_then(|m| m.with_input_fact(1, f32::fact([rays, 3]).into()))
                         .and_then(|m| m.with_input_fact(2, f32::fact(audio_shape).into()))
-                        .and_then(|m| {
-                            if info.opacity {
-                                m.with_input_fact(3, f32::fact([rays, 3]).into())
-                            } else {
-                                Ok(m)
-                            }
-                        })
+                        .and_then(|m| m.with_input_fact(3, f32::fact([rays, 3]).into()))
                         .and_then(|m| m.into_optimized())
                         .and_then(|m| m.into_runnable())
                         .map_err(backend)?,
                 ),
             };
             let inputs = (|| -> TractResult<TVec<TValue>> {
-                let mut inputs: TVec<TValue> = tvec!(
+                // The taps all lie before the compositing: any background will do.
+                Ok(tvec!(
                     Tensor::from_shape(&[rays, 3], &frame.origins[3 * start..3 * end])?.into(),
                     Tensor::from_shape(&[rays, 3], &frame.directions[3 * start..3 * end])?.into(),
                     Tensor::from_shape(&audio_shape, &frame.audio)?.into(),
-                );
-                if info.opacity {
-                    // The taps all lie before the compositing: any background will do.
-                    inputs.push(Tensor::from_shape(&[rays, 3], &vec![0.0f32; 3 * rays])?.into());
-                }
-                Ok(inputs)
+                    Tensor::from_shape(&[rays, 3], &vec![0.0f32; 3 * rays])?.into(),
+                ))
             })()
             .map_err(backend)?;
             let outputs =

@@ -26,8 +26,8 @@ use nldf_train::student::StudentConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// The model at `path` run by tract with a concrete ray count: pixels and segments, flat
-/// (a model with opacity composited over [`ray_background`]).
+/// The model at `path` run by tract with a concrete ray count: pixels (composited over
+/// [`ray_background`]) and segments, flat.
 fn tract_render(
     path: &Path,
     rays: &Rays,
@@ -36,29 +36,26 @@ fn tract_render(
 ) -> (Vec<f32>, Vec<f32>) {
     use tract_onnx::prelude::*;
     let n = rays.len();
-    let opacity = read_model(path).unwrap().info.opacity;
-    let mut model = tract_onnx::onnx()
+    let model = tract_onnx::onnx()
         .model_for_path(path)
         .unwrap()
         .with_input_fact(0, f32::fact([n, 3]).into())
         .unwrap()
         .with_input_fact(1, f32::fact([n, 3]).into())
+        .unwrap()
+        .with_input_fact(3, f32::fact([n, 3]).into())
         .unwrap();
-    if opacity {
-        model = model.with_input_fact(3, f32::fact([n, 3]).into()).unwrap();
-    }
     let model = model.into_optimized().unwrap().into_runnable().unwrap();
     let origins = Tensor::from_shape(&[n, 3], &rays.origins).unwrap();
     let directions = Tensor::from_shape(&[n, 3], &rays.directions).unwrap();
     let audio = Tensor::from_shape(&shape, audio).unwrap();
-    let mut inputs: TVec<TValue> = tvec!(origins.into(), directions.into(), audio.into());
-    if opacity {
-        inputs.push(
-            Tensor::from_shape(&[n, 3], &ray_background(n))
-                .unwrap()
-                .into(),
-        );
-    }
+    let background = Tensor::from_shape(&[n, 3], &ray_background(n)).unwrap();
+    let inputs: TVec<TValue> = tvec!(
+        origins.into(),
+        directions.into(),
+        audio.into(),
+        background.into()
+    );
     let out = model.run(inputs).unwrap();
     let flat = |t: &TValue| -> Vec<f32> {
         t.to_plain_array_view::<f32>()
@@ -150,13 +147,12 @@ fn export_writes_the_contract() {
     let names = |v: &[nldf_model::onnx::ValueInfoProto]| -> Vec<String> {
         v.iter().map(|i| i.name.clone().unwrap()).collect()
     };
-    // The tiny student has opacity: it composites over a background input.
+    // The student composites over a background input.
     assert_eq!(
         names(&graph.input),
         ["rays_o", "rays_d", "audio", "background"]
     );
     assert_eq!(names(&graph.output), ["rgb", "segments", "opacity"]);
-    assert!(model.info.opacity);
     // Initializer names are the checkpoint's weight paths.
     let inits: Vec<&str> = graph
         .initializer
@@ -511,5 +507,97 @@ fn the_student_graph_follows_the_shared_network_description() {
         let audio = neighbourhood(&random_audio(&cfg, 12, 4), 3, cfg.audio.att_frames);
         let (d_rgb, d_seg, _) = tract_against_candle(&run, &path, &cfg, &rays, &audio);
         assert!(d_rgb <= TOL && d_seg <= TOL, "config {c}: {d_rgb} {d_seg}");
+    }
+}
+
+/// One version check when a model or a checkpoint loads: a model of contract 3, one
+/// without opacity and one without a beam anchor, and a checkpoint without this build's
+/// checkpoint version, are each refused as made by an older nldf; a config written before
+/// version 2 reads when its retired switches are on, and is refused when one is off.
+#[test]
+fn models_checkpoints_and_configs_of_an_older_nldf_are_refused_with_one_error() {
+    use nldf_core::run_files::{CHECKPOINT_VERSION_KEY, MODEL_FILE};
+
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 83);
+    let path = run.export(WeightType::F32);
+    let model = read_model(&path).unwrap();
+    let with = |key: &str, value: &str| -> Vec<StringStringEntryProto> {
+        let mut props = model.info.to_metadata();
+        for p in &mut props {
+            if p.key.as_deref() == Some(key) {
+                p.value = Some(value.to_string());
+            }
+        }
+        props
+    };
+    let version = contract::keys::CONTRACT;
+    for (key, value, what) in [
+        (version, "3", "contract version 3"),
+        (version, "2", "contract version 2"),
+        (contract::keys::OPACITY, "false", "no opacity"),
+        (contract::keys::BEAM_ANCHOR, "null", "no beam anchor"),
+    ] {
+        let err = ModelInfo::from_metadata(&with(key, value))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("made by an older nldf") && err.contains(what),
+            "{key} = {value}: {err}"
+        );
+        assert!(err.contains("train again or re-export"), "{err}");
+    }
+    // Through a file: the error names it.
+    let mut older = model.proto.clone();
+    older.metadata_props = with(version, "3");
+    let older_path = run.root.join("older.onnx");
+    std::fs::write(&older_path, prost::Message::encode_to_vec(&older)).unwrap();
+    let err = read_model(&older_path).unwrap_err();
+    assert!(matches!(err, Error::Older { .. }), "{err:?}");
+    assert!(err.to_string().contains("older.onnx"), "{err}");
+    let newer = ModelInfo::from_metadata(&with(version, "6"))
+        .unwrap_err()
+        .to_string();
+    assert!(newer.contains("newer nldf"), "{newer}");
+
+    // A checkpoint without the version: export and the trainer's loader refuse it.
+    let weights = run.student_dir().join(MODEL_FILE);
+    let (tensors, mut meta) = nldf_train::checkpoint::load_tensors(&weights).unwrap();
+    assert!(meta.remove(CHECKPOINT_VERSION_KEY).is_some());
+    nldf_train::checkpoint::save_tensors(&weights, &tensors, meta).unwrap();
+    let err = export_student(
+        &run.student_dir(),
+        &run.root.join("v1.onnx"),
+        WeightType::F32,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("model.safetensors") && err.contains("checkpoint version 1"),
+        "{err}"
+    );
+    assert!(err.contains("made by an older nldf"), "{err}");
+    assert!(!run.root.join("v1.onnx").exists());
+    let (varmap, vb) = nldf_train::nn::new_varmap();
+    nldf_train::student::student(&run.student.cfg, vb).unwrap();
+    let err = nldf_train::checkpoint::open_checkpoint(&run.student_dir(), &varmap, None)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("checkpoint version 1"), "{err}");
+
+    // Configs: the retired switches read when on, never written, refused when off.
+    let mut json = serde_json::to_value(&cfg).unwrap();
+    assert!(json.get("opacity").is_none() && json.get("anchor_beams").is_none());
+    json["opacity"] = true.into();
+    json["anchor_beams"] = true.into();
+    let read: StudentConfig = serde_json::from_value(json.clone()).unwrap();
+    assert_eq!(read, cfg);
+    for key in ["opacity", "anchor_beams"] {
+        let mut off = json.clone();
+        off[key] = false.into();
+        let err = serde_json::from_value::<StudentConfig>(off)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("older nldf"), "{key}: {err}");
     }
 }

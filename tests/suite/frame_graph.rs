@@ -222,18 +222,6 @@ fn frame_graph_matches_nldf_render_for_tiny_students() {
             TINY_IMAGE_TOL,
         );
     }
-    let mut plain = configs().remove(1);
-    plain.opacity = false;
-    let python = python.as_deref();
-    parity(
-        "no opacity",
-        &plain,
-        63,
-        None,
-        false,
-        python,
-        TINY_IMAGE_TOL,
-    );
 }
 
 /// The shipped model's shape (the real-time preset) at its 128 x 128 frames, and the

@@ -5,8 +5,6 @@
 //! seed files into `<dir>/<reader>/`, the libFuzzer corpus. Any panic or broken promise
 //! fails the test and prints the inputs that caused it.
 
-use std::collections::HashMap;
-
 use crate::util::write_run;
 use candle_core::{Device, Tensor};
 use nldf_tests::fuzz::{self, Mutator, Verdict, run_cases};
@@ -124,12 +122,7 @@ fn fuzz_safetensors_reader() {
                 (format!("mlp.body.{i}.fc1.weight"), t)
             })
             .collect();
-        let meta: HashMap<String, String> = [
-            ("step".to_string(), "12".to_string()),
-            ("kind".to_string(), "student".to_string()),
-        ]
-        .into_iter()
-        .collect();
+        let meta = crate::util::checkpoint_meta("student");
         seeds.push(safetensors::serialize(tensors, Some(meta)).unwrap());
     }
     fuzz_reader("safetensors", seeds, 3, fuzz::safetensors);

@@ -47,11 +47,7 @@ fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {
     .unwrap();
     let renderer = FrameRenderer::new(backend, None).unwrap();
 
-    let views = training_views(
-        &data,
-        &run.model.cfg.train,
-        run.model.cfg.model.beam.anchor.is_some(),
-    );
+    let views = training_views(&data, &run.model.cfg.train);
     let beams = frame_beams(&data, &views, None);
     let frames = data.dataset.frames(Split::Train);
     let width = data.dataset.intrinsics.width as usize;

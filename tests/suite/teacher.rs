@@ -456,37 +456,17 @@ fn segment_targets_sum_to_the_teachers_pixel() {
         )
         .unwrap();
     for m in [1usize, 4, 5] {
-        let seg = t
-            .segment_targets(&rays, bg, &code, &data.head_range(), m, false)
-            .unwrap();
-        assert_eq!(seg.len(), rays.len() * m * 3);
-        let mut worst = 0.0f32;
-        for r in 0..rays.len() {
-            for c in 0..3 {
-                let sum: f32 = (0..m).map(|i| seg[(r * m + i) * 3 + c]).sum();
-                worst = worst.max((sum - pixels[3 * r + c]).abs());
-            }
-        }
-        println!("M = {m}: segments miss the pixel by {worst:e}");
-        // Measured worst about 1.8e-7.
-        assert!(worst < 1e-6, "M = {m}: segments miss the pixel by {worst}");
-        // With several segments, a head ray's colour is spread over them.
-        if m > 1 {
-            let spread = (0..rays.len())
-                .any(|r| (0..m - 1).any(|i| (0..3).any(|c| seg[(r * m + i) * 3 + c] > 0.05)));
-            assert!(spread, "M = {m}: every colour sits in the last segment");
-        }
-        // With opacity the background stays out of the segments: the segments plus
-        // (1 - opacity) times the background are the same pixel, the opacity lies in
-        // [0, 1], and a ray that misses the bounds is all zeros.
+        // The background stays out of the segments: the segments plus (1 - opacity) times
+        // the background are the pixel, the opacity lies in [0, 1], and a ray that misses
+        // the bounds is all zeros.
         let w = 3 * m + 1;
-        let alpha_seg = t
-            .segment_targets(&rays, bg, &code, &data.head_range(), m, true)
+        let seg = t
+            .segment_targets(&rays, &code, &data.head_range(), m)
             .unwrap();
-        assert_eq!(alpha_seg.len(), rays.len() * w);
+        assert_eq!(seg.len(), rays.len() * w);
         let (mut worst, mut covered, mut missed) = (0.0f32, 0, 0);
         for r in 0..rays.len() {
-            let t = &alpha_seg[r * w..(r + 1) * w];
+            let t = &seg[r * w..(r + 1) * w];
             let alpha = t[3 * m];
             assert!((0.0..=1.0).contains(&alpha), "ray {r}: opacity {alpha}");
             covered += usize::from(alpha > 0.01);
@@ -497,12 +477,18 @@ fn segment_targets_sum_to_the_teachers_pixel() {
                 worst = worst.max((pixel - pixels[3 * r + c]).abs());
             }
         }
-        println!("M = {m}: opacity targets miss the pixel by {worst:e}");
+        println!("M = {m}: segments and opacity miss the pixel by {worst:e}");
         // Measured worst about 1.8e-7.
         assert!(
             worst < 1e-6,
-            "M = {m}: opacity targets miss the pixel by {worst}"
+            "M = {m}: segments and opacity miss the pixel by {worst}"
         );
+        // With several segments, a head ray's colour is spread over them.
+        if m > 1 {
+            let spread = (0..rays.len())
+                .any(|r| (0..m - 1).any(|i| (0..3).any(|c| seg[r * w + i * 3 + c] > 0.05)));
+            assert!(spread, "M = {m}: every colour sits in the last segment");
+        }
         assert!(covered > 0, "M = {m}: no ray is covered by the head");
         assert!(missed > 0, "M = {m}: every ray met the head's bounds");
     }
@@ -526,11 +512,11 @@ fn importance_sampled_segment_targets_follow_t_intervals() {
         ..
     } = trained_teacher(cfg, 120);
     let ds = &data.dataset;
-    let bg = &ds.background.data;
     let t = &run.model.teacher;
     let m = 4;
+    let w = 3 * m + 1;
     let seg = t
-        .segment_targets(&rays, bg, &code, &data.head_range(), m, false)
+        .segment_targets(&rays, &code, &data.head_range(), m)
         .unwrap();
     // The reference: the same samples and field outputs, composited and split in f64.
     let codes_of = |hit: &[usize]| code.broadcast_as((hit.len(), code.dim(1)?))?.contiguous();
@@ -567,15 +553,13 @@ fn importance_sampled_segment_targets_follow_t_intervals() {
             &rgb,
         );
         let (t0, t1) = samples.spans[h];
-        let mut want = segment_colors_f64(&c.weights, &rgb, &t_vals, (t0 as f64, t1 as f64), m);
-        for ch in 0..3 {
-            want[m - 1][ch] += (1.0 - c.opacity) * bg[3 * r + ch] as f64;
-        }
+        let want = segment_colors_f64(&c.weights, &rgb, &t_vals, (t0 as f64, t1 as f64), m);
         for i in 0..m {
             for ch in 0..3 {
-                worst = worst.max((seg[(r * m + i) * 3 + ch] as f64 - want[i][ch]).abs());
+                worst = worst.max((seg[r * w + i * 3 + ch] as f64 - want[i][ch]).abs());
             }
         }
+        worst = worst.max((seg[r * w + 3 * m] as f64 - c.opacity).abs());
         // Where the samples crowd, a split by count would put other samples in segment 0.
         let by_count = (0..s / m).map(|k| c.weights[k]).sum::<f64>().to_bits();
         let by_t = (0..s)

@@ -3,7 +3,6 @@
 //! out-of-range key is named, tract binds the graph's inputs by name, and a model trained
 //! on another front end's audio features refuses a WAV.
 
-use std::collections::HashMap;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
@@ -322,11 +321,7 @@ fn export_refuses_non_finite_weights_and_fp16_refuses_weights_beyond_its_range()
     let cfg = StudentConfig::tiny();
     let run = write_run(&cfg, 5);
     let path = run.student_dir().join("model.safetensors");
-    let (tensors, _) = nldf_train::checkpoint::load_tensors(&path).unwrap();
-    let meta = HashMap::from([
-        ("step".to_string(), "7".to_string()),
-        ("kind".to_string(), "student".to_string()),
-    ]);
+    let (tensors, meta) = nldf_train::checkpoint::load_tensors(&path).unwrap();
     let with = |name: &str, value: f32| {
         let mut t = tensors.clone();
         let w = &t[name];

@@ -16,6 +16,7 @@ use nldf_core::camera::{Camera, Intrinsics, look_at};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{Rays, head_rays};
 use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
+use nldf_core::run_files::{CHECKPOINT_VERSION, CHECKPOINT_VERSION_KEY};
 use nldf_core::synth::{SynthConfig, generate};
 use nldf_export::{WeightType, export_student};
 use nldf_infer::ort_library::find_ort_library;
@@ -75,14 +76,10 @@ impl Run {
             };
             var.set(&(var.as_tensor() * factor).unwrap()).unwrap();
         }
-        let metadata = HashMap::from([
-            ("step".to_string(), "7".to_string()),
-            ("kind".to_string(), "student".to_string()),
-        ]);
         save_tensors(
             &self.student_dir().join("model.safetensors"),
             &weights(&self.varmap).unwrap(),
-            metadata,
+            checkpoint_meta("student"),
         )
         .unwrap();
     }
@@ -149,23 +146,39 @@ pub(crate) fn write_run(cfg: &StudentConfig, seed: u64) -> Run {
     write_run_with(cfg, seed, spec_for(cfg))
 }
 
-/// [`write_run`] with the render spec `spec` (another camera or image size).
+/// The safetensors metadata of a checkpoint of `kind` (`student`, `upsampler`) at step 7,
+/// as the trainer writes it: with this build's checkpoint version.
+pub(crate) fn checkpoint_meta(kind: &str) -> HashMap<String, String> {
+    HashMap::from([
+        ("step".to_string(), "7".to_string()),
+        ("kind".to_string(), kind.to_string()),
+        (
+            CHECKPOINT_VERSION_KEY.to_string(),
+            CHECKPOINT_VERSION.to_string(),
+        ),
+    ])
+}
+
+/// [`write_run`] with the render spec `spec` (another camera or image size). A `cfg`
+/// without a beam anchor is anchored at the head from the spec's camera, as the trainer
+/// anchors every student (the student in the returned run holds it).
 pub(crate) fn write_run_with(cfg: &StudentConfig, seed: u64, spec: RenderSpec) -> Run {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("run");
     let student_dir = root.join("student");
     std::fs::create_dir_all(&student_dir).unwrap();
+    let mut cfg = cfg.clone();
+    if cfg.beam.anchor.is_none() {
+        let c2w = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+        cfg.beam.anchor = BeamAnchor::of_cameras(spec.bounds.centre(), &[c2w]);
+    }
     let (varmap, vb) = new_varmap();
-    let model = student(cfg, vb).unwrap();
+    let model = student(&cfg, vb).unwrap();
     init_seeded(&varmap, seed).unwrap();
-    let metadata = HashMap::from([
-        ("step".to_string(), "7".to_string()),
-        ("kind".to_string(), "student".to_string()),
-    ]);
     save_tensors(
         &student_dir.join("model.safetensors"),
         &weights(&varmap).unwrap(),
-        metadata,
+        checkpoint_meta("student"),
     )
     .unwrap();
     let config = serde_json::json!({ "model": cfg, "seed": seed, "lr": 5e-4 });
@@ -285,9 +298,9 @@ pub(crate) fn configs() -> Vec<StudentConfig> {
     });
     paper_beam.audio.att_frames = 4;
     paper_beam.segments = 3;
-    // The tiny student anchors its beams as a trained one does (the centre off the origin,
-    // so that the anchor's arithmetic is exercised in full); the other keeps them at fixed
-    // distances from the camera, as models made before anchoring do.
+    // The tiny student's anchor has its centre off the origin, so that the anchor's
+    // arithmetic is exercised in full; the other is anchored from the camera when its run
+    // is written, as the trainer anchors it.
     let mut anchored = StudentConfig::tiny();
     anchored.beam.anchor = Some(BeamAnchor {
         centre: [0.05, -0.03, 0.02],

@@ -14,7 +14,10 @@ use serde::Serialize;
 use crate::adam::Adam;
 use crate::error::{Error, Result};
 use crate::nn::sorted_vars;
-use nldf_core::run_files::{CURVE_FILE, LOG_FILE, MODEL_FILE, STATE_FILE};
+use nldf_core::run_files::{
+    CHECKPOINT_VERSION, CHECKPOINT_VERSION_KEY, CURVE_FILE, LOG_FILE, MODEL_FILE, STATE_FILE,
+    checkpoint_version_problem,
+};
 
 /// Writes named tensors with string metadata to `path` atomically.
 pub fn save_tensors(
@@ -107,8 +110,8 @@ pub struct CheckpointParts<'a> {
     pub title: &'a str,
 }
 
-/// Writes the optimizer state, then the weights (each atomically, with the step in their
-/// metadata), and redraws the training curve from `log.csv`. The caller writes its config.
+/// Writes the optimizer state, then the weights (each atomically, with the step and the
+/// checkpoint version in their metadata), and redraws the training curve from `log.csv`. The caller writes its config.
 pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
     let dir = parts.dir;
     let weights = weights(parts.varmap)?;
@@ -124,6 +127,10 @@ pub fn save_checkpoint(parts: &CheckpointParts) -> Result<()> {
             ("step".to_string(), parts.step.to_string()),
             ("elapsed_s".to_string(), format!("{:.3}", parts.elapsed)),
             ("kind".to_string(), kind.to_string()),
+            (
+                CHECKPOINT_VERSION_KEY.to_string(),
+                CHECKPOINT_VERSION.to_string(),
+            ),
         ]
         .into_iter()
         .collect()
@@ -192,7 +199,7 @@ impl Clock {
 }
 
 /// Restores the weights in `dir` into `varmap` and, given `adam`, the optimizer state
-/// (checking that both come from the same step). Returns the step and the training clock.
+/// (checking the checkpoint's version first, then that both come from the same step). Returns the step and the training clock.
 pub fn open_checkpoint(
     dir: &Path,
     varmap: &VarMap,
@@ -200,6 +207,11 @@ pub fn open_checkpoint(
 ) -> Result<(usize, Clock)> {
     let model_path = dir.join(MODEL_FILE);
     let (tensors, meta) = load_tensors(&model_path)?;
+    if let Some(problem) =
+        checkpoint_version_problem(meta.get(CHECKPOINT_VERSION_KEY).map(String::as_str))
+    {
+        return Err(Error::invalid(&model_path, problem));
+    }
     restore_weights(&model_path, varmap, &tensors)?;
     let step = step_of(&model_path, &meta)?;
     let elapsed = meta

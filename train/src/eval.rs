@@ -35,8 +35,8 @@ pub trait FrameModel {
 
 /// A student's name from its config: the network's shape, then its recipe where it is not
 /// the default one (pixels only, pseudo views and their share, the segment term's lambda,
-/// mouth rays, the learning rate, weight averaging, no pool, beams not anchored), so that students trained differently never
-/// print alike.
+/// mouth rays, the learning rate, weight averaging, no pool), so that students trained
+/// differently never print alike.
 pub fn student_name(cfg: &StudentRunConfig) -> String {
     let (m, t) = (&cfg.model, &cfg.train);
     let defaults = StudentTrainConfig::default();
@@ -64,7 +64,7 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     if t.distill && t.lambda != defaults.lambda {
         recipe.push(format!("lambda {}", t.lambda));
     }
-    if t.distill && m.opacity && t.opacity_floor != defaults.opacity_floor {
+    if t.distill && t.opacity_floor != defaults.opacity_floor {
         recipe.push(format!("opacity floor {}", t.opacity_floor));
     }
     if t.mouth_fraction != defaults.mouth_fraction {
@@ -81,9 +81,6 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     }
     if !t.pool {
         recipe.push("no pool".into());
-    }
-    if m.beam.anchor.is_none() {
-        recipe.push("beams unanchored".into());
     }
     for r in recipe {
         name.push_str(", ");
@@ -548,7 +545,7 @@ mod tests {
     }
 
     #[test]
-    fn lambda_and_unanchored_beams_are_named() {
+    fn lambda_and_the_opacity_floor_are_named() {
         let base = run_config();
         assert_eq!(
             student_name(&base),
@@ -556,8 +553,6 @@ mod tests {
         );
         let mut lambda = base.clone();
         lambda.train.lambda = 0.0;
-        let mut fixed = base.clone();
-        fixed.model.beam.anchor = None;
         let mut pixels = base.clone();
         pixels.train.distill = false;
         pixels.train.lambda = 0.0;
@@ -567,22 +562,19 @@ mod tests {
         faster.train.lr = 1e-3;
         let mut averaged = base.clone();
         averaged.train.ema_decay = 0.998;
-        let names: Vec<String> = [
-            &base, &lambda, &fixed, &pixels, &floored, &faster, &averaged,
-        ]
-        .iter()
-        .map(|c| student_name(c))
-        .collect();
+        let names: Vec<String> = [&base, &lambda, &pixels, &floored, &faster, &averaged]
+            .iter()
+            .map(|c| student_name(c))
+            .collect();
         assert!(names[1].ends_with(", lambda 0"), "{}", names[1]);
-        assert!(names[2].ends_with(", beams unanchored"), "{}", names[2]);
         // Without distillation lambda weighs nothing, so it is not named.
-        assert_eq!(names[3], "student 16x128 (K = 8), pixels only");
-        assert!(names[4].ends_with(", opacity floor 0.05"), "{}", names[4]);
-        assert!(names[5].ends_with(", lr 0.001"), "{}", names[5]);
+        assert_eq!(names[2], "student 16x128 (K = 8), pixels only");
+        assert!(names[3].ends_with(", opacity floor 0.05"), "{}", names[3]);
+        assert!(names[4].ends_with(", lr 0.001"), "{}", names[4]);
         assert!(
-            names[6].ends_with(", weights averaged at 0.998"),
+            names[5].ends_with(", weights averaged at 0.998"),
             "{}",
-            names[6]
+            names[5]
         );
         for (i, a) in names.iter().enumerate() {
             for b in &names[i + 1..] {

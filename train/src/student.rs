@@ -17,47 +17,35 @@ pub use nldf_core::student_config::StudentConfig;
 #[derive(Debug, Clone)]
 pub struct LightOut {
     /// The M segment colours, `[n_rays, m, 3]`: each a weighted sum of sample colours,
-    /// not bounded by a squashing function of its own. With opacity they are premultiplied:
-    /// the network's raw segment colours times the ray's opacity, as the teacher's Eq. 5
-    /// segments carry its weights, so that a ray the head does not cover adds no colour.
+    /// not bounded by a squashing function of its own, premultiplied: the network's raw
+    /// segment colours times the ray's opacity, as the teacher's Eq. 5 segments carry its
+    /// weights, so that a ray the head does not cover adds no colour.
     pub segments: Tensor,
-    /// Their sum, `[n_rays, 3]` (Eq. 7): the pixel itself for a student without opacity,
-    /// the head's colour (premultiplied by its opacity) for one with.
+    /// Their sum, `[n_rays, 3]` (Eq. 7): the head's colour, premultiplied by its opacity.
     pub colour: Tensor,
-    /// How much of each ray the head covers, `sigmoid(logit)`, `[n_rays, 1]`; `None` for a
-    /// student without opacity.
-    pub opacity: Option<Tensor>,
+    /// How much of each ray the head covers, `sigmoid(logit)`, `[n_rays, 1]`.
+    pub opacity: Tensor,
     /// The opacity's logit, the network's last output, `[n_rays, 1]`.
-    pub logit: Option<Tensor>,
+    pub logit: Tensor,
 }
 
 impl LightOut {
     /// The pixels over `background` (`[n_rays, 3]`): `colour + (1 - opacity) *
-    /// background`, as the teacher composites; `colour` for a student without opacity.
+    /// background`, as the teacher composites.
     ///
     /// # Shapes
     /// - returns `[n_rays, 3]`
     pub fn pixels(&self, background: &Tensor) -> Result<Tensor> {
-        match &self.opacity {
-            Some(alpha) => {
-                let clear = alpha.affine(-1.0, 1.0)?;
-                &self.colour + clear.broadcast_mul(background)?
-            }
-            None => Ok(self.colour.clone()),
-        }
+        let clear = self.opacity.affine(-1.0, 1.0)?;
+        &self.colour + clear.broadcast_mul(background)?
     }
 
-    /// Splits the network's raw output `[n_rays, 3 m (+ 1)]`.
-    fn from_raw(raw: &Tensor, m: usize, opacity: bool) -> Result<LightOut> {
+    /// Splits the network's raw output `[n_rays, 3 m + 1]`.
+    fn from_raw(raw: &Tensor, m: usize) -> Result<LightOut> {
         let n_rays = raw.dim(0)?;
-        let colours = raw.narrow(1, 0, 3 * m)?;
-        let (colours, opacity, logit) = if opacity {
-            let logit = raw.narrow(1, 3 * m, 1)?;
-            let alpha = candle_nn::ops::sigmoid(&logit)?;
-            (colours.broadcast_mul(&alpha)?, Some(alpha), Some(logit))
-        } else {
-            (colours, None, None)
-        };
+        let logit = raw.narrow(1, 3 * m, 1)?;
+        let opacity = candle_nn::ops::sigmoid(&logit)?;
+        let colours = raw.narrow(1, 0, 3 * m)?.broadcast_mul(&opacity)?;
         let segments = colours.reshape((n_rays, m, 3))?;
         let colour = segments.sum(1)?;
         Ok(LightOut {
@@ -83,7 +71,6 @@ pub struct ResidualMlp {
     body: Vec<ResidualBlock>,
     output: Linear,
     segments: usize,
-    opacity: bool,
 }
 
 /// Builds a [`ResidualMlp`] for `cfg` under `vb`, layer by layer as its
@@ -107,7 +94,6 @@ pub fn residual_mlp(cfg: &StudentConfig, vb: VarBuilder) -> Result<ResidualMlp> 
         body,
         output: layer(&layout.output)?,
         segments: cfg.segments,
-        opacity: cfg.opacity,
     })
 }
 
@@ -150,7 +136,7 @@ impl ResidualMlp {
         } else {
             beams.apply_op3_no_bwd(&codes, &params, &op)?
         };
-        LightOut::from_raw(&raw, self.segments, self.opacity)
+        LightOut::from_raw(&raw, self.segments)
     }
 
     /// Segment colours, their sum (Eq. 7) and the opacity, with plain candle ops.
@@ -173,7 +159,7 @@ impl ResidualMlp {
             let y = block.fc2.forward(&block.fc1.forward(&h)?.relu()?)?;
             h = (h + y)?.relu()?;
         }
-        let out = LightOut::from_raw(&self.output.forward(&h)?, self.segments, self.opacity)?;
+        let out = LightOut::from_raw(&self.output.forward(&h)?, self.segments)?;
         Ok((h, out))
     }
 }

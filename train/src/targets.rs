@@ -16,21 +16,20 @@ use crate::error::Result;
 use crate::teacher_trainer::TeacherModel;
 use crate::views::{FrameBeams, View};
 
-/// What the teacher renders per ray for the student: `segments` Eq. 5 colours and, with
-/// `opacity`, the accumulated weight after them (see `Teacher::segment_targets`), along
+/// What the teacher renders per ray for the student: `segments` Eq. 5 colours and the
+/// accumulated weight after them (see `Teacher::segment_targets`), along
 /// each ray anchored as the student's beams are (`anchor`), so that the teacher's
 /// `[near, far]` window sits where the student's beam points do, however close the camera.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TargetLayout {
     pub segments: usize,
-    pub opacity: bool,
     pub anchor: Option<BeamAnchor>,
 }
 
 impl TargetLayout {
-    /// Values per ray: `3 m`, plus one with opacity.
+    /// Values per ray: `3 m` colours and the opacity.
     pub fn width(&self) -> usize {
-        3 * self.segments + usize::from(self.opacity)
+        3 * self.segments + 1
     }
 }
 
@@ -61,27 +60,19 @@ pub fn view_targets(
     fb: &FrameBeams,
     layout: TargetLayout,
 ) -> Result<Vec<f32>> {
-    let ds = &data.dataset;
     let mut rays = Rays::with_capacity(fb.pixels.len());
-    let mut bg = Vec::with_capacity(3 * fb.pixels.len());
     for &(i, j) in &fb.pixels {
         let (o, d) = view.camera.ray(i as f32, j as f32);
         let (o, d) = beam_ray(layout.anchor.as_ref(), o, d);
         rays.push(o, d);
-        bg.extend_from_slice(&ds.background.get(i, j));
     }
     if rays.is_empty() {
         return Ok(Vec::new());
     }
     let code = teacher.audio_codes(data, &[view.aud_id])?;
-    Ok(teacher.teacher.segment_targets(
-        &rays,
-        &bg,
-        &code,
-        &data.head_range(),
-        layout.segments,
-        layout.opacity,
-    )?)
+    Ok(teacher
+        .teacher
+        .segment_targets(&rays, &code, &data.head_range(), layout.segments)?)
 }
 
 /// Writes the targets with the teacher's step and the views' fingerprint.
@@ -104,7 +95,8 @@ pub fn save_targets(
     let meta = [
         ("teacher_step".to_string(), teacher_step.to_string()),
         ("segments".to_string(), layout.segments.to_string()),
-        ("opacity".to_string(), layout.opacity.to_string()),
+        // Caches from before every student had opacity said `false`.
+        ("opacity".to_string(), "true".to_string()),
         ("frames".to_string(), targets.len().to_string()),
         ("views".to_string(), views.to_string()),
     ]
@@ -123,9 +115,8 @@ pub fn load_targets(
 ) -> Result<Option<Vec<Vec<f32>>>> {
     let (tensors, meta) = load_tensors(path)?;
     let get = |k: &str| meta.get(k).and_then(|v| v.parse::<usize>().ok());
-    let opacity = meta.get("opacity").map(String::as_str) == Some("true");
     let fits = get("segments") == Some(layout.segments)
-        && opacity == layout.opacity
+        && meta.get("opacity").map(String::as_str) == Some("true")
         && get("frames") == Some(beams.len())
         && meta.get("views").map(String::as_str) == Some(views)
         && teacher_step.is_none_or(|s| get("teacher_step") == Some(s));

@@ -206,11 +206,7 @@ pub fn coarse_box_features(
             .broadcast_as((chunk.len(), code.dim(1)?))?
             .contiguous()?;
         let (hidden, out) = student.mlp.forward_hidden(&beams, &codes)?;
-        let logit = match &out.logit {
-            Some(l) => l.clone(),
-            None => Tensor::full(-MISS_LOGIT, (chunk.len(), 1), &Device::Cpu)?,
-        };
-        let row = Tensor::cat(&[&hidden, &out.colour, &logit], D::Minus1)?;
+        let row = Tensor::cat(&[&hidden, &out.colour, &out.logit], D::Minus1)?;
         let row: Vec<Vec<f32>> = row.to_vec2()?;
         for (&p, values) in chunk.iter().zip(row) {
             let (j, i) = (p / wc - r0, p % wc - c0);

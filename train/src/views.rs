@@ -70,10 +70,9 @@ pub fn recorded_range(data: &TrainData) -> ([f32; 2], [f32; 2]) {
 /// recorded range widened `cfg.pose_range` times about its middle (the training data's own
 /// units: 1 keeps to the recorded poses, 2 reaches twice as far out), then moves it closer
 /// or farther by up to `cfg.pseudo_zoom` of its distance. Closer only while the camera
-/// stays outside the head's bounds, and for a student whose beams are not `anchored` (see
-/// `nldf_core::beam::BeamAnchor`) only while the bounds stay beyond the rays' near bound,
-/// which would otherwise cut the teacher's samples into the face.
-pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig, anchored: bool) -> Vec<View> {
+/// stays outside the head's bounds (the student's beams are anchored at the head, see
+/// `nldf_core::beam::BeamAnchor`, so a closer camera asks nothing new of them).
+pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig) -> Vec<View> {
     let ds = &data.dataset;
     let frames = ds.frames(Split::Train);
     let mut views: Vec<View> = frames
@@ -98,11 +97,7 @@ pub fn training_views(data: &TrainData, cfg: &StudentTrainConfig, anchored: bool
     };
     let (yaw, pitch) = (widen(yaw), widen(pitch));
     let extent = data.bounds.hi - data.bounds.lo;
-    let closest = if anchored {
-        0.5 * extent.length()
-    } else {
-        ds.near + 0.5 * extent.max_element()
-    };
+    let closest = 0.5 * extent.length();
     let draw = |rng: &mut ChaCha8Rng, (lo, hi): (f32, f32)| {
         if hi > lo {
             rng.random_range(lo..=hi)

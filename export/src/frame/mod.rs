@@ -444,11 +444,8 @@ fn composite_frame(
     let axis0 = || vec![attr_int("axis", 0)];
     let (o, d) = hit_rays(g, rays, hits);
     let bg = background_nodes(g, background, (h, w));
-    let behind = ckpt
-        .shape
-        .opacity
-        .then(|| g.node("Gather", "frame.behind", &[&bg, hits], axis0()));
-    student_nodes(g, ckpt, (&o, &d), windows, behind.as_deref())?;
+    let behind = g.node("Gather", "frame.behind", &[&bg, hits], axis0());
+    student_nodes(g, ckpt, (&o, &d), windows, Some(&behind))?;
     let axis1 = g.constant_i64("frame.index_axis", &[1], &[1]);
     let at = g.node("Unsqueeze", "frame.hit_pixels", &[hits, &axis1], vec![]);
     let painted = g.node(

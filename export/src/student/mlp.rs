@@ -16,9 +16,8 @@ use nldf_core::student_network::{LinearLayer, MlpLayout};
 ///
 /// # Shapes
 /// - `beams`: `[n_rays, 3 K (1 + 2 L)]`; `code`: `[1, dim]`; `background` `[n_rays, 3]`
-///   (models with opacity)
-/// - outputs `segments` `[n_rays, M, 3]`, `rgb` `[n_rays, 3]` and, with `background`,
-///   `opacity` `[n_rays, 1]`
+/// - outputs `segments` `[n_rays, M, 3]`, `rgb` `[n_rays, 3]` (over `background` when
+///   given) and `opacity` `[n_rays, 1]`
 pub(super) fn residual_mlp(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
@@ -103,29 +102,26 @@ fn input_layer(
     Ok(x)
 }
 
-/// The output layer's segment colours, `[n_rays, 3 M]`: premultiplied by the opacity
-/// ([`OUTPUT_OPACITY`]) for a model with one.
+/// The output layer's segment colours, `[n_rays, 3 M]`, premultiplied by the opacity
+/// ([`OUTPUT_OPACITY`]), the sigmoid of the output's last column.
 fn segment_colours(g: &mut GraphBuilder, s: &StudentConfig, out: String) -> String {
-    if s.opacity {
-        let axis = g.constant_i64("mlp.output_axis", &[1], &[1]);
-        let slice = |g: &mut GraphBuilder, name: &str, lo: usize, hi: usize| {
-            let lo = g.constant_i64(&format!("{name}.start"), &[1], &[lo as i64]);
-            let hi = g.constant_i64(&format!("{name}.end"), &[1], &[hi as i64]);
-            g.node("Slice", name, &[&out, &lo, &hi, &axis], vec![])
-        };
-        let m3 = 3 * s.segments;
-        let logit = slice(g, "mlp.opacity_logit", m3, m3 + 1);
-        let alpha = g.node("Sigmoid", OUTPUT_OPACITY, &[&logit], vec![]);
-        // Premultiplied: a ray the head does not cover adds no colour.
-        let raw = slice(g, "mlp.colours", 0, m3);
-        g.node("Mul", "mlp.premultiplied", &[&raw, &alpha], vec![])
-    } else {
-        out
-    }
+    let axis = g.constant_i64("mlp.output_axis", &[1], &[1]);
+    let slice = |g: &mut GraphBuilder, name: &str, lo: usize, hi: usize| {
+        let lo = g.constant_i64(&format!("{name}.start"), &[1], &[lo as i64]);
+        let hi = g.constant_i64(&format!("{name}.end"), &[1], &[hi as i64]);
+        g.node("Slice", name, &[&out, &lo, &hi, &axis], vec![])
+    };
+    let m3 = 3 * s.segments;
+    let logit = slice(g, "mlp.opacity_logit", m3, m3 + 1);
+    let alpha = g.node("Sigmoid", OUTPUT_OPACITY, &[&logit], vec![]);
+    // Premultiplied: a ray the head does not cover adds no colour.
+    let raw = slice(g, "mlp.colours", 0, m3);
+    g.node("Mul", "mlp.premultiplied", &[&raw, &alpha], vec![])
 }
 
 /// The segment sum (Eq. 7): [`OUTPUT_SEGMENTS`] `[n_rays, M, 3]` and [`OUTPUT_RGB`]
-/// `[n_rays, 3]`, composited over `background` for a model with opacity.
+/// `[n_rays, 3]`, composited over `background` when given (the upsampler's graph reads the
+/// head's own colour, without one).
 fn segment_sum(g: &mut GraphBuilder, s: &StudentConfig, colours: &str, background: Option<&str>) {
     let shape = g.constant_i64("mlp.segment_shape", &[3], &[0, s.segments as i64, 3]);
     let segments = g.node("Reshape", OUTPUT_SEGMENTS, &[colours, &shape], vec![]);

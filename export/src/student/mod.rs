@@ -137,7 +137,6 @@ pub fn model_info(ckpt: &StudentCheckpoint, graph: &GraphProto) -> ModelInfo {
         spec: ckpt.spec.clone(),
         beam: s.beam,
         segments: s.segments,
-        opacity: s.opacity,
         audio: AudioInput {
             att_frames: s.audio.att_frames,
             window: s.audio.window,
@@ -178,19 +177,17 @@ fn build(
     let s = &ckpt.shape;
     let rays = Dim::Symbolic(RAY_AXIS.to_string());
     let (origins, directions, audio) = ray_inputs(&mut g, ckpt);
-    let background = s.opacity.then(|| {
-        g.input(
-            INPUT_BACKGROUND,
-            DataType::Float,
-            &[rays.clone(), Dim::Fixed(3)],
-        )
-    });
+    let background = g.input(
+        INPUT_BACKGROUND,
+        DataType::Float,
+        &[rays.clone(), Dim::Fixed(3)],
+    );
     student_nodes(
         &mut g,
         ckpt,
         (&origins, &directions),
         &audio,
-        background.as_deref(),
+        Some(&background),
     )?;
     g.output(OUTPUT_RGB, DataType::Float, &[rays.clone(), Dim::Fixed(3)]);
     g.output(
@@ -198,15 +195,15 @@ fn build(
         DataType::Float,
         &[rays.clone(), Dim::Fixed(s.segments), Dim::Fixed(3)],
     );
-    if s.opacity {
-        g.output(OUTPUT_OPACITY, DataType::Float, &[rays, Dim::Fixed(1)]);
-    }
+    g.output(OUTPUT_OPACITY, DataType::Float, &[rays, Dim::Fixed(1)]);
     let n_values = g.n_initializer_values();
     let doc = format!(
         "NLDF student: {} x {} residual MLP over beams of K = {} points with L = {} \
          frequencies and a {}-d audio code, M = {} segments. Inputs {INPUT_ORIGINS} and \
          {INPUT_DIRECTIONS} [{RAY_AXIS}, 3], {INPUT_AUDIO} [{}, {}, {}]; outputs {OUTPUT_RGB} \
-         [{RAY_AXIS}, 3] and {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3].{}",
+         [{RAY_AXIS}, 3] and {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3]. With opacity: input \
+         {INPUT_BACKGROUND} [{RAY_AXIS}, 3], output {OUTPUT_OPACITY} [{RAY_AXIS}, 1], and \
+         {OUTPUT_RGB} = sum of the segments + (1 - {OUTPUT_OPACITY}) {INPUT_BACKGROUND}.",
         s.depth,
         s.width,
         s.beam.n_points,
@@ -217,15 +214,6 @@ fn build(
         s.audio.window,
         s.audio.n_features,
         s.segments,
-        if s.opacity {
-            format!(
-                " With opacity: input {INPUT_BACKGROUND} [{RAY_AXIS}, 3], output \
-                 {OUTPUT_OPACITY} [{RAY_AXIS}, 1], and {OUTPUT_RGB} = sum of the segments \
-                 + (1 - {OUTPUT_OPACITY}) {INPUT_BACKGROUND}."
-            )
-        } else {
-            String::new()
-        },
     );
     let taps = g.taps().to_vec();
     let graph = g.finish(GRAPH_NAME, &doc);
@@ -281,8 +269,8 @@ pub(crate) fn model_proto(
 
 /// The student's nodes on rays `(origins, directions)` with the audio neighbourhood
 /// `windows`: beam encoding, audio code and residual MLP. They compute the tensors
-/// [`OUTPUT_RGB`], [`OUTPUT_SEGMENTS`] and, for a model with opacity (which needs
-/// `background`), [`OUTPUT_OPACITY`]; the caller declares which are graph outputs.
+/// [`OUTPUT_RGB`] (composited over `background` when given), [`OUTPUT_SEGMENTS`] and
+/// [`OUTPUT_OPACITY`]; the caller declares which are graph outputs.
 ///
 /// # Shapes
 /// - `origins`, `directions`, `background`: `[n_rays, 3]`

@@ -9,7 +9,7 @@ use nldf_core::render_spec::RenderSpec;
 
 use super::keys;
 use super::model_info::{AudioInput, ModelInfo, UpsampleInfo, front_end};
-use super::names::{CONTRACT_VERSION, FORMAT, FRAME_FORMAT};
+use super::names::{CONTRACT_PLAIN, CONTRACT_VERSION, FORMAT, FRAME_FORMAT};
 use crate::onnx::StringStringEntryProto;
 
 impl ModelInfo {
@@ -49,18 +49,38 @@ impl ModelInfo {
             .collect();
         check_format(&map, format)?;
         let props = Props(map);
+        // The one version check: contracts before 4, and models without opacity or
+        // anchored beams, were made by an older nldf.
         let contract: u32 = props.parse(keys::CONTRACT)?;
-        if !(2..=CONTRACT_VERSION).contains(&contract) {
+        let older = |what: &str| MetadataError::Older(older_reason(what));
+        if contract > CONTRACT_VERSION {
             return Err(MetadataError::Malformed(
                 keys::CONTRACT.to_string(),
-                format!("contract version {contract}, this build reads 2 to {CONTRACT_VERSION}"),
+                format!(
+                    "contract version {contract}, this build reads up to {CONTRACT_VERSION}: \
+                     made by a newer nldf"
+                ),
             ));
+        }
+        if contract < CONTRACT_PLAIN {
+            return Err(older(&format!("contract version {contract}")));
+        }
+        if !props.parse::<bool>(keys::OPACITY)? {
+            return Err(older("no opacity"));
         }
         let info = read_info(&props, contract, format)?;
         check_flat_keys(&props, &info)?;
         check_audio(&props, &info)?;
         Ok(info)
     }
+}
+
+/// Why a model made by an older nldf is refused: `what` it has, and what this build reads.
+fn older_reason(what: &str) -> String {
+    format!(
+        "{what}; this build reads contracts {CONTRACT_PLAIN} to {CONTRACT_VERSION} with opacity \
+         and anchored beams"
+    )
 }
 
 /// The metadata's values by key.
@@ -139,16 +159,13 @@ fn read_info(props: &Props<'_>, contract: u32, format: &str) -> Result<ModelInfo
         beam: BeamSpec {
             n_points: props.value(keys::BEAM_POINTS)?,
             n_freqs: props.value(keys::BEAM_FREQS)?,
-            // Contracts 2 and 3 predate anchoring.
-            anchor: if contract >= 4 {
-                props.parse(keys::BEAM_ANCHOR)?
-            } else {
-                None
-            },
+            anchor: Some(
+                props
+                    .parse::<Option<_>>(keys::BEAM_ANCHOR)?
+                    .ok_or_else(|| MetadataError::Older(older_reason("no beam anchor")))?,
+            ),
         },
         segments: props.value(keys::SEGMENTS)?,
-        // Contract 2 predates opacity.
-        opacity: contract >= 3 && props.parse(keys::OPACITY)?,
         audio: AudioInput {
             att_frames: props.value(keys::AUDIO_ATT_FRAMES)?,
             window: props.value(keys::AUDIO_WINDOW)?,
@@ -265,6 +282,9 @@ pub enum MetadataError {
     /// The model is nldf's, but of the other kind (frame graph or ray graph).
     #[error("{0}")]
     WrongKind(String),
+    /// The model was made by an older nldf, whose models this build no longer reads.
+    #[error("made by an older nldf ({0}): train again or re-export")]
+    Older(String),
     /// A required key is absent.
     #[error("metadata lacks `{0}`")]
     Missing(String),

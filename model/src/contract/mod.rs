@@ -11,18 +11,16 @@
 //! - input [`INPUT_AUDIO`] `audio`: f32 `[att_frames, window, n_features]`, the windows of
 //!   the frame's neighbourhood (frames `f - att_frames/2 ..`, clamped at the ends of the
 //!   track); without attention only the centre window (index `att_frames / 2`) is used
-//! - output [`OUTPUT_RGB`] `rgb`: f32 `[n_rays, 3]`, the pixel colours (paper Eq. 7)
-//! - output [`OUTPUT_SEGMENTS`] `segments`: f32 `[n_rays, M, 3]`, the M segment colours whose
-//!   sum is `rgb`
-//!
-//! A model with opacity ([`keys::OPACITY`] `true`, contract 3) also has:
 //! - input [`INPUT_BACKGROUND`] `background`: f32 `[n_rays, 3]`, the background image's
 //!   colour at each ray's pixel
+//! - output [`OUTPUT_RGB`] `rgb`: f32 `[n_rays, 3]`, the pixel colours (paper Eq. 7)
+//! - output [`OUTPUT_SEGMENTS`] `segments`: f32 `[n_rays, M, 3]`, the M segment colours,
+//!   the head's colour alone
 //! - output [`OUTPUT_OPACITY`] `opacity`: f32 `[n_rays, 1]`, how much of the ray the head
-//!   covers, in (0, 1)
+//!   covers, in (0, 1) ([`keys::OPACITY`] is always `true`)
 //!
-//! and its `rgb` is `sum_i segments_i + (1 - opacity) * background`, composited in the
-//! graph as the teacher composites; its segments then hold the head's colour alone.
+//! and `rgb` is `sum_i segments_i + (1 - opacity) * background`, composited in the graph as
+//! the teacher composites.
 //!
 //! # Numerics
 //! The graph encodes each beam point as `nldf_core::encoding` does: the sine and cosine of

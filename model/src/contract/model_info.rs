@@ -28,7 +28,7 @@ pub fn model_input_names(info: &ModelInfo) -> Vec<&'static str> {
             INPUT_BACKGROUND,
         ]
     } else {
-        input_names(info.opacity)
+        input_names()
     }
 }
 
@@ -39,7 +39,7 @@ pub fn model_output_names(info: &ModelInfo) -> Vec<&'static str> {
     if info.upsample.is_some() {
         vec![OUTPUT_BOX_RGB, OUTPUT_SEGMENTS, OUTPUT_BOX_OPACITY]
     } else {
-        output_names(info.opacity)
+        output_names()
     }
 }
 
@@ -93,8 +93,6 @@ pub struct ModelInfo {
     pub beam: BeamSpec,
     /// Segments per ray, M.
     pub segments: usize,
-    /// The graph predicts opacity and composites over its background input.
-    pub opacity: bool,
     /// The audio input.
     pub audio: AudioInput,
     /// The network's sizes.
@@ -160,7 +158,8 @@ impl ModelInfo {
             (keys::BEAM_ANCHOR, json(&self.beam.anchor)),
             (keys::MAX_COORD, json(&MAX_COORD)),
             (keys::SEGMENTS, json(&self.segments)),
-            (keys::OPACITY, json(&self.opacity)),
+            // Every model predicts opacity and composites over its background input.
+            (keys::OPACITY, json(&true)),
             (keys::AUDIO_ATT_FRAMES, json(&self.audio.att_frames)),
             (keys::AUDIO_WINDOW, json(&self.audio.window)),
             (keys::AUDIO_FEATURES, json(&self.audio.n_features)),

@@ -21,9 +21,9 @@ pub const INPUT_AUDIO: &str = "audio";
 pub const OUTPUT_RGB: &str = "rgb";
 /// Segment colours, f32 `[n_rays, M, 3]`.
 pub const OUTPUT_SEGMENTS: &str = "segments";
-/// The background colour behind each ray, f32 `[n_rays, 3]` (models with opacity).
+/// The background colour behind each ray, f32 `[n_rays, 3]`.
 pub const INPUT_BACKGROUND: &str = "background";
-/// How much of each ray the head covers, f32 `[n_rays, 1]` (models with opacity).
+/// How much of each ray the head covers, f32 `[n_rays, 1]`.
 pub const OUTPUT_OPACITY: &str = "opacity";
 
 /// The coarse box of an upsampled ray graph, bool `[box_rows, box_cols]`, row-major: true
@@ -41,23 +41,19 @@ pub const BOX_COLS: &str = "box_cols";
 pub const BOX_HEIGHT: &str = "box_height";
 pub const BOX_WIDTH: &str = "box_width";
 
-/// The graph's input names in the order the exporter writes them: the background last,
-/// for a model with opacity.
-pub fn input_names(opacity: bool) -> Vec<&'static str> {
-    let mut names = vec![INPUT_ORIGINS, INPUT_DIRECTIONS, INPUT_AUDIO];
-    if opacity {
-        names.push(INPUT_BACKGROUND);
-    }
-    names
+/// The graph's input names in the order the exporter writes them: the background last.
+pub fn input_names() -> Vec<&'static str> {
+    vec![
+        INPUT_ORIGINS,
+        INPUT_DIRECTIONS,
+        INPUT_AUDIO,
+        INPUT_BACKGROUND,
+    ]
 }
 
 /// The graph's output names in the order the exporter writes them.
-pub fn output_names(opacity: bool) -> Vec<&'static str> {
-    let mut names = vec![OUTPUT_RGB, OUTPUT_SEGMENTS];
-    if opacity {
-        names.push(OUTPUT_OPACITY);
-    }
-    names
+pub fn output_names() -> Vec<&'static str> {
+    vec![OUTPUT_RGB, OUTPUT_SEGMENTS, OUTPUT_OPACITY]
 }
 
 /// Value of [`keys::FORMAT`](super::keys::FORMAT) that marks a model as an nldf student.
@@ -92,8 +88,8 @@ pub const FRAME_OUTPUT_RAYS: &str = "n_rays";
 /// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`](super::keys::AUDIO_FRONT_END); 3: [`keys::OPACITY`](super::keys::OPACITY),
 /// with the background input and opacity output of a model that has one; 4:
 /// [`keys::BEAM_ANCHOR`](super::keys::BEAM_ANCHOR), the graph anchoring rays before sampling them; 5: [`keys::UPSAMPLE`](super::keys::UPSAMPLE),
-/// the upsampled ray graph, written only for one). Contract 2 and 3 models are still read:
-/// they have no anchor, and contract 2 no opacity.
+/// the upsampled ray graph, written only for one). This build reads contracts 4 and 5, and
+/// only models with opacity and anchored beams: older ones were made by an older nldf.
 pub const CONTRACT_VERSION: u32 = 5;
 /// The contract a ray graph without an upsampler is written with: it reads as it did
 /// before contract 5.

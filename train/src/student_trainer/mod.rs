@@ -88,14 +88,21 @@ impl StudentRun {
         teacher: Option<&TeacherModel>,
     ) -> Result<StudentRun> {
         cfg.model.audio.set_from(&data.dataset);
-        if cfg.model.anchor_beams && cfg.model.beam.anchor.is_none() {
+        if cfg.model.beam.anchor.is_none() {
             let c2ws: Vec<_> = data
                 .dataset
                 .frames(Split::Train)
                 .iter()
                 .map(|f| f.c2w)
                 .collect();
-            cfg.model.beam.anchor = BeamAnchor::of_cameras(data.bounds.centre(), &c2ws);
+            let anchor = BeamAnchor::of_cameras(data.bounds.centre(), &c2ws);
+            cfg.model.beam.anchor = Some(anchor.ok_or_else(|| {
+                Error::Config(format!(
+                    "cannot anchor the student's beams: the training cameras of {} have no \
+                     finite mean distance to the head's centre",
+                    data.dataset.root.display()
+                ))
+            })?);
         }
         if let Some(t) = teacher {
             if t.cfg.model.audio.features != data.dataset.audio_source {

@@ -104,12 +104,8 @@ impl StudentModel {
                 .broadcast_as((chunk.len(), code.dim(1)?))?
                 .contiguous()?;
             let out = self.student.mlp.forward_fused(&beams, &codes, false)?;
-            let pixels = if self.cfg.model.opacity {
-                let bg = background.gather(chunk);
-                out.pixels(&Tensor::from_vec(bg, (chunk.len(), 3), &Device::Cpu)?)?
-            } else {
-                out.colour
-            };
+            let bg = background.gather(chunk);
+            let pixels = out.pixels(&Tensor::from_vec(bg, (chunk.len(), 3), &Device::Cpu)?)?;
             let pixels: Vec<f32> = pixels.flatten_all()?.to_vec1()?;
             image.paint(chunk, &pixels);
         }

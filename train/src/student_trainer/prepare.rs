@@ -78,7 +78,6 @@ impl StudentRun {
     pub(super) fn target_layout(&self) -> TargetLayout {
         TargetLayout {
             segments: self.model.cfg.model.segments,
-            opacity: self.model.cfg.model.opacity,
             anchor: self.model.cfg.model.beam.anchor,
         }
     }
@@ -92,11 +91,7 @@ impl StudentRun {
     ) -> Result<Option<TargetLayout>> {
         let teacher_step = teacher.map(|t| t.step);
         std::fs::create_dir_all(&self.model.dir).map_err(|e| Error::io(&self.model.dir, e))?;
-        self.views = training_views(
-            data,
-            &self.model.cfg.train,
-            self.model.cfg.model.beam.anchor.is_some(),
-        );
+        self.views = training_views(data, &self.model.cfg.train);
         // Pseudo views find their mouth by projecting the recorded frames' mouth through
         // the teacher's depth.
         let mouth_points = match teacher {

@@ -182,15 +182,14 @@ impl StudentRun {
         let n = codes.all.len();
         let layout = self.target_layout();
         let width = layout.width();
-        let opacity = layout.opacity;
         let floor = self.model.cfg.train.opacity_floor;
         let empty = vec![0.0f32; width];
         let mut inputs = RayInputs {
             rays: Rays::with_capacity(n),
             gt: Vec::with_capacity(3 * n),
-            bg: Vec::with_capacity(if opacity { 3 * n } else { 0 }),
+            bg: Vec::with_capacity(3 * n),
             tgt: Vec::with_capacity(if distill { 3 * m * n } else { 0 }),
-            tgt_alpha: Vec::with_capacity(if distill && opacity { n } else { 0 }),
+            tgt_alpha: Vec::with_capacity(if distill { n } else { 0 }),
             row_of_ray: Vec::with_capacity(n),
         };
         for (b, detached) in &codes.all {
@@ -201,20 +200,16 @@ impl StudentRun {
             inputs.rays.push(o, d);
             // The background is in screen space: a pseudo view's pixel sees the same one.
             let back = ds.background.get(i, j);
-            if opacity {
-                inputs.bg.extend_from_slice(&back);
-            }
+            inputs.bg.extend_from_slice(&back);
             let target = if distill {
                 let p = b.pixel as usize;
                 let mut target = &self.targets[fi][width * p..width * (p + 1)];
-                if opacity && target[3 * m] < floor {
+                if target[3 * m] < floor {
                     // An empty target: no colour, nothing covering the background.
                     target = &empty[..];
                 }
                 inputs.tgt.extend_from_slice(&target[..3 * m]);
-                if opacity {
-                    inputs.tgt_alpha.push(target[3 * m]);
-                }
+                inputs.tgt_alpha.push(target[3 * m]);
                 target
             } else {
                 &[]
@@ -222,10 +217,9 @@ impl StudentRun {
             if view.recorded {
                 inputs.gt.extend_from_slice(&data.images[fi].get(i, j));
             } else {
-                let alpha = opacity.then(|| target[3 * m]);
                 inputs
                     .gt
-                    .extend_from_slice(&teacher_pixel(&target[..3 * m], alpha, back));
+                    .extend_from_slice(&teacher_pixel(&target[..3 * m], target[3 * m], back));
             }
             inputs.row_of_ray.push(codes.row(b, *detached));
         }
@@ -246,7 +240,6 @@ impl StudentRun {
         let t = &self.model.cfg.train;
         let m = self.model.cfg.model.segments;
         let distill = t.distill;
-        let opacity = self.target_layout().opacity;
         let n = codes.all.len();
         let dev = Device::Cpu;
         let row_of_ray = Tensor::from_vec(inputs.row_of_ray, n, &dev)?;
@@ -259,19 +252,13 @@ impl StudentRun {
             .student
             .mlp
             .forward_fused(&beams, &code_rows, update)?;
-        let pixels = if opacity {
-            out.pixels(&Tensor::from_vec(inputs.bg, (n, 3), &dev)?)?
-        } else {
-            out.colour.clone()
-        };
+        let pixels = out.pixels(&Tensor::from_vec(inputs.bg, (n, 3), &dev)?)?;
         let gt = Tensor::from_vec(inputs.gt, (n, 3), &dev)?;
         let tgt = if distill {
-            Some(Tensor::from_vec(inputs.tgt, (n, m, 3), &dev)?)
-        } else {
-            None
-        };
-        let tgt_alpha = if distill && opacity {
-            Some(Tensor::from_vec(inputs.tgt_alpha, (n, 1), &dev)?)
+            Some((
+                Tensor::from_vec(inputs.tgt, (n, m, 3), &dev)?,
+                Tensor::from_vec(inputs.tgt_alpha, (n, 1), &dev)?,
+            ))
         } else {
             None
         };
@@ -279,11 +266,9 @@ impl StudentRun {
             &pixels,
             &gt,
             &out.segments,
-            out.logit.as_ref(),
-            tgt.as_ref().map(|segments| TeacherTargets {
-                segments,
-                opacity: tgt_alpha.as_ref(),
-            }),
+            &out.logit,
+            tgt.as_ref()
+                .map(|(segments, opacity)| TeacherTargets { segments, opacity }),
             t.lambda,
         )?;
         // Mouth rays weigh `mouth_weight` times another ray in the loss (and the pool).
@@ -383,11 +368,11 @@ struct RayInputs {
     rays: Rays,
     /// Ground-truth pixels, `3 n`.
     gt: Vec<f32>,
-    /// Background pixels, `3 n` (with opacity only).
+    /// Background pixels, `3 n`.
     bg: Vec<f32>,
     /// Teacher segment colours, `3 m n` (distillation only).
     tgt: Vec<f32>,
-    /// Teacher opacities, `n` (distillation with opacity only).
+    /// Teacher opacities, `n` (distillation only).
     tgt_alpha: Vec<f32>,
     /// The code-table row of each ray.
     row_of_ray: Vec<u32>,
@@ -395,18 +380,16 @@ struct RayInputs {
 
 /// A pseudo view's pixel, which has no image: the teacher's (Eq. 7), the sum of its
 /// segment colours, over `back` where it has opacity `alpha`.
-fn teacher_pixel(segments: &[f32], alpha: Option<f32>, back: [f32; 3]) -> [f32; 3] {
+fn teacher_pixel(segments: &[f32], alpha: f32, back: [f32; 3]) -> [f32; 3] {
     let mut pixel = [0.0f32; 3];
     for seg in segments.chunks_exact(3) {
         for (p, v) in pixel.iter_mut().zip(seg) {
             *p += v;
         }
     }
-    if let Some(alpha) = alpha {
-        let clear = 1.0 - alpha;
-        for (p, b) in pixel.iter_mut().zip(back) {
-            *p += clear * b;
-        }
+    let clear = 1.0 - alpha;
+    for (p, b) in pixel.iter_mut().zip(back) {
+        *p += clear * b;
     }
     pixel
 }

@@ -83,11 +83,7 @@ impl CropCutter<'_> {
     ) -> Result<(Vec<RecordedView>, Vec<Crop>)> {
         let student = self.student;
         // Recorded views: the coarse box of every training frame.
-        let views = training_views(
-            self.data,
-            &student.cfg.train,
-            student.cfg.model.anchor_beams,
-        );
+        let views = training_views(self.data, &student.cfg.train);
         let mut recorded = Vec::new();
         for (vi, view) in views.iter().filter(|v| v.recorded).enumerate() {
             if let Some(coarse) = self.coarse_of(view)? {
