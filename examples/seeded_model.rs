@@ -13,9 +13,9 @@ use nldf_core::bounds::dataset_bounds;
 use nldf_core::dataset::Dataset;
 use nldf_core::render_spec::{BACKGROUND_FILE, RENDER_SPEC_FILE, RenderSpec};
 use nldf_export::{WeightType, export_student};
-use nldf_train::checkpoint::{save_tensors, weights};
-use nldf_train::nn::{init_seeded, new_varmap};
-use nldf_train::student::{StudentConfig, student};
+use nldf_train::networks::nn::{init_seeded, new_varmap};
+use nldf_train::networks::student::{StudentConfig, student};
+use nldf_train::trainers::checkpoint::{save_tensors, weights};
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();

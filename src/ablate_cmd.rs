@@ -5,10 +5,10 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use nldf_train::config::StudentTrainConfig;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::posed::PosedJob;
+use nldf_train::trainers::config::StudentTrainConfig;
 
 use crate::presets::StudentPreset;
 use crate::progress::{EventPrinter, stop_flag};

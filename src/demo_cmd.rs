@@ -258,13 +258,14 @@ fn print_summary(command: &str, out: &Path, report: &DemoReport, video: Option<&
     println!("|{}", "---|".repeat(5 + names.len()));
     let opt = |v: Option<f64>| v.map_or("-".into(), |m| format!("{m:.2}"));
     for (mi, r) in report.evaluation.models.iter().enumerate() {
-        let per_split = |f: &dyn Fn(&nldf_train::eval::EvalReport) -> String| -> Vec<String> {
-            report
-                .splits
-                .iter()
-                .map(|(_, e)| e.models.get(mi).map_or("-".into(), f))
-                .collect()
-        };
+        let per_split =
+            |f: &dyn Fn(&nldf_train::reports::eval::EvalReport) -> String| -> Vec<String> {
+                report
+                    .splits
+                    .iter()
+                    .map(|(_, e)| e.models.get(mi).map_or("-".into(), f))
+                    .collect()
+            };
         let scores = per_split(&|m| format!("{} / {:.2}", opt(m.head_psnr), m.psnr));
         let mouth = per_split(&|m| opt(m.mouth_psnr));
         let repainted = per_split(&|m| {

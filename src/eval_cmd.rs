@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use nldf_core::dataset::Split;
-use nldf_train::eval::Evaluation;
 use nldf_train::job::JobEvent;
 use nldf_train::job::eval::EvalJob;
+use nldf_train::reports::eval::Evaluation;
 
 use crate::progress::EventPrinter;
 

@@ -103,7 +103,7 @@ fn main() -> ExitCode {
         }
     };
     // Training allocates and frees the same large buffers every step: keep them.
-    nldf_train::memory::keep_freed_memory();
+    nldf_train::trainers::memory::keep_freed_memory();
     // NLDF_KERNELS forces the training kernels' path (checked before any work starts).
     if let Err(e) =
         nldf_train::kernels::KernelPath::from_env().and_then(nldf_train::kernels::use_path)

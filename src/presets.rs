@@ -16,8 +16,8 @@ pub enum TeacherPreset {
 
 impl TeacherPreset {
     /// The preset's network configuration.
-    pub fn config(self) -> nldf_train::config::TeacherConfig {
-        use nldf_train::config::TeacherConfig;
+    pub fn config(self) -> nldf_train::trainers::config::TeacherConfig {
+        use nldf_train::trainers::config::TeacherConfig;
         match self {
             TeacherPreset::Small => TeacherConfig::small(),
             TeacherPreset::AdNerf => TeacherConfig::ad_nerf(),
@@ -70,8 +70,8 @@ pub enum StudentPreset {
 
 impl StudentPreset {
     /// The preset's network configuration.
-    pub fn config(self) -> nldf_train::student::StudentConfig {
-        use nldf_train::student::StudentConfig;
+    pub fn config(self) -> nldf_train::networks::student::StudentConfig {
+        use nldf_train::networks::student::StudentConfig;
         match self {
             StudentPreset::D28 => StudentConfig::paper_d28(),
             StudentPreset::D50 => StudentConfig::paper_d50(),

@@ -68,8 +68,8 @@ impl EventPrinter {
     }
 
     /// Shows a training stage's step or validation on its bar.
-    fn show_training(&mut self, stage: &str, event: &nldf_train::run_loop::Event) {
-        use nldf_train::run_loop::Event;
+    fn show_training(&mut self, stage: &str, event: &nldf_train::trainers::run_loop::Event) {
+        use nldf_train::trainers::run_loop::Event;
         let Some(bar) = &self.bar else { return };
         match event {
             Event::Step {
@@ -108,7 +108,7 @@ impl EventPrinter {
         stage: &str,
         step: usize,
         interrupted: bool,
-        scores: Option<&nldf_train::scores::Scores>,
+        scores: Option<&nldf_train::trainers::scores::Scores>,
     ) {
         if let Some(bar) = self.bar.take() {
             bar.finish_and_clear();

@@ -315,9 +315,10 @@ const DEFAULT_STUDENT: &str = "student";
 /// Runs `nldf train upsampler`.
 fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     use anyhow::Context;
-    use nldf_train::upsampler_trainer::{UpsamplerRunConfig, train_upsampler};
+    use nldf_train::trainers::config::{StudentRunConfig, read_config};
+    use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, train_upsampler};
     let mut cfg: UpsamplerRunConfig = match &args.config {
-        Some(path) => nldf_train::config::read_config(path)?,
+        Some(path) => read_config(path)?,
         None => UpsamplerRunConfig {
             model: nldf_core::upsampler_config::UpsamplerConfig::with_factor(args.factor),
             ..UpsamplerRunConfig::default()
@@ -343,12 +344,12 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     }
     cfg.check()?;
     let student_dir = args.run.join(&cfg.student);
-    let student_cfg: nldf_train::config::StudentRunConfig =
-        nldf_train::config::read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
+    let student_cfg: StudentRunConfig =
+        read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
             .with_context(|| format!("reading the student in {}", student_dir.display()))?;
     let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
     eprintln!("loading {}", args.data.display());
-    let data = nldf_train::data::TrainData::open_with(&args.data, true, &audio)?;
+    let data = nldf_train::trainers::data::TrainData::open_with(&args.data, true, &audio)?;
     let dir = args.run.join(&args.name);
     eprintln!(
         "upsampler x{} over {} into {}: coarse features and the teacher's crops first",
@@ -434,7 +435,10 @@ mod tests {
                     serde_json::to_value(&*cfg).unwrap(),
                     serde_json::to_value(&recipe).unwrap()
                 );
-                assert_eq!(cfg.model, nldf_train::student::StudentConfig::realtime());
+                assert_eq!(
+                    cfg.model,
+                    nldf_train::networks::student::StudentConfig::realtime()
+                );
                 assert_eq!(cfg.train.pseudo_frames, 600);
             }
             _ => panic!("not the recipe"),

@@ -74,7 +74,7 @@ pub fn safetensors(bytes: &[u8]) -> Verdict {
         }
         Err(e) => one_line_naming(&e.to_string(), "model.safetensors")?,
     }
-    match nldf_train::checkpoint::parse_tensors(path, bytes) {
+    match nldf_train::trainers::checkpoint::parse_tensors(path, bytes) {
         Ok(_) => Ok(()),
         Err(e) => one_line_naming(&e.to_string(), "model.safetensors"),
     }
@@ -83,7 +83,7 @@ pub fn safetensors(bytes: &[u8]) -> Verdict {
 /// A run configuration (teacher and student): parsed strictly, then checked; an error names
 /// the file, and an accepted one sizes its network without overflow.
 pub fn config(bytes: &[u8]) -> Verdict {
-    use nldf_train::config::{StudentRunConfig, TeacherRunConfig, parse_checked};
+    use nldf_train::trainers::config::{StudentRunConfig, TeacherRunConfig, parse_checked};
     let path = Path::new("config.json");
     let text = String::from_utf8_lossy(bytes);
     match parse_checked::<TeacherRunConfig>(path, &text) {

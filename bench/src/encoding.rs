@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use nldf_train::bench::{EncodingBench, Machine, bench_encoding};
+use nldf_train::reports::bench::{EncodingBench, Machine, bench_encoding};
 use serde::Serialize;
 
 use crate::error::Result;

@@ -6,13 +6,13 @@
 
 use std::path::{Path, PathBuf};
 
-use nldf_train::bench::{Machine, StepBench, bench_student_step, bench_teacher_step};
-use nldf_train::config::{StudentRunConfig, TeacherConfig, TeacherRunConfig};
-use nldf_train::data::TrainData;
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::student::StudentConfig;
-use nldf_train::student_trainer::StudentRun;
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::networks::student::StudentConfig;
+use nldf_train::reports::bench::{Machine, StepBench, bench_student_step, bench_teacher_step};
+use nldf_train::trainers::config::{StudentRunConfig, TeacherConfig, TeacherRunConfig};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::student_trainer::StudentRun;
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 use serde::Serialize;
 
 use crate::error::{Result, temp_dir};

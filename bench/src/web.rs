@@ -21,7 +21,7 @@ use nldf_infer::poses::default_pose;
 use nldf_infer::still::{SkipConfig, StillTrack, bench_track, probe_frames};
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
 use nldf_model::{FrameGraphFile, read_frame_model, read_model};
-use nldf_train::bench::Machine;
+use nldf_train::reports::bench::Machine;
 use serde::Serialize;
 
 use crate::error::{Error, Result};

@@ -12,8 +12,6 @@ use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{ONNX_FILE, STUDENT_DIR, TEACHER_DIR, has_checkpoint};
 use nldf_core::synth::{self, SynthConfig};
 
-use nldf_train::config::TeacherConfig;
-use nldf_train::eval::Evaluation;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::job::recipe::{
     DEMO_HOLD, DEMO_PSEUDO, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
@@ -22,8 +20,10 @@ use nldf_train::job::recipe::{
 use nldf_train::job::student::{PseudoSettings, StudentJob, StudentSource};
 use nldf_train::job::teacher::{TeacherJob, TeacherSource};
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::student::StudentConfig;
-use nldf_train::timing::{TIMING_FILE, Timing};
+use nldf_train::networks::student::StudentConfig;
+use nldf_train::reports::eval::Evaluation;
+use nldf_train::trainers::config::TeacherConfig;
+use nldf_train::trainers::timing::{TIMING_FILE, Timing};
 
 use crate::error::{Error, Result};
 

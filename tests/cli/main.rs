@@ -519,10 +519,10 @@ fn bad_checkpoints_and_configs_are_refused() {
     let dir = scratch();
     let run = damaged_run(dir.path(), |r| {
         let p = r.join("teacher/model.safetensors");
-        let (mut t, meta) = nldf_train::checkpoint::load_tensors(&p).unwrap();
+        let (mut t, meta) = nldf_train::trainers::checkpoint::load_tensors(&p).unwrap();
         let first = t.keys().min().unwrap().clone();
         t.remove(&first);
-        nldf_train::checkpoint::save_tensors(&p, &t, meta).unwrap();
+        nldf_train::trainers::checkpoint::save_tensors(&p, &t, meta).unwrap();
     });
     let out = dir.path().join("eval");
     refused(

@@ -9,9 +9,9 @@ use nldf_core::dataset::{Dataset, LABELS_DIR, PARSING_DIR, Split, save_regions_p
 use nldf_core::image::ImageRgb;
 use nldf_core::landmarks::{Landmarks, N_LANDMARKS, OUTER_LIPS};
 use nldf_core::region::{MouthSource, Region};
-use nldf_train::data::TrainData;
-use nldf_train::scores::frame_scores;
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::scores::frame_scores;
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 
 use crate::util::{tiny_run_config, tiny_scene};
 

@@ -22,7 +22,7 @@ use nldf_export::{WeightType, export_student};
 use nldf_model::contract::{self, ModelInfo};
 use nldf_model::onnx::StringStringEntryProto;
 use nldf_model::{Error, read_model};
-use nldf_train::student::StudentConfig;
+use nldf_train::networks::student::StudentConfig;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -562,9 +562,9 @@ fn models_checkpoints_and_configs_of_an_older_nldf_are_refused_with_one_error() 
 
     // A checkpoint without the version: export and the trainer's loader refuse it.
     let weights = run.student_dir().join(MODEL_FILE);
-    let (tensors, mut meta) = nldf_train::checkpoint::load_tensors(&weights).unwrap();
+    let (tensors, mut meta) = nldf_train::trainers::checkpoint::load_tensors(&weights).unwrap();
     assert!(meta.remove(CHECKPOINT_VERSION_KEY).is_some());
-    nldf_train::checkpoint::save_tensors(&weights, &tensors, meta).unwrap();
+    nldf_train::trainers::checkpoint::save_tensors(&weights, &tensors, meta).unwrap();
     let err = export_student(
         &run.student_dir(),
         &run.root.join("v1.onnx"),
@@ -578,9 +578,9 @@ fn models_checkpoints_and_configs_of_an_older_nldf_are_refused_with_one_error() 
     );
     assert!(err.contains("made by an older nldf"), "{err}");
     assert!(!run.root.join("v1.onnx").exists());
-    let (varmap, vb) = nldf_train::nn::new_varmap();
-    nldf_train::student::student(&run.student.cfg, vb).unwrap();
-    let err = nldf_train::checkpoint::open_checkpoint(&run.student_dir(), &varmap, None)
+    let (varmap, vb) = nldf_train::networks::nn::new_varmap();
+    nldf_train::networks::student::student(&run.student.cfg, vb).unwrap();
+    let err = nldf_train::trainers::checkpoint::open_checkpoint(&run.student_dir(), &varmap, None)
         .unwrap_err()
         .to_string();
     assert!(err.contains("checkpoint version 1"), "{err}");

@@ -17,7 +17,7 @@ use nldf_export::{WeightType, export_student_int8};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_model::read_model;
 use nldf_pipeline::quantize::{CalibrationFrame, activation_ranges};
-use nldf_train::student::StudentConfig;
+use nldf_train::networks::student::StudentConfig;
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.
 fn python_render(
@@ -276,9 +276,9 @@ fn int8_stays_near_fp32_on_a_trained_students_val_and_novel_frames() {
     use nldf_core::dataset::{AudioChoice, Dataset, Split};
     use nldf_core::metrics::psnr;
     use nldf_infer::frame::FrameRenderer;
-    use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
-    use nldf_train::data::TrainData;
-    use nldf_train::student_trainer::StudentRun;
+    use nldf_train::trainers::config::{StudentRunConfig, StudentTrainConfig};
+    use nldf_train::trainers::data::TrainData;
+    use nldf_train::trainers::student_trainer::StudentRun;
     let scene = crate::util::tiny_scene();
     let data = TrainData::load(scene).unwrap();
     let dir = tempfile::tempdir().unwrap();

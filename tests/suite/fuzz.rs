@@ -8,7 +8,7 @@
 use crate::util::write_run;
 use candle_core::{Device, Tensor};
 use nldf_tests::fuzz::{self, Mutator, Verdict, run_cases};
-use nldf_train::config::{StudentRunConfig, TeacherRunConfig};
+use nldf_train::trainers::config::{StudentRunConfig, TeacherRunConfig};
 
 /// Cases per reader in the test suite.
 const CASES: usize = 3000;
@@ -153,7 +153,7 @@ fn fuzz_landmarks_reader() {
 
 #[test]
 fn fuzz_onnx_reader() {
-    let cfg = nldf_train::student::StudentConfig::tiny();
+    let cfg = nldf_train::networks::student::StudentConfig::tiny();
     let run = write_run(&cfg, 3);
     let path = run.export(nldf_export::WeightType::F32);
     let seeds = vec![std::fs::read(path).unwrap()];

@@ -2,10 +2,10 @@
 //! numerics on extreme coordinates, and a grid teacher that learns and resumes bit for bit.
 
 use candle_core::{Device, Tensor, Var};
-use nldf_train::data::TrainData;
-use nldf_train::hash_grid::{GridConfig, HashGridOp};
-use nldf_train::hash_grid_reference::{encode_reference, table_grad_reference};
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::networks::hash_grid::{GridConfig, HashGridOp};
+use nldf_train::networks::hash_grid_reference::{encode_reference, table_grad_reference};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
@@ -289,8 +289,8 @@ fn a_tiny_tri_plane_teacher_learns_the_tiny_scene() {
 
 /// [`tiny_grid_run_config`] with region attention.
 fn with_attention(
-    mut cfg: nldf_train::config::TeacherRunConfig,
-) -> nldf_train::config::TeacherRunConfig {
+    mut cfg: nldf_train::trainers::config::TeacherRunConfig,
+) -> nldf_train::trainers::config::TeacherRunConfig {
     if let Some(g) = cfg.model.grid.as_mut() {
         g.region_attention = true;
     }

@@ -11,11 +11,11 @@ use nldf_infer::audio::windows_from_wav;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::frame::FrameRenderer;
 use nldf_model::read_model;
-use nldf_train::config::StudentRunConfig;
-use nldf_train::data::TrainData;
-use nldf_train::student::StudentConfig;
-use nldf_train::student_trainer::StudentRun;
-use nldf_train::views::{frame_beams, training_views};
+use nldf_train::networks::student::StudentConfig;
+use nldf_train::trainers::config::StudentRunConfig;
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::student_trainer::StudentRun;
+use nldf_train::trainers::views::{frame_beams, training_views};
 
 #[test]
 fn the_trainer_and_the_renderer_build_the_same_inputs_for_a_frame() {

@@ -24,7 +24,7 @@ use nldf_infer::poses::{default_track, pose_at};
 use nldf_infer::stream::{STREAM_REPORT_FILE, StreamJob, next_frame, paced_wav_stream};
 use nldf_infer::video::{VideoJob, frame_file_name};
 use nldf_model::read_model;
-use nldf_train::student::StudentConfig;
+use nldf_train::networks::student::StudentConfig;
 
 /// The parity bound between any two renderers' frames: 20 dB (10x in RMS error) under the
 /// measured worst, about 140.9 dB (onnxruntime against candle and tract, the ops-only config).

@@ -11,13 +11,13 @@ use nldf_core::run_files::{
 };
 use nldf_core::synth::SynthConfig;
 use nldf_pipeline::demo::DemoJob;
-use nldf_train::config::TeacherConfig;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::job::posed::PosedJob;
 use nldf_train::job::student::{StudentJob, StudentSource};
-use nldf_train::student::StudentConfig;
+use nldf_train::networks::student::StudentConfig;
+use nldf_train::trainers::config::TeacherConfig;
 
 /// `nldf demo`'s default job with its sizes and budgets shrunk; its recipe (which stages
 /// run, distilled or not) stays the command line's default.
@@ -68,9 +68,10 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
     let splits: Vec<Split> = report.splits.iter().map(|(s, _)| *s).collect();
     assert_eq!(splits, [Split::Val, Split::Novel, Split::Voice]);
     // The pinned steps are what ran, and the time breakdown names every part.
-    let teacher = nldf_train::teacher_trainer::TeacherModel::open(&out.join("teacher")).unwrap();
+    let teacher =
+        nldf_train::trainers::teacher_trainer::TeacherModel::open(&out.join("teacher")).unwrap();
     assert_eq!(teacher.step, 12);
-    let timing = nldf_train::timing::Timing::open(&out).unwrap();
+    let timing = nldf_train::trainers::timing::Timing::open(&out).unwrap();
     let parts: Vec<&str> = timing.parts.iter().map(|p| p.what.as_str()).collect();
     for part in [
         "synthetic scene",
@@ -317,7 +318,7 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
     let mut teacher = TeacherConfig::tiny();
     teacher.depth = 2;
     teacher.skips = vec![];
-    teacher.grid = Some(nldf_train::hash_grid::GridConfig {
+    teacher.grid = Some(nldf_train::networks::hash_grid::GridConfig {
         levels: 6,
         log2_table: 10,
         max_resolution: 64,
@@ -332,7 +333,8 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
         .run(&stop, &mut |_| {})
         .unwrap()
         .expect("the demo ran to its end");
-    let teacher = nldf_train::teacher_trainer::TeacherModel::open(&out.join("teacher")).unwrap();
+    let teacher =
+        nldf_train::trainers::teacher_trainer::TeacherModel::open(&out.join("teacher")).unwrap();
     let grid = teacher.cfg.model.grid.as_ref().expect("a grid teacher");
     assert_eq!(
         teacher.cfg.train.lr,

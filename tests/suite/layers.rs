@@ -14,7 +14,8 @@
 //! groups expanded; the module is the longest prefix of the path that is a file. Comments,
 //! doc links and strings do not count. The crate root declares and re-exports every module,
 //! so it is left out. The check fails naming each cycle it meets, as
-//! `rays -> bounds -> dataset -> rays`.
+//! `rays -> bounds -> dataset -> rays`. nldf-train's folders are layered too: `ops`,
+//! `networks`, `trainers`, `reports`, `job`, a module in one reaching none in a later one.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -517,4 +518,61 @@ fn comments_strings_and_test_modules_do_not_count() {
         ),
     ]);
     assert!(found.is_empty(), "{found:?}");
+}
+
+/// nldf-train's folders by concept, lowest first: a module in one reaches none in a later
+/// one (the fused ops, the networks built on them, the trainers, the reports on trained
+/// models, the jobs).
+const TRAIN_FOLDERS: [&str; 5] = ["ops", "networks", "trainers", "reports", "job"];
+
+/// Each dependency of `graph` from a module in one of `folders` to a module in a later one,
+/// as `a -> b`.
+fn upward_edges(graph: &BTreeMap<String, BTreeSet<String>>, folders: &[&str]) -> Vec<String> {
+    let rank = |m: &str| {
+        folders
+            .iter()
+            .position(|f| m == *f || m.starts_with(&format!("{f}::")))
+    };
+    let mut edges = Vec::new();
+    for (module, deps) in graph {
+        for dep in deps {
+            if let (Some(a), Some(b)) = (rank(module), rank(dep))
+                && b > a
+            {
+                edges.push(format!("{module} -> {dep}"));
+            }
+        }
+    }
+    edges
+}
+
+#[test]
+fn the_training_crates_folders_are_layered() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let files = rust_files(&root.join("train/src"));
+    for folder in TRAIN_FOLDERS {
+        assert!(
+            files.keys().any(|p| p.starts_with(folder)),
+            "train/src/{folder}: no source files"
+        );
+    }
+    let edges = upward_edges(&module_graph(&files), &TRAIN_FOLDERS);
+    assert!(
+        edges.is_empty(),
+        "train/src: modules reaching a folder above their own:\n{}",
+        edges.join("\n")
+    );
+    // Planted: a network that reads a trainer's config is named.
+    let planted: BTreeMap<PathBuf, String> = [
+        ("networks/field.rs", "use crate::trainers::config::Cfg;"),
+        ("trainers/config.rs", "pub struct Cfg;"),
+        ("trainers/run.rs", "use crate::networks::field;"),
+    ]
+    .iter()
+    .map(|&(p, s)| (PathBuf::from(p), s.to_string()))
+    .collect();
+    assert_eq!(
+        upward_edges(&module_graph(&planted), &TRAIN_FOLDERS),
+        ["networks::field -> trainers::config"]
+    );
 }

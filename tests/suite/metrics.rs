@@ -69,7 +69,7 @@ fn ssim_drops_with_noise_and_sizes_must_match() {
 #[test]
 fn the_repainted_share_counts_changed_background_pixels_outside_the_head() {
     use nldf_core::region::Region;
-    use nldf_train::eval::{REPAINT_THRESHOLD, repainted_share};
+    use nldf_train::reports::eval::{REPAINT_THRESHOLD, repainted_share};
     let bg = ImageRgb::filled(4, 4, [0.5, 0.25, 0.75]);
     let mut regions = vec![Region::Background; 16];
     for p in [5, 6, 9, 10] {

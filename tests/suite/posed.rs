@@ -6,9 +6,9 @@ use nldf_core::dataset::{AudioChoice, Dataset, Split, VOICE_DIR};
 use nldf_core::rays::head_rays;
 use nldf_core::student_config::StudentConfig;
 use nldf_core::synth::SceneFile;
-use nldf_train::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
-use nldf_train::data::TrainData;
-use nldf_train::views::{
+use nldf_train::trainers::config::{RunConfig, StudentRunConfig, StudentTrainConfig, read_config};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::views::{
     frame_beams, recorded_range, thin_pseudo_beams, training_views, view_angles, views_fingerprint,
 };
 
@@ -361,9 +361,10 @@ fn thinned_pseudo_views_keep_their_mouth_and_a_seeded_subset_and_recorded_frames
         let mut split: Vec<u32> = fb.face.iter().chain(&fb.other).copied().collect();
         split.sort_unstable();
         assert_eq!(split, (0..n as u32).collect::<Vec<_>>());
-        let label = |b: &nldf_train::views::FrameBeams, list: &[u32]| -> Vec<(u32, u32)> {
-            list.iter().map(|&k| b.pixels[k as usize]).collect()
-        };
+        let label =
+            |b: &nldf_train::trainers::views::FrameBeams, list: &[u32]| -> Vec<(u32, u32)> {
+                list.iter().map(|&k| b.pixels[k as usize]).collect()
+            };
         let in_whole = |list: &[u32], whole_list: &[u32]| {
             let set = label(whole, whole_list);
             label(fb, list).iter().all(|p| set.contains(p))

@@ -96,7 +96,7 @@ fn the_shipped_model_matches_its_card_and_renders_finite_frames() {
 fn the_shipped_model_scores_its_cards_figures_on_its_own_scene() {
     use nldf_core::dataset::{Dataset, Split};
     use nldf_core::synth::{SynthConfig, generate};
-    use nldf_train::scores::frame_scores;
+    use nldf_train::trainers::scores::frame_scores;
     let dir = shipped();
     let card = std::fs::read_to_string(dir.join("README.md")).unwrap();
     let row = card

@@ -19,10 +19,10 @@ use nldf_export::WeightType;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_infer::ort_library::find_ort_library;
 use nldf_model::read_model;
-use nldf_train::data::TrainData;
-use nldf_train::run_loop::train_loop;
-use nldf_train::student::StudentConfig;
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::networks::student::StudentConfig;
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::run_loop::train_loop;
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -127,7 +127,7 @@ fn stress_candle_compositing_extreme_densities_and_spacings_matches_f64() {
     };
     let t = |v: Vec<f32>, shape: &[usize]| Tensor::from_vec(v, shape, &Device::Cpu).unwrap();
     let bg = vec![0.25f32; 3 * n];
-    let out = nldf_train::render::composite(
+    let out = nldf_train::networks::render::composite(
         &t(flat(0), &[n, s]),
         &t(flat(1), &[n, s]),
         &t(flat(2), &[n, s, 3]),
@@ -289,7 +289,7 @@ fn stress_training_at_ten_times_the_learning_rate_never_checkpoints_a_nan() {
     }
 }
 
-fn ten_times_the_learning_rate(mut cfg: nldf_train::config::TeacherRunConfig) {
+fn ten_times_the_learning_rate(mut cfg: nldf_train::trainers::config::TeacherRunConfig) {
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     cfg.train.lr *= 10.0;
@@ -305,9 +305,10 @@ fn ten_times_the_learning_rate(mut cfg: nldf_train::config::TeacherRunConfig) {
         }
     }
     let (tensors, _) =
-        nldf_train::checkpoint::load_tensors(&dir.path().join("model.safetensors")).unwrap();
+        nldf_train::trainers::checkpoint::load_tensors(&dir.path().join("model.safetensors"))
+            .unwrap();
     assert_eq!(
-        nldf_train::checkpoint::first_non_finite(&tensors).unwrap(),
+        nldf_train::trainers::checkpoint::first_non_finite(&tensors).unwrap(),
         None
     );
 }

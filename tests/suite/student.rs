@@ -2,8 +2,8 @@
 //! the pixel (Eq. 7).
 
 use candle_core::{Device, Tensor};
-use nldf_train::nn::new_varmap;
-use nldf_train::student::{StudentConfig, residual_mlp};
+use nldf_train::networks::nn::new_varmap;
+use nldf_train::networks::student::{StudentConfig, residual_mlp};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -85,7 +85,7 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
     };
     let (varmap, vb) = new_varmap();
     let net = residual_mlp(&cfg, vb).unwrap();
-    nldf_train::nn::init_seeded(&varmap, 3).unwrap();
+    nldf_train::networks::nn::init_seeded(&varmap, 3).unwrap();
     let n = 77;
     let mut rng = ChaCha8Rng::seed_from_u64(10);
     let mut random =
@@ -181,11 +181,11 @@ fn the_fused_student_matches_candle_ops_forward_and_backward() {
 
 use crate::util::{assert_learned, tiny_run_config, tiny_scene};
 use nldf_core::dataset::Split;
-use nldf_train::config::{StudentRunConfig, StudentTrainConfig};
-use nldf_train::data::TrainData;
-use nldf_train::pool::{BeamPool, PoolEntry};
-use nldf_train::student_trainer::StudentRun;
-use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
+use nldf_train::trainers::config::{StudentRunConfig, StudentTrainConfig};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::pool::{BeamPool, PoolEntry};
+use nldf_train::trainers::student_trainer::StudentRun;
+use nldf_train::trainers::teacher_trainer::{TeacherModel, TeacherRun};
 
 fn entry(frame: u32, loss: f32) -> PoolEntry {
     PoolEntry {
@@ -399,7 +399,7 @@ fn a_student_resumes_bit_exactly_with_its_pool() {
 fn a_student_with_weight_averaging_ends_on_the_average_of_its_decaying_steps() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let weights = |run: &StudentRun| -> Vec<f32> {
-        nldf_train::nn::sorted_vars(&run.model.varmap)
+        nldf_train::networks::nn::sorted_vars(&run.model.varmap)
             .unwrap()
             .iter()
             .flat_map(|(_, v)| {
@@ -472,7 +472,7 @@ fn a_student_can_keep_its_audio_encoder_fixed() {
     let data = TrainData::load(tiny_scene()).unwrap();
     let split = |run: &StudentRun| -> (Vec<f32>, Vec<f32>) {
         let (mut audio, mut rest) = (Vec::new(), Vec::new());
-        for (name, v) in nldf_train::nn::sorted_vars(&run.model.varmap).unwrap() {
+        for (name, v) in nldf_train::networks::nn::sorted_vars(&run.model.varmap).unwrap() {
             let values = v
                 .as_tensor()
                 .flatten_all()
@@ -515,7 +515,7 @@ fn a_student_can_keep_its_audio_encoder_fixed() {
 /// the opacity is the teacher's, even at 0 and 1.
 #[test]
 fn the_distillation_loss_adds_the_opacity_term_inside_lambda() {
-    use nldf_train::loss::{TeacherTargets, distillation_loss};
+    use nldf_train::trainers::loss::{TeacherTargets, distillation_loss};
     let t = |v: Vec<f32>, shape: &[usize]| Tensor::from_vec(v, shape, &Device::Cpu).unwrap();
     // One ray, M = 1.
     let pixels = t(vec![0.5, 0.5, 0.5], &[1, 3]);
@@ -553,7 +553,7 @@ fn the_distillation_loss_adds_the_opacity_term_inside_lambda() {
     assert!(matched.abs() < 1e-6, "{matched}");
     let z = t(vec![-30.0, 0.0, 30.0, 2.0], &[4, 1]);
     let a = t(vec![0.0, 0.5, 1.0, 1.0 / (1.0 + (-2.0f32).exp())], &[4, 1]);
-    let d: Vec<f32> = nldf_train::loss::opacity_divergence(&z, &a)
+    let d: Vec<f32> = nldf_train::trainers::loss::opacity_divergence(&z, &a)
         .unwrap()
         .to_vec1()
         .unwrap();

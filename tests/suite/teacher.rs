@@ -9,12 +9,12 @@ use glam::Vec3;
 use nldf_core::bounds::Bounds;
 use nldf_core::composite::composite_f64;
 use nldf_core::rays::Rays;
-use nldf_train::config::{TeacherConfig, TeacherRunConfig};
-use nldf_train::data::TrainData;
-use nldf_train::nn::{conv1d, new_varmap};
-use nldf_train::render::composite;
-use nldf_train::sampler::{sample_importance, sample_stratified};
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::networks::nn::{conv1d, new_varmap};
+use nldf_train::networks::render::composite;
+use nldf_train::networks::sampler::{sample_importance, sample_stratified};
+use nldf_train::trainers::config::{TeacherConfig, TeacherRunConfig};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -209,7 +209,8 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
         .unwrap()
         .unwrap();
     assert!(scores.psnr.is_finite() && events >= 12);
-    let log = nldf_train::log::read_log(&dir.path().join(nldf_core::run_files::LOG_FILE)).unwrap();
+    let log = nldf_train::trainers::log::read_log(&dir.path().join(nldf_core::run_files::LOG_FILE))
+        .unwrap();
     assert_eq!(
         log.iter().map(|r| r.step).collect::<Vec<_>>(),
         vec![4, 6, 8, 12]
@@ -244,8 +245,8 @@ fn training_writes_a_log_and_a_checkpoint_and_stops_cleanly() {
 #[test]
 fn the_fused_field_matches_plain_candle_ops_forward_and_backward() {
     use candle_core::Var;
-    use nldf_train::field::teacher_field;
-    use nldf_train::nn::{init_seeded, sorted_vars};
+    use nldf_train::networks::field::teacher_field;
+    use nldf_train::networks::nn::{init_seeded, sorted_vars};
     for (cfg, n_rays, n_samples) in [
         (TeacherConfig::tiny(), 7, 5),
         (TeacherConfig::small(), 13, 9),
@@ -500,7 +501,7 @@ fn segment_targets_sum_to_the_teachers_pixel() {
 #[test]
 fn importance_sampled_segment_targets_follow_t_intervals() {
     use nldf_core::composite::{composite_f64, segment_colors_f64};
-    use nldf_train::teacher::encode_vectors;
+    use nldf_train::networks::teacher::encode_vectors;
     let mut cfg = tiny_run_config(120);
     cfg.model.n_samples = 8;
     cfg.model.n_importance = 24;

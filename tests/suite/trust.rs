@@ -17,14 +17,14 @@ use nldf_export::WeightType;
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_model::onnx::ModelProto;
 use nldf_model::read_model;
-use nldf_train::checkpoint::save_tensors;
-use nldf_train::config::{RunConfig, StudentRunConfig, TeacherRunConfig, parse_checked};
-use nldf_train::data::TrainData;
-use nldf_train::eval::{FrameModel, eval_models};
-use nldf_train::run_loop::{Event, Schedule, TrainingRun, train_loop};
-use nldf_train::scores::{Scores, score_frames};
-use nldf_train::student::StudentConfig;
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::networks::student::StudentConfig;
+use nldf_train::reports::eval::{FrameModel, eval_models};
+use nldf_train::trainers::checkpoint::save_tensors;
+use nldf_train::trainers::config::{RunConfig, StudentRunConfig, TeacherRunConfig, parse_checked};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::run_loop::{Event, Schedule, TrainingRun, train_loop};
+use nldf_train::trainers::scores::{Scores, score_frames};
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 use prost::Message;
 
 /// An image whose every value is NaN.
@@ -240,12 +240,12 @@ fn a_time_cap_stops_the_run_and_leaves_the_learning_rate_to_the_steps() {
     })
     .unwrap();
     assert_eq!((n, run.step), (4, 4));
-    let capped = nldf_train::config::StudentTrainConfig {
+    let capped = nldf_train::trainers::config::StudentTrainConfig {
         lr_decay_steps: 100,
         time_cap_s: 10.0,
         ..Default::default()
     };
-    let budgeted = nldf_train::config::StudentTrainConfig {
+    let budgeted = nldf_train::trainers::config::StudentTrainConfig {
         time_budget_s: 10.0,
         time_cap_s: 0.0,
         ..capped.clone()
@@ -280,7 +280,7 @@ fn a_new_run_whose_budget_is_spent_before_its_first_step_is_still_saved() {
 
 #[test]
 fn adam_refuses_a_non_finite_gradient_and_checkpoints_refuse_non_finite_weights() {
-    use nldf_train::adam::{Adam, AdamParams};
+    use nldf_train::trainers::adam::{Adam, AdamParams};
     let var = candle_core::Var::from_tensor(
         &Tensor::ones(4, candle_core::DType::F32, &Device::Cpu).unwrap(),
     )
@@ -304,7 +304,7 @@ fn adam_refuses_a_non_finite_gradient_and_checkpoints_refuse_non_finite_weights(
     let data = TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let run = TeacherRun::create(dir.path(), tiny_run_config(5), &data).unwrap();
-    let (name, var) = nldf_train::nn::sorted_vars(&run.model.varmap)
+    let (name, var) = nldf_train::networks::nn::sorted_vars(&run.model.varmap)
         .unwrap()
         .remove(0);
     let mut values: Vec<f32> = var.as_tensor().flatten_all().unwrap().to_vec1().unwrap();
@@ -321,7 +321,7 @@ fn export_refuses_non_finite_weights_and_fp16_refuses_weights_beyond_its_range()
     let cfg = StudentConfig::tiny();
     let run = write_run(&cfg, 5);
     let path = run.student_dir().join("model.safetensors");
-    let (tensors, meta) = nldf_train::checkpoint::load_tensors(&path).unwrap();
+    let (tensors, meta) = nldf_train::trainers::checkpoint::load_tensors(&path).unwrap();
     let with = |name: &str, value: f32| {
         let mut t = tensors.clone();
         let w = &t[name];
@@ -464,7 +464,7 @@ fn foreign_features_scene(dir: &Path, keep_wav: bool) -> nldf_core::audio::Audio
         .unwrap()
         .n_frames;
     let cfg = StudentConfig {
-        audio: nldf_train::config::AudioConfig {
+        audio: nldf_train::trainers::config::AudioConfig {
             n_features: 29,
             ..Default::default()
         },
@@ -517,7 +517,7 @@ fn datasets_say_which_front_end_made_their_features() {
 fn a_model_on_foreign_features_refuses_a_wav_and_renders_from_them() {
     use nldf_infer::poses::default_track;
     use nldf_infer::video::VideoJob;
-    use nldf_train::student_trainer::StudentRun;
+    use nldf_train::trainers::student_trainer::StudentRun;
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().join("scene");
     foreign_features_scene(&root, false);

@@ -1,7 +1,7 @@
 //! The learned upsampler (`nldf train upsampler`, `nldf export [--frame] --upsampler`): the
 //! frame graph and the ray graph with the upsampler inside (the ray graph through nldf's
 //! own `FrameRenderer`, which finds the box) match candle's reference renderer
-//! (`nldf_train::upsampler::render_upsampled`) within `REL_TOL` of the largest output value, in
+//! (`nldf_train::networks::upsampler::render_upsampled`) within `REL_TOL` of the largest output value, in
 //! tract and onnxruntime, for a tiny student and at production size (the real-time student,
 //! 256 x 256 and 512 x 512 frames, x4), with a camera that sees no head among the poses.
 
@@ -18,9 +18,9 @@ use nldf_infer::FrameRenderer;
 use nldf_infer::backend::{BackendOptions, backend_for};
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_model::{read_frame_model, read_model};
-use nldf_train::checkpoint::{save_tensors, weights};
-use nldf_train::nn::{init_seeded, new_varmap};
-use nldf_train::upsampler::{Upsampler, render_upsampled, upsampler};
+use nldf_train::networks::nn::{init_seeded, new_varmap};
+use nldf_train::networks::upsampler::{Upsampler, render_upsampled, upsampler};
+use nldf_train::trainers::checkpoint::{save_tensors, weights};
 
 use crate::util::{
     camera_at, configs, max_diff, runtimes, spec_for, tensor_shapes, write_run_with,
@@ -416,7 +416,7 @@ fn upsampled_frame_graph_matches_candle_at_production_size() {
 /// graph renders a recorded frame as candle does.
 #[test]
 fn a_tiny_upsampler_trains_scores_and_exports() {
-    use nldf_train::upsampler_trainer::{
+    use nldf_train::trainers::upsampler_trainer::{
         UpsamplerRunConfig, UpsamplerTrainConfig, train_upsampler,
     };
     let dir = tempfile::tempdir().unwrap();
@@ -429,7 +429,7 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
             supersample: 1,
             ..defaults.scene.clone()
         },
-        teacher: nldf_train::config::TeacherConfig::tiny(),
+        teacher: nldf_train::trainers::config::TeacherConfig::tiny(),
         teacher_iters: 12,
         student: StudentConfig::tiny(),
         student_iters: 20,
@@ -442,10 +442,12 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
     };
     let stop = std::sync::atomic::AtomicBool::new(false);
     demo.run(&stop, &mut |_| {}).unwrap().unwrap();
-    let student_cfg: nldf_train::config::StudentRunConfig =
-        nldf_train::config::read_config(&out.join("student").join("config.json")).unwrap();
+    let student_cfg: nldf_train::trainers::config::StudentRunConfig =
+        nldf_train::trainers::config::read_config(&out.join("student").join("config.json"))
+            .unwrap();
     let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
-    let data = nldf_train::data::TrainData::open_with(&out.join("data"), true, &audio).unwrap();
+    let data =
+        nldf_train::trainers::data::TrainData::open_with(&out.join("data"), true, &audio).unwrap();
     let cfg = UpsamplerRunConfig {
         model: UpsamplerConfig {
             factor: 2,
@@ -570,11 +572,12 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
     export_frame_upsampled(&out.join("student"), &up_dir, &frame_path, WeightType::F32).unwrap();
     // Its frame graph renders a recorded frame, from the scene's WAV, as candle renders it
     // from the dataset's feature windows.
-    let trained = nldf_train::upsampler_trainer::UpsampledModel::open(&up_dir, &out).unwrap();
+    let trained =
+        nldf_train::trainers::upsampler_trainer::UpsampledModel::open(&up_dir, &out).unwrap();
     let model = read_frame_model(&frame_path).unwrap();
     let wave = nldf_core::audio::read_wav(&out.join("data").join("aud.wav")).unwrap();
     for frame in [&data.dataset.train[1], data.dataset.train.last().unwrap()] {
-        use nldf_train::eval::FrameModel;
+        use nldf_train::reports::eval::FrameModel;
         let want = trained.render_frame(&data, frame).unwrap();
         assert!(
             max_diff(&want.data, &data.dataset.background.data) > 0.05,

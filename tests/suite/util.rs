@@ -21,10 +21,10 @@ use nldf_core::synth::{SynthConfig, generate};
 use nldf_export::{WeightType, export_student};
 use nldf_infer::ort_library::find_ort_library;
 use nldf_model::onnx::{ModelProto, StringStringEntryProto};
-use nldf_train::checkpoint::{save_tensors, weights};
-use nldf_train::config::{TeacherConfig, TeacherRunConfig, TeacherTrainConfig};
-use nldf_train::nn::{init_seeded, new_varmap, sorted_vars};
-use nldf_train::student::{Student, StudentConfig, student};
+use nldf_train::networks::nn::{init_seeded, new_varmap, sorted_vars};
+use nldf_train::networks::student::{Student, StudentConfig, student};
+use nldf_train::trainers::checkpoint::{save_tensors, weights};
+use nldf_train::trainers::config::{TeacherConfig, TeacherRunConfig, TeacherTrainConfig};
 use prost::Message;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -502,7 +502,7 @@ pub(crate) fn tiny_grid_run_config(iters: usize) -> TeacherRunConfig {
     let mut cfg = tiny_run_config(iters);
     cfg.model.depth = 2;
     cfg.model.skips = vec![];
-    cfg.model.grid = Some(nldf_train::hash_grid::GridConfig {
+    cfg.model.grid = Some(nldf_train::networks::hash_grid::GridConfig {
         levels: 8,
         log2_table: 12,
         base_resolution: 4,
@@ -514,9 +514,10 @@ pub(crate) fn tiny_grid_run_config(iters: usize) -> TeacherRunConfig {
 
 /// A teacher of `cfg` on the tiny scene learns in 200 steps ([`assert_learned`]).
 pub(crate) fn assert_teacher_learns(what: &str, cfg: TeacherRunConfig) {
-    let data = nldf_train::data::TrainData::load(tiny_scene()).unwrap();
+    let data = nldf_train::trainers::data::TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut run = nldf_train::teacher_trainer::TeacherRun::create(dir.path(), cfg, &data).unwrap();
+    let mut run =
+        nldf_train::trainers::teacher_trainer::TeacherRun::create(dir.path(), cfg, &data).unwrap();
     let before = run.model.validation_scores(&data, 2).unwrap();
     let mut losses = Vec::new();
     for _ in 0..200 {
@@ -529,8 +530,8 @@ pub(crate) fn assert_teacher_learns(what: &str, cfg: TeacherRunConfig) {
 /// A teacher of `cfg` (20 steps) saved after 6 steps and resumed takes the same next two
 /// steps bit for bit; one opened without its optimizer's moments does not.
 pub(crate) fn assert_teacher_resumes_bit_for_bit(cfg: TeacherRunConfig) {
-    use nldf_train::teacher_trainer::{TeacherModel, TeacherRun};
-    let data = nldf_train::data::TrainData::load(tiny_scene()).unwrap();
+    use nldf_train::trainers::teacher_trainer::{TeacherModel, TeacherRun};
+    let data = nldf_train::trainers::data::TrainData::load(tiny_scene()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let mut run = TeacherRun::create(dir.path(), cfg, &data).unwrap();
     for _ in 0..6 {

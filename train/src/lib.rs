@@ -5,46 +5,24 @@
 //! writes, and nldf-pipeline's demo joins its jobs to the export. It never depends on
 //! nldf-export or nldf-infer.
 //!
-//! The teacher follows nerfstudio's split: [`sampler`] (where rays are sampled), [`field`]
-//! (the network), [`render`] (compositing), joined by [`teacher`] and trained by
-//! [`trainer`].
+//! Folders by concept, lowest first:
+//! - [`ops`]: the fused candle ops (teacher field, student MLP) on nldf-kernels' products;
+//! - [`networks`]: the networks as candle layers. The teacher follows nerfstudio's split:
+//!   [`networks::sampler`] (where rays are sampled), [`networks::field`] (the network),
+//!   [`networks::render`] (compositing), joined by [`networks::teacher`]; the student
+//!   ([`networks::student`]), the audio encoder and the learned upsampler beside it;
+//! - [`trainers`]: what trains them: data, views and targets, losses, the pool, the
+//!   optimizer, checkpoints and configs, the run loop and one trainer per network;
+//! - [`reports`]: evaluation, scores, plots and the training-step benchmarks;
+//! - [`job`]: the training jobs the command line and the pipeline run.
 
-pub mod adam;
-pub mod audio_net;
-pub mod bench;
-pub mod checkpoint;
-pub mod config;
-pub mod config_file;
-pub mod data;
 pub mod error;
-pub mod eval;
-pub mod field;
-pub mod field_op;
-pub mod hash_grid;
-pub mod hash_grid_reference;
 pub mod job;
 /// The dense-layer kernels the fused ops are built on (the `nldf-kernels` crate).
 pub use nldf_kernels as kernels;
-pub mod log;
-pub mod loss;
-pub mod memory;
-pub mod nn;
-pub mod op_base;
-pub mod plot;
-pub mod pool;
-pub mod render;
-pub mod run_loop;
-pub mod sampler;
-pub mod scores;
-pub mod student;
-pub mod student_op;
-pub mod student_trainer;
-pub mod targets;
-pub mod teacher;
-pub mod teacher_trainer;
-pub mod timing;
-pub mod upsampler;
-pub mod upsampler_trainer;
-pub mod views;
+pub mod networks;
+pub mod ops;
+pub mod reports;
+pub mod trainers;
 
 pub use error::{Error, Result};

@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 
 use nldf_export::WeightType;
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
-use nldf_train::eval::{FrameModel, student_short_name};
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::student_trainer::StudentModel;
+use nldf_train::reports::eval::{FrameModel, student_short_name};
+use nldf_train::trainers::student_trainer::StudentModel;
 
 use super::points::OnnxPoint;
 use super::shared::{PRECISIONS, precision_name};

@@ -4,8 +4,8 @@
 
 use std::path::PathBuf;
 
-use nldf_train::eval::{EvalReport, FrameModel};
-use nldf_train::plot::FrontierDot;
+use nldf_train::reports::eval::{EvalReport, FrameModel};
+use nldf_train::trainers::plot::FrontierDot;
 use serde::Serialize;
 
 use super::points::{OnnxPoint, Timed};

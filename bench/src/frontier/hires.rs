@@ -6,9 +6,9 @@ use std::path::Path;
 use nldf_core::dataset::Split;
 use nldf_core::stats::median;
 use nldf_infer::BackendKind;
-use nldf_train::eval::FrameModel;
 use nldf_train::job::eval::EvalJob;
 use nldf_train::job::{JobEvent, OnEvent};
+use nldf_train::reports::eval::FrameModel;
 
 use super::exports::{Export, open_point};
 use super::front::{Point, Times, mark_front, score};

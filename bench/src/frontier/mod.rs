@@ -35,10 +35,10 @@ use std::path::Path;
 use nldf_core::dataset::Split;
 use nldf_core::stats::median;
 use nldf_infer::BackendKind;
-use nldf_train::data::TrainData;
-use nldf_train::eval::{EvalReport, FrameModel};
 use nldf_train::job::OnEvent;
 use nldf_train::job::eval::{EvalJob, EvalPlan};
+use nldf_train::reports::eval::{EvalReport, FrameModel};
+use nldf_train::trainers::data::TrainData;
 
 pub use front::{Point, SpeedUp, SplitScore, mark_front, speed_ups};
 pub use report::{AdNerfSetting, FrontierReport, FrontierSettings};

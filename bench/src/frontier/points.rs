@@ -11,9 +11,9 @@ use nldf_core::dataset::Frame;
 use nldf_core::image::ImageRgb;
 use nldf_export::WeightType;
 use nldf_infer::{BackendKind, FrameRenderer};
-use nldf_train::data::TrainData;
-use nldf_train::eval::FrameModel;
-use nldf_train::teacher_trainer::TeacherModel;
+use nldf_train::reports::eval::FrameModel;
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::teacher_trainer::TeacherModel;
 
 use super::shared::precision_name;
 

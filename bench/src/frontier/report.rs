@@ -6,8 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
-use nldf_train::bench::Machine;
-use nldf_train::plot::plot_frontier;
+use nldf_train::reports::bench::Machine;
+use nldf_train::trainers::plot::plot_frontier;
 use serde::Serialize;
 
 use super::front::{Point, SpeedUp, dots_of, head_dots_of};

@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
 use nldf_export::WeightType;
-use nldf_train::data::TrainData;
-use nldf_train::eval::{Evaluation, FrameModel, eval_models};
 use nldf_train::job::{JobEvent, OnEvent};
+use nldf_train::reports::eval::{Evaluation, FrameModel, eval_models};
+use nldf_train::trainers::data::TrainData;
 
 use crate::error::Result;
 use crate::load::LoadGate;

@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use nldf_core::dataset::{Frame, Split};
 use nldf_core::stats::median;
-use nldf_train::config::{TeacherConfig, TeacherRunConfig};
-use nldf_train::data::TrainData;
-use nldf_train::eval::FrameModel;
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::teacher_trainer::TeacherRun;
+use nldf_train::reports::eval::FrameModel;
+use nldf_train::trainers::config::{TeacherConfig, TeacherRunConfig};
+use nldf_train::trainers::data::TrainData;
+use nldf_train::trainers::teacher_trainer::TeacherRun;
 
 use super::front::paired_ratio;
 use super::points::Timed;

@@ -11,8 +11,8 @@ use nldf_export::WeightType;
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_model::FrameGraphFile;
-use nldf_train::data::TrainData;
-use nldf_train::eval::FrameModel;
+use nldf_train::reports::eval::FrameModel;
+use nldf_train::trainers::data::TrainData;
 
 use super::shared::precision_name;
 

@@ -20,11 +20,11 @@ use nldf_export::WeightType;
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_model::FrameGraphFile;
-use nldf_train::bench::Machine;
-use nldf_train::eval::{EvalReport, FrameModel};
 use nldf_train::job::eval::{EvalJob, EvalPlan};
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::upsampler_trainer::UpsampledModel;
+use nldf_train::reports::bench::Machine;
+use nldf_train::reports::eval::{EvalReport, FrameModel};
+use nldf_train::trainers::upsampler_trainer::UpsampledModel;
 use serde::Serialize;
 
 use super::exports::{Export, open_point};
@@ -186,7 +186,7 @@ impl UpsamplerBench {
         let ray_export = |precision: WeightType, path: PathBuf| Export {
             student: format!("{}.rays", self.upsampler),
             describe: format!("{} with upsampler x{factor}", student.describe()),
-            short: nldf_train::eval::student_short_name(&student.cfg),
+            short: nldf_train::reports::eval::student_short_name(&student.cfg),
             step: up.step,
             macs_per_ray: 0.0,
             precision,
@@ -199,7 +199,7 @@ impl UpsamplerBench {
             exports.push(Export {
                 student: student.label(),
                 describe: student.describe(),
-                short: nldf_train::eval::student_short_name(&student.cfg),
+                short: nldf_train::reports::eval::student_short_name(&student.cfg),
                 step: student.step,
                 macs_per_ray: student.macs_per_ray(),
                 precision: w,

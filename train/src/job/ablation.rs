@@ -12,14 +12,14 @@ use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{LOG_FILE, TARGETS_FILE, has_checkpoint, teacher_dir};
 use serde::Serialize;
 
-use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::eval::FrameModel;
 use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::{JobEvent, OnEvent};
-use crate::student::StudentConfig;
-use crate::student_trainer::StudentModel;
-use crate::teacher_trainer::TeacherModel;
+use crate::networks::student::StudentConfig;
+use crate::reports::eval::FrameModel;
+use crate::trainers::data::TrainData;
+use crate::trainers::student_trainer::StudentModel;
+use crate::trainers::teacher_trainer::TeacherModel;
 
 /// What `nldf ablate` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -255,10 +255,10 @@ fn write_reports(
     let mut series = Vec::new();
     let mut seen = std::collections::HashSet::new();
     for r in rows.iter().filter(|r| seen.insert(r.folder.clone())) {
-        let log = crate::log::read_log(&r.folder.join(LOG_FILE))?;
-        series.push(crate::plot::Series {
+        let log = crate::trainers::log::read_log(&r.folder.join(LOG_FILE))?;
+        series.push(crate::trainers::plot::Series {
             label: r.variant.clone(),
-            color: crate::plot::palette(series.len()),
+            color: crate::trainers::plot::palette(series.len()),
             points: log
                 .iter()
                 .filter_map(|l| l.val_psnr.map(|v| (l.elapsed_s / 60.0, v)))
@@ -267,7 +267,7 @@ fn write_reports(
         });
     }
     let png = run.join("ablation.png");
-    crate::plot::plot_lines(&png, "student validation PSNR against wall time", &series)?;
+    crate::trainers::plot::plot_lines(&png, "student validation PSNR against wall time", &series)?;
     let md_path = run.join("ablation.md");
     nldf_core::files::write_atomic(&md_path, md.as_bytes())?;
     let json = run.join("ablation.json");

@@ -8,13 +8,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::Serialize;
 
-use crate::bench::Machine;
-use crate::config::{TeacherRunConfig, TeacherTrainConfig};
 use crate::error::{Error, Result};
 use crate::job::recipe::TeacherKind;
 use crate::job::{JobEvent, OnEvent, load_data};
-use crate::plot::{Series, palette, plot_xy};
-use crate::teacher_trainer::TeacherRun;
+use crate::reports::bench::Machine;
+use crate::trainers::config::{TeacherRunConfig, TeacherTrainConfig};
+use crate::trainers::plot::{Series, palette, plot_xy};
+use crate::trainers::teacher_trainer::TeacherRun;
 use nldf_core::dataset::AudioChoice;
 use nldf_core::files::write_json;
 
@@ -139,7 +139,7 @@ impl CurveJob {
     fn curve(
         &self,
         kind: TeacherKind,
-        data: &crate::data::TrainData,
+        data: &crate::trainers::data::TrainData,
         stop: &AtomicBool,
         on_event: OnEvent,
     ) -> Result<Curve> {

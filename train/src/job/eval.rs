@@ -1,18 +1,18 @@
 //! The evaluation job: the run's teacher and every student and upsampler beside it render
-//! the frames of a split, scored against the ground truth (see [`crate::eval`]).
+//! the frames of a split, scored against the ground truth (see [`crate::reports::eval`]).
 
 use std::path::PathBuf;
 
 use nldf_core::dataset::{AudioChoice, Split};
 use nldf_core::run_files::{RENDER_SPEC_FILE, has_checkpoint, teacher_dir};
 
-use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::eval::{Evaluation, FrameModel, eval_models};
 use crate::job::{JobEvent, OnEvent, audio_note, mouth_note};
-use crate::student_trainer::StudentModel;
-use crate::teacher_trainer::TeacherModel;
-use crate::upsampler_trainer::{CoarseBilinear, UpsampledModel};
+use crate::reports::eval::{Evaluation, FrameModel, eval_models};
+use crate::trainers::data::TrainData;
+use crate::trainers::student_trainer::StudentModel;
+use crate::trainers::teacher_trainer::TeacherModel;
+use crate::trainers::upsampler_trainer::{CoarseBilinear, UpsampledModel};
 
 /// What `nldf eval` was asked to do.
 #[derive(Debug, Clone, PartialEq)]

@@ -18,12 +18,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use nldf_core::dataset::AudioChoice;
 use nldf_core::run_files::has_checkpoint;
 
-use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::run_loop::Event;
-use crate::run_loop::TrainingRun;
-use crate::scores::Scores;
-use crate::timing::{TIMING_FILE, Timing};
+use crate::trainers::data::TrainData;
+use crate::trainers::run_loop::Event;
+use crate::trainers::run_loop::TrainingRun;
+use crate::trainers::scores::Scores;
+use crate::trainers::timing::{TIMING_FILE, Timing};
 
 /// What a job reports as it goes.
 #[derive(Debug, Clone, PartialEq)]
@@ -134,12 +134,13 @@ pub(crate) fn train_stage(
     let dir = run.dir().to_path_buf();
     let mut timing = Timing::open(&dir)?;
     timing.absorb("", before);
-    let result = crate::run_loop::train_loop_timed(run, data, stop, &mut timing, &mut |event| {
-        on_event(&JobEvent::Training {
-            stage: stage.to_string(),
-            event: event.clone(),
-        })
-    });
+    let result =
+        crate::trainers::run_loop::train_loop_timed(run, data, stop, &mut timing, &mut |event| {
+            on_event(&JobEvent::Training {
+                stage: stage.to_string(),
+                event: event.clone(),
+            })
+        });
     // Kept whatever ended the loop: an interrupted or failed stage's time was spent too.
     timing.save(&dir)?;
     on_event(&JobEvent::Note(format!(

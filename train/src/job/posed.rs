@@ -16,14 +16,14 @@ use nldf_core::image::{ImageRgb, grid};
 use nldf_core::run_files::{has_checkpoint, teacher_dir};
 use serde::Serialize;
 
-use crate::data::TrainData;
 use crate::error::{Error, Result};
-use crate::eval::{EvalReport, FrameModel, eval_models};
 use crate::job::student::{PseudoSettings, StudentJob, StudentSource};
 use crate::job::{JobEvent, OnEvent};
-use crate::student::StudentConfig;
-use crate::student_trainer::StudentModel;
-use crate::teacher_trainer::TeacherModel;
+use crate::networks::student::StudentConfig;
+use crate::reports::eval::{EvalReport, FrameModel, eval_models};
+use crate::trainers::data::TrainData;
+use crate::trainers::student_trainer::StudentModel;
+use crate::trainers::teacher_trainer::TeacherModel;
 
 /// What `nldf ablate --posed` was asked to do.
 #[derive(Debug, Clone, PartialEq)]

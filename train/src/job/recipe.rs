@@ -3,10 +3,10 @@
 //! ([`TeacherKind`]) and the student's run ([`student_recipe`]). The demo job itself, which
 //! also exports and evaluates, is nldf-pipeline's.
 
-use crate::config::{StudentRunConfig, TeacherConfig};
 use crate::error::Result;
 use crate::job::student::{PseudoSettings, StudentSource};
-use crate::student::StudentConfig;
+use crate::networks::student::StudentConfig;
+use crate::trainers::config::{StudentRunConfig, TeacherConfig};
 
 /// The demo's teacher steps.
 pub const DEMO_TEACHER_ITERS: usize = 1100;

@@ -8,15 +8,15 @@ use std::sync::atomic::AtomicBool;
 use nldf_core::dataset::AudioChoice;
 use nldf_core::run_files::{STUDENT_FILES, has_checkpoint, teacher_dir};
 
-use crate::config::{StudentRunConfig, check_config, read_config};
-use crate::data::TrainData;
 use crate::error::{Error, Result};
 use crate::job::{JobEvent, OnEvent, check_resume, load_data, train_stage, wrote};
-use crate::scores::Scores;
-use crate::student::StudentConfig;
-use crate::student_trainer::{RECORDED_TARGETS_PART, StudentRun};
-use crate::teacher_trainer::TeacherModel;
-use crate::timing::Timing;
+use crate::networks::student::StudentConfig;
+use crate::trainers::config::{StudentRunConfig, check_config, read_config};
+use crate::trainers::data::TrainData;
+use crate::trainers::scores::Scores;
+use crate::trainers::student_trainer::{RECORDED_TARGETS_PART, StudentRun};
+use crate::trainers::teacher_trainer::TeacherModel;
+use crate::trainers::timing::Timing;
 
 /// Where a new student's configuration comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,7 +67,7 @@ impl StudentSource {
 
 /// Pseudo-view settings that replace [`StudentTrainConfig`]'s defaults where given.
 ///
-/// [`StudentTrainConfig`]: crate::config::StudentTrainConfig
+/// [`StudentTrainConfig`]: crate::trainers::config::StudentTrainConfig
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PseudoSettings {
     /// Pseudo views the teacher renders.
@@ -80,7 +80,7 @@ pub struct PseudoSettings {
 
 impl PseudoSettings {
     /// Writes the given settings into `train`.
-    pub fn apply(&self, train: &mut crate::config::StudentTrainConfig) {
+    pub fn apply(&self, train: &mut crate::trainers::config::StudentTrainConfig) {
         if let Some(n) = self.frames {
             train.pseudo_frames = n;
         }

@@ -7,12 +7,12 @@ use std::sync::atomic::AtomicBool;
 use nldf_core::dataset::AudioChoice;
 use nldf_core::run_files::{TEACHER_FILES, teacher_dir};
 
-use crate::config::{TeacherConfig, TeacherRunConfig, check_config, read_config};
-use crate::data::TrainData;
 use crate::error::Result;
 use crate::job::{JobEvent, OnEvent, check_resume, load_data, train_stage, wrote};
-use crate::scores::Scores;
-use crate::teacher_trainer::TeacherRun;
+use crate::trainers::config::{TeacherConfig, TeacherRunConfig, check_config, read_config};
+use crate::trainers::data::TrainData;
+use crate::trainers::scores::Scores;
+use crate::trainers::teacher_trainer::TeacherRun;
 
 /// Where a new teacher's configuration comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -105,7 +105,7 @@ impl TeacherPlan {
     pub fn run(mut self, stop: &AtomicBool, on_event: OnEvent) -> Result<Option<Scores>> {
         let scores = train_stage(
             "teacher",
-            &crate::timing::Timing::default(),
+            &crate::trainers::timing::Timing::default(),
             &mut self.run,
             &self.data,
             stop,

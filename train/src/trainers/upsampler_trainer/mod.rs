@@ -1,0 +1,323 @@
+//! Training the learned upsampler ([`crate::networks::upsampler`]) over a trained student, which stays
+//! fixed: the CNN learns from the full-size frames of the recorded views and from the
+//! teacher's full-size renders of pseudo views (poses beyond the recording, drawn as the
+//! student's own pseudo views are), on crops of the head's coarse box.
+//!
+//! A training crop is `crop + 2 halo` coarse rays on a side; the loss (mean squared error
+//! of the composited pixels) counts only its central `crop x crop` rays' `r x r` blocks, so
+//! that the zero padding at the crop's edge, which a rendered box only has on background,
+//! teaches nothing.
+
+mod config;
+mod crops;
+
+use std::path::{Path, PathBuf};
+
+use candle_core::{Tensor, Var};
+use candle_nn::VarMap;
+use nldf_core::camera::Camera;
+use nldf_core::dataset::Frame;
+use nldf_core::image::ImageRgb;
+use nldf_core::run_files::{CONFIG_FILE, LOG_FILE, MODEL_FILE};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+pub use self::config::{UpsamplerRunConfig, UpsamplerTrainConfig};
+use self::crops::{Crop, CropCutter, draw_crops};
+use crate::error::{Error, Result};
+use crate::networks::nn::{new_varmap, sorted_vars};
+use crate::networks::upsampler::{Upsampler, render_upsampled, upsampler};
+use crate::trainers::adam::{Adam, AdamParams};
+use crate::trainers::checkpoint::{
+    CheckpointParts, Clock, open_checkpoint, save_checkpoint, save_json,
+};
+use crate::trainers::config::read_config;
+use crate::trainers::data::TrainData;
+use crate::trainers::frame_model::{FrameModel, student_name};
+use crate::trainers::log::CsvLog;
+use crate::trainers::student_trainer::StudentModel;
+use crate::trainers::teacher_trainer::TeacherModel;
+
+/// A trained upsampler with its student.
+pub struct UpsampledModel {
+    pub dir: PathBuf,
+    pub cfg: UpsamplerRunConfig,
+    pub student: StudentModel,
+    pub varmap: VarMap,
+    pub up: Upsampler,
+    pub step: usize,
+    pub trained_s: f64,
+}
+
+impl UpsampledModel {
+    /// The upsampler of `cfg` at step 0 over the student in `run`.
+    fn build(dir: &Path, run: &Path, cfg: UpsamplerRunConfig) -> Result<UpsampledModel> {
+        cfg.check()?;
+        let student = StudentModel::open(&run.join(&cfg.student))?;
+        let (varmap, vb) = new_varmap();
+        let up = upsampler(&cfg.model, student.cfg.model.width, vb)?;
+        Ok(UpsampledModel {
+            dir: dir.to_path_buf(),
+            cfg,
+            student,
+            varmap,
+            up,
+            step: 0,
+            trained_s: 0.0,
+        })
+    }
+
+    /// Whether `dir` holds a trained upsampler (its configuration and weights).
+    pub fn is_upsampler(dir: &Path) -> bool {
+        dir.join(MODEL_FILE).is_file()
+            && read_config::<UpsamplerRunConfig>(&dir.join(CONFIG_FILE)).is_ok()
+    }
+
+    /// Loads the trained upsampler in `dir` (a folder of the run `run`) and its student.
+    pub fn open(dir: &Path, run: &Path) -> Result<UpsampledModel> {
+        let cfg: UpsamplerRunConfig = read_config(&dir.join(CONFIG_FILE))?;
+        let mut model = Self::build(dir, run, cfg)?;
+        let (step, clock) = open_checkpoint(dir, &model.varmap, None)?;
+        (model.step, model.trained_s) = (step, clock.elapsed());
+        Ok(model)
+    }
+
+    /// Renders one camera with one audio code (see [`render_upsampled`]); also returns the
+    /// coarse rays the student evaluated.
+    pub fn render_view(
+        &self,
+        camera: &Camera,
+        code: &Tensor,
+        data: &TrainData,
+    ) -> Result<(ImageRgb, usize)> {
+        render_upsampled(
+            &self.student.student,
+            &self.up,
+            camera,
+            &data.dataset.background,
+            code,
+            &data.head_range(),
+        )
+    }
+}
+
+impl FrameModel for UpsampledModel {
+    fn label(&self) -> String {
+        self.dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "upsampler".into())
+    }
+    fn describe(&self) -> String {
+        format!(
+            "{} + upsampler x{}",
+            student_name(&self.student.cfg),
+            self.cfg.model.factor
+        )
+    }
+    fn step(&self) -> usize {
+        self.step
+    }
+    fn macs_per_ray(&self) -> f64 {
+        // Per output ray that meets the head: the student's share of one coarse ray and the
+        // CNN's per-pixel cost (an estimate: the box also holds pixels that miss).
+        let r2 = (self.cfg.model.factor * self.cfg.model.factor) as f64;
+        self.student.cfg.model.macs_per_ray() as f64 / r2
+            + self.cfg.model.macs_per_pixel(self.student.cfg.model.width)
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        let code = self.student.audio_codes(data, &[frame.aud_id])?;
+        Ok(self
+            .render_view(&data.dataset.camera(frame), &code, data)?
+            .0)
+    }
+}
+
+/// The student alone on the coarse grid, upscaled bilinearly to the output's size: the
+/// baseline the upsampler must beat at the same student cost.
+pub struct CoarseBilinear {
+    pub student: StudentModel,
+    pub factor: usize,
+}
+
+impl FrameModel for CoarseBilinear {
+    fn label(&self) -> String {
+        format!("{}_bilinear_x{}", self.student.label(), self.factor)
+    }
+    fn describe(&self) -> String {
+        format!(
+            "{} at 1/{} side, bilinear",
+            student_name(&self.student.cfg),
+            self.factor
+        )
+    }
+    fn step(&self) -> usize {
+        self.student.step
+    }
+    fn macs_per_ray(&self) -> f64 {
+        self.student.cfg.model.macs_per_ray() as f64 / (self.factor * self.factor) as f64
+    }
+    fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
+        let ds = &data.dataset;
+        let camera = ds.camera(frame);
+        let k = nldf_core::upsampler_config::coarse_intrinsics(&camera.intrinsics, self.factor)?;
+        let coarse = Camera {
+            intrinsics: k,
+            c2w: camera.c2w,
+        };
+        let bg = ds.background.downscaled(self.factor as u32);
+        let code = self.student.audio_codes(data, &[frame.aud_id])?;
+        let small = self.student.render_view(&coarse, &bg, &code, data)?;
+        Ok(small.upscaled(self.factor as u32))
+    }
+}
+
+/// The upsampler's `report.json`: what its training run did ([`UpsamplerReport`]).
+pub const REPORT_FILE: &str = "report.json";
+
+/// What one training run produced.
+#[derive(Debug, Clone, Serialize)]
+pub struct UpsamplerReport {
+    pub steps: usize,
+    /// Seconds spent on the coarse features and the teacher's crops before the first step.
+    pub prepare_s: f64,
+    /// Seconds of optimizer steps.
+    pub train_s: f64,
+    pub final_loss: f64,
+    pub recorded_views: usize,
+    pub pseudo_crops: usize,
+}
+
+/// Trains a new upsampler into `dir` over the student `cfg.student` of `run` and the
+/// teacher `RUN/teacher`, on `data` (the data the student was trained on). `on_step` sees
+/// each step and its loss. When `stop` is set (Ctrl-C) it checkpoints the steps done and
+/// returns. It writes `config.json` first, then the checkpoint and [`REPORT_FILE`].
+pub fn train_upsampler(
+    dir: &Path,
+    run: &Path,
+    cfg: UpsamplerRunConfig,
+    data: &TrainData,
+    stop: &std::sync::atomic::AtomicBool,
+    on_step: &mut dyn FnMut(usize, f64),
+) -> Result<UpsamplerReport> {
+    let mut model = UpsampledModel::build(dir, run, cfg)?;
+    crate::networks::upsampler::init_upsampler_seeded(&model.varmap, model.cfg.train.seed)?;
+    let teacher = TeacherModel::open(&nldf_core::run_files::teacher_dir(run))?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    save_json(&dir.join(CONFIG_FILE), &model.cfg)?;
+    let started = std::time::Instant::now();
+    let t = model.cfg.train.clone();
+    let r = model.cfg.model.factor;
+    let side = t.crop + 2 * t.halo;
+    let cutter = CropCutter {
+        data,
+        student: &model.student,
+        t: &t,
+        r,
+        side,
+        margin: model.cfg.model.margin,
+        range: data.head_range(),
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(t.seed);
+    let (recorded, pseudo) = cutter.prepare(&teacher, &mut rng)?;
+    if recorded.is_empty() {
+        return Err(Error::Config(format!(
+            "no training frame's head box is {side} coarse rays on a side at factor {r}: \
+             the frames are too small for this upsampler (lower `train.crop` or `halo`)"
+        )));
+    }
+    let prepare_s = started.elapsed().as_secs_f64();
+    let mut adam = upsampler_adam(&model.varmap)?;
+    let mut log = CsvLog::open(&dir.join(LOG_FILE), 0)?;
+    let clock = Clock::resumed(0.0);
+    let mut last_loss = f64::NAN;
+    let train_started = std::time::Instant::now();
+    let mut done = 0;
+    for step in 1..=t.iters {
+        if stop.load(std::sync::atomic::Ordering::Relaxed) {
+            break;
+        }
+        let crops = draw_crops(&recorded, &pseudo, data, &mut rng, &t, r)?;
+        let (loss, lr) = train_step(&model.up, &mut adam, &crops, &t, r, step)?;
+        last_loss = loss;
+        if step % t.log_every == 0 || step == t.iters {
+            let psnr = nldf_core::metrics::psnr_from_mse(last_loss);
+            let n = t.crop * r;
+            let px_per_s =
+                (step * t.batch * n * n) as f64 / train_started.elapsed().as_secs_f64().max(1e-9);
+            log.row(step, clock.elapsed(), last_loss, psnr, lr, px_per_s, None)?;
+        }
+        on_step(step, last_loss);
+        done = step;
+    }
+    let train_s = train_started.elapsed().as_secs_f64();
+    model.step = done;
+    save_checkpoint(&CheckpointParts {
+        dir,
+        kind: "upsampler",
+        step: done,
+        elapsed: clock.elapsed(),
+        varmap: &model.varmap,
+        adam: &adam,
+        title: "upsampler",
+    })?;
+    let report = UpsamplerReport {
+        steps: done,
+        prepare_s,
+        train_s,
+        final_loss: last_loss,
+        recorded_views: recorded.len(),
+        pseudo_crops: pseudo.len(),
+    };
+    save_json(&dir.join(REPORT_FILE), &report)?;
+    Ok(report)
+}
+
+/// Adam over every upsampler weight at the same learning rate.
+fn upsampler_adam(varmap: &VarMap) -> Result<Adam> {
+    let vars: Vec<(String, Var, f64)> = sorted_vars(varmap)?
+        .into_iter()
+        .map(|(n, v)| (n, v, 1.0))
+        .collect();
+    Ok(Adam::new(
+        vars,
+        AdamParams {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+    ))
+}
+
+/// One optimizer step of the upsampler on `crops` (step `step` of the schedule): the
+/// composited pixels' mean squared error against the targets over the crops' centres.
+/// Returns the loss and the learning rate it stepped with.
+fn train_step(
+    up: &Upsampler,
+    adam: &mut Adam,
+    crops: &[Crop],
+    t: &UpsamplerTrainConfig,
+    r: usize,
+    step: usize,
+) -> Result<(f64, f64)> {
+    let grid = Tensor::stack(&crops.iter().map(|c| &c.grid).collect::<Vec<_>>(), 0)?;
+    let target = Tensor::stack(&crops.iter().map(|c| &c.target).collect::<Vec<_>>(), 0)?;
+    let bg = Tensor::stack(&crops.iter().map(|c| &c.background).collect::<Vec<_>>(), 0)?;
+    let out = up.forward(&grid)?;
+    let (lo, n) = (t.halo * r, t.crop * r);
+    let out = out.narrow(2, lo, n)?.narrow(3, lo, n)?;
+    let pixels = Upsampler::composite(&out, &bg)?;
+    let loss = (pixels - target)?.sqr()?.mean_all()?;
+    let grads = loss.backward()?;
+    let frac = (step - 1) as f64 / t.iters.max(2).saturating_sub(1) as f64;
+    let lr = t.lr * (t.lr_final / t.lr).powf(frac);
+    adam.step(&grads, lr)?;
+    let loss = loss.to_scalar::<f32>()? as f64;
+    if !loss.is_finite() {
+        return Err(Error::NonFinite(format!(
+            "the upsampler's loss became {loss} at step {step}"
+        )));
+    }
+    Ok((loss, lr))
+}
