@@ -4,7 +4,8 @@
 
 use std::path::Path;
 
-use nldf_train::reports::bench::{EncodingBench, Machine, bench_encoding};
+use nldf_core::host::Machine;
+use nldf_train::reports::bench::{EncodingBench, bench_encoding};
 use serde::Serialize;
 
 use crate::error::Result;

@@ -4,7 +4,7 @@
 //! run when the load at the start is above a limit, unless forced; a forced run says so in
 //! its output.
 
-use nldf_train::reports::bench::Machine;
+use nldf_core::host::Machine;
 
 use crate::error::{Error, Result};
 

@@ -7,11 +7,11 @@
 
 use std::path::{Path, PathBuf};
 
+use nldf_core::host::Machine;
 use nldf_infer::BackendOptions;
 use nldf_infer::bench::{RenderBench, RenderBenchConfig, bench_render};
 use nldf_model::ExportedModel;
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::reports::bench::Machine;
 use nldf_train::trainers::plot::{Series, palette, plot_xy};
 use serde::Serialize;
 

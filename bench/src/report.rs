@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nldf_train::reports::bench::Machine;
+use nldf_core::host::Machine;
 use serde::Serialize;
 
 use crate::error::{Result, create_dir};

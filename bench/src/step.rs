@@ -6,9 +6,10 @@
 
 use std::path::{Path, PathBuf};
 
+use nldf_core::host::Machine;
 use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::networks::student::StudentConfig;
-use nldf_train::reports::bench::{Machine, StepBench, bench_student_step, bench_teacher_step};
+use nldf_train::reports::bench::{StepBench, bench_student_step, bench_teacher_step};
 use nldf_train::trainers::config::{StudentRunConfig, TeacherConfig, TeacherRunConfig};
 use nldf_train::trainers::data::TrainData;
 use nldf_train::trainers::student_trainer::StudentRun;

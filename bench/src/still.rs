@@ -9,13 +9,13 @@ use std::path::{Path, PathBuf};
 
 use glam::Mat4;
 use nldf_core::audio::neighbourhood;
+use nldf_core::host::Machine;
 use nldf_infer::frame::FrameRenderer;
 use nldf_infer::poses::{default_pose, default_track};
 use nldf_infer::still::{SkipConfig, StillTrack, bench_track, probe_frames};
 use nldf_infer::{BackendKind, BackendOptions, backend_for};
 use nldf_model::contract::ModelInfo;
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::reports::bench::Machine;
 use serde::Serialize;
 
 use crate::error::Result;

@@ -4,10 +4,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use nldf_core::host::Machine;
 use nldf_infer::stream::{LatencyStats, StreamJob, StreamReport, paced_wav_stream};
 use nldf_infer::{BackendKind, BackendOptions};
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::reports::bench::Machine;
 use serde::Serialize;
 
 use crate::error::{Result, temp_dir};

@@ -15,13 +15,13 @@ use std::time::Instant;
 use glam::Mat4;
 use nldf_core::audio::{Waveform, neighbourhood, write_wav};
 use nldf_core::camera::turn_about;
+use nldf_core::host::Machine;
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_infer::poses::default_pose;
 use nldf_infer::still::{SkipConfig, StillTrack, bench_track, probe_frames};
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
 use nldf_model::{FrameGraphFile, read_frame_model, read_model};
-use nldf_train::reports::bench::Machine;
 use serde::Serialize;
 
 use crate::error::{Error, Result};

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
-use nldf_train::reports::bench::Machine;
+use nldf_core::host::Machine;
 use nldf_train::trainers::plot::plot_frontier;
 use serde::Serialize;
 

@@ -15,6 +15,7 @@ use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
+use nldf_core::host::Machine;
 use nldf_core::stats::median;
 use nldf_export::WeightType;
 use nldf_infer::BackendKind;
@@ -22,7 +23,6 @@ use nldf_infer::frame_graph::FrameGraph;
 use nldf_model::FrameGraphFile;
 use nldf_train::job::eval::{EvalJob, EvalPlan};
 use nldf_train::job::{JobEvent, OnEvent};
-use nldf_train::reports::bench::Machine;
 use nldf_train::reports::eval::{EvalReport, FrameModel};
 use nldf_train::trainers::upsampler_trainer::UpsampledModel;
 use serde::Serialize;

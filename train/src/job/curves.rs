@@ -11,12 +11,12 @@ use serde::Serialize;
 use crate::error::{Error, Result};
 use crate::job::recipe::TeacherKind;
 use crate::job::{JobEvent, OnEvent, load_data};
-use crate::reports::bench::Machine;
 use crate::trainers::config::{TeacherRunConfig, TeacherTrainConfig};
 use crate::trainers::plot::{Series, palette, plot_xy};
 use crate::trainers::teacher_trainer::TeacherRun;
 use nldf_core::dataset::AudioChoice;
 use nldf_core::files::write_json;
+use nldf_core::host::Machine;
 
 /// What `nldf bench teachers` was asked to do.
 #[derive(Debug, Clone, PartialEq)]
