@@ -583,3 +583,52 @@ fn importance_sampled_segment_targets_follow_t_intervals() {
         "importance samples changed the first segment of only {moved} of {n_hit} rays"
     );
 }
+
+/// The teacher's field is described once (`TeacherConfig::field_layers`): the candle
+/// builder's weights are exactly the description's layers, name for name and shape for
+/// shape, for AD-NeRF's shape, the small preset and the grid teacher; and the step
+/// benchmark's per-sample layers are the description's, less the per-ray terms.
+#[test]
+fn the_teachers_field_follows_its_described_layers() {
+    use std::collections::BTreeMap;
+
+    use nldf_train::networks::field::teacher_field;
+    use nldf_train::networks::nn::sorted_vars;
+    use nldf_train::reports::bench::teacher_sample_layers;
+
+    for (name, cfg) in [
+        ("AD-NeRF", TeacherConfig::ad_nerf()),
+        ("small", TeacherConfig::small()),
+        ("grid", TeacherConfig::grid()),
+    ] {
+        let (varmap, vb) = new_varmap();
+        teacher_field(&cfg, vb).unwrap();
+        let built: BTreeMap<String, Vec<usize>> = sorted_vars(&varmap)
+            .unwrap()
+            .into_iter()
+            .map(|(k, v)| (k, v.dims().to_vec()))
+            .collect();
+        let layers = cfg.field_layers();
+        let mut described = BTreeMap::new();
+        for l in &layers {
+            described.insert(format!("{}.weight", l.name), vec![l.fan_out, l.fan_in]);
+            if l.bias {
+                described.insert(format!("{}.bias", l.name), vec![l.fan_out]);
+            }
+        }
+        assert_eq!(
+            built, described,
+            "{name}: candle's field is not the description"
+        );
+        let per_sample: Vec<(usize, usize)> = layers
+            .iter()
+            .filter(|l| !l.per_ray)
+            .map(|l| (l.fan_in, l.fan_out))
+            .collect();
+        assert_eq!(teacher_sample_layers(&cfg), per_sample, "{name}");
+        // AD-NeRF's skip at layer 4 feeds the input in again at layer 5.
+        if name == "AD-NeRF" {
+            assert!(layers.iter().any(|l| l.name == "trunk.5.points"));
+        }
+    }
+}

@@ -38,39 +38,40 @@ pub struct TeacherField {
     learned_points: bool,
 }
 
-/// Builds a [`TeacherField`] under `vb`: `trunk.{i}.{hidden,points,audio}`, `density`,
-/// `feature`, `color_feature`, `color_dir`, `rgb`.
+/// Builds a [`TeacherField`] under `vb`, layer by layer as
+/// [`TeacherConfig::field_layers`] lists them: `trunk.{i}.{hidden,points,audio}`,
+/// `density`, `feature`, `color_feature`, `color_dir`, `rgb`.
 pub fn teacher_field(cfg: &TeacherConfig, vb: VarBuilder) -> Result<TeacherField> {
-    let (w, p, a) = (cfg.width, cfg.pos_dim(), cfg.audio.dim);
+    let mut built = std::collections::HashMap::new();
+    for l in cfg.field_layers() {
+        let layer = dense(l.fan_in, l.fan_out, l.bias, vb.pp(&l.name))?;
+        built.insert(l.name, layer);
+    }
+    let mut take = |name: &str| {
+        built
+            .remove(name)
+            .ok_or_else(|| candle_core::Error::Msg(format!("the field has no layer `{name}`")))
+    };
     let mut trunk = Vec::with_capacity(cfg.depth);
     for i in 0..cfg.depth {
-        let vb = vb.pp("trunk").pp(i);
         let fed = i == 0 || cfg.skips.contains(&(i - 1));
         trunk.push(TrunkLayer {
-            hidden: if i > 0 {
-                Some(dense(w, w, true, vb.pp("hidden"))?)
-            } else {
-                None
-            },
-            points: if fed {
-                Some(dense(p, w, i == 0, vb.pp("points"))?)
-            } else {
-                None
-            },
-            audio: if fed {
-                Some(dense(a, w, false, vb.pp("audio"))?)
-            } else {
-                None
-            },
+            hidden: (i > 0)
+                .then(|| take(&format!("trunk.{i}.hidden")))
+                .transpose()?,
+            points: fed
+                .then(|| take(&format!("trunk.{i}.points")))
+                .transpose()?,
+            audio: fed.then(|| take(&format!("trunk.{i}.audio"))).transpose()?,
         });
     }
     Ok(TeacherField {
         trunk,
-        density: dense(w, 1, true, vb.pp("density"))?,
-        feature: dense(w, w, true, vb.pp("feature"))?,
-        color_feature: dense(w, cfg.color_width, true, vb.pp("color_feature"))?,
-        color_dir: dense(cfg.dir_dim(), cfg.color_width, false, vb.pp("color_dir"))?,
-        rgb: dense(cfg.color_width, 3, true, vb.pp("rgb"))?,
+        density: take("density")?,
+        feature: take("feature")?,
+        color_feature: take("color_feature")?,
+        color_dir: take("color_dir")?,
+        rgb: take("rgb")?,
         learned_points: cfg.grid.is_some(),
     })
 }

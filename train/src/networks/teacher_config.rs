@@ -162,4 +162,52 @@ impl TeacherConfig {
     pub fn dir_dim(&self) -> usize {
         3 * (1 + 2 * self.dir_freqs)
     }
+
+    /// The field's dense layers, each by name and shape, in the order the builder creates
+    /// them: per trunk layer `i`, `trunk.{i}.hidden` (after the first), then where the input
+    /// is fed in (the first layer and after each skip) `trunk.{i}.points` (biased on the
+    /// first layer only) and `trunk.{i}.audio` (per ray); then `density`, `feature`,
+    /// `color_feature`, `color_dir` (per ray) and `rgb`. The one description that the candle
+    /// builder (`networks::field::teacher_field`) and the step benchmarks' FLOP count follow.
+    pub fn field_layers(&self) -> Vec<FieldLayer> {
+        let (w, p, a, c) = (self.width, self.pos_dim(), self.audio.dim, self.color_width);
+        let layer = |name: String, fan_in, fan_out, bias, per_ray| FieldLayer {
+            name,
+            fan_in,
+            fan_out,
+            bias,
+            per_ray,
+        };
+        let mut layers = Vec::new();
+        for i in 0..self.depth {
+            if i > 0 {
+                layers.push(layer(format!("trunk.{i}.hidden"), w, w, true, false));
+            }
+            if i == 0 || self.skips.contains(&(i - 1)) {
+                layers.push(layer(format!("trunk.{i}.points"), p, w, i == 0, false));
+                layers.push(layer(format!("trunk.{i}.audio"), a, w, false, true));
+            }
+        }
+        layers.extend([
+            layer("density".into(), w, 1, true, false),
+            layer("feature".into(), w, w, true, false),
+            layer("color_feature".into(), w, c, true, false),
+            layer("color_dir".into(), self.dir_dim(), c, false, true),
+            layer("rgb".into(), c, 3, true, false),
+        ]);
+        layers
+    }
+}
+
+/// One dense layer of the teacher's field ([`TeacherConfig::field_layers`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FieldLayer {
+    /// Its name among the field's weights (`trunk.0.points`, `density`).
+    pub name: String,
+    pub fan_in: usize,
+    pub fan_out: usize,
+    pub bias: bool,
+    /// Computed once per ray and broadcast over its samples (the audio code's and the view
+    /// direction's terms), not per sample.
+    pub per_ray: bool,
 }

@@ -20,20 +20,14 @@ fn layer_products(n: usize, i: usize, o: usize) -> [(usize, usize, usize); 3] {
     [(n, i, o), (n, o, i), (o, n, i)]
 }
 
-/// Per-sample dense layers `(in, out)` of the teacher field (per-ray terms excluded).
+/// Per-sample dense layers `(in, out)` of the teacher field, as its description lists them
+/// ([`TeacherConfig::field_layers`], per-ray terms excluded).
 pub fn teacher_sample_layers(cfg: &TeacherConfig) -> Vec<(usize, usize)> {
-    let (w, p) = (cfg.width, cfg.pos_dim());
-    let mut layers = Vec::new();
-    for i in 0..cfg.depth {
-        if i > 0 {
-            layers.push((w, w));
-        }
-        if i == 0 || cfg.skips.contains(&(i - 1)) {
-            layers.push((p, w));
-        }
-    }
-    layers.extend([(w, 1), (w, w), (w, cfg.color_width), (cfg.color_width, 3)]);
-    layers
+    cfg.field_layers()
+        .iter()
+        .filter(|l| !l.per_ray)
+        .map(|l| (l.fan_in, l.fan_out))
+        .collect()
 }
 
 /// Results of a training-step benchmark.
@@ -386,13 +380,14 @@ pub fn bench_student_step(
     .report()
 }
 
-/// Dense layers `(in, out)` of the student.
+/// Dense layers `(in, out)` of the student, as its description lists them
+/// (`nldf_core::student_network::MlpLayout`).
 pub fn student_layers(cfg: &crate::networks::student::StudentConfig) -> Vec<(usize, usize)> {
-    let w = cfg.width;
-    let mut layers = vec![(cfg.input_dim(), w)];
-    layers.extend(std::iter::repeat_n((w, w), 2 * cfg.n_blocks()));
-    layers.push((w, cfg.output_dim()));
-    layers
+    nldf_core::student_network::MlpLayout::of(cfg)
+        .layers()
+        .iter()
+        .map(|l| (l.fan_in, l.fan_out))
+        .collect()
 }
 
 /// One way to compute the positional encoding's sines and cosines, timed and checked.
