@@ -8,13 +8,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
-use nldf_core::dataset::{AUDIO_NPY, AUDIO_WAV, Split, VOICE_DIR};
+use anyhow::Result;
 use nldf_core::run_files::{CURVE_FILE, STUDENT_DIR, TEACHER_DIR};
 use nldf_core::synth::SynthConfig;
-use nldf_infer::backend::{BackendKind, BackendOptions};
-use nldf_infer::video::{VideoJob, VideoReport};
+use nldf_infer::video::VideoReport;
 use nldf_pipeline::demo::{DemoJob, DemoReport};
+use nldf_pipeline::demo_video::plan_video;
 use nldf_train::job::JobEvent;
 use nldf_train::job::recipe::{
     DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
@@ -192,47 +191,14 @@ pub fn run_job(job: DemoJob, command: &str) -> Result<()> {
 }
 
 /// Renders the exported student at the held-out frames' poses into OUT/video (replacing an
-/// earlier one's), with tract: an MP4 when ffmpeg is found, PNG frames always. It speaks
-/// with the `voice` split's speaker, a voice it never heard, where the dataset has one (the
-/// synthetic scene), else with the dataset's own recording from its start.
+/// earlier one's) with nldf-pipeline's [`plan_video`], with a progress bar.
 fn render_new_voice(data: &Path, out: &Path, model: &Path) -> Result<VideoReport> {
-    let video = out.join("video");
-    if video.exists() {
-        std::fs::remove_dir_all(&video)
-            .with_context(|| format!("removing the earlier demo video {}", video.display()))?;
-    }
-    let voice = data.join(VOICE_DIR).join(AUDIO_WAV);
-    let recording = data.join(AUDIO_WAV);
-    // A dataset without its WAV (AD-NeRF ships only aud.npy) speaks its features, silent.
-    let (audio, features, what) = if voice.is_file() {
-        (Some(voice), None, "a voice the student never heard")
-    } else if recording.is_file() {
-        (Some(recording), None, "the recording's audio")
-    } else {
-        (
-            None,
-            Some(data.join(AUDIO_NPY)),
-            "the recording's audio features",
-        )
-    };
+    let (plan, voice) = plan_video(data, out, model)?;
     println!(
-        "== rendering {what} at the held-out poses -> {}",
-        video.display()
+        "== rendering {} at the held-out poses -> {}",
+        voice.describe(),
+        out.join("video").display()
     );
-    let job = VideoJob {
-        model: model.to_path_buf(),
-        audio,
-        features,
-        poses: Some(data.join(Split::Val.file_name())),
-        out: video,
-        backend: BackendKind::Tract,
-        options: BackendOptions::default(),
-        size: None,
-        mp4: true,
-        ffmpeg: None,
-        skip: None,
-    };
-    let plan = job.plan()?;
     let bar = progress_bar(plan.n_frames() as u64, "frames");
     let report = plan.render(|p| bar.set_position(p.done as u64))?;
     bar.finish_and_clear();
