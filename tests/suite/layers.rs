@@ -1,5 +1,7 @@
-//! Layering: the crates depend downward, and the module graph of every crate (core, kernels,
-//! prepare, model, export, train, infer, pipeline, bench and the command line) has no cycle.
+//! Layering: the crates depend downward, as `docs/crates.md` draws them (its list of each
+//! crate's dependencies is Cargo.lock's, each naming only crates listed after it), and the
+//! module graph of every crate (core, kernels, prepare, model, export, train, infer,
+//! pipeline, bench and the command line) has no cycle.
 //!
 //! Crates: what each crate reaches through its dependencies, direct or not, is read from
 //! `Cargo.lock`: of nldf's crates only those below it, and none of the ML frameworks it must
@@ -574,5 +576,105 @@ fn the_training_crates_folders_are_layered() {
     assert_eq!(
         upward_edges(&module_graph(&planted), &TRAIN_FOLDERS),
         ["networks::field -> trainers::config"]
+    );
+}
+
+/// The crate graph as `docs/crates.md` lists it (the fenced block after its
+/// `<!-- crate graph` marker): each line `crate -> deps`, in its order.
+fn drawn_graph(doc: &str) -> Vec<(String, Vec<String>)> {
+    let after = doc
+        .split_once("<!-- crate graph")
+        .expect("docs/crates.md: no crate graph marker")
+        .1;
+    let block = after
+        .split_once("```text\n")
+        .and_then(|(_, rest)| rest.split_once("```"))
+        .expect("docs/crates.md: no fenced crate graph after the marker")
+        .0;
+    block
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| {
+            let (krate, deps) = l.split_once("->").unwrap_or((l, ""));
+            let deps = deps.split_whitespace().map(str::to_string).collect();
+            (krate.trim().to_string(), deps)
+        })
+        .collect()
+}
+
+/// What is wrong with the drawn graph `drawn` against the locked one `locked` (each nldf
+/// crate's direct nldf dependencies): a crate missing or extra, dependencies that differ,
+/// and any dependency not drawn on a later line (an edge pointing up).
+fn drawn_graph_problems(
+    drawn: &[(String, Vec<String>)],
+    locked: &BTreeMap<String, BTreeSet<String>>,
+) -> Vec<String> {
+    let mut problems = Vec::new();
+    let names: BTreeSet<&String> = drawn.iter().map(|(k, _)| k).collect();
+    let nldf: BTreeSet<&String> = locked.keys().filter(|k| k.starts_with("nldf")).collect();
+    for missing in nldf.difference(&names) {
+        problems.push(format!("{missing}: not drawn"));
+    }
+    for (i, (krate, deps)) in drawn.iter().enumerate() {
+        let drawn_deps: BTreeSet<String> = deps.iter().cloned().collect();
+        let lock_deps: BTreeSet<String> = locked
+            .get(krate)
+            .map(|d| {
+                d.iter()
+                    .filter(|d| d.starts_with("nldf"))
+                    .cloned()
+                    .collect()
+            })
+            .unwrap_or_default();
+        if !locked.contains_key(krate) {
+            problems.push(format!("{krate}: not in Cargo.lock"));
+        } else if drawn_deps != lock_deps {
+            problems.push(format!(
+                "{krate}: drawn with {drawn_deps:?}, Cargo.lock has {lock_deps:?}"
+            ));
+        }
+        for dep in deps {
+            if !drawn[i + 1..].iter().any(|(k, _)| k == dep) {
+                problems.push(format!(
+                    "{krate} -> {dep}: points up (or {dep} is not drawn below)"
+                ));
+            }
+        }
+    }
+    problems
+}
+
+#[test]
+fn the_drawn_crate_graph_is_the_locked_one_and_points_down() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let doc = std::fs::read_to_string(root.join("docs/crates.md")).unwrap();
+    let lock = std::fs::read_to_string(root.join("Cargo.lock")).unwrap();
+    let locked = lock_dependencies(&lock);
+    let drawn = drawn_graph(&doc);
+    let problems = drawn_graph_problems(&drawn, &locked);
+    assert!(
+        problems.is_empty(),
+        "docs/crates.md's crate graph:\n{}",
+        problems.join("\n")
+    );
+    // Planted: nldf-model drawn above nldf-export, and an edge Cargo.lock lacks.
+    let mut planted = drawn.clone();
+    let model = planted.iter().position(|(k, _)| k == "nldf-model").unwrap();
+    let export = planted
+        .iter()
+        .position(|(k, _)| k == "nldf-export")
+        .unwrap();
+    planted.swap(model, export);
+    planted[0].1.push("nldf-kernels".into());
+    let problems = drawn_graph_problems(&planted, &locked);
+    assert!(
+        problems
+            .iter()
+            .any(|p| p.starts_with("nldf-export -> nldf-model: points up")),
+        "{problems:?}"
+    );
+    assert!(
+        problems.iter().any(|p| p.starts_with("nldf: drawn with")),
+        "{problems:?}"
     );
 }
