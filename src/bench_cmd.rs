@@ -203,6 +203,10 @@ pub struct WebBenchArgs {
     /// Time the native runtimes only.
     #[arg(long)]
     pub no_browser: bool,
+    /// The speech every frame's audio comes from (a WAV, e.g. a dataset's aud.wav)
+    /// [default: the synthetic scene's hidden voice, seed 0's `voice` split speaker].
+    #[arg(long)]
+    pub audio: Option<PathBuf>,
     /// Folder for web.json and web.md.
     #[arg(long, default_value = "runs/bench")]
     pub out: PathBuf,
@@ -424,6 +428,7 @@ fn web(args: WebBenchArgs) -> Result<()> {
         web: (!args.no_browser).then_some(args.web),
         pairs: args.timing.pairs,
         load: args.timing.load.gate(),
+        audio: args.audio,
     };
     let report = job.run(&mut |note| eprintln!("{note}"))?;
     print_written(&report.write(&args.out)?);

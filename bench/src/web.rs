@@ -13,9 +13,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Mat4;
-use nldf_core::audio::{Waveform, neighbourhood, write_wav};
+use nldf_core::audio::{neighbourhood, read_wav, resample, write_wav};
 use nldf_core::camera::turn_about;
 use nldf_core::host::Machine;
+use nldf_core::synth::hidden_voice;
 use nldf_infer::audio::windows_from_wav;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_infer::poses::default_pose;
@@ -51,6 +52,9 @@ pub struct WebBenchJob {
     pub pairs: usize,
     /// The load limit at the start.
     pub load: LoadGate,
+    /// The speech every frame's audio comes from (a WAV); `None` plays the synthetic scene's
+    /// hidden voice ([`hidden_voice`] of seed 0, the shipped model's `voice` split speaker).
+    pub audio: Option<PathBuf>,
 }
 
 /// One model's frame rates: the median over the rounds, each round's beside it.
@@ -103,7 +107,10 @@ pub struct WebReport {
     pub threads: usize,
     /// Rounds of every model and runtime.
     pub pairs: usize,
-    /// Seconds of the WAV (a voiced test signal) every frame's audio comes from.
+    /// What every frame's audio comes from: a WAV's path, or the synthetic scene's hidden
+    /// voice.
+    pub track: String,
+    /// Its seconds.
     pub track_seconds: f64,
     /// Still-pixel skipping's settings, the page's and nldf's.
     pub skip: SkipConfig,
@@ -123,16 +130,26 @@ impl WebBenchJob {
         check_pairs(self.pairs)?;
         let mut machine = self.load.admit()?;
         let dir = crate::error::temp_dir()?;
-        let wav = dir.path().join("voice.wav");
-        // Whole frames at 25 fps, at least 4 s: the skipping probes spread over the clip.
-        let track_samples = 640 * (self.frames + WARM_UP).max(100);
-        write_wav(
-            &wav,
-            &Waveform {
-                sample_rate: 16_000,
-                samples: voice(track_samples),
-            },
-        )?;
+        let (wav, track) = match &self.audio {
+            Some(path) => (path.clone(), path.display().to_string()),
+            None => {
+                let wav = dir.path().join("voice.wav");
+                // Whole frames at 25 fps, at least 4 s: the skipping probes spread over it.
+                let seconds = 0.04 * (self.frames + WARM_UP).max(100) as f64;
+                write_wav(&wav, &hidden_voice(0, seconds))?;
+                (
+                    wav,
+                    "the synthetic scene's hidden voice (seed 0)".to_string(),
+                )
+            }
+        };
+        let speech = resample(&read_wav(&wav)?, 16_000);
+        if speech.samples.is_empty() {
+            return Err(Error::Missing(format!(
+                "{}: the WAV holds no samples",
+                wav.display()
+            )));
+        }
         let skip = SkipConfig::default();
         let models = self
             .models
@@ -150,9 +167,12 @@ impl WebBenchJob {
             let of = format!("round {} of {}", round + 1, self.pairs);
             for (row, model) in rows.iter_mut().zip(&models) {
                 let path = row.model.display().to_string();
-                let ort_fps = native_fps(model, BackendKind::Ort, self.threads, self.frames)?;
+                let speech = &speech.samples;
+                let ort_fps =
+                    native_fps(model, BackendKind::Ort, self.threads, self.frames, speech)?;
                 note(&format!("{of}: {path}: onnxruntime {ort_fps:.1} frames/s"));
-                let tract_fps = native_fps(model, BackendKind::Tract, self.threads, self.frames)?;
+                let tract_fps =
+                    native_fps(model, BackendKind::Tract, self.threads, self.frames, speech)?;
                 note(&format!("{of}: {path}: tract {tract_fps:.1} frames/s"));
                 row.rounds_ort_fps.push(ort_fps);
                 row.rounds_tract_fps.push(tract_fps);
@@ -187,7 +207,8 @@ impl WebBenchJob {
             frames: self.frames,
             threads: self.threads,
             pairs: self.pairs,
-            track_seconds: track_samples as f64 / 16_000.0,
+            track,
+            track_seconds: speech.seconds(),
             skip,
             rows,
         })
@@ -274,16 +295,6 @@ impl WebRow {
     }
 }
 
-/// A voiced, wobbling test signal, `n` samples at 16 kHz.
-fn voice(n: usize) -> Vec<f32> {
-    (0..n)
-        .map(|i| {
-            let t = i as f32 / 16_000.0;
-            0.4 * (2.0 * std::f32::consts::PI * (160.0 + 50.0 * (3.0 * t).sin()) * t).sin()
-        })
-        .collect()
-}
-
 /// Native onnxruntime on the ray graph at `path` with nldf's still-pixel skipping
 /// (`StillSkipper` with `skip`, probes spread over the WAV, as `nldf render --skip-still`):
 /// `frames` frames of the WAV at the default pose after [`WARM_UP`] frames, each rendered
@@ -329,20 +340,22 @@ fn native_skip(
 }
 
 /// Frames per second of `model` in the runtime `kind`: `frames` frames after
-/// [`WARM_UP`], each with its own audio chunk and a pose turning a little from frame to
-/// frame, as a page playing a voice renders them.
+/// [`WARM_UP`], each with its own audio chunk of `speech` (16 kHz, looped) and a pose
+/// turning a little from frame to frame, as a page playing a voice renders them.
 pub fn native_fps(
     model: &FrameGraphFile,
     kind: BackendKind,
     threads: usize,
     frames: usize,
+    speech: &[f32],
 ) -> Result<f64> {
     let mut graph = FrameGraph::open(model, kind, threads)?;
     let spec = &model.info.spec;
     let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
     let centre = spec.bounds.centre();
     let n = frames + WARM_UP;
-    let samples = voice((n + 2) * model.audio.samples_per_frame);
+    let needed = (n + 2) * model.audio.samples_per_frame;
+    let samples: Vec<f32> = speech.iter().copied().cycle().take(needed).collect();
     let mut start = Instant::now();
     for f in 0..n {
         if f == WARM_UP {
@@ -411,7 +424,7 @@ impl WebReport {
              browser / onnxruntime: the median over the rounds of the per-round ratio \
              (smallest-largest). {} timed frames per model, runtime and round \
              after {WARM_UP} warm-up frames, {} threads; each frame from its own audio \
-             chunk of a {:.1} s voiced test WAV. Full frames: the head turning a little from \
+             chunk of {} ({:.1} s). Full frames: the head turning a little from \
              frame to frame. Skipping still pixels: the head at its default pose, from a fresh \
              skipper (its full and probed frames counted), threshold {:.0}/255, margin {} px, \
              {} probes spread over the WAV, a full frame every {} still frames; the browser's \
@@ -425,6 +438,7 @@ impl WebReport {
             self.pairs,
             self.frames,
             self.threads,
+            self.track,
             self.track_seconds,
             255.0 * k.threshold,
             k.margin,

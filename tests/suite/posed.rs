@@ -396,3 +396,51 @@ fn thinned_pseudo_views_keep_their_mouth_and_a_seeded_subset_and_recorded_frames
     thin_pseudo_beams(&views, &mut all, 0, 7);
     assert_eq!(all, full);
 }
+
+/// The speech the benchmarks play by default (`nldf bench web`) is the synthetic scene's
+/// hidden voice: at the `voice` split's length it is that split's audio, sample for sample
+/// (to 16-bit rounding), and it is speech, with pauses, not a steady tone.
+#[test]
+fn the_benchmarks_speech_is_the_voice_splits_audio() {
+    // Seed 0's scene, as the shipped model's is, long enough that its `voice` split (its
+    // held-out frames' length) holds speech, not only the first pause.
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scene");
+    let cfg = nldf_core::synth::SynthConfig {
+        seconds: 12.0,
+        size: 16,
+        supersample: 1,
+        ..nldf_core::synth::SynthConfig::default()
+    };
+    nldf_core::synth::generate(&cfg, None, &root, false, &|| {}).unwrap();
+    let split = nldf_core::audio::read_wav(&root.join(VOICE_DIR).join("aud.wav")).unwrap();
+    assert_eq!(split.sample_rate, 16_000);
+    let seconds = split.samples.len() as f64 / 16_000.0;
+    let loudest = split.samples.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(loudest > 0.1, "the {seconds} s voice split is silent");
+    let speech = nldf_core::synth::hidden_voice(cfg.seed, seconds);
+    assert_eq!(speech.samples.len(), split.samples.len());
+    let worst = speech
+        .samples
+        .iter()
+        .zip(&split.samples)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst < 1e-4,
+        "the hidden voice misses the split's audio by {worst}"
+    );
+    // Speech pauses between phrases: over the bench's 4 s, some 20 ms windows are near
+    // silent, others loud.
+    let speech = nldf_core::synth::hidden_voice(0, 4.0);
+    let rms: Vec<f32> = speech
+        .samples
+        .chunks(320)
+        .map(|c| (c.iter().map(|v| v * v).sum::<f32>() / c.len() as f32).sqrt())
+        .collect();
+    let loud = rms.iter().cloned().fold(0.0f32, f32::max);
+    assert!(
+        rms.iter().any(|&r| r < 0.02 * loud),
+        "no pause in 4 s of speech"
+    );
+}

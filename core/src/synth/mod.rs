@@ -15,6 +15,7 @@ mod scene;
 mod sdf;
 pub mod speech;
 mod splits;
+pub use splits::hidden_voice;
 pub mod trace;
 
 use std::path::{Path, PathBuf};

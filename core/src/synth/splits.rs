@@ -74,13 +74,34 @@ fn recorded_range(tracks: &Tracks, n_train: usize) -> [f32; 2] {
 /// the scene's rate, and the mouth track that speech drives.
 fn other_voice(cfg: &SynthConfig, n_frames: usize) -> (Voice, Waveform, Vec<MouthFrame>) {
     let voice_seed = cfg.voice_seed.unwrap_or(cfg.seed.wrapping_add(1));
-    let mut rng = stream(voice_seed, 3);
-    let voice = Voice::random(&mut rng);
     let rate = cfg.features.sample_rate;
     let n_samples = (n_frames as f64 * rate as f64 / cfg.fps as f64).round() as usize;
-    let voice_wave = synthesize_speech(&mut rng, &voice, n_samples, rate).quantized_16bit();
+    let (voice, voice_wave) = speaker(voice_seed, n_samples, rate);
     let mouth = mouth_track(&voice_wave, cfg.fps, n_frames);
     (voice, voice_wave, mouth)
+}
+
+/// The speaker of voice seed `voice_seed` saying `n_samples` samples at `rate`, as 16-bit
+/// audio: the `voice` split's speech of a scene whose voice seed it is.
+fn speaker(voice_seed: u64, n_samples: usize, rate: u32) -> (Voice, Waveform) {
+    let mut rng = stream(voice_seed, 3);
+    let voice = Voice::random(&mut rng);
+    let wave = synthesize_speech(&mut rng, &voice, n_samples, rate).quantized_16bit();
+    (voice, wave)
+}
+
+/// Speech of the hidden voice of the synthetic scene of seed `scene_seed` (the `voice`
+/// split's speaker, voice seed `scene_seed + 1`), `seconds` long at 16 kHz: what the
+/// benchmarks play, so that a model is timed on speech rather than a tone. At the split's
+/// length it is the split's audio.
+pub fn hidden_voice(scene_seed: u64, seconds: f64) -> Waveform {
+    let rate = 16_000;
+    speaker(
+        scene_seed.wrapping_add(1),
+        (seconds * f64::from(rate)).round() as usize,
+        rate,
+    )
+    .1
 }
 
 impl EvalSplits {
