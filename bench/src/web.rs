@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Mat4;
-use nldf_core::audio::{neighbourhood, read_wav, resample, write_wav};
+use nldf_core::audio::{Waveform, neighbourhood, read_wav, resample, write_wav};
 use nldf_core::camera::turn_about;
 use nldf_core::host::Machine;
 use nldf_core::synth::hidden_voice;
@@ -118,6 +118,28 @@ pub struct WebReport {
 }
 
 impl WebBenchJob {
+    /// The speech every frame plays: `audio`, or the synthetic scene's hidden voice written
+    /// into `dir` (whole frames at 25 fps, at least 4 s, so that the skipping probes spread
+    /// over it). Returns the WAV, what it is, and its samples at 16 kHz.
+    fn speech(&self, dir: &Path) -> Result<(PathBuf, String, Waveform)> {
+        let (wav, track) = match &self.audio {
+            Some(path) => (path.clone(), path.display().to_string()),
+            None => {
+                let wav = dir.join("voice.wav");
+                let seconds = 0.04 * (self.frames + WARM_UP).max(100) as f64;
+                write_wav(&wav, &hidden_voice(0, seconds))?;
+                let what = "the synthetic scene's hidden voice (seed 0)".to_string();
+                (wav, what)
+            }
+        };
+        let speech = resample(&read_wav(&wav)?, 16_000);
+        if speech.samples.is_empty() {
+            let problem = format!("{}: the WAV holds no samples", wav.display());
+            return Err(Error::Missing(problem));
+        }
+        Ok((wav, track, speech))
+    }
+
     /// Times every model natively, then in the browser, in rounds.
     pub fn run(&self, note: &mut dyn FnMut(&str)) -> Result<WebReport> {
         if !(self.ray_models.is_empty() || self.ray_models.len() == self.models.len()) {
@@ -130,26 +152,7 @@ impl WebBenchJob {
         check_pairs(self.pairs)?;
         let mut machine = self.load.admit()?;
         let dir = crate::error::temp_dir()?;
-        let (wav, track) = match &self.audio {
-            Some(path) => (path.clone(), path.display().to_string()),
-            None => {
-                let wav = dir.path().join("voice.wav");
-                // Whole frames at 25 fps, at least 4 s: the skipping probes spread over it.
-                let seconds = 0.04 * (self.frames + WARM_UP).max(100) as f64;
-                write_wav(&wav, &hidden_voice(0, seconds))?;
-                (
-                    wav,
-                    "the synthetic scene's hidden voice (seed 0)".to_string(),
-                )
-            }
-        };
-        let speech = resample(&read_wav(&wav)?, 16_000);
-        if speech.samples.is_empty() {
-            return Err(Error::Missing(format!(
-                "{}: the WAV holds no samples",
-                wav.display()
-            )));
-        }
+        let (wav, track, speech) = self.speech(dir.path())?;
         let skip = SkipConfig::default();
         let models = self
             .models
