@@ -3,8 +3,9 @@
 // still pixels at the default pose (skip_fps, and skip_ray_share: the share of the head's
 // rays re-rendered). Each line records the machine, Chromium and whether its WebAssembly has
 // SIMD (`simd`, the page's detection).
-// node web/bench.mjs [--frames 50] [--warmup 5] [--threads 2] [--wav WAV] MODEL.onnx...
-// (default model: models/demo/frame.onnx; default track: a 4 s voiced test signal).
+// node web/bench.mjs --wav SPEECH.wav [--frames 50] [--warmup 5] [--threads 2] MODEL.onnx...
+// (default model: models/demo/frame.onnx). The track is speech, never a tone: `nldf bench
+// web` gives the synthetic scene's hidden voice.
 // Needs scripts/web_env.sh.
 import { chromium } from 'playwright-core';
 import { execFileSync } from 'node:child_process';
@@ -29,7 +30,11 @@ for (let i = 0; i < argv.length; i++) {
   else opts.models.push(path.resolve(a));
 }
 if (opts.models.length === 0) opts.models.push(path.join(here, '..', 'models', 'demo', 'frame.onnx'));
-for (const m of opts.wav ? [...opts.models, opts.wav] : opts.models) {
+if (!opts.wav) {
+  console.error('bench: --wav SPEECH.wav is required (nldf bench web passes the synthetic scene\'s hidden voice)');
+  process.exit(2);
+}
+for (const m of [...opts.models, opts.wav]) {
   if (!existsSync(m)) {
     console.error(`bench: ${m} is missing`);
     process.exit(2);
@@ -38,30 +43,6 @@ for (const m of opts.wav ? [...opts.models, opts.wav] : opts.models) {
 if (!existsSync(opts.chromium)) {
   console.error(`bench: ${opts.chromium} is missing (run scripts/web_env.sh)`);
   process.exit(3);
-}
-
-// A voiced, wobbling test signal, 4 s at 16 kHz, as a 16-bit WAV.
-function testWav(seconds = 4) {
-  const n = 16000 * seconds;
-  const buf = Buffer.alloc(44 + 2 * n);
-  buf.write('RIFF', 0);
-  buf.writeUInt32LE(36 + 2 * n, 4);
-  buf.write('WAVEfmt ', 8);
-  buf.writeUInt32LE(16, 16);
-  buf.writeUInt16LE(1, 20);
-  buf.writeUInt16LE(1, 22);
-  buf.writeUInt32LE(16000, 24);
-  buf.writeUInt32LE(32000, 28);
-  buf.writeUInt16LE(2, 32);
-  buf.writeUInt16LE(16, 34);
-  buf.write('data', 36);
-  buf.writeUInt32LE(2 * n, 40);
-  for (let i = 0; i < n; i++) {
-    const t = i / 16000;
-    const v = 0.4 * Math.sin(2 * Math.PI * (150 + 60 * Math.sin(2.5 * t)) * t) * (0.55 + 0.45 * Math.sin(9 * t));
-    buf.writeInt16LE(Math.round(v * 32767), 44 + 2 * i);
-  }
-  return buf;
 }
 
 const run = (cmd, args) => {
@@ -98,8 +79,7 @@ try {
   page.on('pageerror', (e) => errors.push(e.message));
   await page.route('**/bench/*', (route) => {
     const name = new URL(route.request().url()).pathname.split('/').pop();
-    const track = () => (opts.wav ? readFileSync(opts.wav) : testWav());
-    const body = name === 'track.wav' ? track() : readFileSync(opts.models[Number(name.split('.')[0])]);
+    const body = readFileSync(name === 'track.wav' ? opts.wav : opts.models[Number(name.split('.')[0])]);
     return route.fulfill({ status: 200, body, contentType: 'application/octet-stream' });
   });
   await page.goto(`${base}/?model=none&autoplay=0&threads=${opts.threads}`);
@@ -133,7 +113,7 @@ try {
       fps: Number(frame.fps.toFixed(2)),
       ms_per_frame: Number(frame.ms_per_frame.toFixed(2)),
       graph_fps: Number(graph.fps.toFixed(2)),
-      track: opts.wav ? path.basename(opts.wav) : 'test signal, 4 s',
+      track: path.basename(opts.wav),
       upsample: info.upsample,
       skip_fps: skip ? Number(skip.fps.toFixed(2)) : null,
       skip_ray_share: skip ? Number(skip.ray_share.toFixed(4)) : null,
