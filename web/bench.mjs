@@ -117,6 +117,10 @@ try {
       upsample: info.upsample,
       skip_fps: skip ? Number(skip.fps.toFixed(2)) : null,
       skip_ray_share: skip ? Number(skip.ray_share.toFixed(4)) : null,
+      // The skipped frames against full renders of the same frames (untimed).
+      skip_psnr: skip?.psnr_vs_full == null ? null : Number(skip.psnr_vs_full.toFixed(2)),
+      skip_worst_psnr: skip?.worst_frame_psnr == null ? null : Number(skip.worst_frame_psnr.toFixed(2)),
+      skip_max_abs: skip ? Number(skip.max_abs_error.toFixed(5)) : null,
     }));
   }
   if (errors.length) throw new Error(`page errors: ${errors.join('; ')}`);

@@ -74,6 +74,9 @@ pub struct WebRow {
     /// it re-rendered.
     pub browser_skip_fps: Option<f64>,
     pub browser_skip_rays: Option<f64>,
+    /// The page's skipped frames against full renders of the same frames (the first
+    /// round's): PSNR over all frames, dB (`None` where identical or not measured).
+    pub browser_skip_psnr: Option<f64>,
     /// What `web/bench.mjs` reported for this model (versions, threads, SIMD).
     pub browser: Option<serde_json::Value>,
     /// The ray graph timed with nldf's skipping.
@@ -232,6 +235,7 @@ impl WebRow {
             browser_fps: None,
             browser_skip_fps: None,
             browser_skip_rays: None,
+            browser_skip_psnr: None,
             browser: None,
             ray_model,
             ort_skip: None,
@@ -264,6 +268,7 @@ fn record_browser(
             row.rounds_browser_skip_fps.push(fps);
         }
         row.browser_skip_rays = row.browser_skip_rays.or(get("skip_ray_share"));
+        row.browser_skip_psnr = row.browser_skip_psnr.or(get("skip_psnr"));
         note(&format!(
             "{of}: {}: browser {:.1} frames/s, skipping still pixels {:.1}",
             row.model.display(),
@@ -432,11 +437,13 @@ impl WebReport {
              skipper (its full and probed frames counted), threshold {:.0}/255, margin {} px, \
              {} probes spread over the WAV, a full frame every {} still frames; the browser's \
              on the frame graph, onnxruntime's on the ray graph with nldf's skipper \
-             (`nldf render --skip-still`); rays: the share of the head's rays re-rendered.\n\n\
+             (`nldf render --skip-still`); rays: the share of the head's rays re-rendered; \
+             PSNR: the skipped frames against full renders of the same frames, over all \
+             frames (an untimed pass).\n\n\
              | model | size (MB) | frame | browser (onnxruntime-web) | onnxruntime | tract | \
              browser / onnxruntime | browser, skipping (rays) | onnxruntime, skipping (rays) \
-             | browser / onnxruntime, skipping |\n\
-             | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+             | browser / onnxruntime, skipping | skipping PSNR (dB), browser / onnxruntime |\n\
+             | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
             machine_cell(&self.machine),
             self.pairs,
             self.frames,
@@ -451,9 +458,10 @@ impl WebReport {
         let fps = |f: Option<f64>| f.map_or_else(|| "not measured".into(), |f| format!("{f:.1}"));
         let share =
             |s: Option<f64>| s.map_or_else(String::new, |s| format!(" ({:.0} %)", 100.0 * s));
+        let db = |p: Option<f64>| p.map_or_else(|| "-".into(), |p| format!("{p:.1}"));
         for r in &self.rows {
             md.push_str(&format!(
-                "| {} | {:.2} | {} x {} | {} | {:.1} | {:.1} | {} | {}{} | {}{} | {} |\n",
+                "| {} | {:.2} | {} x {} | {} | {:.1} | {:.1} | {} | {}{} | {}{} | {} | {} / {} |\n",
                 r.model.display(),
                 r.bytes as f64 / 1e6,
                 r.width,
@@ -467,6 +475,8 @@ impl WebReport {
                 fps(r.ort_skip_fps),
                 share(r.ort_skip.as_ref().map(|t| t.ray_share)),
                 crate::repeats::cell(r.browser_over_ort_skipping.as_ref()),
+                db(r.browser_skip_psnr),
+                db(r.ort_skip.as_ref().and_then(|t| t.psnr_vs_full)),
             ));
         }
         let rays: Vec<String> = self

@@ -433,7 +433,9 @@ const hook = {
   // frame (graph, 8 bits, canvas), or the graph's run alone when `toCanvas` is false; full
   // frames with the head turning a little, or with `skip` the track's frames at the default
   // pose through a fresh still-pixel skipper (its full and probed frames included), with the
-  // share of the head's rays re-rendered.
+  // share of the head's rays re-rendered and, from an untimed pass after the timed one, the
+  // skipped frames' error against full renders: PSNR over all frames, the worst frame's, and
+  // the largest difference of any channel.
   bench: (n = 50, warmup = 5, toCanvas = true, skip = false) => exclusive(async () => {
     const info = state.model.info;
     if (skip && !state.track) throw new Error('skipping needs a track');
@@ -459,9 +461,37 @@ const hook = {
     for (let i = 0; i < n; i++) await once(i, skip ? 0 : 0.2 * Math.sin(i / 7));
     const ms = (performance.now() - t0) / n;
     skipper.reset();
-    return { frames: n, ms_per_frame: ms, fps: 1000 / ms, ray_share: head > 0 ? rays / head : null };
+    const error = skip ? await skipError(n, chunk, pose(0)) : {};
+    return { frames: n, ms_per_frame: ms, fps: 1000 / ms, ray_share: head > 0 ? rays / head : null, ...error };
   }),
 };
+// The skipper's frames `0..n` (audio `chunk(f)`, pose `c2w`, from a fresh skipper) against
+// full renders of the same frames: { psnr_vs_full, worst_frame_psnr, max_abs_error }, a PSNR
+// null where the frames are identical.
+async function skipError(n, chunk, c2w) {
+  const skipper = state.model.skipper;
+  const psnr = (mse) => (mse > 0 ? -10 * Math.log10(mse) : null);
+  let total = 0;
+  let count = 0;
+  let worst = 0;
+  let maxAbs = 0;
+  for (let f = 0; f < n; f++) {
+    const skipped = (await skipper.render(runGraph, c2w, chunk(f), probeChunks)).image;
+    const full = (await runGraph(chunk(f), c2w, null)).image;
+    let se = 0;
+    for (let i = 0; i < full.length; i++) {
+      const d = skipped[i] - full[i];
+      se += d * d;
+      maxAbs = Math.max(maxAbs, Math.abs(d));
+    }
+    total += se;
+    count += full.length;
+    worst = Math.max(worst, se / full.length);
+  }
+  skipper.reset();
+  return { psnr_vs_full: psnr(total / count), worst_frame_psnr: psnr(worst), max_abs_error: maxAbs };
+}
+
 hook.ready = (async () => {
   const url = params.get('model') ?? '../models/demo/frame.onnx';
   if (url === 'none') return;
