@@ -52,7 +52,6 @@ impl ModelInfo {
         // The one version check: contracts before 4, and models without opacity or
         // anchored beams, were made by an older nldf.
         let contract: u32 = props.parse(keys::CONTRACT)?;
-        let older = |what: &str| MetadataError::Older(older_reason(what));
         if contract > CONTRACT_VERSION {
             return Err(MetadataError::Malformed(
                 keys::CONTRACT.to_string(),
@@ -75,12 +74,12 @@ impl ModelInfo {
     }
 }
 
-/// Why a model made by an older nldf is refused: `what` it has, and what this build reads.
-fn older_reason(what: &str) -> String {
-    format!(
+/// The refusal of a model made by an older nldf: `what` it has, and what this build reads.
+fn older(what: &str) -> MetadataError {
+    MetadataError::Older(format!(
         "{what}; this build reads contracts {CONTRACT_PLAIN} to {CONTRACT_VERSION} with opacity \
          and anchored beams"
-    )
+    ))
 }
 
 /// The metadata's values by key.
@@ -162,7 +161,7 @@ fn read_info(props: &Props<'_>, contract: u32, format: &str) -> Result<ModelInfo
             anchor: Some(
                 props
                     .parse::<Option<_>>(keys::BEAM_ANCHOR)?
-                    .ok_or_else(|| MetadataError::Older(older_reason("no beam anchor")))?,
+                    .ok_or_else(|| older("no beam anchor"))?,
             ),
         },
         segments: props.value(keys::SEGMENTS)?,

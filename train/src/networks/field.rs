@@ -47,24 +47,22 @@ pub fn teacher_field(cfg: &TeacherConfig, vb: VarBuilder) -> Result<TeacherField
         let layer = dense(l.fan_in, l.fan_out, l.bias, vb.pp(&l.name))?;
         built.insert(l.name, layer);
     }
+    // Each trunk layer's inputs are those the description lists for it.
+    let trunk = (0..cfg.depth)
+        .map(|i| {
+            let mut input = |kind: &str| built.remove(&format!("trunk.{i}.{kind}"));
+            TrunkLayer {
+                hidden: input("hidden"),
+                points: input("points"),
+                audio: input("audio"),
+            }
+        })
+        .collect();
     let mut take = |name: &str| {
         built
             .remove(name)
             .ok_or_else(|| candle_core::Error::Msg(format!("the field has no layer `{name}`")))
     };
-    let mut trunk = Vec::with_capacity(cfg.depth);
-    for i in 0..cfg.depth {
-        let fed = i == 0 || cfg.skips.contains(&(i - 1));
-        trunk.push(TrunkLayer {
-            hidden: (i > 0)
-                .then(|| take(&format!("trunk.{i}.hidden")))
-                .transpose()?,
-            points: fed
-                .then(|| take(&format!("trunk.{i}.points")))
-                .transpose()?,
-            audio: fed.then(|| take(&format!("trunk.{i}.audio"))).transpose()?,
-        });
-    }
     Ok(TeacherField {
         trunk,
         density: take("density")?,
