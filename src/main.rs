@@ -10,6 +10,7 @@ mod eval_cmd;
 mod export_cmd;
 mod features_cmd;
 mod frontier_cmd;
+mod lookahead_cmd;
 mod prepare_cmd;
 mod presets;
 mod progress;

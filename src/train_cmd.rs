@@ -49,6 +49,11 @@ pub enum TrainCommand {
     /// frame from its features, learned from the recorded frames and the teacher's renders
     /// of pseudo views. Goes to RUN/<name>; `nldf eval` scores it beside the student.
     Upsampler(UpsamplerArgs),
+    /// A short-lookahead student from a trained one (RUN/<student>, without audio
+    /// attention): its audio encoder distilled again to read at most --lookahead-ms of
+    /// future audio, the rest kept, into RUN/<name>, so that `nldf render --stream` shows
+    /// each frame sooner.
+    Lookahead(crate::lookahead_cmd::LookaheadArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -195,6 +200,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         Some(TrainCommand::Teacher(args)) => run_teacher(args),
         Some(TrainCommand::Student(args)) => run_student(args),
         Some(TrainCommand::Upsampler(args)) => run_upsampler(args),
+        Some(TrainCommand::Lookahead(args)) => crate::lookahead_cmd::run(args),
         None => run_recipe(args.recipe),
     }
 }
@@ -250,7 +256,7 @@ impl StudentArgs {
                     model.width = w;
                 }
                 StudentSource::Settings {
-                    model,
+                    model: Box::new(model),
                     distill: !self.no_distill,
                     pool: !self.no_pool,
                     pseudo: PseudoSettings {

@@ -118,6 +118,24 @@ impl FeatureConfig {
         self.sample_rate as f64 / self.hop as f64
     }
 
+    /// Seconds of audio past a video frame's instant that its window reads when it reads
+    /// `ahead` feature frames past its centre (`window / 2` of them: all, AD-NeRF's 152.5
+    /// ms at the defaults): the last one read, `ahead - 1` hops after the centre, ends half
+    /// a Hann window later. A video frame's instant is taken on the feature grid (every
+    /// frame at 25 fps with the defaults).
+    pub fn lookahead_s(&self, ahead: usize) -> f64 {
+        let hops = ahead as f64 - 1.0;
+        (hops * self.hop as f64 + (self.win - self.win / 2) as f64) / self.sample_rate as f64
+    }
+
+    /// The most feature frames past a window's centre whose lookahead
+    /// ([`FeatureConfig::lookahead_s`]) is at most `seconds`; `None` when not even one is.
+    pub fn ahead_within(&self, seconds: f64) -> Option<usize> {
+        (1..=self.window / 2)
+            .rev()
+            .find(|&a| self.lookahead_s(a) <= seconds + 1e-12)
+    }
+
     /// Checks that the settings describe a usable front end.
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Argument(format!("audio features: {m}")));

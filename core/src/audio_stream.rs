@@ -15,6 +15,7 @@ use crate::audio::{
     window_span,
 };
 use crate::error::{Error, Result};
+pub use crate::wav_stream::{WavStreamDecoder, WavStreamFormat};
 
 /// Video-frame feature windows made incrementally from a stream of samples.
 #[derive(Debug)]
@@ -35,6 +36,8 @@ pub struct FeatureStream {
     /// Final video-frame windows, `[n_windows, window, n_mels]`.
     windows: Vec<f32>,
     n_windows: usize,
+    /// Rows of each window, from the first, that must be final before it is made.
+    rows_read: usize,
     ended: bool,
 }
 
@@ -62,8 +65,25 @@ impl FeatureStream {
             n_feat: 0,
             windows: Vec::new(),
             n_windows: 0,
+            rows_read: cfg.window,
             ended: false,
         })
+    }
+
+    /// The stream for a model that reads only the first `rows` rows of each window (a
+    /// short-lookahead encoder, which zeroes the rest): a window is made once those rows
+    /// are final, its later rows repeating the last feature frame so far, as at a track's
+    /// end. The rows read are the file path's, bit for bit.
+    pub fn reading(mut self, rows: usize) -> FeatureStream {
+        self.rows_read = rows.clamp(1, self.cfg.window);
+        self
+    }
+
+    /// One past the last feature frame of video frame `f`'s window that must be final
+    /// before the window is made.
+    fn read_end(&self, f: usize) -> isize {
+        let (first, end) = window_span(f, self.fps, &self.cfg);
+        (first + self.rows_read as isize).min(end)
     }
 
     /// Adds samples and makes every window that became final.
@@ -169,7 +189,7 @@ impl FeatureStream {
         // 3. Video frames inside the received audio whose feature frames are all final.
         let n_video = n_video_frames(self.input.len(), self.input_rate, self.fps);
         while self.n_windows < n_video {
-            let (_, end) = window_span(self.n_windows, self.fps, &self.cfg);
+            let end = self.read_end(self.n_windows);
             if !self.ended && end > self.n_feat as isize {
                 break;
             }
@@ -192,8 +212,7 @@ impl FeatureStream {
     /// Input samples that must have arrived before video frame `f`'s window is final
     /// (before the stream's end): the algorithmic part of a stream's latency.
     pub fn samples_needed(&self, f: usize) -> usize {
-        let (_, end) = window_span(f, self.fps, &self.cfg);
-        let last_feat = (end - 1).max(0) as usize;
+        let last_feat = (self.read_end(f) - 1).max(0) as usize;
         let signal_end =
             (self.front.first_sample(last_feat) + self.cfg.win as isize).max(0) as usize;
         let input_end = match self.resampler {
@@ -204,221 +223,6 @@ impl FeatureStream {
         let frame_end =
             ((f + 1) as f64 * self.input_rate as f64 / self.fps as f64 - 1e-6).ceil() as usize;
         input_end.max(frame_end)
-    }
-}
-
-/// Sample encodings a WAV stream may carry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Encoding {
-    /// Integer PCM of this many bits (8 is unsigned, as in WAV files).
-    Int(u16),
-    /// 32-bit IEEE float.
-    Float32,
-}
-
-/// The format of a WAV stream, from its header.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct WavStreamFormat {
-    pub sample_rate: u32,
-    pub channels: u16,
-    pub bits_per_sample: u16,
-    pub float: bool,
-}
-
-/// Decodes a WAV stream piece by piece: [`WavStreamDecoder::push`] takes bytes as they
-/// arrive and returns the mono samples they complete. A `data` chunk whose declared size is
-/// 0 or at least 2^31 - 1 bytes (what tools writing to a pipe put there) runs to the end
-/// of the stream; otherwise the declared size is honoured.
-#[derive(Debug, Default)]
-pub struct WavStreamDecoder {
-    pending: Vec<u8>,
-    format: Option<(WavStreamFormat, Encoding)>,
-    /// Bytes of sample data still expected (`None`: to the end of the stream).
-    data_left: Option<u64>,
-    in_data: bool,
-    bytes_seen: u64,
-}
-
-/// A data chunk at least this long is taken as "to the end of the stream".
-const STREAMING_DATA_SIZE: u32 = 0x7fff_ffff;
-
-impl WavStreamDecoder {
-    /// A decoder waiting for the header.
-    pub fn new() -> WavStreamDecoder {
-        WavStreamDecoder::default()
-    }
-
-    /// The format, once the header has been read.
-    pub fn format(&self) -> Option<WavStreamFormat> {
-        self.format.map(|(f, _)| f)
-    }
-
-    /// Takes the next bytes of the stream; returns the mono samples they complete (averaged
-    /// over channels, integers scaled to [-1, 1)). A malformed header or a non-finite sample
-    /// is an error; the message does not name the stream.
-    pub fn push(&mut self, bytes: &[u8]) -> std::result::Result<Vec<f32>, String> {
-        self.bytes_seen += bytes.len() as u64;
-        self.pending.extend_from_slice(bytes);
-        if !self.in_data {
-            self.parse_header()?;
-            if !self.in_data {
-                return Ok(Vec::new());
-            }
-        }
-        let (format, encoding) = self.format.ok_or("no fmt chunk before the data")?;
-        let width = (format.bits_per_sample as usize).div_ceil(8);
-        let frame = width * format.channels as usize;
-        let mut usable = self.pending.len() - self.pending.len() % frame;
-        if let Some(left) = self.data_left {
-            usable = usable.min(left as usize - left as usize % frame);
-        }
-        let mut out = Vec::with_capacity(usable / frame);
-        for chunk in self.pending[..usable].chunks_exact(frame) {
-            let mut sum = 0.0f32;
-            for c in chunk.chunks_exact(width) {
-                let v = decode_sample(c, encoding);
-                if !v.is_finite() {
-                    return Err("a sample is not finite".into());
-                }
-                sum += v;
-            }
-            out.push(sum / format.channels as f32);
-        }
-        self.pending.drain(..usable);
-        if let Some(left) = &mut self.data_left {
-            *left -= usable as u64;
-            if *left < frame as u64 {
-                // The declared data is complete; whatever follows is other chunks.
-                *left = 0;
-                self.pending.clear();
-            }
-        }
-        Ok(out)
-    }
-
-    /// Checks the end of the stream: an error when no sample data began or when it stops
-    /// inside a sample frame.
-    pub fn finish(&self) -> std::result::Result<(), String> {
-        if self.bytes_seen == 0 {
-            return Err("empty stream, not a WAV stream".into());
-        }
-        if !self.in_data {
-            return Err("the stream ended inside the WAV header".into());
-        }
-        if !self.pending.is_empty() && self.data_left != Some(0) {
-            return Err("sample data ends inside a frame (truncated)".into());
-        }
-        Ok(())
-    }
-
-    /// Reads the RIFF header and chunks up to the start of `data`, as far as the pending
-    /// bytes go.
-    fn parse_header(&mut self) -> std::result::Result<(), String> {
-        let mut at = 0usize;
-        let p = &self.pending;
-        if p.len() < 12 {
-            if !b"RIFF".starts_with(&p[..p.len().min(4)]) {
-                return Err("not a WAV stream (no RIFF header)".into());
-            }
-            return Ok(());
-        }
-        if &p[0..4] != b"RIFF" || &p[8..12] != b"WAVE" {
-            return Err("not a WAV stream (no RIFF/WAVE header)".into());
-        }
-        at += 12;
-        let mut format = self.format;
-        loop {
-            if p.len() < at + 8 {
-                return Ok(());
-            }
-            let id = &p[at..at + 4];
-            let size = u32::from_le_bytes([p[at + 4], p[at + 5], p[at + 6], p[at + 7]]);
-            if id == b"data" {
-                let (f, _) = format.ok_or("no fmt chunk before the data")?;
-                self.format = format;
-                self.data_left = (size != 0 && size < STREAMING_DATA_SIZE).then_some(size as u64);
-                self.in_data = true;
-                self.pending.drain(..at + 8);
-                if f.channels == 0 {
-                    return Err("WAV header declares 0 channels".into());
-                }
-                return Ok(());
-            }
-            let padded = size as usize + (size as usize & 1);
-            if size >= STREAMING_DATA_SIZE {
-                return Err(format!(
-                    "chunk `{}` declares {size} bytes",
-                    String::from_utf8_lossy(id)
-                ));
-            }
-            if p.len() < at + 8 + padded {
-                return Ok(());
-            }
-            if id == b"fmt " {
-                format = Some(parse_fmt(&p[at + 8..at + 8 + size as usize])?);
-            }
-            at += 8 + padded;
-        }
-    }
-}
-
-/// Reads a `fmt ` chunk: PCM (tag 1), IEEE float (tag 3) or WAVE_FORMAT_EXTENSIBLE holding
-/// either.
-fn parse_fmt(c: &[u8]) -> std::result::Result<(WavStreamFormat, Encoding), String> {
-    if c.len() < 16 {
-        return Err("fmt chunk is shorter than 16 bytes".into());
-    }
-    let u16_at = |i: usize| u16::from_le_bytes([c[i], c[i + 1]]);
-    let mut tag = u16_at(0);
-    let channels = u16_at(2);
-    let sample_rate = u32::from_le_bytes([c[4], c[5], c[6], c[7]]);
-    let bits = u16_at(14);
-    if tag == 0xfffe {
-        if c.len() < 26 {
-            return Err("extensible fmt chunk is too short".into());
-        }
-        tag = u16_at(24);
-    }
-    if channels == 0 {
-        return Err("WAV header declares 0 channels".into());
-    }
-    if !(1000..=768_000).contains(&sample_rate) {
-        return Err(format!(
-            "WAV sample rate {sample_rate} Hz is outside 1000..=768000"
-        ));
-    }
-    let encoding = match (tag, bits) {
-        (1, 8 | 16 | 24 | 32) => Encoding::Int(bits),
-        (3, 32) => Encoding::Float32,
-        (1, b) => return Err(format!("unsupported sample width {b} bits")),
-        (3, b) => return Err(format!("unsupported float width {b} bits")),
-        (t, _) => return Err(format!("unsupported WAV format tag {t}")),
-    };
-    Ok((
-        WavStreamFormat {
-            sample_rate,
-            channels,
-            bits_per_sample: bits,
-            float: encoding == Encoding::Float32,
-        },
-        encoding,
-    ))
-}
-
-/// One little-endian sample as [`read_wav`](crate::audio::read_wav) scales it.
-fn decode_sample(b: &[u8], encoding: Encoding) -> f32 {
-    match encoding {
-        Encoding::Float32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-        Encoding::Int(bits) => {
-            let v: i32 = match bits {
-                8 => b[0] as i32 - 128,
-                16 => i16::from_le_bytes([b[0], b[1]]) as i32,
-                24 => i32::from_le_bytes([0, b[0], b[1], b[2]]) >> 8,
-                _ => i32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-            };
-            let scale = 1.0 / (1u64 << (bits - 1)) as f64;
-            (v as f64 * scale) as f32
-        }
     }
 }
 

@@ -37,5 +37,6 @@ pub mod student_network;
 pub mod synth;
 pub mod upsampler_config;
 pub mod wav;
+pub mod wav_stream;
 
 pub use error::{Error, Result};

@@ -27,6 +27,13 @@ pub struct AudioConfig {
     /// Which front end made the features (set from the data): later stages read the
     /// dataset's audio the same way, and an exported model records it.
     pub features: FeatureSource,
+    /// Feature frames past the window's centre that the encoder reads; the later ones are
+    /// zeroed before it (`None`: all `window / 2` of them, AD-NeRF's 152.5 ms of future
+    /// audio). A short-lookahead encoder (`nldf train lookahead`) reads fewer, so that a
+    /// stream renders a frame sooner (at 50 Hz, 20 ms per frame fewer); it needs a student
+    /// without attention, whose neighbours' windows would read further.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ahead: Option<usize>,
 }
 
 impl Default for AudioConfig {
@@ -37,6 +44,7 @@ impl Default for AudioConfig {
             dim: 64,
             att_frames: 8,
             features: FeatureSource::default(),
+            ahead: None,
         }
     }
 }
@@ -68,7 +76,17 @@ impl AudioConfig {
             )));
         }
         in_range(&format!("{at}.dim"), self.dim, 1, MAX_WIDTH)?;
+        if let Some(a) = self.ahead {
+            in_range(&format!("{at}.ahead"), a, 1, self.window / 2)?;
+        }
         in_range(&format!("{at}.att_frames"), self.att_frames, 1, 64)
+    }
+
+    /// Rows of each `[window, n_features]` window the encoder reads, from the first: the
+    /// rest are zeroed (`window / 2 + ahead`; all without `ahead`).
+    pub fn rows_read(&self) -> usize {
+        self.ahead
+            .map_or(self.window, |a| (self.window / 2 + a).min(self.window))
     }
 }
 
@@ -239,6 +257,13 @@ impl StudentConfig {
                     a.centre, a.distance
                 )));
             }
+        }
+        if self.audio.ahead.is_some() && self.attention {
+            return Err(Error::Argument(
+                "`model.audio.ahead` needs `model.attention` off: attention reads the \
+                 neighbouring frames' windows, which lie further ahead"
+                    .into(),
+            ));
         }
         self.audio.check("model.audio")
     }

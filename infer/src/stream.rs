@@ -15,8 +15,10 @@
 //!
 //! A frame's latency is measured from the moment the audio of its instant (sample
 //! `ceil(f / fps * rate)`) arrived to the moment its PNG is in place; it includes the
-//! lookahead the features need (AD-NeRF's 16-frame windows reach 150 ms ahead, the
-//! attention's neighbours 3 frames more: 0.27 s at 25 fps) and the render.
+//! lookahead the features need and the render. AD-NeRF's 16-frame windows reach 152.5 ms
+//! ahead; a student with attention waits for its neighbours' 3 frames more (0.27 s at 25
+//! fps); a short-lookahead student (`nldf train lookahead`) reads only the first rows of
+//! its window, and the stream waits for those alone.
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -34,7 +36,7 @@ use crate::error::{Error, Result};
 use crate::frame::FrameRenderer;
 use crate::poses::{default_pose, pose_at, poses_from_transforms};
 use crate::video::frame_file_name;
-use nldf_core::audio::{lookahead_frames, neighbourhood_of};
+use nldf_core::audio::neighbourhood_of;
 
 /// The report's file name in the output folder.
 pub const STREAM_REPORT_FILE: &str = "stream.json";
@@ -304,8 +306,9 @@ impl StreamPlan {
         };
         let info = self.renderer.info().clone();
         let fps = info.spec.fps;
-        let att = info.audio.att_frames;
-        let ahead = lookahead_frames(att);
+        // Without attention only the frame's own window counts: no neighbour is waited for.
+        let ahead = info.audio.frames_ahead();
+        let rows = info.audio.rows_read();
         let mut mel: Option<FeatureStream> = None;
         let mut arrivals: Vec<(usize, Instant)> = Vec::new();
         let mut next = 0usize;
@@ -318,7 +321,7 @@ impl StreamPlan {
             if mel.is_none()
                 && let Some(rate) = rate
             {
-                mel = Some(FeatureStream::new(rate, fps, &self.features)?);
+                mel = Some(FeatureStream::new(rate, fps, &self.features)?.reading(rows));
             }
             let Some(m) = mel.as_mut() else {
                 if ended {

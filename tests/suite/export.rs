@@ -601,3 +601,72 @@ fn models_checkpoints_and_configs_of_an_older_nldf_are_refused_with_one_error() 
         assert!(err.contains("older nldf"), "{key}: {err}");
     }
 }
+
+/// A short-lookahead student (`model.audio.ahead`) reads only the first
+/// `window / 2 + ahead` rows of its centre window, in candle and in the exported graph alike:
+/// changing the later rows or the other windows changes nothing, changing a row it reads
+/// changes the colours, and the graph matches candle. Its metadata says how many rows it
+/// reads past the centre.
+#[test]
+fn export_a_short_lookahead_student_reads_only_its_rows_as_candle_does() {
+    let mut cfg = StudentConfig::tiny();
+    cfg.attention = false;
+    cfg.audio.ahead = Some(3);
+    let rows = cfg.audio.rows_read();
+    assert_eq!(rows, 11);
+    let run = write_run(&cfg, 31);
+    let path = run.export(WeightType::F32);
+    let info = read_model(&path).unwrap().info;
+    assert_eq!(info.audio.ahead, Some(3));
+    assert_eq!(info.audio.rows_read(), rows);
+    let rays = random_rays(2000, 5);
+    let a = &cfg.audio;
+    let audio = neighbourhood(&random_audio(&cfg, 10, 6), 3, a.att_frames);
+    let (d_rgb, d_seg, rgb) = tract_against_candle(&run, &path, &cfg, &rays, &audio);
+    println!("short lookahead: tract vs candle max |rgb diff| {d_rgb:.2e}, segments {d_seg:.2e}");
+    assert!(d_rgb <= TOL && d_seg <= TOL, "{d_rgb} {d_seg}");
+    let (want, _) = candle_render(&run, &rays, &audio);
+    let shape = [a.att_frames, a.window, a.n_features];
+    let per_window = a.window * a.n_features;
+    let centre = a.att_frames / 2;
+    // Every value it must not read, changed.
+    let mut unread = audio.clone();
+    for (i, v) in unread.iter_mut().enumerate() {
+        let (w, row) = (i / per_window, (i % per_window) / a.n_features);
+        if w != centre || row >= rows {
+            *v = 3.0 - *v;
+        }
+    }
+    let (rgb_unread, _) = tract_render(&path, &rays, &unread, shape);
+    let (candle_unread, _) = candle_render(&run, &rays, &unread);
+    assert_eq!(
+        max_diff(&rgb, &rgb_unread),
+        0.0,
+        "the graph reads a later row"
+    );
+    assert_eq!(
+        max_diff(&want, &candle_unread),
+        0.0,
+        "candle reads a later row"
+    );
+    // The last row it reads does reach the colours.
+    let mut read = audio.clone();
+    let last = centre * per_window + (rows - 1) * a.n_features;
+    for v in &mut read[last..last + a.n_features] {
+        *v = 3.0 - *v;
+    }
+    let (rgb_read, _) = tract_render(&path, &rays, &read, shape);
+    assert!(
+        max_diff(&rgb, &rgb_read) > 1e-5,
+        "row {} is not read",
+        rows - 1
+    );
+    // With attention the neighbours' windows would be read too: refused.
+    let mut bad = cfg.clone();
+    bad.attention = true;
+    let err = bad.check().unwrap_err().to_string();
+    assert!(
+        err.contains("`model.audio.ahead` needs `model.attention` off"),
+        "{err}"
+    );
+}

@@ -14,6 +14,7 @@ mod identity;
 mod infer;
 mod jobs;
 mod layers;
+mod lookahead;
 mod machine_paths;
 mod metrics;
 mod posed;

@@ -5,6 +5,7 @@ use super::ops::{conv_leaky, leaky, linear};
 use crate::checkpoint::StudentCheckpoint;
 use crate::error::Result;
 use crate::graph::{GraphBuilder, attr_int, attr_ints};
+use nldf_core::student_config::AudioConfig;
 use nldf_core::student_network::{AudioLayout, LinearLayer};
 
 /// The audio code of the frame: AudioNet over each window of the neighbourhood and
@@ -34,6 +35,7 @@ pub(super) fn audio_code(
             vec![],
         )
     };
+    let windows = rows_read(g, a, windows);
     // AudioNet: [n, window, F] -> [n, F, window] -> convs -> mean over what is left.
     let mut x = g.node(
         "Transpose",
@@ -82,4 +84,22 @@ pub(super) fn audio_code(
         vec![attr_int("axis", 1)],
     );
     Ok(g.node("MatMul", "audio.code", &[&weights, &codes], vec![]))
+}
+
+/// A short-lookahead encoder reads the first [`AudioConfig::rows_read`] rows of each
+/// window: the rest are zeroed, as the trainer zeroes them (`windows` as they are for an
+/// encoder that reads every row).
+///
+/// # Shapes
+/// - `windows`: `[n, window, n_features]`; returns the same
+fn rows_read(g: &mut GraphBuilder, a: &AudioConfig, windows: String) -> String {
+    let rows = a.rows_read();
+    if rows >= a.window {
+        return windows;
+    }
+    let mask: Vec<f32> = (0..a.window)
+        .map(|j| if j < rows { 1.0 } else { 0.0 })
+        .collect();
+    let mask = g.constant_f32("audio.rows_read", &[1, a.window, 1], &mask);
+    g.node("Mul", "audio.ahead", &[&windows, &mask], vec![])
 }

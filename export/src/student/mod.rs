@@ -142,6 +142,7 @@ pub fn model_info(ckpt: &StudentCheckpoint, graph: &GraphProto) -> ModelInfo {
             window: s.audio.window,
             n_features: s.audio.n_features,
             attention: s.attention,
+            ahead: s.audio.ahead,
         },
         network: NetworkShape {
             depth: s.depth,

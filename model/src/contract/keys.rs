@@ -31,6 +31,10 @@ pub const AUDIO_WINDOW: &str = "nldf.audio_window";
 pub const AUDIO_FEATURES: &str = "nldf.audio_features";
 /// Whether the neighbourhood is fused by attention (else only the centre window counts).
 pub const AUDIO_ATTENTION: &str = "nldf.audio_attention";
+/// Feature frames past the centre window's middle that the graph reads (a count; absent:
+/// all `window / 2`): a short-lookahead student (`nldf train lookahead`) zeroes the rest, so
+/// a stream need not wait for them.
+pub const AUDIO_AHEAD: &str = "nldf.audio_ahead";
 /// Which front end made the training features (plain string): `nldf` (the render spec's
 /// `features` hold its settings, and any WAV can be turned into the same features) or
 /// `foreign` (another front end's, e.g. AD-NeRF's DeepSpeech: a render must be given

@@ -170,6 +170,7 @@ fn read_info(props: &Props<'_>, contract: u32, format: &str) -> Result<ModelInfo
             window: props.value(keys::AUDIO_WINDOW)?,
             n_features: props.value(keys::AUDIO_FEATURES)?,
             attention: props.parse(keys::AUDIO_ATTENTION)?,
+            ahead: read_ahead(props)?,
         },
         network: props.parse(keys::NETWORK)?,
         step: props.parse(keys::STEP)?,
@@ -177,6 +178,28 @@ fn read_info(props: &Props<'_>, contract: u32, format: &str) -> Result<ModelInfo
         background_png,
         upsample: read_upsample(props, contract, format)?,
     })
+}
+
+/// The audio rows a graph reads past the window's middle ([`keys::AUDIO_AHEAD`]), absent
+/// for one that reads them all; refused with attention or beyond the window's half.
+fn read_ahead(props: &Props<'_>) -> Result<Option<usize>, MetadataError> {
+    let Some(v) = props.0.get(keys::AUDIO_AHEAD) else {
+        return Ok(None);
+    };
+    let a: usize = parse(keys::AUDIO_AHEAD, v)?;
+    let window: usize = props.value(keys::AUDIO_WINDOW)?;
+    let attention: bool = props.parse(keys::AUDIO_ATTENTION)?;
+    if a == 0 || a > window / 2 || attention {
+        return Err(MetadataError::Malformed(
+            keys::AUDIO_AHEAD.to_string(),
+            format!(
+                "{a} rows ahead: it must be 1 to half the window ({}) and the graph without \
+                 attention",
+                window / 2
+            ),
+        ));
+    }
+    Ok(Some(a))
 }
 
 /// A ray graph's upsampler ([`keys::UPSAMPLE`], required from contract 5); `None` for a

@@ -54,6 +54,10 @@ pub struct AudioInput {
     pub n_features: usize,
     /// Fuse the neighbourhood with attention; without, only window `att_frames / 2` counts.
     pub attention: bool,
+    /// Feature frames past the centre window's middle that the graph reads; the later rows
+    /// are zeroed inside it (`None`: all of them). Only without attention.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ahead: Option<usize>,
 }
 
 impl AudioInput {
@@ -65,6 +69,22 @@ impl AudioInput {
     /// Values in one neighbourhood.
     pub fn len(&self) -> usize {
         self.att_frames * self.window * self.n_features
+    }
+
+    /// Neighbouring frames after the frame itself whose windows the graph reads: the
+    /// neighbourhood's with attention, none without (only the centre window counts).
+    pub fn frames_ahead(&self) -> usize {
+        if self.attention {
+            nldf_core::audio::lookahead_frames(self.att_frames)
+        } else {
+            0
+        }
+    }
+
+    /// Rows of a window the graph reads, from the first (the rest are zeroed).
+    pub fn rows_read(&self) -> usize {
+        self.ahead
+            .map_or(self.window, |a| (self.window / 2 + a).min(self.window))
     }
 
     /// True when the input holds no values.
@@ -174,6 +194,9 @@ impl ModelInfo {
             (keys::BACKGROUND_FILE, s.background.clone()),
         ];
         let mut entries = entries;
+        if let Some(a) = self.audio.ahead {
+            entries.push((keys::AUDIO_AHEAD, json(&a)));
+        }
         if let Some(up) = &self.upsample {
             entries.push((keys::UPSAMPLE, json(up)));
         }

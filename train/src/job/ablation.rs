@@ -106,7 +106,7 @@ impl AblationJob {
             run: self.run.clone(),
             name,
             source: StudentSource::Settings {
-                model: model.clone(),
+                model: Box::new(model.clone()),
                 distill,
                 pool,
                 pseudo: PseudoSettings::default(),

@@ -7,6 +7,7 @@
 pub mod ablation;
 pub mod curves;
 pub mod eval;
+pub mod lookahead;
 pub mod posed;
 pub mod recipe;
 pub mod student;

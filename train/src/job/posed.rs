@@ -143,7 +143,7 @@ impl PosedJob {
             run: self.run.clone(),
             name: format!("posed_{name}"),
             source: StudentSource::Settings {
-                model: self.model.clone(),
+                model: Box::new(self.model.clone()),
                 distill,
                 pool: true,
                 pseudo: PseudoSettings {

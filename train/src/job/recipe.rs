@@ -113,7 +113,7 @@ pub fn student_recipe(
     iters: usize,
 ) -> Result<StudentRunConfig> {
     let mut cfg = StudentSource::Settings {
-        model: model.clone(),
+        model: Box::new(model.clone()),
         distill,
         pool: true,
         pseudo,

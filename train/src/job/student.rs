@@ -23,7 +23,7 @@ use crate::trainers::timing::Timing;
 pub enum StudentSource {
     /// A network shape with the default training settings and these switches.
     Settings {
-        model: StudentConfig,
+        model: Box<StudentConfig>,
         /// Distil from the teacher (Eq. 9); off: pixels only.
         distill: bool,
         /// Train the active beam pool.
@@ -52,7 +52,7 @@ impl StudentSource {
                 pseudo,
             } => {
                 let mut cfg = StudentRunConfig {
-                    model: model.clone(),
+                    model: (**model).clone(),
                     ..StudentRunConfig::default()
                 };
                 cfg.train.distill = *distill;

@@ -130,6 +130,19 @@ pub fn audio_encoder(cfg: &AudioConfig, vb: VarBuilder) -> Result<AudioEncoder> 
 }
 
 impl AudioEncoder {
+    /// A short-lookahead encoder's mask over each window's rows, `[1, 1, window, 1]`: 1 for
+    /// the [`AudioConfig::rows_read`] first rows, 0 after; `None` when it reads them all.
+    fn rows_mask(&self, window: usize, device: &candle_core::Device) -> Result<Option<Tensor>> {
+        let rows = self.cfg.rows_read().min(window);
+        if rows == window {
+            return Ok(None);
+        }
+        let mask: Vec<f32> = (0..window)
+            .map(|j| if j < rows { 1.0 } else { 0.0 })
+            .collect();
+        Ok(Some(Tensor::from_vec(mask, (1, 1, window, 1), device)?))
+    }
+
     /// Codes of `n` frames from their neighbourhoods: with attention, the `att_frames`
     /// windows around each frame are encoded and fused; without, only the centre window
     /// (index `att_frames / 2`) is encoded.
@@ -139,6 +152,14 @@ impl AudioEncoder {
     /// - returns `[n, dim]`
     pub fn forward(&self, neighbourhoods: &Tensor, attention: bool) -> Result<Tensor> {
         let (n, seq, window, f) = neighbourhoods.dims4()?;
+        let masked;
+        let neighbourhoods = match self.rows_mask(window, neighbourhoods.device())? {
+            Some(mask) => {
+                masked = neighbourhoods.broadcast_mul(&mask)?;
+                &masked
+            }
+            None => neighbourhoods,
+        };
         if attention {
             let codes = self
                 .net

@@ -72,6 +72,10 @@ pub fn student_name(cfg: &StudentRunConfig) -> String {
     if !t.pool {
         recipe.push("no pool".into());
     }
+    if let (Some(a), nldf_core::audio::FeatureSource::Nldf(f)) = (m.audio.ahead, &m.audio.features)
+    {
+        recipe.push(format!("audio {:.1} ms ahead", 1e3 * f.lookahead_s(a)));
+    }
     for r in recipe {
         name.push_str(", ");
         name.push_str(&r);

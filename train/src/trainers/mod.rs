@@ -3,7 +3,8 @@
 //! pool ([`pool`]), the optimizer ([`adam`]), checkpoints and configs ([`checkpoint`],
 //! [`config`], [`config_file`]), the loop every trainer shares ([`run_loop`], with its log,
 //! timings, validation [`scores`] and training curves, [`plot`]) and one trainer per network ([`teacher_trainer`], [`student_trainer`],
-//! [`upsampler_trainer`]).
+//! [`upsampler_trainer`]), and the short-lookahead audio encoder distilled over a trained
+//! student ([`lookahead`]).
 
 pub mod adam;
 pub mod checkpoint;
@@ -12,6 +13,7 @@ pub mod config_file;
 pub mod data;
 pub mod frame_model;
 pub mod log;
+pub mod lookahead;
 pub mod loss;
 pub mod memory;
 pub mod plot;

@@ -48,7 +48,7 @@ impl StudentModel {
     }
 
     /// The network of `cfg` at step 0, weights as the variable builder made them.
-    pub(super) fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentModel> {
+    pub(crate) fn build(dir: &Path, cfg: StudentRunConfig) -> Result<StudentModel> {
         cfg.check()?;
         let (varmap, vb) = new_varmap();
         let student = student(&cfg.model, vb)?;
