@@ -79,6 +79,20 @@ impl FrameAudio {
         })
     }
 
+    /// One past the last sample of a chunk that the graph reads: every sample with
+    /// attention (the neighbours' windows reach the chunk's end); without, the end of the
+    /// frame's own window read `ahead` feature frames past its centre (all `W / 2` for
+    /// `None`; a short-lookahead student reads fewer). A live source may put its newest
+    /// sample just before it and NaN after: the graph's frame is the same.
+    pub fn read_end(&self, attention: bool, ahead: Option<usize>) -> usize {
+        if attention {
+            return self.samples;
+        }
+        let rows = ahead.unwrap_or(self.window / 2).max(1);
+        let lookahead = (rows - 1) * self.hop + self.win - self.win / 2;
+        ((-self.offset) as usize + lookahead).min(self.samples)
+    }
+
     /// Feature frames a chunk holds: `P (A - 1) + W`.
     pub fn n_features(&self) -> usize {
         self.features_per_frame * (self.att_frames - 1) + self.window

@@ -286,13 +286,21 @@ fn the_page_draws_nldf_frames_from_a_wav_and_the_microphone() {
         frame_model.audio.samples,
         "the microphone chunk"
     );
+    // The newest samples end where the graph stops reading (the shipped student has no
+    // attention: its own window, 152.5 ms past the frame's instant), NaN after.
+    let info = &frame_model.info.audio;
+    let read_end = frame_model.audio.read_end(info.attention, info.ahead);
+    assert!(read_end < chunk.len(), "{read_end} of {}", chunk.len());
+    assert!(
+        chunk[read_end..].iter().all(|v| v.is_nan()),
+        "the microphone chunk holds samples past the graph's read end {read_end}"
+    );
     let live: Vec<f32> = chunk.iter().copied().filter(|v| !v.is_nan()).collect();
     let rms = (live.iter().map(|v| v * v).sum::<f32>() / live.len().max(1) as f32).sqrt();
     assert!(
-        live.len() == chunk.len() && rms > 0.05,
-        "the microphone chunk is silent or short: rms {rms}, {} of {} samples",
+        live.len() == read_end && rms > 0.05,
+        "the microphone chunk is silent or short: rms {rms}, {} of {read_end} samples",
         live.len(),
-        chunk.len()
     );
     let kind = if ort_available() {
         BackendKind::Ort

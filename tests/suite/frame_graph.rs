@@ -567,3 +567,58 @@ fn a_keep_mask_renders_the_kept_pixels_and_the_background_elsewhere() {
         }
     }
 }
+
+/// A live source puts its newest sample just before the graph's read end
+/// (`FrameAudio::read_end`) and NaN after it, as the page's microphone does: without
+/// attention the frame is the one of the whole chunk, for the full window and for a
+/// short-lookahead student, while a chunk cut a hop earlier changes it. The numbers are
+/// those the page's unit test (`web/test/model.test.mjs`) takes for nldf's default layout.
+#[test]
+fn a_chunk_cut_at_the_graphs_read_end_gives_the_whole_chunks_frame() {
+    let default = FrameAudio::new(&nldf_core::audio::FeatureConfig::default(), 25.0, 8).unwrap();
+    assert_eq!((default.samples, default.offset), (9680, -5320));
+    assert_eq!(default.read_end(false, None), 5320 + 2440);
+    assert_eq!(default.read_end(false, Some(5)), 5320 + 1480);
+    assert_eq!(default.read_end(true, None), 9680);
+    let mut full = StudentConfig::tiny();
+    full.attention = false;
+    let mut short = full.clone();
+    short.audio.ahead = Some(3);
+    for (c, cfg) in [full, short].into_iter().enumerate() {
+        let spec = spec_for(&cfg);
+        let run = write_run_with(&cfg, 70 + c as u64, spec.clone());
+        run.scale_weights_like_trained(cfg.n_blocks());
+        let path = run.root.join("frame.onnx");
+        export_frame(&run.student_dir(), &path, WeightType::F32).unwrap();
+        let model = read_frame_model(&path).unwrap();
+        let info = &model.info.audio;
+        assert_eq!(info.ahead, cfg.audio.ahead);
+        let end = model.audio.read_end(info.attention, info.ahead);
+        let wave = speech_like(16_000);
+        let f = 12;
+        let chunk = model.audio.chunk(&wave, f);
+        let cut = |at: usize| -> Vec<f32> {
+            let mut c = chunk.clone();
+            c[at..].iter_mut().for_each(|v| *v = f32::NAN);
+            c
+        };
+        let pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+        let mut graph = FrameGraph::open(&model, BackendKind::Tract, 1).unwrap();
+        let whole = graph.render(pose, &chunk).unwrap().image;
+        let at_end = graph.render(pose, &cut(end)).unwrap().image;
+        let earlier = graph
+            .render(pose, &cut(end - model.audio.hop))
+            .unwrap()
+            .image;
+        let d_end = max_diff(&whole.data, &at_end.data);
+        let d_earlier = max_diff(&whole.data, &earlier.data);
+        println!(
+            "config {c}: read end {end}: cut there {d_end:.2e}, a hop earlier {d_earlier:.2e}"
+        );
+        assert_eq!(d_end, 0.0, "config {c}: the graph reads past {end}");
+        assert!(
+            d_earlier > 1e-6,
+            "config {c}: the graph ignores its last row"
+        );
+    }
+}

@@ -98,9 +98,14 @@ export function frameModelInfo(bytes, name = 'the model') {
     }
   };
   const audio = json('nldf.frame_audio');
-  for (const k of ['sample_rate', 'samples', 'offset', 'samples_per_frame']) {
+  for (const k of ['sample_rate', 'samples', 'offset', 'samples_per_frame', 'hop', 'win', 'window']) {
     if (!Number.isInteger(audio[k])) throw new Error(`${name}: nldf.frame_audio.${k} is not an integer`);
   }
+  const ahead = p.has('nldf.audio_ahead') ? json('nldf.audio_ahead') : null;
+  if (ahead !== null && !(Number.isInteger(ahead) && ahead > 0 && ahead <= audio.window / 2)) {
+    throw new Error(`${name}: nldf.audio_ahead is "${p.get('nldf.audio_ahead')}", not 1 to ${audio.window / 2}`);
+  }
+  audio.readEnd = readEnd(audio, json('nldf.audio_attention') === true, ahead);
   if (audio.sample_rate !== 16000) {
     throw new Error(`${name}: audio at ${audio.sample_rate} Hz, the page handles 16000 Hz`);
   }
@@ -173,13 +178,27 @@ export function chunkFor(layout, samples, frame) {
   return out;
 }
 
-// The newest `layout.samples` samples of a live signal, as the chunk of a frame whose audio
-// ends now (NaN in front while fewer have arrived).
+// One past the last sample of a chunk that the graph reads. With attention, every sample:
+// the neighbours' windows reach the chunk's end. Without, the frame's own window alone, whose
+// rows end `ahead` feature frames past its centre (all `window / 2` unless nldf.audio_ahead
+// says fewer, a short-lookahead student's): the frame's instant lies at `-offset`, and the
+// last row read ends half a Hann window after its centre, `ahead - 1` hops past the instant.
+export function readEnd(layout, attention, ahead) {
+  if (attention) return layout.samples;
+  const rows = ahead ?? layout.window / 2;
+  const lookahead = (rows - 1) * layout.hop + layout.win - Math.floor(layout.win / 2);
+  return Math.min(layout.samples, -layout.offset + lookahead);
+}
+
+// The newest samples of a live signal, as the chunk of the frame whose read audio ends now:
+// they end at `layout.readEnd` (the chunk's end without it), NaN in front while fewer have
+// arrived and NaN after it, where the graph reads nothing it uses.
 export function liveChunk(layout, ring) {
   const out = new Float32Array(layout.samples).fill(NaN);
-  const have = Math.min(ring.count, out.length);
+  const end = layout.readEnd ?? out.length;
+  const have = Math.min(ring.count, end);
   for (let i = 0; i < have; i++) {
-    out[out.length - have + i] = ring.at(ring.count - have + i);
+    out[end - have + i] = ring.at(ring.count - have + i);
   }
   return out;
 }
