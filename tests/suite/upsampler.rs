@@ -801,3 +801,27 @@ fn the_upsampler_follows_its_described_layout() {
         assert_eq!(layout.stages.len(), cfg.stages());
     }
 }
+
+/// The x2 shape chosen for 128 x 128 on the tuning scene ships as a config that
+/// `nldf train upsampler --config` reads: a 1x1 reduction to 64 channels and one x2 stage of
+/// 32, 4000 steps, 60 % of the recorded crops on the mouth, the rest the defaults.
+#[test]
+fn the_shipped_x2_upsampler_config_reads_as_chosen() {
+    use nldf_train::trainers::config::read_config;
+    use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, UpsamplerTrainConfig};
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/upsampler_x2.json");
+    let mut cfg: UpsamplerRunConfig = read_config(&path).unwrap();
+    assert_eq!(cfg.model.factor, 2);
+    assert_eq!(cfg.model.channels, vec![64, 32]);
+    assert_eq!(cfg.model.margin, UpsamplerConfig::default().margin);
+    assert_eq!(cfg.train.iters, 4000);
+    assert_eq!(cfg.train.mouth_fraction, 0.6);
+    let defaults = UpsamplerTrainConfig::default();
+    assert_eq!(
+        (cfg.train.batch, cfg.train.lr),
+        (defaults.batch, defaults.lr)
+    );
+    cfg.student = "student".into();
+    cfg.check().unwrap();
+}
