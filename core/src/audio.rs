@@ -73,6 +73,13 @@ pub fn lookahead_frames(att_frames: usize) -> usize {
     att_frames.saturating_sub(1) - att_frames / 2
 }
 
+/// Samples past a window's centre (the frame's instant) that reading `ahead` feature frames
+/// past it takes: the last one read starts `ahead - 1` hops after the centre and ends half a
+/// Hann window later (at least one frame is read).
+pub fn samples_past_centre(ahead: usize, hop: usize, win: usize) -> usize {
+    ahead.max(1).saturating_sub(1) * hop + win - win / 2
+}
+
 /// Settings of the log-mel features. The defaults follow common speech front ends (25 ms
 /// windows every 20 ms at 16 kHz, as DeepSpeech's 50 Hz features that AD-NeRF uses) with
 /// AD-NeRF's 16-frame window and its feature count F = 29.
@@ -124,8 +131,7 @@ impl FeatureConfig {
     /// a Hann window later. A video frame's instant is taken on the feature grid (every
     /// frame at 25 fps with the defaults).
     pub fn lookahead_s(&self, ahead: usize) -> f64 {
-        let hops = ahead as f64 - 1.0;
-        (hops * self.hop as f64 + (self.win - self.win / 2) as f64) / self.sample_rate as f64
+        samples_past_centre(ahead, self.hop, self.win) as f64 / self.sample_rate as f64
     }
 
     /// The most feature frames past a window's centre whose lookahead

@@ -88,8 +88,8 @@ impl FrameAudio {
         if attention {
             return self.samples;
         }
-        let rows = ahead.unwrap_or(self.window / 2).max(1);
-        let lookahead = (rows - 1) * self.hop + self.win - self.win / 2;
+        let rows = ahead.unwrap_or(self.window / 2);
+        let lookahead = crate::audio::samples_past_centre(rows, self.hop, self.win);
         ((-self.offset) as usize + lookahead).min(self.samples)
     }
 

@@ -85,9 +85,14 @@ impl AudioConfig {
     /// Rows of each `[window, n_features]` window the encoder reads, from the first: the
     /// rest are zeroed (`window / 2 + ahead`; all without `ahead`).
     pub fn rows_read(&self) -> usize {
-        self.ahead
-            .map_or(self.window, |a| (self.window / 2 + a).min(self.window))
+        rows_read(self.window, self.ahead)
     }
+}
+
+/// Rows of a `window`-row audio window that an encoder reading `ahead` feature frames past
+/// its centre reads, from the first (all of them for `None`).
+pub fn rows_read(window: usize, ahead: Option<usize>) -> usize {
+    ahead.map_or(window, |a| (window / 2 + a).min(window))
 }
 
 /// A retired switch (`opacity`, `anchor_beams`) read from a config written before checkpoint

@@ -83,8 +83,7 @@ impl AudioInput {
 
     /// Rows of a window the graph reads, from the first (the rest are zeroed).
     pub fn rows_read(&self) -> usize {
-        self.ahead
-            .map_or(self.window, |a| (self.window / 2 + a).min(self.window))
+        nldf_core::student_config::rows_read(self.window, self.ahead)
     }
 
     /// True when the input holds no values.
