@@ -433,12 +433,21 @@ fn check_skipping(
         skipped >= frames.len() / 2,
         "the page skipped {skipped} frames"
     );
+    // The audio moves some of the head, and the page sends the graph the rays nldf sends.
+    assert!(page_rays > 0, "no skipped frame re-rendered a ray");
+    assert_eq!(
+        page_rays, nldf_rays,
+        "rays re-rendered, the page's and nldf's"
+    );
     assert!(
         worst_kept <= TOL_8BIT,
         "re-rendered pixels {worst_kept}/255 off nldf's full frames"
     );
+    // Where nldf's skipped frames are its full frames exactly (infinite PSNR), the page's
+    // may differ by the runtimes' rounding alone.
     assert!(
-        page_worst <= nldf_worst + TOL_8BIT && page_psnr >= nldf_psnr - 0.5,
+        page_worst <= nldf_worst + TOL_8BIT
+            && (page_psnr >= nldf_psnr - 0.5 || page_worst <= TOL_8BIT),
         "the page's skipping strays further from the full frames than nldf's: \
          {page_psnr:.2} dB (worst {page_worst}/255) against {nldf_psnr:.2} dB \
          (worst {nldf_worst}/255)"
@@ -447,9 +456,11 @@ fn check_skipping(
 
 /// A frame graph with a learned upsampler (the real-time student at 128 x 128, x4, weights
 /// at a trained network's magnitude) picked through the page's file input: the page sizes
-/// `keep` to the coarse grid, says so, turns its still-pixel skipping off, and draws nldf's
-/// frames (`FrameRenderer` on the same student and upsampler's ray graph) within 1/255, at
-/// both ends and the middle of the track, from the default pose and a turned one.
+/// `keep` to the coarse grid, says so, and draws nldf's frames (`FrameRenderer` on the same
+/// student and upsampler's ray graph) within 1/255, at both ends and the middle of the
+/// track, from the default pose and a turned one. With still-pixel skipping on, the page
+/// gives the graph the coarse cells its kept pixels read, and its frames match nldf's own
+/// skipping on the upsampled ray graph (`check_skipping`).
 #[test]
 fn the_page_draws_an_upsampled_frame_graph() {
     if !browser_available() {
@@ -468,6 +479,11 @@ fn the_page_draws_an_upsampled_frame_graph() {
     spec.intrinsics = crate::util::camera_at(128, 128);
     let run = crate::util::write_run_with(&cfg, 61, spec);
     run.scale_weights_like_trained(cfg.n_blocks());
+    // Audio that moves pixels past the skipper's threshold, as speech moves a trained
+    // head's mouth: skipped frames then re-render coarse cells, not none (with the gain at
+    // 1.2 none moves; at 1.5 a page that left out the CNN's reach sent 24096 rays where
+    // nldf sent 25008, and its frames strayed 239/255).
+    run.scale_audio_weights(1.5);
     let up_dir = run.root.join("upsampler");
     crate::upsampler::write_upsampler(&up_dir, &UpsamplerConfig::with_factor(4), cfg.width, 62);
     let frame_path = run.root.join("frame_up.onnx");
@@ -477,7 +493,7 @@ fn the_page_draws_an_upsampled_frame_graph() {
 
     let tmp = tempfile::tempdir().unwrap();
     let wav = tmp.path().join("speech.wav");
-    write_test_wav(&wav, 1.0);
+    write_test_wav(&wav, 2.0);
     let out = tmp.path().join("browser");
     let model = read_model(&ray_path).unwrap();
     let info = &model.info;
@@ -487,18 +503,24 @@ fn the_page_draws_an_upsampled_frame_graph() {
     let default_pose = Mat4::from_cols_array_2d(&info.spec.default_pose).transpose();
     let centre = info.spec.bounds.centre();
     let pose = |(yaw, pitch): (f32, f32)| turn_about(centre, yaw, pitch) * default_pose;
+    let n_skip = n.to_string();
     let result = run_page(
         &wav,
         &out,
         &frames,
-        &["--model-file", frame_path.to_str().unwrap()],
+        &[
+            "--model-file",
+            frame_path.to_str().unwrap(),
+            "--skip-frames",
+            &n_skip,
+        ],
     );
     let status = result["model_status"].as_str().unwrap_or_default();
     assert!(
         status.contains("learned upsampler x4") && status.contains("32 x 32"),
         "the page does not say it holds an upsampler: {status:?}"
     );
-    assert_eq!(result["skip_enabled"], false, "skipping is off for it");
+    assert_eq!(result["skip_enabled"], true, "skipping is offered for it");
     assert_eq!(
         (result["width"].as_u64(), result["height"].as_u64()),
         (Some(128), Some(128))
@@ -514,6 +536,7 @@ fn the_page_draws_an_upsampled_frame_graph() {
          {parity}",
         frames.len() * POSES.len()
     );
+    check_skipping(&result, &out, &model, &windows, &mut renderer);
 }
 
 /// nldf's renderer on `model` in tract, 2 threads.

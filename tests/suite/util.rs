@@ -84,6 +84,22 @@ impl Run {
         .unwrap();
     }
 
+    /// Multiplies the audio encoder's weights by `gain` and saves the checkpoint: a larger
+    /// gain makes the frame follow the audio over more of the head.
+    pub(crate) fn scale_audio_weights(&self, gain: f64) {
+        for (name, var) in sorted_vars(&self.varmap).unwrap() {
+            if name.starts_with("audio.") && name.ends_with("weight") {
+                var.set(&(var.as_tensor() * gain).unwrap()).unwrap();
+            }
+        }
+        save_tensors(
+            &self.student_dir().join("model.safetensors"),
+            &weights(&self.varmap).unwrap(),
+            checkpoint_meta("student"),
+        )
+        .unwrap();
+    }
+
     /// Rounds every weight of the candle student to f16 and back (the fp16 model's
     /// values).
     pub(crate) fn round_weights_to_f16(&self) {

@@ -88,9 +88,9 @@ async function runGraph(chunk, c2w, keep) {
   return { image, nRays };
 }
 
-// The page skips still pixels of graphs without an upsampler only (its `keep` is then the
-// image's).
-const skipping = () => $('skip').checked && state.model?.info.upsample === 1;
+// Still pixels are skipped while the box is ticked (with a learned upsampler, through the
+// coarse cells they read: ./still.js).
+const skipping = () => $('skip').checked && !!state.model;
 const probeChunks = () => probeFrames(state.track.frames, SKIP_CONFIG.probes).map((f) => trackChunk(f));
 
 // One frame: the graph's frame for `chunk` from the camera turned by yaw/pitch (with `skip`,
@@ -161,7 +161,7 @@ async function loadModel(source, name) {
     throw new Error(`${name}: the graph has no ${missing.join(' or ')} (an older export? run nldf export --frame again)`);
   }
   const all = new Uint8Array(info.keepWidth * info.keepHeight).fill(1);
-  const skipper = new StillSkipper(info.width, info.height);
+  const skipper = new StillSkipper(info.width, info.height, SKIP_CONFIG, info.upsample);
   await exclusive(async () => {
     await state.model?.session.release();
     state.model = { session, info, name, all, skipper };
@@ -174,10 +174,8 @@ async function loadModel(source, name) {
     `${name.split('/').pop()}: ${info.width} x ${info.height}, ${info.fps} fps, ` +
     `${info.audio.samples} samples (${(info.audio.samples / RATE).toFixed(2)} s) of audio a frame` +
     (info.upsample > 1
-      ? `; learned upsampler x${info.upsample} (rays on ${info.keepWidth} x ${info.keepHeight}; ` +
-        'still pixels are not skipped)'
+      ? `; learned upsampler x${info.upsample} (rays on ${info.keepWidth} x ${info.keepHeight})`
       : '');
-  $('skip').disabled = info.upsample > 1;
   clearError();
   state.dirty = true;
   if (state.track) setTrack(state.track.samples, state.track.name);
@@ -439,7 +437,6 @@ const hook = {
   bench: (n = 50, warmup = 5, toCanvas = true, skip = false) => exclusive(async () => {
     const info = state.model.info;
     if (skip && !state.track) throw new Error('skipping needs a track');
-    if (skip && info.upsample > 1) throw new Error('the page skips still pixels of graphs without an upsampler only');
     const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
     const pose = (yaw) => turnedPose(info.defaultPose, info.centre, yaw, 0);
     const skipper = state.model.skipper;

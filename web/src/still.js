@@ -6,6 +6,12 @@
 // over those and the last full frame spreads by more than `threshold` in any channel, grown
 // by `margin` pixels (a square), is kept: from then on the graph runs with `keep` = that
 // set, and every other pixel is the last full frame's.
+//
+// A graph with a learned upsampler x`factor` takes `keep` on its coarse grid: the cells of
+// the kept pixels, grown by the upsampler's receptive halo (`coarseKeep`), as nldf's
+// `FrameRenderer::render_pixels` sends them. The CNN then runs on the box around those
+// cells, which gives the kept pixels as the whole frame does; only the kept pixels are
+// taken from it.
 
 // SkipConfig::default().
 export const SKIP_CONFIG = { threshold: 12 / 255, margin: 2, refresh: 25, probes: 8 };
@@ -37,15 +43,49 @@ export function grow(hot, width, height, margin) {
   return keep;
 }
 
+// upsampler_config::receptive_halo: the coarse cells on each side of an output pixel's own
+// cell that an upsampler x`factor` reads for it (2 for x2, x4 and x8).
+export function receptiveHalo(factor) {
+  const f = Math.max(1, factor);
+  let stages = 0;
+  while (f % 2 ** (stages + 1) === 0) stages += 1;
+  let halo = 1;
+  for (let x = 0; x < f; x++) {
+    let lo = x - 1;
+    let hi = x + 1;
+    for (let s = 0; s < stages; s++) {
+      lo = Math.floor(lo / 2) - 1;
+      hi = Math.floor(hi / 2) + 1;
+    }
+    halo = Math.max(halo, -lo, hi);
+  }
+  return halo;
+}
+
+// The coarse `keep` of an upsampler x`factor` for the pixels `keep` (0/1, `width` x
+// `height`): every cell holding a kept pixel, grown by `receptiveHalo(factor)` cells (a
+// square) within the grid.
+export function coarseKeep(keep, width, height, factor) {
+  const wc = width / factor;
+  const hc = height / factor;
+  const own = new Uint8Array(wc * hc);
+  for (let p = 0, n = width * height; p < n; p++) {
+    if (keep[p]) own[Math.floor(Math.floor(p / width) / factor) * wc + Math.floor((p % width) / factor)] = 1;
+  }
+  return grow(own, wc, hc, receptiveHalo(factor));
+}
+
 const samePose = (a, b) => a.length === b.length && a.every((v, i) => v === b[i]);
 
 // Renders frames through `run(chunk, pose, keep)`, which resolves to the graph's
-// { image: Float32Array [h w 3], nRays } (keep null: every pixel).
+// { image: Float32Array [h w 3], nRays } (keep null: every pixel; else the graph's own
+// `keep`, on the coarse grid of an upsampler x`factor`).
 export class StillSkipper {
-  constructor(width, height, config = SKIP_CONFIG) {
+  constructor(width, height, config = SKIP_CONFIG, factor = 1) {
     this.width = width;
     this.height = height;
     this.config = config;
+    this.factor = factor;
     this.reset();
   }
 
@@ -54,6 +94,7 @@ export class StillSkipper {
     this.base = null;
     this.headRays = 0;
     this.keep = null; // the kept pixels at `pose`, once found
+    this.runKeep = null; // the graph's `keep` for them
     this.sinceFull = 0;
   }
 
@@ -75,13 +116,14 @@ export class StillSkipper {
     let kind = 'partial';
     if (this.keep === null) {
       this.keep = await this.findMoving(run, pose, probeChunks());
+      this.runKeep = this.factor > 1 ? coarseKeep(this.keep, this.width, this.height, this.factor) : this.keep;
       kind = 'probed';
     }
     this.sinceFull += 1;
     const image = this.base.slice();
     let nRays = 0;
     if (this.keep.some((k) => k)) {
-      const out = await run(chunk, pose, this.keep);
+      const out = await run(chunk, pose, this.runKeep);
       nRays = out.nRays;
       for (let p = 0, n = this.width * this.height; p < n; p++) {
         if (!this.keep[p]) continue;
