@@ -76,12 +76,7 @@ impl Run {
             };
             var.set(&(var.as_tensor() * factor).unwrap()).unwrap();
         }
-        save_tensors(
-            &self.student_dir().join("model.safetensors"),
-            &weights(&self.varmap).unwrap(),
-            checkpoint_meta("student"),
-        )
-        .unwrap();
+        save_student(&self.student_dir(), &self.varmap);
     }
 
     /// Multiplies the audio encoder's weights by `gain` and saves the checkpoint: a larger
@@ -92,12 +87,7 @@ impl Run {
                 var.set(&(var.as_tensor() * gain).unwrap()).unwrap();
             }
         }
-        save_tensors(
-            &self.student_dir().join("model.safetensors"),
-            &weights(&self.varmap).unwrap(),
-            checkpoint_meta("student"),
-        )
-        .unwrap();
+        save_student(&self.student_dir(), &self.varmap);
     }
 
     /// Rounds every weight of the candle student to f16 and back (the fp16 model's
@@ -113,6 +103,16 @@ impl Run {
             var.set(&rounded).unwrap();
         }
     }
+}
+
+/// Writes the weights of `varmap` as the student checkpoint of `student_dir`.
+fn save_student(student_dir: &Path, varmap: &candle_nn::VarMap) {
+    save_tensors(
+        &student_dir.join("model.safetensors"),
+        &weights(varmap).unwrap(),
+        checkpoint_meta("student"),
+    )
+    .unwrap();
 }
 
 /// The camera of `spec_for` at `width` x `height` pixels with the same field of view.
@@ -191,12 +191,7 @@ pub(crate) fn write_run_with(cfg: &StudentConfig, seed: u64, spec: RenderSpec) -
     let (varmap, vb) = new_varmap();
     let model = student(&cfg, vb).unwrap();
     init_seeded(&varmap, seed).unwrap();
-    save_tensors(
-        &student_dir.join("model.safetensors"),
-        &weights(&varmap).unwrap(),
-        checkpoint_meta("student"),
-    )
-    .unwrap();
+    save_student(&student_dir, &varmap);
     let config = serde_json::json!({ "model": cfg, "seed": seed, "lr": 5e-4 });
     std::fs::write(student_dir.join("config.json"), config.to_string()).unwrap();
     spec.save(&student_dir.join(RENDER_SPEC_FILE)).unwrap();
