@@ -465,7 +465,7 @@ fn the_page_draws_an_upsampled_frame_graph() {
     }
     use nldf_core::student_config::StudentConfig;
     use nldf_core::upsampler_config::UpsamplerConfig;
-    use nldf_export::{WeightType, export_frame_upsampled, export_student_upsampled};
+    use nldf_export::{WeightType, export_frame, export_frame_upsampled, export_student_upsampled};
 
     let mut cfg = StudentConfig::realtime();
     cfg.beam.anchor = Some(nldf_core::beam::BeamAnchor {
@@ -487,6 +487,9 @@ fn the_page_draws_an_upsampled_frame_graph() {
     export_frame_upsampled(&run.student_dir(), &up_dir, &frame_path, WeightType::F32).unwrap();
     let ray_path = run.root.join("model_up.onnx");
     export_student_upsampled(&run.student_dir(), &up_dir, &ray_path, WeightType::F32).unwrap();
+    let native_path = run.root.join("frame_native.onnx");
+    export_frame(&run.student_dir(), &native_path, WeightType::F32).unwrap();
+    let choose = format!("{},{}", frame_path.display(), native_path.display());
 
     let tmp = tempfile::tempdir().unwrap();
     let wav = tmp.path().join("speech.wav");
@@ -510,8 +513,11 @@ fn the_page_draws_an_upsampled_frame_graph() {
             frame_path.to_str().unwrap(),
             "--skip-frames",
             &n_skip,
+            "--choose",
+            &choose,
         ],
     );
+    check_choice(&result);
     let status = result["model_status"].as_str().unwrap_or_default();
     assert!(
         status.contains("learned upsampler x4") && status.contains("32 x 32"),
@@ -534,6 +540,80 @@ fn the_page_draws_an_upsampled_frame_graph() {
         frames.len() * POSES.len()
     );
     check_skipping(&result, &out, &model, &windows, &mut renderer);
+}
+
+/// What the page picked among the native and the x4 graph of the same student (offered
+/// upsampled first): at a target both reach, the native graph (the most rays); at one
+/// neither reaches, the faster as timed, said so; loaded with no model named, the demo's
+/// frame graph, with a line that says it falls short of 1e9 frames/s.
+fn check_choice(result: &serde_json::Value) {
+    let picks = result["choice"]
+        .as_array()
+        .expect("the driver recorded the page's picks");
+    assert_eq!(picks.len(), 2);
+    for pick in picks {
+        let measured = pick["measured"].as_array().unwrap();
+        let names: Vec<&str> = measured
+            .iter()
+            .map(|m| m["name"].as_str().unwrap())
+            .collect();
+        assert_eq!(
+            names,
+            ["frame_native.onnx", "frame_up.onnx"],
+            "ranked by rays"
+        );
+        let rays: Vec<u64> = measured
+            .iter()
+            .map(|m| m["rays"].as_u64().unwrap())
+            .collect();
+        assert_eq!(rays, [128 * 128, 32 * 32]);
+        assert!(
+            measured.iter().all(|m| m["fps"].as_f64().unwrap() > 0.0),
+            "{pick}"
+        );
+        assert_eq!(pick["model"].as_str(), pick["picked"].as_str(), "{pick}");
+        assert_eq!(pick["width"], 128);
+    }
+    let (easy, hard) = (&picks[0], &picks[1]);
+    assert_eq!(easy["picked"], "frame_native.onnx", "{easy}");
+    assert_eq!(easy["reached"], true);
+    let note = easy["note"].as_str().unwrap();
+    assert!(
+        note.starts_with("picked frame_native.onnx") && note.contains("reaching 0.001"),
+        "{note:?}"
+    );
+    let fps = |name: &str| {
+        hard["measured"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["name"] == name)
+            .unwrap()["fps"]
+            .as_f64()
+            .unwrap()
+    };
+    let fastest = if fps("frame_up.onnx") > fps("frame_native.onnx") {
+        "frame_up.onnx"
+    } else {
+        "frame_native.onnx"
+    };
+    assert_eq!(hard["picked"], fastest, "{hard}");
+    assert_eq!(hard["reached"], false);
+    let note = hard["note"].as_str().unwrap();
+    assert!(
+        note.contains("under 1000000000 frames/s: frames will be dropped")
+            && note.contains("also timed"),
+        "{note:?}"
+    );
+    let first = &result["default_choice"];
+    assert_eq!(first["model"], "frame.onnx", "{first}");
+    assert_eq!(first["shown"], true);
+    let note = first["note"].as_str().unwrap();
+    assert!(
+        note.starts_with("picked frame.onnx") && note.contains("under 1000000000"),
+        "{note:?}"
+    );
+    println!("the page's picks: {}; {}", easy["note"], hard["note"]);
 }
 
 /// nldf's renderer on `model` in tract, 2 threads.

@@ -49,6 +49,7 @@ const state = {
   mic: null, // { ring, stop }
   lastMicChunk: null,
   rendering: false,
+  choosing: false, // the live loop waits while the page times frame graphs
   times: [], // { at, nRays, headRays } of the frames drawn in the last 2 s
   last: null, // the last frame: { kind, nRays, headRays, keep }
 };
@@ -71,8 +72,8 @@ function pose() {
 
 // The graph's frame for `chunk` from camera-to-world `c2w` (row-major), only the pixels
 // `keep` marks (a 0/1 mask, row-major; null: every pixel) rendered: { image, nRays }.
-async function runGraph(chunk, c2w, keep) {
-  const { session, info, all } = state.model;
+async function runGraph(chunk, c2w, keep, model = state.model) {
+  const { session, info, all } = model;
   const { width, height, keepWidth, keepHeight } = info;
   const out = await session.run({
     audio: new ort.Tensor('float32', chunk, [chunk.length]),
@@ -132,7 +133,8 @@ function draw(image) {
   return rgb;
 }
 
-async function loadModel(source, name) {
+// Reads and checks a frame graph and opens its session: { session, info, name, all, skipper }.
+async function openModel(source, name) {
   let bytes = source;
   if (typeof source === 'string') {
     name ??= source;
@@ -162,24 +164,95 @@ async function loadModel(source, name) {
   }
   const all = new Uint8Array(info.keepWidth * info.keepHeight).fill(1);
   const skipper = new StillSkipper(info.width, info.height, SKIP_CONFIG, info.upsample);
+  return { session, info, name, all, skipper };
+}
+
+const shortName = (name) => name.split('/').pop();
+
+// Makes `model` the page's model (releasing the one before); `note` is said after its line.
+async function install(model, note = '') {
+  const { info, name } = model;
   await exclusive(async () => {
-    await state.model?.session.release();
-    state.model = { session, info, name, all, skipper };
+    if (state.model !== model) await state.model?.session.release();
+    state.model = model;
   });
   canvas.width = info.width;
   canvas.height = info.height;
   $('drop').style.aspectRatio = `${info.width} / ${info.height}`;
   $('drop').style.height = 'auto';
   $('model-status').textContent =
-    `${name.split('/').pop()}: ${info.width} x ${info.height}, ${info.fps} fps, ` +
+    `${shortName(name)}: ${info.width} x ${info.height}, ${info.fps} fps, ` +
     `${info.audio.samples} samples (${(info.audio.samples / RATE).toFixed(2)} s) of audio a frame` +
     (info.upsample > 1
       ? `; learned upsampler x${info.upsample} (rays on ${info.keepWidth} x ${info.keepHeight})`
       : '');
+  $('choice').textContent = note;
+  $('choice').hidden = !note;
   clearError();
   state.dirty = true;
   if (state.track) setTrack(state.track.samples, state.track.name);
   return { width: info.width, height: info.height, upsample: info.upsample, fps: info.fps, audio: info.audio, threads };
+}
+
+async function loadModel(source, name) {
+  return install(await openModel(source, name));
+}
+
+// Frames per second of `model`'s runs here: `n` full frames after one untimed, the head
+// turning a little as a moving head does (every ray cast: what skipping cannot save), with
+// the track's audio (silence without one).
+async function affordable(model, n) {
+  const { info } = model;
+  const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
+  const once = async (i) => {
+    const c2w = turnedPose(info.defaultPose, info.centre, 0.2 * Math.sin(i / 7), 0);
+    const { image } = await runGraph(chunk(i), c2w, null, model);
+    return image;
+  };
+  return exclusive(async () => {
+    await once(0);
+    const t0 = performance.now();
+    for (let i = 1; i <= n; i++) await once(i);
+    return (1000 * n) / (performance.now() - t0);
+  });
+}
+
+// Picks what this browser can afford among frame graphs (URLs or bytes): each is timed on
+// `n` frames of a moving head; ranked by the rays they cast (native rays first, then coarser
+// grids), the first that reaches `target` frames/s (default: the graphs' own frame rate)
+// is kept, else the fastest, and the page says which and why. Resolves to { picked, target,
+// reached, measured: [{ name, fps, rays, upsample }] } in rank order.
+async function choose(sources, target = null, n = 6) {
+  if (!sources.length) throw new Error('no frame graph to choose from');
+  const models = [];
+  state.choosing = true;
+  try {
+    for (const s of sources) {
+      const [source, name] = Array.isArray(s) ? s : [s, undefined];
+      models.push(await openModel(source, name));
+    }
+    const rays = (m) => m.info.keepWidth * m.info.keepHeight;
+    models.sort((a, b) => rays(b) - rays(a));
+    target ??= Math.max(...models.map((m) => m.info.fps));
+    const measured = [];
+    for (const m of models) measured.push({ name: shortName(m.name), fps: await affordable(m, n), rays: rays(m), upsample: m.info.upsample });
+    let at = measured.findIndex((m) => m.fps >= target);
+    const reached = at >= 0;
+    if (!reached) at = measured.reduce((best, m, i) => (m.fps > measured[best].fps ? i : best), 0);
+    const others = measured.filter((_, i) => i !== at).map((m) => `${m.name} ${m.fps.toFixed(1)}`);
+    const note =
+      `picked ${measured[at].name}: ${measured[at].fps.toFixed(1)} frames/s measured here for a moving head, ` +
+      (reached ? `reaching ${target} frames/s` : `under ${target} frames/s: frames will be dropped`) +
+      (others.length ? ` (also timed: ${others.join(', ')})` : '') + '.';
+    for (const [i, m] of models.entries()) if (i !== at) await m.session.release();
+    await install(models[at], note);
+    return { picked: measured[at].name, target, reached, measured };
+  } catch (e) {
+    for (const m of models) if (m !== state.model) await m.session.release().catch(() => {});
+    throw e;
+  } finally {
+    state.choosing = false;
+  }
 }
 
 function setTrack(samples, name) {
@@ -270,7 +343,7 @@ function micChunk() {
 // The live loop: the frame the audio is at, whenever the previous one is done.
 function tick() {
   requestAnimationFrame(tick);
-  if (!state.model || state.rendering) return;
+  if (!state.model || state.rendering || state.choosing) return;
   let chunk;
   let skip = false;
   const info = state.model.info;
@@ -350,7 +423,17 @@ const endDrag = () => {
 view.addEventListener('pointerup', endDrag);
 view.addEventListener('pointercancel', endDrag);
 
-// Files: picked, or dropped anywhere on the page (.onnx: a model; anything else: audio).
+// Files: picked, or dropped anywhere on the page (.onnx: a model, several: the page picks
+// among them; anything else: audio).
+async function openFiles(files) {
+  const graphs = [...files].filter((f) => f.name.toLowerCase().endsWith('.onnx'));
+  if (graphs.length > 1) {
+    const sources = await Promise.all(graphs.map(async (f) => [new Uint8Array(await f.arrayBuffer()), f.name]));
+    await choose(sources);
+    return;
+  }
+  if (files[0]) await openFile(files[0]);
+}
 async function openFile(file) {
   const bytes = new Uint8Array(await file.arrayBuffer());
   if (file.name.toLowerCase().endsWith('.onnx')) {
@@ -361,7 +444,7 @@ async function openFile(file) {
   }
 }
 const guarded = (fn) => (...args) => Promise.resolve().then(() => fn(...args)).catch((e) => showError(e.message ?? String(e)));
-$('model-input').addEventListener('change', guarded(async (e) => e.target.files[0] && openFile(e.target.files[0])));
+$('model-input').addEventListener('change', guarded(async (e) => openFiles(e.target.files)));
 $('wav-input').addEventListener('change', guarded(async (e) => e.target.files[0] && openFile(e.target.files[0])));
 document.addEventListener('dragover', (e) => {
   e.preventDefault();
@@ -371,8 +454,8 @@ document.addEventListener('dragleave', () => view.classList.remove('dragover'));
 document.addEventListener('drop', guarded(async (e) => {
   e.preventDefault();
   view.classList.remove('dragover');
-  const file = e.dataTransfer?.files?.[0];
-  if (file) await openFile(file);
+  const files = e.dataTransfer?.files;
+  if (files?.length) await openFiles(files);
 }));
 $('play').addEventListener('click', guarded(() => (state.playback ? stopPlayback() : play())));
 $('skip').addEventListener('change', () => {
@@ -387,6 +470,11 @@ const hook = {
   threads,
   ortVersion: ort.env.versions?.web,
   loadModel: (source, name) => loadModel(source, name).catch((e) => {
+    showError(e.message);
+    throw e;
+  }),
+  // Picks among frame graphs what this browser can afford (see choose above).
+  choose: (sources, target = null, n = 6) => choose(sources, target, n).catch((e) => {
     showError(e.message);
     throw e;
   }),
@@ -489,11 +577,19 @@ async function skipError(n, chunk, c2w) {
   return { psnr_vs_full: psnr(total / count), worst_frame_psnr: psnr(worst), max_abs_error: maxAbs };
 }
 
+// `?model=URL` loads that graph; `?models=A,B,...` (default: the demo's frame graph) picks
+// what this browser can afford among them, at `?fps=` frames/s if given.
 hook.ready = (async () => {
-  const url = params.get('model') ?? '../models/demo/frame.onnx';
-  if (url === 'none') return;
+  const one = params.get('model');
+  if (one === 'none') return;
+  const url = (u) => [new URL(u, location.href).pathname, shortName(u)];
   try {
-    await hook.loadModel(new URL(url, location.href).pathname, url.split('/').pop());
+    if (one) {
+      await hook.loadModel(...url(one));
+    } else {
+      const list = (params.get('models') ?? '../models/demo/frame.onnx').split(',').filter(Boolean);
+      await hook.choose(list.map(url), Number(params.get('fps')) || null);
+    }
   } catch (e) {
     $('model-status').textContent = 'no model';
   }

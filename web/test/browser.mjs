@@ -6,15 +6,17 @@
 //
 // node web/test/browser.mjs --wav WAV --out DIR [--frames 0,1,25] [--poses 0,0;0.3,-0.1]
 //   [--skip-frames N] [--model URL] [--model-file PATH] [--mic] [--ray-graph PATH]
-//   [--screenshot PNG] [--chromium PATH]
+//   [--choose PATH,PATH] [--screenshot PNG] [--chromium PATH]
 //
 // DIR gets frame_<f>_<p>.rgb (raw RGB u8, pose number p), skip_<f>.rgb and, for a skipped
 // frame, skip_<f>.keep (the page's mask, one byte a pixel), mic.f32 (the chunk the page
 // used, raw little-endian f32) and mic.rgb, and result.json: sizes, files, how each skipping
-// frame was made, page and console errors.
+// frame was made, what the page picked among the --choose graphs (at a target every graph
+// reaches and at one none reaches) and on a fresh load with no model named, page and
+// console errors.
 import { chromium } from 'playwright-core';
 import { execFileSync } from 'node:child_process';
-import { mkdtempSync, mkdirSync, rmSync, writeFileSync, existsSync } from 'node:fs';
+import { mkdtempSync, mkdirSync, readFileSync, rmSync, writeFileSync, existsSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import path from 'node:path';
 import { startServer } from '../serve.mjs';
@@ -36,6 +38,7 @@ function parseArgs(argv) {
     else if (key === '--mic') args.mic = true;
     else if (key === '--ray-graph') args.rayGraph = path.resolve(value());
     else if (key === '--model-file') args.modelFile = path.resolve(value());
+    else if (key === '--choose') args.choose = value().split(',').map((f) => path.resolve(f));
     else if (key === '--screenshot') args.screenshot = path.resolve(value());
     else if (key === '--chromium') args.chromium = value();
     else throw new Error(`unknown argument ${key}`);
@@ -211,6 +214,31 @@ try {
     result.mic = { chunk: 'mic.f32', file: 'mic.rgb', yaw, pitch, captured: mic.captured };
   }
 
+  // The page picks among frame graphs what it can afford: at a target every graph reaches it
+  // keeps the one with the most rays, at one none reaches the fastest; then, loaded afresh
+  // with no model named, it times the demo's frame graph against 1e9 frames/s and says so.
+  if (args.choose) {
+    const files = args.choose.map((f) => [readFileSync(f).toString('base64'), path.basename(f)]);
+    const picks = [];
+    for (const target of [0.001, 1e9]) {
+      picks.push(await page.evaluate(async ([files, target]) => {
+        const bytes = (b64) => Uint8Array.from(atob(b64), (c) => c.charCodeAt(0));
+        const r = await window.nldf.choose(files.map(([b, n]) => [bytes(b), n]), target, 3);
+        return { ...r, note: document.getElementById('choice').textContent, model: window.nldf.state().model, width: document.getElementById('canvas').width };
+      }, [files, target]));
+    }
+    result.choice = picks;
+    result.errors = await page.evaluate(() => window.nldf.errors.slice());
+    await page.goto(`${base}/?autoplay=0&fps=1e9`);
+    await page.waitForFunction(() => window.nldf !== undefined);
+    await page.evaluate(() => window.nldf.ready);
+    result.default_choice = await page.evaluate(() => ({
+      model: window.nldf.state().model,
+      note: document.getElementById('choice').textContent,
+      shown: !document.getElementById('choice').hidden,
+    }));
+  }
+
   if (args.screenshot) {
     await page.evaluate(() => window.nldf.play());
     await page.waitForTimeout(1500);
@@ -219,7 +247,7 @@ try {
     await page.evaluate(() => window.nldf.stop());
     result.screenshot = args.screenshot;
   }
-  result.errors = await page.evaluate(() => window.nldf.errors.slice());
+  result.errors = (result.errors ?? []).concat(await page.evaluate(() => window.nldf.errors.slice()));
 } catch (e) {
   failed = e;
   result.failure = String(e.message ?? e).split('\n')[0];
