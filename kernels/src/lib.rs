@@ -1205,20 +1205,24 @@ mod tests {
         }
     }
 
-    /// `c (+)= act(a b + addend + bias)` gated, on `path`, through the tiles every product
-    /// uses (`a` `[m, k]`, `b` `[k, n]`, addend, bias, gate and `c` `[m, n]`).
-    #[allow(clippy::too_many_arguments)]
-    fn product_on(
-        path: KernelPath,
-        (a, m, k): (&[f32], usize, usize),
-        (b, n): (&[f32], usize),
-        c: &mut [f32],
+    /// One gated product `c (+)= act(a b + addend + bias)` of the tests: `a` `[m, k]`, `b`
+    /// `[k, n]`, addend and gate `[m, n]`, bias `[n]`.
+    struct Case<'a> {
+        a: &'a [f32],
+        b: &'a [f32],
+        m: usize,
+        k: usize,
+        n: usize,
         accumulate: bool,
-        addend: Option<&[f32]>,
-        bias: Option<&[f32]>,
+        addend: Option<&'a [f32]>,
+        bias: Option<&'a [f32]>,
         relu: bool,
-        gate: Option<&[f32]>,
-    ) {
+        gate: Option<&'a [f32]>,
+    }
+
+    /// `t` into `c` (`[m, n]`) on `path`, through the tiles every product uses.
+    fn product_on(path: KernelPath, t: &Case, c: &mut [f32]) {
+        let Case { a, b, m, k, n, .. } = *t;
         let mut packed = Vec::new();
         // SAFETY: every slice has the shape given (the caller's test data).
         unsafe {
@@ -1236,40 +1240,31 @@ mod tests {
                 packed.as_ptr(),
                 c.as_mut_ptr(),
                 n,
-                accumulate,
+                t.accumulate,
                 (
-                    addend.map_or(std::ptr::null(), <[f32]>::as_ptr),
+                    t.addend.map_or(std::ptr::null(), <[f32]>::as_ptr),
                     n,
-                    if addend.is_some() {
+                    if t.addend.is_some() {
                         Addend::Full
                     } else {
                         Addend::None
                     },
                 ),
-                bias.map_or(std::ptr::null(), <[f32]>::as_ptr),
-                relu,
-                gate.map_or(std::ptr::null(), <[f32]>::as_ptr),
+                t.bias.map_or(std::ptr::null(), <[f32]>::as_ptr),
+                t.relu,
+                t.gate.map_or(std::ptr::null(), <[f32]>::as_ptr),
                 path,
             );
         }
     }
 
-    /// The wide kernels' arithmetic, one output at a time in scalar f32: per block of KC
-    /// reduction rows a chain of fused multiply-adds from zero (`f32::mul_add` rounds once,
-    /// as `vfmadd` does), added to C from the second block on (or from the first when
-    /// accumulating); the last block adds the addend, then the bias, then clamps at zero
-    /// and gates, as `finish` does.
-    #[allow(clippy::too_many_arguments)]
-    fn fused_chain_model(
-        (a, m, k): (&[f32], usize, usize),
-        (b, n): (&[f32], usize),
-        c: &mut [f32],
-        accumulate: bool,
-        addend: Option<&[f32]>,
-        bias: Option<&[f32]>,
-        relu: bool,
-        gate: Option<&[f32]>,
-    ) {
+    /// The wide kernels' arithmetic for `t` into `c`, one output at a time in scalar f32:
+    /// per block of KC reduction rows a chain of fused multiply-adds from zero
+    /// (`f32::mul_add` rounds once, as `vfmadd` does), added to C from the second block on
+    /// (or from the first when accumulating); the last block adds the addend, then the
+    /// bias, then clamps at zero and gates, as `finish` does.
+    fn fused_chain_model(t: &Case, c: &mut [f32]) {
+        let Case { a, b, m, k, n, .. } = *t;
         for i in 0..m {
             for j in 0..n {
                 let mut k0 = 0;
@@ -1280,21 +1275,21 @@ mod tests {
                     for p in k0..k0 + kc {
                         x = a[i * k + p].mul_add(b[p * n + j], x);
                     }
-                    if accumulate || k0 > 0 {
+                    if t.accumulate || k0 > 0 {
                         x += c[i * n + j];
                     }
                     if last {
-                        if let Some(add) = addend {
+                        if let Some(add) = t.addend {
                             x += add[i * n + j];
                         }
-                        if let Some(bias) = bias {
+                        if let Some(bias) = t.bias {
                             x += bias[j];
                         }
                         // `max(x, 0)` of the vector units gives +0 for -0 too.
-                        if relu && x <= 0.0 {
+                        if t.relu && x <= 0.0 {
                             x = 0.0;
                         }
-                        if gate.is_some_and(|g| g[i * n + j] <= 0.0) {
+                        if t.gate.is_some_and(|g| g[i * n + j] <= 0.0) {
                             x = 0.0;
                         }
                     }
@@ -1341,32 +1336,23 @@ mod tests {
             let gate = values(m * n, 36);
             for mode in 0..8 {
                 let (accumulate, relu, extras) = (mode & 1 != 0, mode & 2 != 0, mode & 4 != 0);
-                let extra = |v: &[f32]| -> Option<Vec<f32>> { extras.then(|| v.to_vec()) };
-                let (addend, bias, gate) = (extra(&addend), extra(&bias), extra(&gate));
-                let mut want = old.clone();
-                fused_chain_model(
-                    (&a, m, k),
-                    (&b, n),
-                    &mut want,
+                let case = Case {
+                    a: &a,
+                    b: &b,
+                    m,
+                    k,
+                    n,
                     accumulate,
-                    addend.as_deref(),
-                    bias.as_deref(),
+                    addend: extras.then_some(&addend[..]),
+                    bias: extras.then_some(&bias[..]),
                     relu,
-                    gate.as_deref(),
-                );
+                    gate: extras.then_some(&gate[..]),
+                };
+                let mut want = old.clone();
+                fused_chain_model(&case, &mut want);
                 let run = |path| {
                     let mut c = old.clone();
-                    product_on(
-                        path,
-                        (&a, m, k),
-                        (&b, n),
-                        &mut c,
-                        accumulate,
-                        addend.as_deref(),
-                        bias.as_deref(),
-                        relu,
-                        gate.as_deref(),
-                    );
+                    product_on(path, &case, &mut c);
                     c
                 };
                 for &path in &wide {
