@@ -198,12 +198,16 @@ async function loadModel(source, name) {
   return install(await openModel(source, name));
 }
 
+// The audio of frame `f` of the track, looped (silence without a track), for a graph of `info`.
+const loopedChunk = (info, f) =>
+  state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples);
+
 // Frames per second of `model`'s runs here: `n` full frames after one untimed, the head
 // turning a little as a moving head does (every ray cast: what skipping cannot save), with
 // the track's audio (silence without one).
 async function affordable(model, n) {
   const { info } = model;
-  const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
+  const chunk = (f) => loopedChunk(info, f);
   const once = async (i) => {
     const c2w = turnedPose(info.defaultPose, info.centre, 0.2 * Math.sin(i / 7), 0);
     const { image } = await runGraph(chunk(i), c2w, null, model);
@@ -525,7 +529,7 @@ const hook = {
   bench: (n = 50, warmup = 5, toCanvas = true, skip = false) => exclusive(async () => {
     const info = state.model.info;
     if (skip && !state.track) throw new Error('skipping needs a track');
-    const chunk = (f) => (state.track ? chunkFor(info.audio, state.track.samples, f % state.track.frames) : new Float32Array(info.audio.samples));
+    const chunk = (f) => loopedChunk(info, f);
     const pose = (yaw) => turnedPose(info.defaultPose, info.centre, yaw, 0);
     const skipper = state.model.skipper;
     let rays = 0;
