@@ -207,12 +207,7 @@ const loopedChunk = (info, f) =>
 // the track's audio (silence without one).
 async function affordable(model, n) {
   const { info } = model;
-  const chunk = (f) => loopedChunk(info, f);
-  const once = async (i) => {
-    const c2w = turnedPose(info.defaultPose, info.centre, 0.2 * Math.sin(i / 7), 0);
-    const { image } = await runGraph(chunk(i), c2w, null, model);
-    return image;
-  };
+  const once = (i) => runGraph(loopedChunk(info, i), turnedPose(info.defaultPose, info.centre, 0.2 * Math.sin(i / 7), 0), null, model);
   return exclusive(async () => {
     await once(0);
     const t0 = performance.now();
@@ -468,20 +463,20 @@ $('skip').addEventListener('change', () => {
 });
 $('mic').addEventListener('click', guarded(() => (state.mic ? stopMic() : startMic())));
 
+// `fn`, its error also shown on the page.
+const shown = (fn) => (...args) => fn(...args).catch((e) => {
+  showError(e.message);
+  throw e;
+});
+
 // The hook: deterministic frames for the tests and the benchmark (yaw and pitch in radians).
 const hook = {
   errors,
   threads,
   ortVersion: ort.env.versions?.web,
-  loadModel: (source, name) => loadModel(source, name).catch((e) => {
-    showError(e.message);
-    throw e;
-  }),
+  loadModel: shown(loadModel),
   // Picks among frame graphs what this browser can afford (see choose above).
-  choose: (sources, target = null, n = 6) => choose(sources, target, n).catch((e) => {
-    showError(e.message);
-    throw e;
-  }),
+  choose: shown(choose),
   setWav,
   chunkFor: (f) => trackChunk(f),
   // The track's frame f, through the still-pixel skipper while its box is ticked.
