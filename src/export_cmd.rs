@@ -92,6 +92,9 @@ fn export(
     out: &Path,
     weights: WeightType,
 ) -> Result<ExportReport> {
+    if let Some(name) = &args.upsampler {
+        note_mouth_patch(&args.run.join(name), args.frame);
+    }
     Ok(match (&args.data, weights) {
         (Some(data), WeightType::Int8) => {
             let export = || -> nldf_pipeline::Result<ExportReport> {
@@ -138,6 +141,31 @@ fn export(
         _ => export_student(student, out, weights)
             .with_context(|| format!("exporting the student in {}", student.display()))?,
     })
+}
+
+/// Says whether the upsampler in `dir` has a mouth patch and which graph draws it: the frame
+/// graph does, the ray graph (nldf's renderer) leaves it out.
+fn note_mouth_patch(dir: &Path, frame: bool) {
+    let path = dir.join(nldf_core::run_files::CONFIG_FILE);
+    let Ok(config) = nldf_core::files::read_json::<serde_json::Value>(&path) else {
+        return; // the export itself names what is wrong with the file
+    };
+    if config
+        .pointer("/model/mouth_patch")
+        .is_some_and(|b| !b.is_null())
+    {
+        if frame {
+            println!(
+                "mouth patch: the pixels whose rays meet the mouth's box are the student's own \
+                 rays, drawn over the upsampled frame"
+            );
+        } else {
+            eprintln!(
+                "note: the ray graph leaves out the upsampler's mouth patch; the frame graph \
+                 (--frame) draws it"
+            );
+        }
+    }
 }
 
 /// Reads the written model back as every loader will; a frame graph's inputs are printed.

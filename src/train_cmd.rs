@@ -49,6 +49,11 @@ pub enum TrainCommand {
     /// frame from its features, learned from the recorded frames and the teacher's renders
     /// of pseudo views. Goes to RUN/<name>; `nldf eval` scores it beside the student.
     Upsampler(UpsamplerArgs),
+    /// Give a trained upsampler (RUN/<name>) a mouth patch without training it again: the
+    /// mouth's box, found from RUN/teacher's surface at the dataset's mouth pixels, saved as
+    /// `model.mouth_patch` in its config.json, so that every frame's pixels whose rays meet
+    /// it are the student's own rays (`nldf train upsampler` does this itself).
+    MouthPatch(MouthPatchArgs),
     /// A short-lookahead student from a trained one (RUN/<student>, without audio
     /// attention): its audio encoder distilled again to read at most --lookahead-ms of
     /// future audio, the rest kept, into RUN/<name>, so that `nldf render --stream` shows
@@ -81,6 +86,19 @@ pub struct UpsamplerArgs {
     /// Training steps (overrides the configuration).
     #[arg(long)]
     pub iters: Option<usize>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct MouthPatchArgs {
+    /// Dataset folder the student was trained on.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Run folder holding RUN/teacher and the upsampler.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Folder of the upsampler inside RUN.
+    #[arg(long, default_value = "upsampler")]
+    pub name: String,
 }
 
 #[derive(clap::Args, Debug, Clone)]
@@ -200,6 +218,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         Some(TrainCommand::Teacher(args)) => run_teacher(args),
         Some(TrainCommand::Student(args)) => run_student(args),
         Some(TrainCommand::Upsampler(args)) => run_upsampler(args),
+        Some(TrainCommand::MouthPatch(args)) => run_mouth_patch(args),
         Some(TrainCommand::Lookahead(args)) => crate::lookahead_cmd::run(args),
         None => run_recipe(args.recipe),
     }
@@ -317,6 +336,38 @@ fn run_teacher(args: TeacherArgs) -> Result<()> {
 
 /// The student's folder inside a run when neither `--student` nor a configuration names one.
 const DEFAULT_STUDENT: &str = "student";
+
+/// Runs `nldf train mouth-patch`.
+fn run_mouth_patch(args: MouthPatchArgs) -> Result<()> {
+    use anyhow::Context;
+    use nldf_train::trainers::config::{StudentRunConfig, read_config};
+    use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, attach_mouth_patch};
+    let dir = args.run.join(&args.name);
+    let cfg: UpsamplerRunConfig = read_config(&dir.join(nldf_core::run_files::CONFIG_FILE))
+        .with_context(|| format!("reading the upsampler in {}", dir.display()))?;
+    let student_dir = args.run.join(&cfg.student);
+    let student_cfg: StudentRunConfig =
+        read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
+            .with_context(|| format!("reading the student in {}", student_dir.display()))?;
+    let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
+    eprintln!("loading {}", args.data.display());
+    let data = nldf_train::trainers::data::TrainData::open_with(&args.data, true, &audio)?;
+    eprintln!("finding the mouth's box from the teacher's surface at the mouth pixels");
+    match attach_mouth_patch(&dir, &args.run, &data)? {
+        Some(b) => println!(
+            "mouth patch: the box {:?} to {:?} in head space, saved in {}",
+            b.lo.to_array(),
+            b.hi.to_array(),
+            dir.join(nldf_core::run_files::CONFIG_FILE).display()
+        ),
+        None => anyhow::bail!(
+            "{}: its frames have no mouth region (no region labels, no landmarks), so there \
+             is no mouth box to patch",
+            args.data.display()
+        ),
+    }
+    Ok(())
+}
 
 /// Runs `nldf train upsampler`.
 fn run_upsampler(args: UpsamplerArgs) -> Result<()> {

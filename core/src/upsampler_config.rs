@@ -7,6 +7,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::bounds::Bounds;
 use crate::camera::Intrinsics;
 use crate::checks::in_range;
 use crate::error::{Error, Result};
@@ -89,6 +90,13 @@ pub struct UpsamplerConfig {
     /// Coarse rays added around the head's hits on each side of the box the CNN runs on,
     /// so that its edge (zero padding) lies on background.
     pub margin: usize,
+    /// The mouth's box in head space (`lo`, `hi`), inside the head's bounds: every output
+    /// pixel whose ray meets it (within `[near, far]`) is the student's own ray at full
+    /// resolution, drawn over the upsampled frame, so that the mouth keeps native-ray
+    /// detail. `nldf train upsampler` (or `nldf train mouth-patch` on a trained upsampler)
+    /// fills it from the teacher's mouth surface points; absent: no patch.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mouth_patch: Option<Bounds>,
 }
 
 impl Default for UpsamplerConfig {
@@ -97,6 +105,7 @@ impl Default for UpsamplerConfig {
             factor: 4,
             channels: vec![32, 16, 16],
             margin: 2,
+            mouth_patch: None,
         }
     }
 }
@@ -160,7 +169,20 @@ impl UpsamplerConfig {
         for (i, &c) in self.channels.iter().enumerate() {
             in_range(&format!("{at}.channels[{i}]"), c, 1, 256)?;
         }
-        in_range(&format!("{at}.margin"), self.margin, 0, 64)
+        in_range(&format!("{at}.margin"), self.margin, 0, 64)?;
+        if let Some(b) = &self.mouth_patch {
+            let ok =
+                (0..3).all(|a| b.lo[a].is_finite() && b.hi[a].is_finite() && b.lo[a] < b.hi[a]);
+            if !ok {
+                return Err(Error::Argument(format!(
+                    "`{at}.mouth_patch` must be a box with finite `lo` below `hi` on every \
+                     axis, got lo {:?}, hi {:?}",
+                    b.lo.to_array(),
+                    b.hi.to_array()
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// Multiply-adds of the CNN per output pixel inside the box, for an input of `width`

@@ -268,9 +268,44 @@ pub(crate) fn upsampled_image(
     background: &str,
     (hc, wc): (usize, usize),
 ) -> Result<String> {
+    let rows = student_rows(g, ckpt)?;
+    upsampled_image_of(g, ckpt, up, &rows, (hits, hit, n_hit), background, (hc, wc))
+}
+
+/// [`upsampled_image`] when the student also ran on other rays after the coarse hits (a
+/// mouth patch's): its rows `first` (int64 `[n_hit]`) are the coarse hits'.
+pub(crate) fn upsampled_image_first(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    first: &str,
+    (hits, hit, n_hit): (&str, &str, &str),
+    background: &str,
+    (hc, wc): (usize, usize),
+) -> Result<String> {
+    let rows = student_rows(g, ckpt)?;
+    let rows = g.node(
+        "Gather",
+        "up.coarse_rows",
+        &[&rows, first],
+        vec![attr_int("axis", 0)],
+    );
+    upsampled_image_of(g, ckpt, up, &rows, (hits, hit, n_hit), background, (hc, wc))
+}
+
+/// [`upsampled_image`] from the coarse hits' student rows `rows` (`[n_hit, width + 4]`).
+fn upsampled_image_of(
+    g: &mut GraphBuilder,
+    ckpt: &StudentCheckpoint,
+    up: &UpsamplerCheckpoint,
+    rows: &str,
+    (hits, hit, n_hit): (&str, &str, &str),
+    background: &str,
+    (hc, wc): (usize, usize),
+) -> Result<String> {
     let r = up.shape.factor;
     let (h, w) = (hc * r, wc * r);
-    let canvas = coarse_canvas(g, ckpt, hits, (hc, wc))?;
+    let canvas = coarse_canvas(g, ckpt, rows, hits, (hc, wc));
     let b = coarse_box(g, hit, n_hit, (hc, wc), up.shape.margin);
     // The box by index lists (NonZero, Gather) rather than a Slice of computed bounds:
     // runtimes size a NonZero's output when it runs, a Slice's not always.
@@ -319,12 +354,12 @@ pub(crate) fn upsampled_image(
 fn coarse_canvas(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
+    rows: &str,
     hits: &str,
     (hc, wc): (usize, usize),
-) -> Result<String> {
+) -> String {
     let width = ckpt.shape.width;
     let channels = width + 4;
-    let rows = student_rows(g, ckpt)?;
     let miss = miss_row(g, width);
     let canvas_shape = g.constant_i64(
         "up.canvas_shape",
@@ -334,18 +369,13 @@ fn coarse_canvas(
     let canvas = g.node("Expand", "up.canvas_empty", &[&miss, &canvas_shape], vec![]);
     let axis1 = g.constant_i64("up.index_axis", &[1], &[1]);
     let at = g.node("Unsqueeze", "up.hit_rows", &[hits, &axis1], vec![]);
-    let canvas = g.node(
-        "ScatterND",
-        "up.canvas_flat",
-        &[&canvas, &at, &rows],
-        vec![],
-    );
+    let canvas = g.node("ScatterND", "up.canvas_flat", &[&canvas, &at, rows], vec![]);
     let grid_shape = g.constant_i64(
         "up.grid_shape",
         &[3],
         &[hc as i64, wc as i64, channels as i64],
     );
-    Ok(g.node("Reshape", "up.canvas", &[&canvas, &grid_shape], vec![]))
+    g.node("Reshape", "up.canvas", &[&canvas, &grid_shape], vec![])
 }
 
 /// The hits' box on the coarse grid, grown by `margin` cells, as node names: whether any

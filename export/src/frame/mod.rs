@@ -134,15 +134,41 @@ fn frame_model(
         &[Dim::Fixed(hc), Dim::Fixed(wc)],
     );
     let windows = front_end(&mut g, &layout, &cfg, &audio);
-    let rays = camera_rays(&mut g, &grid, &pose);
-    let (hits, hit, n_rays) = head_hits(&mut g, ckpt, &rays, &keep);
+    let rays = camera_rays(&mut g, "rays", &grid, &pose);
+    let (hits, hit, mut n_rays) = head_hits(&mut g, ckpt, &rays, &keep);
     let image = match up {
         None => composite_frame(&mut g, ckpt, &rays, &hits, &windows, &background, (h, w))?,
         Some(up) => {
             let bg = background_nodes(&mut g, &background, (h, w));
-            let (o, d) = hit_rays(&mut g, &rays, &hits);
-            student_nodes(&mut g, ckpt, (&o, &d), &windows, None)?;
-            upsampled_image(&mut g, ckpt, up, (&hits, &hit, &n_rays), &bg, (hc, wc))?
+            let (o, d) = hit_rays(&mut g, "frame", &rays, &hits);
+            match &up.shape.mouth_patch {
+                None => {
+                    student_nodes(&mut g, ckpt, (&o, &d), &windows, None)?;
+                    upsampled_image(&mut g, ckpt, up, (&hits, &hit, &n_rays), &bg, (hc, wc))?
+                }
+                Some(mouth) => {
+                    let patch = MouthPatch::rays(&mut g, ckpt, mouth, &k, &pose);
+                    // One student pass over the coarse hits, then the patch's rays.
+                    let axis0 = || vec![attr_int("axis", 0)];
+                    let o = g.node("Concat", "patch.all_origins", &[&o, &patch.o], axis0());
+                    let d = g.node("Concat", "patch.all_directions", &[&d, &patch.d], axis0());
+                    student_nodes(&mut g, ckpt, (&o, &d), &windows, None)?;
+                    let first = rank_rows(&mut g, "up.coarse", "keep.hit_count", &hits, None);
+                    let image = crate::upsampler_graph::upsampled_image_first(
+                        &mut g,
+                        ckpt,
+                        up,
+                        &first,
+                        (&hits, &hit, &n_rays),
+                        &bg,
+                        (hc, wc),
+                    )?;
+                    let all = g.node("Add", "patch.all_rays", &[&n_rays, &patch.count], vec![]);
+                    let image = patch.paint(&mut g, &image, &n_rays, &bg, ckpt.shape.width, (h, w));
+                    n_rays = all;
+                    image
+                }
+            }
         }
     };
     g.node("Identity", FRAME_OUTPUT_IMAGE, &[&image], vec![]);
@@ -272,42 +298,79 @@ fn background_rgb8(ckpt: &StudentCheckpoint, w: usize, h: usize) -> Result<Vec<u
 
 /// The camera's rays through every pixel, row by row: `(origin [1, 3], directions
 /// [h w, 3])`, `d = (c0 x_i + c1 y_j) + c2 (-1)` with the rotation's columns `c` and
-/// AD-NeRF's `x_i = (i - cx) / f`, `y_j = -(j - cy) / f`, added in glam's order.
-fn camera_rays(g: &mut GraphBuilder, k: &Intrinsics, pose: &str) -> (String, String) {
+/// AD-NeRF's `x_i = (i - cx) / f`, `y_j = -(j - cy) / f`, added in glam's order; its nodes'
+/// names start with `prefix`.
+fn camera_rays(g: &mut GraphBuilder, prefix: &str, k: &Intrinsics, pose: &str) -> (String, String) {
     let xs: Vec<f32> = (0..k.width)
         .map(|i| k.camera_direction(i as f32, 0.0).x)
         .collect();
     let ys: Vec<f32> = (0..k.height)
         .map(|j| k.camera_direction(0.0, j as f32).y)
         .collect();
-    let xs = g.constant_f32("rays.x", &[1, k.width as usize, 1], &xs);
-    let ys = g.constant_f32("rays.y", &[k.height as usize, 1, 1], &ys);
+    let xs = g.constant_f32(&format!("{prefix}.x"), &[1, k.width as usize, 1], &xs);
+    let ys = g.constant_f32(&format!("{prefix}.y"), &[k.height as usize, 1, 1], &ys);
     let slice = |g: &mut GraphBuilder, name: &str, x: &str, lo: [i64; 2], hi: [i64; 2]| {
         let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
         let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
         g.node("Slice", name, &[x, &lo, &hi], vec![])
     };
-    let column_shape = g.constant_i64("rays.column_shape", &[3], &[1, 1, 3]);
+    let column_shape = g.constant_i64(&format!("{prefix}.column_shape"), &[3], &[1, 1, 3]);
     let mut columns = Vec::new();
     for c in 0..3i64 {
-        let col = slice(g, &format!("rays.rotation{c}"), pose, [0, c], [3, c + 1]);
+        let col = slice(
+            g,
+            &format!("{prefix}.rotation{c}"),
+            pose,
+            [0, c],
+            [3, c + 1],
+        );
         columns.push(g.node(
             "Reshape",
-            &format!("rays.column{c}"),
+            &format!("{prefix}.column{c}"),
             &[&col, &column_shape],
             vec![],
         ));
     }
-    let origin = slice(g, "rays.origin_column", pose, [0, 3], [3, 4]);
-    let row = g.constant_i64("rays.row_shape", &[2], &[1, 3]);
-    let origin = g.node("Reshape", "rays.origin", &[&origin, &row], vec![]);
-    let along_x = g.node("Mul", "rays.along_x", &[&columns[0], &xs], vec![]);
-    let along_y = g.node("Mul", "rays.along_y", &[&columns[1], &ys], vec![]);
-    let across = g.node("Add", "rays.across", &[&along_x, &along_y], vec![]);
-    let back = g.node("Neg", "rays.back", &[&columns[2]], vec![]);
-    let d = g.node("Add", "rays.directions_grid", &[&across, &back], vec![]);
-    let flat = g.constant_i64("rays.flat_shape", &[2], &[-1, 3]);
-    let d = g.node("Reshape", "rays.directions", &[&d, &flat], vec![]);
+    let origin = slice(g, &format!("{prefix}.origin_column"), pose, [0, 3], [3, 4]);
+    let row = g.constant_i64(&format!("{prefix}.row_shape"), &[2], &[1, 3]);
+    let origin = g.node(
+        "Reshape",
+        &format!("{prefix}.origin"),
+        &[&origin, &row],
+        vec![],
+    );
+    let along_x = g.node(
+        "Mul",
+        &format!("{prefix}.along_x"),
+        &[&columns[0], &xs],
+        vec![],
+    );
+    let along_y = g.node(
+        "Mul",
+        &format!("{prefix}.along_y"),
+        &[&columns[1], &ys],
+        vec![],
+    );
+    let across = g.node(
+        "Add",
+        &format!("{prefix}.across"),
+        &[&along_x, &along_y],
+        vec![],
+    );
+    let back = g.node("Neg", &format!("{prefix}.back"), &[&columns[2]], vec![]);
+    let d = g.node(
+        "Add",
+        &format!("{prefix}.directions_grid"),
+        &[&across, &back],
+        vec![],
+    );
+    let flat = g.constant_i64(&format!("{prefix}.flat_shape"), &[2], &[-1, 3]);
+    let d = g.node(
+        "Reshape",
+        &format!("{prefix}.directions"),
+        &[&d, &flat],
+        vec![],
+    );
     (origin, d)
 }
 
@@ -320,96 +383,482 @@ fn camera_rays(g: &mut GraphBuilder, k: &Intrinsics, pose: &str) -> (String, Str
 fn head_hits(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
-    (o, d): &(String, String),
+    rays: &(String, String),
     keep: &str,
 ) -> (String, String, String) {
     let spec = &ckpt.spec;
-    let lo = g.constant_f32("bounds.lo", &[1, 3], &spec.bounds.lo.to_array());
-    let hi = g.constant_f32("bounds.hi", &[1, 3], &spec.bounds.hi.to_array());
-    let to_lo = g.node("Sub", "bounds.to_lo", &[&lo, o], vec![]);
-    let to_hi = g.node("Sub", "bounds.to_hi", &[&hi, o], vec![]);
-    let u = g.node("Div", "bounds.u", &[&to_lo, d], vec![]);
-    let v = g.node("Div", "bounds.v", &[&to_hi, d], vec![]);
-    let enter = g.node("Min", "bounds.enter_raw", &[&u, &v], vec![]);
-    let exit = g.node("Max", "bounds.exit_raw", &[&u, &v], vec![]);
+    let hit = slab_hits(g, "bounds", &spec.bounds, (spec.near, spec.far), rays);
+    let flat = g.constant_i64("keep.flat_shape", &[1], &[-1]);
+    let keep = g.node("Reshape", "keep.pixels", &[keep, &flat], vec![]);
+    let hit = g.node("And", "keep.hit", &[&hit, &keep], vec![]);
+    let (hits, n_hit) = mask_indices(g, ("bounds", "keep"), &hit);
+    (hits, hit, n_hit)
+}
+
+/// The int64 indices `[n]` of the true entries of the bool mask `[m]`, row-major, and how
+/// many there are, int64 `[1]`; the index nodes' names start with `prefixes.0`, the
+/// count's with `prefixes.1`.
+fn mask_indices(g: &mut GraphBuilder, (at, count): (&str, &str), mask: &str) -> (String, String) {
+    let hits = g.node("NonZero", &format!("{at}.hits_2d"), &[mask], vec![]);
+    let flat = g.constant_i64(&format!("{at}.hits_shape"), &[1], &[-1]);
+    // Counted from the mask, not from the indices' shape, which a runtime may hold
+    // symbolically.
+    let ones = g.node(
+        "Cast",
+        &format!("{count}.hit_count"),
+        &[mask],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let n_hit = g.node(
+        "ReduceSum",
+        &format!("{count}.n_rays"),
+        &[&ones],
+        vec![attr_int("keepdims", 1)],
+    );
+    let hits = g.node("Reshape", &format!("{at}.hits"), &[&hits, &flat], vec![]);
+    (hits, n_hit)
+}
+
+/// Whether each ray `o + t d` meets the box `bounds` within `[near, far]`
+/// (`Bounds::intersect`'s slab test, axis by axis), bool `[n]`; node names start with
+/// `prefix`.
+///
+/// # Shapes
+/// - `o`: `[1, 3]` or `[n, 3]`; `d`: `[n, 3]`
+fn slab_hits(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    bounds: &nldf_core::bounds::Bounds,
+    (near, far): (f32, f32),
+    (o, d): &(String, String),
+) -> String {
+    let name = |n: &str| format!("{prefix}.{n}");
+    let lo = g.constant_f32(&name("lo"), &[1, 3], &bounds.lo.to_array());
+    let hi = g.constant_f32(&name("hi"), &[1, 3], &bounds.hi.to_array());
+    let to_lo = g.node("Sub", &name("to_lo"), &[&lo, o], vec![]);
+    let to_hi = g.node("Sub", &name("to_hi"), &[&hi, o], vec![]);
+    let u = g.node("Div", &name("u"), &[&to_lo, d], vec![]);
+    let v = g.node("Div", &name("v"), &[&to_hi, d], vec![]);
+    let enter = g.node("Min", &name("enter_raw"), &[&u, &v], vec![]);
+    let exit = g.node("Max", &name("exit_raw"), &[&u, &v], vec![]);
     // An axis the ray runs parallel to: no limit from inside the slab, a miss from outside.
-    let abs = g.node("Abs", "bounds.abs_d", &[d], vec![]);
-    let tiny = g.constant_f32("bounds.parallel", &[], &[1e-12]);
-    let parallel = g.node("Less", "bounds.is_parallel", &[&abs, &tiny], vec![]);
-    let below = g.node("Less", "bounds.below", &[o, &lo], vec![]);
-    let above = g.node("Greater", "bounds.above", &[o, &hi], vec![]);
-    let outside = g.node("Or", "bounds.outside", &[&below, &above], vec![]);
-    let inf = g.constant_f32("bounds.inf", &[], &[f32::INFINITY]);
-    let neg_inf = g.constant_f32("bounds.neg_inf", &[], &[f32::NEG_INFINITY]);
+    let abs = g.node("Abs", &name("abs_d"), &[d], vec![]);
+    let tiny = g.constant_f32(&name("parallel"), &[], &[1e-12]);
+    let parallel = g.node("Less", &name("is_parallel"), &[&abs, &tiny], vec![]);
+    let below = g.node("Less", &name("below"), &[o, &lo], vec![]);
+    let above = g.node("Greater", &name("above"), &[o, &hi], vec![]);
+    let outside = g.node("Or", &name("outside"), &[&below, &above], vec![]);
+    let inf = g.constant_f32(&name("inf"), &[], &[f32::INFINITY]);
+    let neg_inf = g.constant_f32(&name("neg_inf"), &[], &[f32::NEG_INFINITY]);
     let enter_par = g.node(
         "Where",
-        "bounds.enter_parallel",
+        &name("enter_parallel"),
         &[&outside, &inf, &neg_inf],
         vec![],
     );
     let exit_par = g.node(
         "Where",
-        "bounds.exit_parallel",
+        &name("exit_parallel"),
         &[&outside, &neg_inf, &inf],
         vec![],
     );
     let enter = g.node(
         "Where",
-        "bounds.enter",
+        &name("enter"),
         &[&parallel, &enter_par, &enter],
         vec![],
     );
     let exit = g.node(
         "Where",
-        "bounds.exit",
+        &name("exit"),
         &[&parallel, &exit_par, &exit],
         vec![],
     );
     let reduce = || vec![attr_ints("axes", &[1]), attr_int("keepdims", 0)];
-    let t0 = g.node("ReduceMax", "bounds.t0_axes", &[&enter], reduce());
-    let t1 = g.node("ReduceMin", "bounds.t1_axes", &[&exit], reduce());
-    let near = g.constant_f32("bounds.near", &[], &[spec.near]);
-    let far = g.constant_f32("bounds.far", &[], &[spec.far]);
-    let t0 = g.node("Max", "bounds.t0", &[&t0, &near], vec![]);
-    let t1 = g.node("Min", "bounds.t1", &[&t1, &far], vec![]);
-    let hit = g.node("Greater", "bounds.hit", &[&t1, &t0], vec![]);
-    let flat = g.constant_i64("keep.flat_shape", &[1], &[-1]);
-    let keep = g.node("Reshape", "keep.pixels", &[keep, &flat], vec![]);
-    let hit = g.node("And", "keep.hit", &[&hit, &keep], vec![]);
-    let hits = g.node("NonZero", "bounds.hits_2d", &[&hit], vec![]);
-    let flat = g.constant_i64("bounds.hits_shape", &[1], &[-1]);
-    // Counted from the mask, not from the indices' shape, which a runtime may hold
-    // symbolically.
-    let ones = g.node(
-        "Cast",
-        "keep.hit_count",
-        &[&hit],
-        vec![attr_int("to", DataType::Int64 as i64)],
-    );
-    let n_hit = g.node(
-        "ReduceSum",
-        "keep.n_rays",
-        &[&ones],
-        vec![attr_int("keepdims", 1)],
-    );
-    let hits = g.node("Reshape", "bounds.hits", &[&hits, &flat], vec![]);
-    (hits, hit, n_hit)
+    let t0 = g.node("ReduceMax", &name("t0_axes"), &[&enter], reduce());
+    let t1 = g.node("ReduceMin", &name("t1_axes"), &[&exit], reduce());
+    let near = g.constant_f32(&name("near"), &[], &[near]);
+    let far = g.constant_f32(&name("far"), &[], &[far]);
+    let t0 = g.node("Max", &name("t0"), &[&t0, &near], vec![]);
+    let t1 = g.node("Min", &name("t1"), &[&t1, &far], vec![]);
+    g.node("Greater", &name("hit"), &[&t1, &t0], vec![])
 }
 
-/// The rays `hits` selects: origins and directions `[n_hit, 3]`.
+/// The rows of a batch that the true entries of a mask hold, in the order `NonZero` lists
+/// them (`indices`, int64 `[n]`): entry k (row-major) is row `first + k` (`first` 0 when
+/// `None`; int64 `[1]` otherwise). An index list sized by the mask's `NonZero`, for a
+/// Gather: runtimes do not all size a Slice of computed bounds (tract's fails to run).
+///
+/// # Shapes
+/// - `mask_i64`: int64 `[m]`, 0 or 1; returns int64 `[n]`
+fn rank_rows(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    mask_i64: &str,
+    indices: &str,
+    first: Option<&str>,
+) -> String {
+    let name = |n: &str| format!("{prefix}.{n}");
+    // Ranks summed in f32 (exact to 2^24 entries): tract sums no integers.
+    let mask = g.node(
+        "Cast",
+        &name("mask_f32"),
+        &[mask_i64],
+        vec![attr_int("to", DataType::Float as i64)],
+    );
+    let axis0 = g.constant_i64(&name("rank_axis"), &[], &[0]);
+    let ranks = g.node("CumSum", &name("ranks_f32"), &[&mask, &axis0], vec![]);
+    let ranks = g.node(
+        "Cast",
+        &name("ranks_all"),
+        &[&ranks],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let ranks = g.node(
+        "Gather",
+        &name("ranks"),
+        &[&ranks, indices],
+        vec![attr_int("axis", 0)],
+    );
+    // Ranks count from 1.
+    let one = g.constant_i64(&name("rank_one"), &[1], &[1]);
+    let offset = match first {
+        Some(first) => g.node("Sub", &name("first_row"), &[first, &one], vec![]),
+        None => g.node("Neg", &name("first_row"), &[&one], vec![]),
+    };
+    g.node("Add", &name("row_index"), &[&ranks, &offset], vec![])
+}
+
+/// The pose's rotation columns as `[1, 1, 3]` each and its origin `[1, 3]`, node names
+/// starting with `prefix`.
+fn pose_columns(g: &mut GraphBuilder, prefix: &str, pose: &str) -> ([String; 3], String) {
+    let slice = |g: &mut GraphBuilder, name: &str, lo: [i64; 2], hi: [i64; 2]| {
+        let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
+        let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
+        g.node("Slice", name, &[pose, &lo, &hi], vec![])
+    };
+    let column_shape = g.constant_i64(&format!("{prefix}.column_shape"), &[3], &[1, 1, 3]);
+    let columns = [0i64, 1, 2].map(|c| {
+        let col = slice(g, &format!("{prefix}.rotation{c}"), [0, c], [3, c + 1]);
+        g.node(
+            "Reshape",
+            &format!("{prefix}.column{c}"),
+            &[&col, &column_shape],
+            vec![],
+        )
+    });
+    let origin = slice(g, &format!("{prefix}.origin_column"), [0, 3], [3, 4]);
+    let row = g.constant_i64(&format!("{prefix}.row_shape"), &[2], &[1, 3]);
+    let origin = g.node(
+        "Reshape",
+        &format!("{prefix}.origin"),
+        &[&origin, &row],
+        vec![],
+    );
+    (columns, origin)
+}
+
+/// The pixel rows and columns (int64 `[n]` index lists, ascending) of the rectangle that
+/// the corners of `bounds` project to in the camera `k` at `pose`, grown by one pixel on
+/// each side and clipped to the image; the whole image when a corner is not in front of
+/// the camera (its depth below 1e-6), where the projection bounds nothing. A pixel whose
+/// ray meets the box lies inside: the box's image is the hull of its corners' images.
+fn projected_rect(
+    g: &mut GraphBuilder,
+    bounds: &nldf_core::bounds::Bounds,
+    k: &Intrinsics,
+    pose: &str,
+) -> (String, String) {
+    let (h, w) = (k.height as usize, k.width as usize);
+    let (lo, hi) = (bounds.lo, bounds.hi);
+    let corners: Vec<f32> = (0..8)
+        .flat_map(|c| {
+            [
+                if c & 1 == 0 { lo.x } else { hi.x },
+                if c & 2 == 0 { lo.y } else { hi.y },
+                if c & 4 == 0 { lo.z } else { hi.z },
+            ]
+        })
+        .collect();
+    let corners = g.constant_f32("patch.rect.corners", &[8, 3], &corners);
+    let slice = |g: &mut GraphBuilder, name: &str, lo: [i64; 2], hi: [i64; 2]| {
+        let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
+        let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
+        g.node("Slice", name, &[pose, &lo, &hi], vec![])
+    };
+    let rotation = slice(g, "patch.rect.rotation", [0, 0], [3, 3]);
+    let origin = slice(g, "patch.rect.origin_column", [0, 3], [3, 4]);
+    let row = g.constant_i64("patch.rect.row_shape", &[2], &[1, 3]);
+    let origin = g.node("Reshape", "patch.rect.origin", &[&origin, &row], vec![]);
+    // Camera coordinates: (p - o) R, the rotation's columns being the camera's axes.
+    let rel = g.node("Sub", "patch.rect.relative", &[&corners, &origin], vec![]);
+    let cam = g.node("MatMul", "patch.rect.camera", &[&rel, &rotation], vec![]);
+    let axis1 = g.constant_i64("patch.rect.axis1", &[1], &[1]);
+    let coord = |g: &mut GraphBuilder, name: &str, a: i64| {
+        let lo = g.constant_i64(&format!("{name}.start"), &[1], &[a]);
+        let hi = g.constant_i64(&format!("{name}.end"), &[1], &[a + 1]);
+        g.node("Slice", name, &[&cam, &lo, &hi, &axis1], vec![])
+    };
+    let x = coord(g, "patch.rect.x", 0);
+    let y = coord(g, "patch.rect.y", 1);
+    let z = coord(g, "patch.rect.z", 2);
+    let depth = g.node("Neg", "patch.rect.depth", &[&z], vec![]);
+    let tiny = g.constant_f32("patch.rect.min_depth", &[], &[1e-6]);
+    let front = g.node("Greater", "patch.rect.in_front", &[&depth, &tiny], vec![]);
+    let front = g.node(
+        "Cast",
+        "patch.rect.in_front_i64",
+        &[&front],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let all_axes = || vec![attr_int("keepdims", 0)];
+    let all_front = g.node(
+        "ReduceMin",
+        "patch.rect.all_front_i64",
+        &[&front],
+        all_axes(),
+    );
+    let zero_i = g.constant_i64("patch.rect.zero_i", &[], &[0]);
+    let all_front = g.node(
+        "Greater",
+        "patch.rect.all_front",
+        &[&all_front, &zero_i],
+        vec![],
+    );
+    let safe = g.node("Max", "patch.rect.safe_depth", &[&depth, &tiny], vec![]);
+    let focal = g.constant_f32("patch.rect.focal", &[], &[k.focal]);
+    let px = g.node("Div", "patch.rect.x_over_depth", &[&x, &safe], vec![]);
+    let py = g.node("Div", "patch.rect.y_over_depth", &[&y, &safe], vec![]);
+    let px = g.node("Mul", "patch.rect.x_focal", &[&px, &focal], vec![]);
+    let py = g.node("Mul", "patch.rect.y_focal", &[&py, &focal], vec![]);
+    let cx = g.constant_f32("patch.rect.cx", &[], &[k.cx]);
+    let cy = g.constant_f32("patch.rect.cy", &[], &[k.cy]);
+    let u = g.node("Add", "patch.rect.u", &[&cx, &px], vec![]);
+    let v = g.node("Sub", "patch.rect.v", &[&cy, &py], vec![]);
+    // A span of pixel indices `[floor(min) - 1, ceil(max) + 2)` clipped to `[0, n]`, or all of
+    // them when a corner is not in front.
+    let span = |g: &mut GraphBuilder, name: &str, t: &str, n: usize| {
+        let lo_c = g.constant_f32(&format!("{name}.clip_lo"), &[], &[-2.0]);
+        let hi_c = g.constant_f32(&format!("{name}.clip_hi"), &[], &[n as f32 + 2.0]);
+        let t = g.node(
+            "Clip",
+            &format!("{name}.clipped"),
+            &[t, &lo_c, &hi_c],
+            vec![],
+        );
+        let min = g.node(
+            "ReduceMin",
+            &format!("{name}.min"),
+            &[&t],
+            vec![attr_int("keepdims", 0)],
+        );
+        let max = g.node(
+            "ReduceMax",
+            &format!("{name}.max"),
+            &[&t],
+            vec![attr_int("keepdims", 0)],
+        );
+        let min = g.node("Floor", &format!("{name}.floor"), &[&min], vec![]);
+        let max = g.node("Ceil", &format!("{name}.ceil"), &[&max], vec![]);
+        let one = g.constant_f32(&format!("{name}.one"), &[], &[1.0]);
+        let two = g.constant_f32(&format!("{name}.two"), &[], &[2.0]);
+        let start = g.node("Sub", &format!("{name}.start_f"), &[&min, &one], vec![]);
+        let end = g.node("Add", &format!("{name}.end_f"), &[&max, &two], vec![]);
+        let to_i = || vec![attr_int("to", DataType::Int64 as i64)];
+        let start = g.node("Cast", &format!("{name}.start_i"), &[&start], to_i());
+        let end = g.node("Cast", &format!("{name}.end_i"), &[&end], to_i());
+        let all_end = g.constant_i64(&format!("{name}.all_end"), &[], &[n as i64]);
+        let start = g.node(
+            "Where",
+            &format!("{name}.start_s"),
+            &[&all_front, &start, &zero_i],
+            vec![],
+        );
+        let end = g.node(
+            "Where",
+            &format!("{name}.end_s"),
+            &[&all_front, &end, &all_end],
+            vec![],
+        );
+        let shape = g.constant_i64(&format!("{name}.one_shape"), &[1], &[1]);
+        let start = g.node(
+            "Reshape",
+            &format!("{name}.first"),
+            &[&start, &shape],
+            vec![],
+        );
+        let end = g.node("Reshape", &format!("{name}.past"), &[&end, &shape], vec![]);
+        crate::layers::index_range(g, name, n, &start, &end, 1)
+    };
+    let cols = span(g, "patch.rect.cols", &u, w);
+    let rows = span(g, "patch.rect.rows", &v, h);
+    (rows, cols)
+}
+
+/// The mouth patch of an upsampled frame graph: the output pixels whose rays meet the
+/// upsampler's mouth box, their rays (which go through the student after the coarse hits)
+/// and their count.
+struct MouthPatch {
+    /// int64 `[n_patch]`, row-major pixel indices of the output image.
+    pixels: String,
+    /// int64 `[n_patch]`, their places among the tested pixels (`mask_i64`'s).
+    local: String,
+    /// int64 `[1]`.
+    count: String,
+    /// The patch's mask over the tested pixels as int64 `[n_rect]`.
+    mask_i64: String,
+    o: String,
+    d: String,
+}
+
+impl MouthPatch {
+    /// The rays of the output camera `k` at `pose` through the pixels whose rays meet
+    /// `mouth` within the student's `[near, far]` (`nldf_train`'s `mouth_patch_rays`).
+    /// Only the pixels inside the rectangle that the box's corners project to (grown by a
+    /// pixel; the whole image when a corner is not in front of the camera) are tested, so
+    /// that a frame does not test every pixel of the output.
+    fn rays(
+        g: &mut GraphBuilder,
+        ckpt: &StudentCheckpoint,
+        mouth: &nldf_core::bounds::Bounds,
+        k: &Intrinsics,
+        pose: &str,
+    ) -> MouthPatch {
+        let spec = &ckpt.spec;
+        let (h, w) = (k.height as usize, k.width as usize);
+        let (rows, cols) = projected_rect(g, mouth, k, pose);
+        // The rectangle's rays, as `camera_rays` makes them (the same products and sums).
+        let xs: Vec<f32> = (0..k.width)
+            .map(|i| k.camera_direction(i as f32, 0.0).x)
+            .collect();
+        let ys: Vec<f32> = (0..k.height)
+            .map(|j| k.camera_direction(0.0, j as f32).y)
+            .collect();
+        let xs = g.constant_f32("patch.rays.x_all", &[w], &xs);
+        let ys = g.constant_f32("patch.rays.y_all", &[h], &ys);
+        let axis0 = || vec![attr_int("axis", 0)];
+        let xs = g.node("Gather", "patch.rays.x_rect", &[&xs, &cols], axis0());
+        let ys = g.node("Gather", "patch.rays.y_rect", &[&ys, &rows], axis0());
+        let x_shape = g.constant_i64("patch.rays.x_shape", &[3], &[1, -1, 1]);
+        let y_shape = g.constant_i64("patch.rays.y_shape", &[3], &[-1, 1, 1]);
+        let xs = g.node("Reshape", "patch.rays.x", &[&xs, &x_shape], vec![]);
+        let ys = g.node("Reshape", "patch.rays.y", &[&ys, &y_shape], vec![]);
+        let (columns, origin) = pose_columns(g, "patch.rays", pose);
+        let along_x = g.node("Mul", "patch.rays.along_x", &[&columns[0], &xs], vec![]);
+        let along_y = g.node("Mul", "patch.rays.along_y", &[&columns[1], &ys], vec![]);
+        let across = g.node("Add", "patch.rays.across", &[&along_x, &along_y], vec![]);
+        let back = g.node("Neg", "patch.rays.back", &[&columns[2]], vec![]);
+        let d = g.node(
+            "Add",
+            "patch.rays.directions_grid",
+            &[&across, &back],
+            vec![],
+        );
+        let flat = g.constant_i64("patch.rays.flat_shape", &[2], &[-1, 3]);
+        let d = g.node("Reshape", "patch.rays.directions", &[&d, &flat], vec![]);
+        // The rectangle's pixel indices, row-major `[n_rect]`.
+        let width = g.constant_i64("patch.image_width", &[1], &[w as i64]);
+        let row_start = g.node("Mul", "patch.row_start", &[&rows, &width], vec![]);
+        let col_axis = g.constant_i64("patch.col_axis", &[1], &[1]);
+        let row_axis = g.constant_i64("patch.row_axis", &[1], &[0]);
+        let row_start = g.node(
+            "Unsqueeze",
+            "patch.row_start_col",
+            &[&row_start, &col_axis],
+            vec![],
+        );
+        let col = g.node("Unsqueeze", "patch.col_row", &[&cols, &row_axis], vec![]);
+        let rect = g.node("Add", "patch.rect_grid", &[&row_start, &col], vec![]);
+        let flat1 = g.constant_i64("patch.rect_flat", &[1], &[-1]);
+        let rect = g.node("Reshape", "patch.rect_pixels", &[&rect, &flat1], vec![]);
+
+        let rays = (origin, d);
+        let hit = slab_hits(g, "patch.bounds", mouth, (spec.near, spec.far), &rays);
+        let (local, count) = mask_indices(g, ("patch", "patch"), &hit);
+        let pixels = g.node("Gather", "patch.pixels_index", &[&rect, &local], axis0());
+        let (o, d) = hit_rays(g, "patch", &rays, &local);
+        MouthPatch {
+            pixels,
+            local,
+            count,
+            mask_i64: "patch.hit_count".to_string(),
+            o,
+            d,
+        }
+    }
+
+    /// `image` (`[h, w, 3]`) with the patch's pixels painted: the student's rows from
+    /// `n_first` (the coarse hits come first) to `n_all`, `colour + (1 - sigmoid(logit))
+    /// background`, over `background` (float `[h w, 3]`).
+    fn paint(
+        &self,
+        g: &mut GraphBuilder,
+        image: &str,
+        n_first: &str,
+        background: &str,
+        width: usize,
+        (h, w): (usize, usize),
+    ) -> String {
+        // The student's rows (hidden layer, colour, logit) that the upsampler's part of the
+        // graph gathered, `[n_all, width + 4]`; the patch's are rows `n_first ..`.
+        let at = rank_rows(g, "patch", &self.mask_i64, &self.local, Some(n_first));
+        let rows = g.node(
+            "Gather",
+            "patch.rows",
+            &["up.rows", &at],
+            vec![attr_int("axis", 0)],
+        );
+        let cols = |g: &mut GraphBuilder, name: &str, lo: i64, hi: i64| {
+            let lo = g.constant_i64(&format!("{name}.start"), &[1], &[lo]);
+            let hi = g.constant_i64(&format!("{name}.end"), &[1], &[hi]);
+            let axis = g.constant_i64(&format!("{name}.axis"), &[1], &[1]);
+            g.node("Slice", name, &[&rows, &lo, &hi, &axis], vec![])
+        };
+        let f = width as i64;
+        let colour = cols(g, "patch.colour", f, f + 3);
+        let logit = cols(g, "patch.logit", f + 3, f + 4);
+        let alpha = g.node("Sigmoid", "patch.opacity", &[&logit], vec![]);
+        let one = g.constant_f32("patch.one", &[1], &[1.0]);
+        let clear = g.node("Sub", "patch.clear", &[&one, &alpha], vec![]);
+        let behind = g.node(
+            "Gather",
+            "patch.background",
+            &[background, &self.pixels],
+            vec![attr_int("axis", 0)],
+        );
+        let behind = g.node("Mul", "patch.behind", &[&clear, &behind], vec![]);
+        let pixels = g.node("Add", "patch.pixels", &[&colour, &behind], vec![]);
+        let flat = g.constant_i64("patch.flat_shape", &[2], &[-1, 3]);
+        let flat = g.node("Reshape", "patch.image_flat", &[image, &flat], vec![]);
+        let axis1 = g.constant_i64("patch.index_axis", &[1], &[1]);
+        let at = g.node("Unsqueeze", "patch.index", &[&self.pixels, &axis1], vec![]);
+        let painted = g.node("ScatterND", "patch.painted", &[&flat, &at, &pixels], vec![]);
+        let shape = g.constant_i64("patch.image_shape", &[3], &[h as i64, w as i64, 3]);
+        g.node("Reshape", "patch.image", &[&painted, &shape], vec![])
+    }
+}
+
+/// The rays `hits` selects: origins and directions `[n_hit, 3]`; node names start with
+/// `prefix`.
 fn hit_rays(
     g: &mut GraphBuilder,
+    prefix: &str,
     (origin, directions): &(String, String),
     hits: &str,
 ) -> (String, String) {
     let d = g.node(
         "Gather",
-        "frame.directions",
+        &format!("{prefix}.directions"),
         &[directions, hits],
         vec![attr_int("axis", 0)],
     );
-    let shape = g.node("Shape", "frame.ray_shape", &[&d], vec![]);
-    let o = g.node("Expand", "frame.origins", &[origin, &shape], vec![]);
+    let shape = g.node("Shape", &format!("{prefix}.ray_shape"), &[&d], vec![]);
+    let o = g.node(
+        "Expand",
+        &format!("{prefix}.origins"),
+        &[origin, &shape],
+        vec![],
+    );
     (o, d)
 }
 
@@ -442,7 +891,7 @@ fn composite_frame(
     (h, w): (usize, usize),
 ) -> Result<String> {
     let axis0 = || vec![attr_int("axis", 0)];
-    let (o, d) = hit_rays(g, rays, hits);
+    let (o, d) = hit_rays(g, "frame", rays, hits);
     let bg = background_nodes(g, background, (h, w));
     let behind = g.node("Gather", "frame.behind", &[&bg, hits], axis0());
     student_nodes(g, ckpt, (&o, &d), windows, Some(&behind))?;

@@ -9,10 +9,10 @@
 use candle_core::{D, DType, Device, Module, Result, Tensor};
 use candle_nn::{Conv2d, Conv2dConfig, Init, VarBuilder};
 use nldf_core::beam::encode_beams_parallel;
-use nldf_core::bounds::HeadRange;
+use nldf_core::bounds::{Bounds, HeadRange};
 use nldf_core::camera::Camera;
 use nldf_core::image::ImageRgb;
-use nldf_core::rays::head_rays;
+use nldf_core::rays::{PixelRays, head_rays};
 pub use nldf_core::upsampler_config::UpsamplerConfig;
 use nldf_core::upsampler_config::{
     Conv2dLayer, MISS_LOGIT, bilinear_kernel, coarse_box, coarse_intrinsics,
@@ -243,7 +243,10 @@ pub fn image_box(image: &ImageRgb, rows: (usize, usize), cols: (usize, usize)) -
 
 /// Renders the frame seen by `camera` with one audio code: the student on the coarse grid's
 /// box, the upsampler on it, composited over `background`; every pixel outside the box (and
-/// the whole frame when no coarse ray meets the head) is the background.
+/// the whole frame when no coarse ray meets the head) is the background. With a mouth patch
+/// ([`UpsamplerConfig::mouth_patch`]) the pixels whose rays meet the mouth's box are then
+/// the student's own rays over the background ([`paint_mouth_patch`]). Returns the image
+/// and the rays the student evaluated, coarse and patch.
 ///
 /// # Shapes
 /// - `code`: `[1, audio_dim]`; `background` is the camera's image size
@@ -258,24 +261,74 @@ pub fn render_upsampled(
     let r = up.cfg.factor;
     let coarse = coarse_box_features(student, camera, code, range, (r, up.cfg.margin))?;
     let mut image = background.clone();
-    if !coarse.any_hit {
-        return Ok((image, 0));
-    }
-    let rows = (coarse.rows.0 * r, coarse.rows.1 * r);
-    let cols = (coarse.cols.0 * r, coarse.cols.1 * r);
-    let bg = image_box(background, rows, cols)?;
-    let out = up.forward(&coarse.grid)?;
-    let pixels = Upsampler::composite(&out, &bg)?.squeeze(0)?;
-    let pixels: Vec<Vec<Vec<f32>>> = pixels.to_dtype(DType::F32)?.to_vec3()?;
-    let w = image.width as usize;
-    for (c, plane) in pixels.iter().enumerate() {
-        for (y, line) in plane.iter().enumerate() {
-            for (x, &v) in line.iter().enumerate() {
-                image.data[3 * ((rows.0 + y) * w + cols.0 + x) + c] = v;
+    if coarse.any_hit {
+        let rows = (coarse.rows.0 * r, coarse.rows.1 * r);
+        let cols = (coarse.cols.0 * r, coarse.cols.1 * r);
+        let bg = image_box(background, rows, cols)?;
+        let out = up.forward(&coarse.grid)?;
+        let pixels = Upsampler::composite(&out, &bg)?.squeeze(0)?;
+        let pixels: Vec<Vec<Vec<f32>>> = pixels.to_dtype(DType::F32)?.to_vec3()?;
+        let w = image.width as usize;
+        for (c, plane) in pixels.iter().enumerate() {
+            for (y, line) in plane.iter().enumerate() {
+                for (x, &v) in line.iter().enumerate() {
+                    image.data[3 * ((rows.0 + y) * w + cols.0 + x) + c] = v;
+                }
             }
         }
     }
-    Ok((image, coarse.n_rays))
+    let patched = match &up.cfg.mouth_patch {
+        Some(mouth) => {
+            paint_mouth_patch(student, mouth, camera, background, code, range, &mut image)?
+        }
+        None => 0,
+    };
+    Ok((image, coarse.n_rays + patched))
+}
+
+/// The output pixels of `camera` whose rays meet the mouth's box `mouth` within the head
+/// range's `[near, far]`, row by row, with their rays: the mouth patch's rays.
+pub fn mouth_patch_rays(camera: &Camera, range: &HeadRange, mouth: &Bounds) -> PixelRays {
+    head_rays(
+        camera,
+        &HeadRange {
+            bounds: *mouth,
+            ..*range
+        },
+    )
+}
+
+/// Paints the mouth patch into `image`: the student's own rays through the pixels of
+/// [`mouth_patch_rays`], composited over `background` (`colour + (1 - opacity)
+/// background`). Returns how many rays it evaluated.
+///
+/// # Shapes
+/// - `code`: `[1, audio_dim]`; `image` and `background` are the camera's image size
+pub fn paint_mouth_patch(
+    student: &Student,
+    mouth: &Bounds,
+    camera: &Camera,
+    background: &ImageRgb,
+    code: &Tensor,
+    range: &HeadRange,
+    image: &mut ImageRgb,
+) -> crate::Result<usize> {
+    let patch = mouth_patch_rays(camera, range, mouth);
+    let spec = &student.cfg.beam;
+    for (c, chunk) in patch.pixels.chunks(GRID_CHUNK).enumerate() {
+        let lo = c * GRID_CHUNK;
+        let sub = patch.rays.slice(lo..lo + chunk.len());
+        let beams = encode_beams_parallel(&sub, range.near, range.far, spec, None);
+        let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
+        let codes = code
+            .broadcast_as((chunk.len(), code.dim(1)?))?
+            .contiguous()?;
+        let (_, out) = student.mlp.forward_hidden(&beams, &codes)?;
+        let bg = Tensor::from_vec(background.gather(chunk), (chunk.len(), 3), &Device::Cpu)?;
+        let pixels: Vec<f32> = out.pixels(&bg)?.flatten_all()?.to_vec1()?;
+        image.paint(chunk, &pixels);
+    }
+    Ok(patch.pixels.len())
 }
 
 #[cfg(test)]
