@@ -361,26 +361,23 @@ fn run_mouth_patch(args: MouthPatchArgs) -> Result<()> {
             dir.join(nldf_core::run_files::CONFIG_FILE).display()
         ),
         None => anyhow::bail!(
-            "{}: its frames have no mouth region (no region labels, no landmarks), so there \
-             is no mouth box to patch",
-            args.data.display()
+            "{}: no mouth box found: its frames have no mouth region (no region labels, no \
+             landmarks), or the teacher in {} holds no surface at their mouth pixels; {} is \
+             unchanged",
+            args.data.display(),
+            args.run.join("teacher").display(),
+            dir.join(nldf_core::run_files::CONFIG_FILE).display()
         ),
     }
     Ok(())
 }
 
-/// Runs `nldf train upsampler`.
-fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
-    use anyhow::Context;
-    use nldf_train::trainers::config::{StudentRunConfig, read_config};
-    use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, train_upsampler};
-    let mut cfg: UpsamplerRunConfig = match &args.config {
-        Some(path) => read_config(path)?,
-        None => UpsamplerRunConfig {
-            model: nldf_core::upsampler_config::UpsamplerConfig::with_factor(args.factor),
-            ..UpsamplerRunConfig::default()
-        },
-    };
+/// The upsampler's student: `--student` (saying so when it overrides the configuration's),
+/// else the configuration's, else [`DEFAULT_STUDENT`].
+fn choose_student(
+    cfg: &mut nldf_train::trainers::upsampler_trainer::UpsamplerRunConfig,
+    args: &UpsamplerArgs,
+) {
     if let Some(flag) = &args.student {
         if let Some(file) = &args.config
             && !cfg.student.is_empty()
@@ -396,6 +393,33 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     } else if cfg.student.is_empty() {
         cfg.student = DEFAULT_STUDENT.to_string();
     }
+}
+
+/// Says what the upsampler's training found for its mouth patch (`None`: not asked).
+fn say_mouth_patch(found: Option<bool>) {
+    match found {
+        Some(true) => println!("mouth patch: the mouth's box is saved with the upsampler"),
+        Some(false) => eprintln!(
+            "warning: train.mouth_patch is on but no mouth box was found (no mouth region in \
+             the frames, or no teacher surface at their mouth pixels): the upsampler has no patch"
+        ),
+        None => {}
+    }
+}
+
+/// Runs `nldf train upsampler`.
+fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
+    use anyhow::Context;
+    use nldf_train::trainers::config::{StudentRunConfig, read_config};
+    use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, train_upsampler};
+    let mut cfg: UpsamplerRunConfig = match &args.config {
+        Some(path) => read_config(path)?,
+        None => UpsamplerRunConfig {
+            model: nldf_core::upsampler_config::UpsamplerConfig::with_factor(args.factor),
+            ..UpsamplerRunConfig::default()
+        },
+    };
+    choose_student(&mut cfg, &args);
     if let Some(iters) = args.iters {
         cfg.train.iters = iters;
     }
@@ -431,6 +455,7 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     if let Some(bar) = bar {
         bar.finish();
     }
+    say_mouth_patch(report.mouth_patch);
     if report.steps < iters as usize {
         eprintln!(
             "stopped after {} of {iters} steps; the checkpoint holds them",

@@ -90,7 +90,8 @@ pub struct UpsamplerConfig {
     /// Coarse rays added around the head's hits on each side of the box the CNN runs on,
     /// so that its edge (zero padding) lies on background.
     pub margin: usize,
-    /// The mouth's box in head space (`lo`, `hi`), inside the head's bounds: every output
+    /// The mouth's box in head space (`lo`, `hi`; the trainer clips it to the head's
+    /// bounds, the check asks only for a finite box with `lo` below `hi`): every output
     /// pixel whose ray meets it (within `[near, far]`) is the student's own ray at full
     /// resolution, drawn over the upsampled frame, so that the mouth keeps native-ray
     /// detail. `nldf train upsampler` (or `nldf train mouth-patch` on a trained upsampler)

@@ -225,6 +225,10 @@ fn conv(
     Ok(layers::conv2d(g, &format!("up.{name}"), x, &w, &b, k))
 }
 
+/// The node of [`student_rows`]: the student's rows (hidden layer, colour, logit) of every
+/// ray it ran on, which a mouth patch's painting reads after the coarse rays'.
+pub(crate) const UP_ROWS: &str = "up.rows";
+
 /// The rows the upsampler reads per coarse ray, `[n_rays, width + 4]`: the student's last
 /// hidden layer, its premultiplied colour and its opacity logit. The student's nodes must
 /// already be in `g` (run without a background, so that [`OUTPUT_RGB`] is its own colour).
@@ -236,7 +240,7 @@ fn student_rows(g: &mut GraphBuilder, ckpt: &StudentCheckpoint) -> Result<String
     let hidden = format!("{last}.act");
     Ok(g.node(
         "Concat",
-        "up.rows",
+        UP_ROWS,
         &[&hidden, OUTPUT_RGB, "mlp.opacity_logit"],
         vec![attr_int("axis", 1)],
     ))

@@ -7,7 +7,7 @@
 //! `r x r` block instead, through the block's centre, again only those that meet the head;
 //! the graph upsamples the box around them (widened by the upsampler's margin) and every
 //! pixel outside the box is the background, as `nldf_train::upsampler::render_upsampled`
-//! renders.
+//! renders (without the upsampler's mouth patch, which the frame graph alone draws).
 
 use glam::Mat4;
 use nldf_core::camera::{Camera, Intrinsics};

@@ -415,7 +415,8 @@ fn upsampled_frame_graph_matches_candle_at_production_size() {
 /// mouth's box with the student's own ray: it matches candle's `render_upsampled` (which
 /// paints them so) within `REL_TOL`, counts the patch's rays in `n_rays`, its patched pixels
 /// are the native-ray frame graph's and every other pixel the patchless graph's, from a
-/// default, a turned and a looking-away camera.
+/// default, a turned and a looking-away camera, one with the box in front but outside the
+/// image and one inside the box.
 #[test]
 fn a_mouth_patch_draws_the_students_own_rays_in_the_frame_graph() {
     use nldf_train::networks::upsampler::mouth_patch_rays;
@@ -465,10 +466,16 @@ fn a_mouth_patch_draws_the_students_own_rays_in_the_frame_graph() {
     let windows = audio_windows(&wave, spec.fps, &features).unwrap();
     let layout = FrameAudio::new(&features, spec.fps, cfg.audio.att_frames).unwrap();
     let default_pose = Mat4::from_cols_array_2d(&spec.default_pose).transpose();
+    let inside =
+        Mat4::from_translation(mouth.centre() - default_pose.w_axis.truncate()) * default_pose;
     let poses = [
         default_pose,
         turn_about(b.centre(), 0.5, -0.2) * default_pose,
         look_at(Vec3::new(0.0, 0.0, 2.5), Vec3::new(0.0, 6.0, 2.5), Vec3::Z),
+        // The box in front of the camera but outside its image: an empty rectangle.
+        Mat4::from_translation(Vec3::new(3.0, 0.0, 0.0)) * default_pose,
+        // The camera inside the box: its corners on both sides, the whole image tested.
+        inside,
     ];
     let background = ImageRgb::load(&run.student_dir().join("background.png")).unwrap();
     let range = HeadRange {
@@ -482,7 +489,11 @@ fn a_mouth_patch_draws_the_students_own_rays_in_the_frame_graph() {
             .iter()
             .map(|m| FrameGraph::open(m, kind, 2).unwrap())
             .collect();
-        for (c, (&f, pose)) in [1usize, n / 2, n - 1].iter().zip(poses).enumerate() {
+        for (c, (&f, pose)) in [1usize, n / 2, n - 1, 2, n / 3]
+            .iter()
+            .zip(poses)
+            .enumerate()
+        {
             let camera = Camera {
                 intrinsics: spec.intrinsics,
                 c2w: pose,
@@ -507,13 +518,13 @@ fn a_mouth_patch_draws_the_students_own_rays_in_the_frame_graph() {
             let [native, plain, patched] = [&outs[0], &outs[1], &outs[2]];
             let patch = mouth_patch_rays(&camera, &range, &mouth).pixels;
             let label = format!("{} camera {c}", kind.name());
-            if c < 2 {
-                assert!(
+            match c {
+                0 | 1 => assert!(
                     !patch.is_empty(),
                     "{label}: the camera sees the mouth's box"
-                );
-            } else {
-                assert!(patch.is_empty(), "{label}: the camera looks away");
+                ),
+                2 | 3 => assert!(patch.is_empty(), "{label}: the box is out of sight"),
+                _ => {}
             }
             assert_eq!(
                 patched.n_rays, want_rays,

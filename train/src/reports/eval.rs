@@ -189,7 +189,7 @@ pub fn eval_models(
             let started = std::time::Instant::now();
             let render = model.render_frame(data, frame)?;
             render_s[mi] += started.elapsed().as_secs_f64();
-            macs[mi] += hits * model.macs_per_ray();
+            macs[mi] += hits * model.macs_per_ray() + model.extra_macs(data, frame);
             let view = views.get(&frame.img_id).cloned();
             let background = &data.dataset.background;
             let score = score_frame(&render, &truth, regions.as_deref(), background, frame, view)?;

@@ -20,6 +20,11 @@ pub trait FrameModel {
     fn step(&self) -> usize;
     /// Multiply-adds per ray that meets the head's bounds (the others cost none).
     fn macs_per_ray(&self) -> f64;
+    /// Multiply-adds a frame costs beyond [`FrameModel::macs_per_ray`] times its hits (an
+    /// upsampler's mouth patch: its rays at the student's cost); none by default.
+    fn extra_macs(&self, _data: &TrainData, _frame: &Frame) -> f64 {
+        0.0
+    }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb>;
 }
 

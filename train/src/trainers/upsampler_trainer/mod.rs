@@ -85,7 +85,7 @@ impl UpsampledModel {
     }
 
     /// Renders one camera with one audio code (see [`render_upsampled`]); also returns the
-    /// coarse rays the student evaluated.
+    /// rays the student evaluated, coarse and the mouth patch's.
     pub fn render_view(
         &self,
         camera: &Camera,
@@ -100,6 +100,35 @@ impl UpsampledModel {
             code,
             &data.head_range(),
         )
+    }
+}
+
+impl UpsampledModel {
+    /// Starts training: draws the seeded weights, opens the run's teacher, finds the mouth
+    /// patch when asked ([`UpsampledModel::find_mouth_patch`]) and writes `config.json`.
+    fn start(&mut self, run: &Path, data: &TrainData) -> Result<(TeacherModel, Option<bool>)> {
+        crate::networks::upsampler::init_upsampler_seeded(&self.varmap, self.cfg.train.seed)?;
+        let teacher = TeacherModel::open(&nldf_core::run_files::teacher_dir(run))?;
+        let mouth_found = self.find_mouth_patch(&teacher, data)?;
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        save_json(&self.dir.join(CONFIG_FILE), &self.cfg)?;
+        Ok((teacher, mouth_found))
+    }
+
+    /// With `train.mouth_patch`, finds the mouth's box ([`mouth_patch_box`]) and sets it as
+    /// the model's; returns whether one was found (`None` when not asked).
+    fn find_mouth_patch(
+        &mut self,
+        teacher: &TeacherModel,
+        data: &TrainData,
+    ) -> Result<Option<bool>> {
+        if !self.cfg.train.mouth_patch {
+            return Ok(None);
+        }
+        let mouth = mouth_patch_box(teacher, data)?;
+        self.cfg.model.mouth_patch = mouth;
+        self.up.cfg.mouth_patch = mouth;
+        Ok(Some(mouth.is_some()))
     }
 }
 
@@ -126,6 +155,15 @@ impl FrameModel for UpsampledModel {
         let r2 = (self.cfg.model.factor * self.cfg.model.factor) as f64;
         self.student.cfg.model.macs_per_ray() as f64 / r2
             + self.cfg.model.macs_per_pixel(self.student.cfg.model.width)
+    }
+    fn extra_macs(&self, data: &TrainData, frame: &Frame) -> f64 {
+        let Some(mouth) = &self.cfg.model.mouth_patch else {
+            return 0.0;
+        };
+        let camera = data.dataset.camera(frame);
+        let patch =
+            crate::networks::upsampler::mouth_patch_rays(&camera, &data.head_range(), mouth);
+        patch.pixels.len() as f64 * self.student.cfg.model.macs_per_ray() as f64
     }
     fn render_frame(&self, data: &TrainData, frame: &Frame) -> Result<ImageRgb> {
         let code = self.student.audio_codes(data, &[frame.aud_id])?;
@@ -188,6 +226,9 @@ pub struct UpsamplerReport {
     pub final_loss: f64,
     pub recorded_views: usize,
     pub pseudo_crops: usize,
+    /// Asked for a mouth patch (`train.mouth_patch`): whether a mouth box was found
+    /// ([`mouth_patch_box`]); `None` when not asked.
+    pub mouth_patch: Option<bool>,
 }
 
 /// Trains a new upsampler into `dir` over the student `cfg.student` of `run` and the
@@ -203,15 +244,7 @@ pub fn train_upsampler(
     on_step: &mut dyn FnMut(usize, f64),
 ) -> Result<UpsamplerReport> {
     let mut model = UpsampledModel::build(dir, run, cfg)?;
-    crate::networks::upsampler::init_upsampler_seeded(&model.varmap, model.cfg.train.seed)?;
-    let teacher = TeacherModel::open(&nldf_core::run_files::teacher_dir(run))?;
-    if model.cfg.train.mouth_patch {
-        let mouth = mouth_patch_box(&teacher, data)?;
-        model.cfg.model.mouth_patch = mouth;
-        model.up.cfg.mouth_patch = mouth;
-    }
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    save_json(&dir.join(CONFIG_FILE), &model.cfg)?;
+    let (teacher, mouth_found) = model.start(run, data)?;
     let started = std::time::Instant::now();
     let t = model.cfg.train.clone();
     let r = model.cfg.model.factor;
@@ -275,6 +308,7 @@ pub fn train_upsampler(
         final_loss: last_loss,
         recorded_views: recorded.len(),
         pseudo_crops: pseudo.len(),
+        mouth_patch: mouth_found,
     };
     save_json(&dir.join(REPORT_FILE), &report)?;
     Ok(report)
@@ -295,7 +329,9 @@ const MOUTH_PATCH_TRIM: f64 = 0.01;
 /// training frames' mouth pixels carried to the head's surface by the teacher
 /// ([`mouth_surface_points`]), their box between the 1st and 99th percentile on each axis,
 /// grown by [`MOUTH_PATCH_PAD`] and clipped to the head's bounds. `None` when the frames
-/// have no mouth region (no labels, no landmarks) or the box falls outside the head.
+/// have no mouth region (no labels, no landmarks), when the teacher holds no surface at
+/// their mouth pixels (its weights there sum below one half: an undertrained teacher), or
+/// when the box falls outside the head.
 ///
 /// [`UpsamplerConfig::mouth_patch`]: nldf_core::upsampler_config::UpsamplerConfig::mouth_patch
 /// [`mouth_surface_points`]: crate::trainers::views::mouth_surface_points
