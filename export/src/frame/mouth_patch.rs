@@ -6,7 +6,7 @@
 use nldf_core::camera::Intrinsics;
 use nldf_model::onnx::DataType;
 
-use super::{hit_rays, mask_indices, slab_hits};
+use super::select::{hit_rays, mask_indices, slab_hits};
 use crate::checkpoint::StudentCheckpoint;
 use crate::graph::{GraphBuilder, attr_int};
 

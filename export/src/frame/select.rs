@@ -1,0 +1,123 @@
+//! Picking rays in the frame graph: which rays meet a box (the slab test), the indices
+//! of a mask's true entries, and the rays those indices select.
+
+use nldf_model::onnx::DataType;
+
+use crate::graph::{GraphBuilder, attr_int, attr_ints};
+
+/// The int64 indices `[n]` of the true entries of the bool mask `[m]`, row-major, and how
+/// many there are, int64 `[1]`; the index nodes' names start with `prefixes.0`, the
+/// count's with `prefixes.1`.
+pub(super) fn mask_indices(
+    g: &mut GraphBuilder,
+    (at, count): (&str, &str),
+    mask: &str,
+) -> (String, String) {
+    let hits = g.node("NonZero", &format!("{at}.hits_2d"), &[mask], vec![]);
+    let flat = g.constant_i64(&format!("{at}.hits_shape"), &[1], &[-1]);
+    // Counted from the mask, not from the indices' shape, which a runtime may hold
+    // symbolically.
+    let ones = g.node(
+        "Cast",
+        &format!("{count}.hit_count"),
+        &[mask],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let n_hit = g.node(
+        "ReduceSum",
+        &format!("{count}.n_rays"),
+        &[&ones],
+        vec![attr_int("keepdims", 1)],
+    );
+    let hits = g.node("Reshape", &format!("{at}.hits"), &[&hits, &flat], vec![]);
+    (hits, n_hit)
+}
+
+/// Whether each ray `o + t d` meets the box `bounds` within `[near, far]`
+/// (`Bounds::intersect`'s slab test, axis by axis), bool `[n]`; node names start with
+/// `prefix`.
+///
+/// # Shapes
+/// - `o`: `[1, 3]` or `[n, 3]`; `d`: `[n, 3]`
+pub(super) fn slab_hits(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    bounds: &nldf_core::bounds::Bounds,
+    (near, far): (f32, f32),
+    (o, d): &(String, String),
+) -> String {
+    let name = |n: &str| format!("{prefix}.{n}");
+    let lo = g.constant_f32(&name("lo"), &[1, 3], &bounds.lo.to_array());
+    let hi = g.constant_f32(&name("hi"), &[1, 3], &bounds.hi.to_array());
+    let to_lo = g.node("Sub", &name("to_lo"), &[&lo, o], vec![]);
+    let to_hi = g.node("Sub", &name("to_hi"), &[&hi, o], vec![]);
+    let u = g.node("Div", &name("u"), &[&to_lo, d], vec![]);
+    let v = g.node("Div", &name("v"), &[&to_hi, d], vec![]);
+    let enter = g.node("Min", &name("enter_raw"), &[&u, &v], vec![]);
+    let exit = g.node("Max", &name("exit_raw"), &[&u, &v], vec![]);
+    // An axis the ray runs parallel to: no limit from inside the slab, a miss from outside.
+    let abs = g.node("Abs", &name("abs_d"), &[d], vec![]);
+    let tiny = g.constant_f32(&name("parallel"), &[], &[1e-12]);
+    let parallel = g.node("Less", &name("is_parallel"), &[&abs, &tiny], vec![]);
+    let below = g.node("Less", &name("below"), &[o, &lo], vec![]);
+    let above = g.node("Greater", &name("above"), &[o, &hi], vec![]);
+    let outside = g.node("Or", &name("outside"), &[&below, &above], vec![]);
+    let inf = g.constant_f32(&name("inf"), &[], &[f32::INFINITY]);
+    let neg_inf = g.constant_f32(&name("neg_inf"), &[], &[f32::NEG_INFINITY]);
+    let enter_par = g.node(
+        "Where",
+        &name("enter_parallel"),
+        &[&outside, &inf, &neg_inf],
+        vec![],
+    );
+    let exit_par = g.node(
+        "Where",
+        &name("exit_parallel"),
+        &[&outside, &neg_inf, &inf],
+        vec![],
+    );
+    let enter = g.node(
+        "Where",
+        &name("enter"),
+        &[&parallel, &enter_par, &enter],
+        vec![],
+    );
+    let exit = g.node(
+        "Where",
+        &name("exit"),
+        &[&parallel, &exit_par, &exit],
+        vec![],
+    );
+    let reduce = || vec![attr_ints("axes", &[1]), attr_int("keepdims", 0)];
+    let t0 = g.node("ReduceMax", &name("t0_axes"), &[&enter], reduce());
+    let t1 = g.node("ReduceMin", &name("t1_axes"), &[&exit], reduce());
+    let near = g.constant_f32(&name("near"), &[], &[near]);
+    let far = g.constant_f32(&name("far"), &[], &[far]);
+    let t0 = g.node("Max", &name("t0"), &[&t0, &near], vec![]);
+    let t1 = g.node("Min", &name("t1"), &[&t1, &far], vec![]);
+    g.node("Greater", &name("hit"), &[&t1, &t0], vec![])
+}
+
+/// The rays `hits` selects: origins and directions `[n_hit, 3]`; node names start with
+/// `prefix`.
+pub(super) fn hit_rays(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    (origin, directions): &(String, String),
+    hits: &str,
+) -> (String, String) {
+    let d = g.node(
+        "Gather",
+        &format!("{prefix}.directions"),
+        &[directions, hits],
+        vec![attr_int("axis", 0)],
+    );
+    let shape = g.node("Shape", &format!("{prefix}.ray_shape"), &[&d], vec![]);
+    let o = g.node(
+        "Expand",
+        &format!("{prefix}.origins"),
+        &[origin, &shape],
+        vec![],
+    );
+    (o, d)
+}
