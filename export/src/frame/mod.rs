@@ -43,7 +43,7 @@ use nldf_core::upsampler_config::coarse_intrinsics;
 
 use front_end::front_end;
 use mouth_patch::{MouthPatch, rank_rows};
-use select::{hit_rays, mask_indices, slab_hits};
+use select::{hit_rays, mask_indices, pose_columns, ray_directions, slab_hits};
 
 /// Name of the frame graph.
 pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
@@ -319,69 +319,8 @@ fn camera_rays(g: &mut GraphBuilder, prefix: &str, k: &Intrinsics, pose: &str) -
         .collect();
     let xs = g.constant_f32(&format!("{prefix}.x"), &[1, k.width as usize, 1], &xs);
     let ys = g.constant_f32(&format!("{prefix}.y"), &[k.height as usize, 1, 1], &ys);
-    let slice = |g: &mut GraphBuilder, name: &str, x: &str, lo: [i64; 2], hi: [i64; 2]| {
-        let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
-        let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
-        g.node("Slice", name, &[x, &lo, &hi], vec![])
-    };
-    let column_shape = g.constant_i64(&format!("{prefix}.column_shape"), &[3], &[1, 1, 3]);
-    let mut columns = Vec::new();
-    for c in 0..3i64 {
-        let col = slice(
-            g,
-            &format!("{prefix}.rotation{c}"),
-            pose,
-            [0, c],
-            [3, c + 1],
-        );
-        columns.push(g.node(
-            "Reshape",
-            &format!("{prefix}.column{c}"),
-            &[&col, &column_shape],
-            vec![],
-        ));
-    }
-    let origin = slice(g, &format!("{prefix}.origin_column"), pose, [0, 3], [3, 4]);
-    let row = g.constant_i64(&format!("{prefix}.row_shape"), &[2], &[1, 3]);
-    let origin = g.node(
-        "Reshape",
-        &format!("{prefix}.origin"),
-        &[&origin, &row],
-        vec![],
-    );
-    let along_x = g.node(
-        "Mul",
-        &format!("{prefix}.along_x"),
-        &[&columns[0], &xs],
-        vec![],
-    );
-    let along_y = g.node(
-        "Mul",
-        &format!("{prefix}.along_y"),
-        &[&columns[1], &ys],
-        vec![],
-    );
-    let across = g.node(
-        "Add",
-        &format!("{prefix}.across"),
-        &[&along_x, &along_y],
-        vec![],
-    );
-    let back = g.node("Neg", &format!("{prefix}.back"), &[&columns[2]], vec![]);
-    let d = g.node(
-        "Add",
-        &format!("{prefix}.directions_grid"),
-        &[&across, &back],
-        vec![],
-    );
-    let flat = g.constant_i64(&format!("{prefix}.flat_shape"), &[2], &[-1, 3]);
-    let d = g.node(
-        "Reshape",
-        &format!("{prefix}.directions"),
-        &[&d, &flat],
-        vec![],
-    );
-    (origin, d)
+    let (columns, origin) = pose_columns(g, prefix, pose);
+    (origin, ray_directions(g, prefix, &columns, (&xs, &ys)))
 }
 
 /// The pixels whose rays meet the head's bounds within `[near, far]`

@@ -6,7 +6,7 @@
 use nldf_core::camera::Intrinsics;
 use nldf_model::onnx::DataType;
 
-use super::select::{hit_rays, mask_indices, slab_hits};
+use super::select::{hit_rays, mask_indices, pose_columns, ray_directions, slab_hits};
 use crate::checkpoint::StudentCheckpoint;
 use crate::graph::{GraphBuilder, attr_int};
 
@@ -53,35 +53,6 @@ pub(super) fn rank_rows(
         None => g.node("Neg", &name("first_row"), &[&one], vec![]),
     };
     g.node("Add", &name("row_index"), &[&ranks, &offset], vec![])
-}
-
-/// The pose's rotation columns as `[1, 1, 3]` each and its origin `[1, 3]`, node names
-/// starting with `prefix`.
-fn pose_columns(g: &mut GraphBuilder, prefix: &str, pose: &str) -> ([String; 3], String) {
-    let slice = |g: &mut GraphBuilder, name: &str, lo: [i64; 2], hi: [i64; 2]| {
-        let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
-        let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
-        g.node("Slice", name, &[pose, &lo, &hi], vec![])
-    };
-    let column_shape = g.constant_i64(&format!("{prefix}.column_shape"), &[3], &[1, 1, 3]);
-    let columns = [0i64, 1, 2].map(|c| {
-        let col = slice(g, &format!("{prefix}.rotation{c}"), [0, c], [3, c + 1]);
-        g.node(
-            "Reshape",
-            &format!("{prefix}.column{c}"),
-            &[&col, &column_shape],
-            vec![],
-        )
-    });
-    let origin = slice(g, &format!("{prefix}.origin_column"), [0, 3], [3, 4]);
-    let row = g.constant_i64(&format!("{prefix}.row_shape"), &[2], &[1, 3]);
-    let origin = g.node(
-        "Reshape",
-        &format!("{prefix}.origin"),
-        &[&origin, &row],
-        vec![],
-    );
-    (columns, origin)
 }
 
 /// The pixel rows and columns (int64 `[n]` index lists, ascending) of the rectangle that
@@ -272,18 +243,7 @@ impl MouthPatch {
         let xs = g.node("Reshape", "patch.rays.x", &[&xs, &x_shape], vec![]);
         let ys = g.node("Reshape", "patch.rays.y", &[&ys, &y_shape], vec![]);
         let (columns, origin) = pose_columns(g, "patch.rays", pose);
-        let along_x = g.node("Mul", "patch.rays.along_x", &[&columns[0], &xs], vec![]);
-        let along_y = g.node("Mul", "patch.rays.along_y", &[&columns[1], &ys], vec![]);
-        let across = g.node("Add", "patch.rays.across", &[&along_x, &along_y], vec![]);
-        let back = g.node("Neg", "patch.rays.back", &[&columns[2]], vec![]);
-        let d = g.node(
-            "Add",
-            "patch.rays.directions_grid",
-            &[&across, &back],
-            vec![],
-        );
-        let flat = g.constant_i64("patch.rays.flat_shape", &[2], &[-1, 3]);
-        let d = g.node("Reshape", "patch.rays.directions", &[&d, &flat], vec![]);
+        let d = ray_directions(g, "patch.rays", &columns, (&xs, &ys));
         // The rectangle's pixel indices, row-major `[n_rect]`.
         let width = g.constant_i64("patch.image_width", &[1], &[w as i64]);
         let row_start = g.node("Mul", "patch.row_start", &[&rows, &width], vec![]);

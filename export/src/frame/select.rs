@@ -1,5 +1,5 @@
-//! Picking rays in the frame graph: which rays meet a box (the slab test), the indices
-//! of a mask's true entries, and the rays those indices select.
+//! Rays in the frame graph: the pose's axes, the rays' directions, which rays meet a box
+//! (the slab test), the indices of a mask's true entries and the rays those select.
 
 use nldf_model::onnx::DataType;
 
@@ -120,4 +120,57 @@ pub(super) fn hit_rays(
         vec![],
     );
     (o, d)
+}
+
+/// The pose's rotation columns as `[1, 1, 3]` each and its origin `[1, 3]`, node names
+/// starting with `prefix`.
+pub(super) fn pose_columns(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    pose: &str,
+) -> ([String; 3], String) {
+    let slice = |g: &mut GraphBuilder, name: &str, lo: [i64; 2], hi: [i64; 2]| {
+        let lo = g.constant_i64(&format!("{name}.start"), &[2], &lo);
+        let hi = g.constant_i64(&format!("{name}.end"), &[2], &hi);
+        g.node("Slice", name, &[pose, &lo, &hi], vec![])
+    };
+    let column_shape = g.constant_i64(&format!("{prefix}.column_shape"), &[3], &[1, 1, 3]);
+    let columns = [0i64, 1, 2].map(|c| {
+        let col = slice(g, &format!("{prefix}.rotation{c}"), [0, c], [3, c + 1]);
+        g.node(
+            "Reshape",
+            &format!("{prefix}.column{c}"),
+            &[&col, &column_shape],
+            vec![],
+        )
+    });
+    let origin = slice(g, &format!("{prefix}.origin_column"), [0, 3], [3, 4]);
+    let row = g.constant_i64(&format!("{prefix}.row_shape"), &[2], &[1, 3]);
+    let origin = g.node(
+        "Reshape",
+        &format!("{prefix}.origin"),
+        &[&origin, &row],
+        vec![],
+    );
+    (columns, origin)
+}
+
+/// The directions `[n, 3]` of the rays through a grid of pixels: `(c0 x_i + c1 y_j) + c2
+/// (-1)` from the pose's `columns` (`[1, 1, 3]` each, [`pose_columns`]) and the pixels'
+/// camera-plane coordinates `xs` (`[1, w, 1]`) and `ys` (`[h, 1, 1]`), added in glam's
+/// order, row by row; node names start with `prefix`.
+pub(super) fn ray_directions(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    columns: &[String; 3],
+    (xs, ys): (&str, &str),
+) -> String {
+    let name = |n: &str| format!("{prefix}.{n}");
+    let along_x = g.node("Mul", &name("along_x"), &[&columns[0], xs], vec![]);
+    let along_y = g.node("Mul", &name("along_y"), &[&columns[1], ys], vec![]);
+    let across = g.node("Add", &name("across"), &[&along_x, &along_y], vec![]);
+    let back = g.node("Neg", &name("back"), &[&columns[2]], vec![]);
+    let d = g.node("Add", &name("directions_grid"), &[&across, &back], vec![]);
+    let flat = g.constant_i64(&name("flat_shape"), &[2], &[-1, 3]);
+    g.node("Reshape", &name("directions"), &[&d, &flat], vec![])
 }
