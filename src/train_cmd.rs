@@ -1,7 +1,7 @@
 //! `nldf train`: the teacher and student trainers with progress, logging, checkpoints and
 //! Ctrl-C handling.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Subcommand;
@@ -337,21 +337,31 @@ fn run_teacher(args: TeacherArgs) -> Result<()> {
 /// The student's folder inside a run when neither `--student` nor a configuration names one.
 const DEFAULT_STUDENT: &str = "student";
 
+/// The dataset `data`, its audio features read as the student in `student_dir` was
+/// trained on them (an upsampler's data).
+fn student_data(student_dir: &Path, data: &Path) -> Result<nldf_train::trainers::data::TrainData> {
+    use anyhow::Context;
+    use nldf_train::trainers::config::{StudentRunConfig, read_config};
+    let student_cfg: StudentRunConfig =
+        read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
+            .with_context(|| format!("reading the student in {}", student_dir.display()))?;
+    let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
+    eprintln!("loading {}", data.display());
+    Ok(nldf_train::trainers::data::TrainData::open_with(
+        data, true, &audio,
+    )?)
+}
+
 /// Runs `nldf train mouth-patch`.
 fn run_mouth_patch(args: MouthPatchArgs) -> Result<()> {
     use anyhow::Context;
-    use nldf_train::trainers::config::{StudentRunConfig, read_config};
+    use nldf_train::trainers::config::read_config;
     use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, attach_mouth_patch};
     let dir = args.run.join(&args.name);
     let cfg: UpsamplerRunConfig = read_config(&dir.join(nldf_core::run_files::CONFIG_FILE))
         .with_context(|| format!("reading the upsampler in {}", dir.display()))?;
     let student_dir = args.run.join(&cfg.student);
-    let student_cfg: StudentRunConfig =
-        read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
-            .with_context(|| format!("reading the student in {}", student_dir.display()))?;
-    let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
-    eprintln!("loading {}", args.data.display());
-    let data = nldf_train::trainers::data::TrainData::open_with(&args.data, true, &audio)?;
+    let data = student_data(&student_dir, &args.data)?;
     eprintln!("finding the mouth's box from the teacher's surface at the mouth pixels");
     match attach_mouth_patch(&dir, &args.run, &data)? {
         Some(b) => println!(
@@ -409,8 +419,7 @@ fn say_mouth_patch(found: Option<bool>) {
 
 /// Runs `nldf train upsampler`.
 fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
-    use anyhow::Context;
-    use nldf_train::trainers::config::{StudentRunConfig, read_config};
+    use nldf_train::trainers::config::read_config;
     use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, train_upsampler};
     let mut cfg: UpsamplerRunConfig = match &args.config {
         Some(path) => read_config(path)?,
@@ -425,12 +434,7 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
     }
     cfg.check()?;
     let student_dir = args.run.join(&cfg.student);
-    let student_cfg: StudentRunConfig =
-        read_config(&student_dir.join(nldf_core::run_files::CONFIG_FILE))
-            .with_context(|| format!("reading the student in {}", student_dir.display()))?;
-    let audio = nldf_core::dataset::AudioChoice::Matching(student_cfg.model.audio.features);
-    eprintln!("loading {}", args.data.display());
-    let data = nldf_train::trainers::data::TrainData::open_with(&args.data, true, &audio)?;
+    let data = student_data(&student_dir, &args.data)?;
     let dir = args.run.join(&args.name);
     eprintln!(
         "upsampler x{} over {} into {}: coarse features and the teacher's crops first",
