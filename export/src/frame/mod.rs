@@ -43,7 +43,7 @@ use nldf_core::upsampler_config::coarse_intrinsics;
 
 use front_end::front_end;
 use mouth_patch::{MouthPatch, rank_rows};
-use select::{hit_rays, mask_indices, pose_columns, ray_directions, slab_hits};
+use select::{hit_rays, mask_indices, pixel_coords, pose_columns, ray_directions, slab_hits};
 
 /// Name of the frame graph.
 pub const FRAME_GRAPH_NAME: &str = "nldf_frame";
@@ -311,12 +311,7 @@ fn background_rgb8(ckpt: &StudentCheckpoint, w: usize, h: usize) -> Result<Vec<u
 /// AD-NeRF's `x_i = (i - cx) / f`, `y_j = -(j - cy) / f`, added in glam's order; its nodes'
 /// names start with `prefix`.
 fn camera_rays(g: &mut GraphBuilder, prefix: &str, k: &Intrinsics, pose: &str) -> (String, String) {
-    let xs: Vec<f32> = (0..k.width)
-        .map(|i| k.camera_direction(i as f32, 0.0).x)
-        .collect();
-    let ys: Vec<f32> = (0..k.height)
-        .map(|j| k.camera_direction(0.0, j as f32).y)
-        .collect();
+    let (xs, ys) = pixel_coords(k);
     let xs = g.constant_f32(&format!("{prefix}.x"), &[1, k.width as usize, 1], &xs);
     let ys = g.constant_f32(&format!("{prefix}.y"), &[k.height as usize, 1, 1], &ys);
     let (columns, origin) = pose_columns(g, prefix, pose);

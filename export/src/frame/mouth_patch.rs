@@ -6,7 +6,9 @@
 use nldf_core::camera::Intrinsics;
 use nldf_model::onnx::DataType;
 
-use super::select::{hit_rays, mask_indices, pose_columns, ray_directions, slab_hits};
+use super::select::{
+    hit_rays, mask_indices, pixel_coords, pose_columns, ray_directions, slab_hits,
+};
 use crate::checkpoint::StudentCheckpoint;
 use crate::graph::{GraphBuilder, attr_int};
 
@@ -227,12 +229,7 @@ impl MouthPatch {
         let (h, w) = (k.height as usize, k.width as usize);
         let (rows, cols) = projected_rect(g, mouth, k, pose);
         // The rectangle's rays, as `camera_rays` makes them (the same products and sums).
-        let xs: Vec<f32> = (0..k.width)
-            .map(|i| k.camera_direction(i as f32, 0.0).x)
-            .collect();
-        let ys: Vec<f32> = (0..k.height)
-            .map(|j| k.camera_direction(0.0, j as f32).y)
-            .collect();
+        let (xs, ys) = pixel_coords(k);
         let xs = g.constant_f32("patch.rays.x_all", &[w], &xs);
         let ys = g.constant_f32("patch.rays.y_all", &[h], &ys);
         let axis0 = || vec![attr_int("axis", 0)];

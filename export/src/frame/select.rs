@@ -1,6 +1,7 @@
 //! Rays in the frame graph: the pose's axes, the rays' directions, which rays meet a box
 //! (the slab test), the indices of a mask's true entries and the rays those select.
 
+use nldf_core::camera::Intrinsics;
 use nldf_model::onnx::DataType;
 
 use crate::graph::{GraphBuilder, attr_int, attr_ints};
@@ -173,4 +174,16 @@ pub(super) fn ray_directions(
     let d = g.node("Add", &name("directions_grid"), &[&across, &back], vec![]);
     let flat = g.constant_i64(&name("flat_shape"), &[2], &[-1, 3]);
     g.node("Reshape", &name("directions"), &[&d, &flat], vec![])
+}
+
+/// The camera-plane coordinates of the pixel columns (`x_i = (i - cx) / f`, `[w]`) and rows
+/// (`y_j = -(j - cy) / f`, `[h]`), as `Intrinsics::camera_direction` makes them.
+pub(super) fn pixel_coords(k: &Intrinsics) -> (Vec<f32>, Vec<f32>) {
+    let xs = (0..k.width)
+        .map(|i| k.camera_direction(i as f32, 0.0).x)
+        .collect();
+    let ys = (0..k.height)
+        .map(|j| k.camera_direction(0.0, j as f32).y)
+        .collect();
+    (xs, ys)
 }

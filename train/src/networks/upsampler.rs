@@ -196,16 +196,10 @@ pub fn coarse_box_features(
     for p in 0..bh * bw {
         canvas[p * channels + width + 3] = MISS_LOGIT;
     }
-    let spec = &student.cfg.beam;
     for (c, chunk) in head.pixels.chunks(GRID_CHUNK).enumerate() {
         let lo = c * GRID_CHUNK;
         let sub = head.rays.slice(lo..lo + chunk.len());
-        let beams = encode_beams_parallel(&sub, range.near, range.far, spec, None);
-        let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
-        let codes = code
-            .broadcast_as((chunk.len(), code.dim(1)?))?
-            .contiguous()?;
-        let (hidden, out) = student.mlp.forward_hidden(&beams, &codes)?;
+        let (hidden, out) = student_on_rays(student, &sub, range, code)?;
         let row = Tensor::cat(&[&hidden, &out.colour, &out.logit], D::Minus1)?;
         let row: Vec<Vec<f32>> = row.to_vec2()?;
         for (&p, values) in chunk.iter().zip(row) {
@@ -224,6 +218,23 @@ pub fn coarse_box_features(
         n_rays: head.pixels.len(),
         grid,
     })
+}
+
+/// The student's last hidden layer `[n, width]` and outputs for the rays `rays`, their
+/// beams encoded within the head range's `[near, far]`, all with the audio code `code`
+/// (`[1, audio_dim]`).
+fn student_on_rays(
+    student: &Student,
+    rays: &nldf_core::rays::Rays,
+    range: &HeadRange,
+    code: &Tensor,
+) -> Result<(Tensor, crate::networks::student::LightOut)> {
+    let spec = &student.cfg.beam;
+    let n = rays.len();
+    let beams = encode_beams_parallel(rays, range.near, range.far, spec, None);
+    let beams = Tensor::from_vec(beams, (n, spec.encoded_len()), &Device::Cpu)?;
+    let codes = code.broadcast_as((n, code.dim(1)?))?.contiguous()?;
+    student.mlp.forward_hidden(&beams, &codes)
 }
 
 /// `[1, 3, h, w]` of the image's pixels in rows `rows` and columns `cols`.
@@ -314,16 +325,10 @@ pub fn paint_mouth_patch(
     image: &mut ImageRgb,
 ) -> crate::Result<usize> {
     let patch = mouth_patch_rays(camera, range, mouth);
-    let spec = &student.cfg.beam;
     for (c, chunk) in patch.pixels.chunks(GRID_CHUNK).enumerate() {
         let lo = c * GRID_CHUNK;
         let sub = patch.rays.slice(lo..lo + chunk.len());
-        let beams = encode_beams_parallel(&sub, range.near, range.far, spec, None);
-        let beams = Tensor::from_vec(beams, (chunk.len(), spec.encoded_len()), &Device::Cpu)?;
-        let codes = code
-            .broadcast_as((chunk.len(), code.dim(1)?))?
-            .contiguous()?;
-        let (_, out) = student.mlp.forward_hidden(&beams, &codes)?;
+        let (_, out) = student_on_rays(student, &sub, range, code)?;
         let bg = Tensor::from_vec(background.gather(chunk), (chunk.len(), 3), &Device::Cpu)?;
         let pixels: Vec<f32> = out.pixels(&bg)?.flatten_all()?.to_vec1()?;
         image.paint(chunk, &pixels);
