@@ -20,6 +20,11 @@ pub struct Bounds {
 }
 
 impl Bounds {
+    /// Whether every axis has finite ends with `lo` below `hi`.
+    pub fn is_proper(&self) -> bool {
+        (0..3).all(|a| self.lo[a].is_finite() && self.hi[a].is_finite() && self.lo[a] < self.hi[a])
+    }
+
     /// The box's centre.
     pub fn centre(&self) -> Vec3 {
         0.5 * (self.lo + self.hi)

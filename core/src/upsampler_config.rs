@@ -171,17 +171,15 @@ impl UpsamplerConfig {
             in_range(&format!("{at}.channels[{i}]"), c, 1, 256)?;
         }
         in_range(&format!("{at}.margin"), self.margin, 0, 64)?;
-        if let Some(b) = &self.mouth_patch {
-            let ok =
-                (0..3).all(|a| b.lo[a].is_finite() && b.hi[a].is_finite() && b.lo[a] < b.hi[a]);
-            if !ok {
-                return Err(Error::Argument(format!(
-                    "`{at}.mouth_patch` must be a box with finite `lo` below `hi` on every \
-                     axis, got lo {:?}, hi {:?}",
-                    b.lo.to_array(),
-                    b.hi.to_array()
-                )));
-            }
+        if let Some(b) = &self.mouth_patch
+            && !b.is_proper()
+        {
+            return Err(Error::Argument(format!(
+                "`{at}.mouth_patch` must be a box with finite `lo` below `hi` on every \
+                 axis, got lo {:?}, hi {:?}",
+                b.lo.to_array(),
+                b.hi.to_array()
+            )));
         }
         Ok(())
     }

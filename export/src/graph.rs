@@ -418,6 +418,21 @@ impl GraphBuilder {
         name.to_string()
     }
 
+    /// Renames the value `old` to `new` wherever a node makes or reads it (so that a graph
+    /// output can be made from it under the old name).
+    pub fn rename(&mut self, old: &str, new: &str) {
+        for n in &mut self.nodes {
+            for v in n.input.iter_mut().chain(n.output.iter_mut()) {
+                if v == old {
+                    *v = new.to_string();
+                }
+            }
+            if n.name.as_deref() == Some(old) {
+                n.name = Some(new.to_string());
+            }
+        }
+    }
+
     /// Number of weight values stored so far.
     pub fn n_initializer_values(&self) -> usize {
         self.initializers

@@ -1,8 +1,10 @@
 //! ONNX layers the graphs share, each written once: a padded convolution, bilinear
 //! upsampling as a transposed convolution with fixed weights, depth-to-space, a slice of
-//! channels, and the index helpers that cut a box of hits out of a grid.
+//! channels, and the index helpers that cut a box of hits out of a grid or pick a mask's rows.
 
 use nldf_core::upsampler_config::bilinear_kernel;
+
+use nldf_model::onnx::DataType;
 
 use crate::graph::{GraphBuilder, attr_int, attr_ints};
 
@@ -137,4 +139,49 @@ pub(crate) fn index_range(
     let at = g.node("NonZero", &format!("{name}.at"), &[&inside], vec![]);
     let flat = g.constant_i64(&format!("{name}.flat"), &[1], &[-1]);
     g.node("Reshape", name, &[&at, &flat], vec![])
+}
+
+/// The rows of a batch that the true entries of a mask hold, in the order `NonZero` lists
+/// them (`indices`, int64 `[n]`): entry k (row-major) is row `first + k` (`first` 0 when
+/// `None`; int64 `[1]` otherwise). An index list sized by the mask's `NonZero`, for a
+/// Gather: runtimes do not all size a Slice of computed bounds (tract's fails to run).
+///
+/// # Shapes
+/// - `mask_i64`: int64 `[m]`, 0 or 1; returns int64 `[n]`
+pub(crate) fn rank_rows(
+    g: &mut GraphBuilder,
+    prefix: &str,
+    mask_i64: &str,
+    indices: &str,
+    first: Option<&str>,
+) -> String {
+    let name = |n: &str| format!("{prefix}.{n}");
+    // Ranks summed in f32 (exact to 2^24 entries): tract sums no integers.
+    let mask = g.node(
+        "Cast",
+        &name("mask_f32"),
+        &[mask_i64],
+        vec![attr_int("to", DataType::Float as i64)],
+    );
+    let axis0 = g.constant_i64(&name("rank_axis"), &[], &[0]);
+    let ranks = g.node("CumSum", &name("ranks_f32"), &[&mask, &axis0], vec![]);
+    let ranks = g.node(
+        "Cast",
+        &name("ranks_all"),
+        &[&ranks],
+        vec![attr_int("to", DataType::Int64 as i64)],
+    );
+    let ranks = g.node(
+        "Gather",
+        &name("ranks"),
+        &[&ranks, indices],
+        vec![attr_int("axis", 0)],
+    );
+    // Ranks count from 1.
+    let one = g.constant_i64(&name("rank_one"), &[1], &[1]);
+    let offset = match first {
+        Some(first) => g.node("Sub", &name("first_row"), &[first, &one], vec![]),
+        None => g.node("Neg", &name("first_row"), &[&one], vec![]),
+    };
+    g.node("Add", &name("row_index"), &[&ranks, &offset], vec![])
 }

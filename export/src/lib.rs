@@ -13,6 +13,7 @@ pub mod error;
 pub mod frame;
 pub mod graph;
 pub(crate) mod layers;
+pub(crate) mod patch;
 pub mod student;
 pub mod upsampler_graph;
 

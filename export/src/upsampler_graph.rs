@@ -26,8 +26,9 @@ use nldf_core::student_network::MlpLayout;
 use nldf_core::upsampler_config::{Conv2dLayer, MISS_LOGIT, UpsamplerConfig};
 use nldf_model::contract::{
     BOX_COLS, BOX_HEIGHT, BOX_ROWS, BOX_WIDTH, INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS,
-    INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_RGB,
-    OUTPUT_SEGMENTS, RAY_AXIS, UpsampleInfo,
+    INPUT_DIRECTIONS, INPUT_ORIGINS, INPUT_PATCH_BACKGROUND, INPUT_PATCH_DIRECTIONS,
+    INPUT_PATCH_ORIGINS, ModelInfo, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_PATCH_RGB,
+    OUTPUT_RGB, OUTPUT_SEGMENTS, PATCH_AXIS, RAY_AXIS, UpsampleInfo,
 };
 use nldf_model::onnx::{DataType, ModelProto};
 
@@ -35,6 +36,7 @@ use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights
 use crate::error::{Error, Result};
 use crate::graph::{ActivationRanges, Dim, GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::layers::{self, bilinear_up, channels_of, depth_to_space, index_range, span};
+use crate::patch::{PatchInputs, patch_pixels};
 use crate::student::{
     ExportReport, model_info, model_proto, ray_inputs, student_nodes, write_model,
 };
@@ -168,8 +170,39 @@ fn upsampled_ray_model(
         DataType::Float,
         &[pixels[0].clone(), pixels[1].clone(), Dim::Fixed(3)],
     );
-    student_nodes(&mut g, ckpt, (&origins, &directions), &audio, None)?;
-    let (rgb, alpha) = upsampled_box(&mut g, ckpt, up, &cells, &background)?;
+    let patch = up.shape.mouth_patch.map(|_| PatchInputs::declare(&mut g));
+    let (rgb, alpha) = match &patch {
+        None => {
+            student_nodes(&mut g, ckpt, (&origins, &directions), &audio, None)?;
+            upsampled_box(&mut g, ckpt, up, &cells, &background, None)?
+        }
+        Some(p) => {
+            // One student pass over the coarse rays, then the patch's.
+            let axis0 = || vec![attr_int("axis", 0)];
+            let o = g.node("Concat", "patch.all_origins", &[&origins, &p.o], axis0());
+            let d = g.node(
+                "Concat",
+                "patch.all_directions",
+                &[&directions, &p.d],
+                axis0(),
+            );
+            student_nodes(&mut g, ckpt, (&o, &d), &audio, None)?;
+            let (first, at) = p.rows(&mut g, &cells);
+            // The segments output keeps the coarse rays' rows.
+            g.rename(OUTPUT_SEGMENTS, "patch.all_segments");
+            g.node(
+                "Gather",
+                OUTPUT_SEGMENTS,
+                &["patch.all_segments", &first],
+                axis0(),
+            );
+            let out = upsampled_box(&mut g, ckpt, up, &cells, &background, Some(&first))?;
+            let width = ckpt.shape.width;
+            let pixels = patch_pixels(&mut g, "patch", (UP_ROWS, &at), &p.background, width);
+            g.node("Identity", OUTPUT_PATCH_RGB, &[&pixels], vec![]);
+            out
+        }
+    };
     g.node("Identity", OUTPUT_BOX_RGB, &[&rgb], vec![]);
     g.node("Identity", OUTPUT_BOX_OPACITY, &[&alpha], vec![]);
     g.output(
@@ -187,6 +220,13 @@ fn upsampled_ray_model(
         DataType::Float,
         &[pixels[0].clone(), pixels[1].clone(), Dim::Fixed(1)],
     );
+    if patch.is_some() {
+        g.output(
+            OUTPUT_PATCH_RGB,
+            DataType::Float,
+            &[sym(PATCH_AXIS), Dim::Fixed(3)],
+        );
+    }
     let n_values = g.n_initializer_values();
     let doc = format!(
         "NLDF student ({} x {}) with a learned upsampler x{r} ({:?} channels): inputs \
@@ -196,14 +236,29 @@ fn upsampled_ray_model(
          {INPUT_BACKGROUND} [{BOX_HEIGHT}, {BOX_WIDTH}, 3] ({r} x the box's rows and \
          columns); outputs {OUTPUT_BOX_RGB} [{BOX_HEIGHT}, {BOX_WIDTH}, 3], the box's pixels \
          composited over the background, {OUTPUT_SEGMENTS} [{RAY_AXIS}, {}, 3] and \
-         {OUTPUT_BOX_OPACITY} [{BOX_HEIGHT}, {BOX_WIDTH}, 1].",
-        s.depth, s.width, up.shape.channels, s.segments,
+         {OUTPUT_BOX_OPACITY} [{BOX_HEIGHT}, {BOX_WIDTH}, 1].{}",
+        s.depth,
+        s.width,
+        up.shape.channels,
+        s.segments,
+        if patch.is_some() {
+            format!(
+                " Mouth patch: inputs {INPUT_PATCH_ORIGINS} and {INPUT_PATCH_DIRECTIONS} \
+                 [{PATCH_AXIS}, 3] (the rays of the output pixels whose rays meet the mouth's \
+                 box, nldf.upsample's mouth_patch) and {INPUT_PATCH_BACKGROUND} [{PATCH_AXIS}, \
+                 3]; output {OUTPUT_PATCH_RGB} [{PATCH_AXIS}, 3], the student's own colours \
+                 of those rays composited over their background."
+            )
+        } else {
+            String::new()
+        },
     );
     let graph = g.finish(nldf_model::contract::GRAPH_NAME, &doc);
     let mut info = model_info(ckpt, &graph);
     info.upsample = Some(UpsampleInfo {
         factor: r,
         margin: up.shape.margin,
+        mouth_patch: up.shape.mouth_patch,
     });
     let metadata = info.to_metadata();
     Ok((model_proto(graph, doc, metadata), info, n_values))
@@ -465,7 +520,9 @@ fn scatter_box(
 /// true cells of `cells` (bool `[bh, bw]`, row-major order; the other cells are misses),
 /// through the CNN, composited over `background` (float `[bh r, bw r, 3]`).
 ///
-/// The student's nodes must already be in `g`, as for [`upsampled_image`].
+/// The student's nodes must already be in `g`, as for [`upsampled_image`]; when it also
+/// ran on other rays (a mouth patch's), `first` (int64 `[n_rays]`) says which of its rows
+/// are the given coarse rays'.
 ///
 /// # Shapes
 /// - returns the box's pixels `[bh r, bw r, 3]` and opacity `[bh r, bw r, 1]`
@@ -475,8 +532,17 @@ pub(crate) fn upsampled_box(
     up: &UpsamplerCheckpoint,
     cells: &str,
     background: &str,
+    first: Option<&str>,
 ) -> Result<(String, String)> {
-    let rows = student_rows(g, ckpt)?;
+    let mut rows = student_rows(g, ckpt)?;
+    if let Some(first) = first {
+        rows = g.node(
+            "Gather",
+            "up.coarse_rows",
+            &[&rows, first],
+            vec![attr_int("axis", 0)],
+        );
+    }
     let miss = miss_row(g, ckpt.shape.width);
     // `[bh, bw, width + 4]` of misses, by broadcasting (no shape computed in the graph).
     let axis2 = g.constant_i64("up.cell_axis", &[1], &[2]);

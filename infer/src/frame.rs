@@ -7,9 +7,12 @@
 //! `r x r` block instead, through the block's centre, again only those that meet the head;
 //! the graph upsamples the box around them (widened by the upsampler's margin) and every
 //! pixel outside the box is the background, as `nldf_train::upsampler::render_upsampled`
-//! renders (without the upsampler's mouth patch, which the frame graph alone draws).
+//! renders. With the upsampler's mouth patch, the output pixels whose rays meet the mouth's
+//! box go through the student as they are (in the same graph call) and are painted over the
+//! upsampled frame.
 
 use glam::Mat4;
+use nldf_core::bounds::HeadRange;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
 use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
@@ -17,7 +20,7 @@ use nldf_core::upsampler_config::{coarse_box, coarse_intrinsics, receptive_halo}
 use nldf_model::contract::{ModelInfo, UpsampleInfo};
 
 use crate::error::{Error, Result};
-use crate::runtime::{Backend, BoxInput, RayOutputs};
+use crate::runtime::{Backend, BoxInput, PatchRays, RayOutputs};
 
 /// Largest image side `nldf render` accepts.
 pub const MAX_SIDE: u32 = 8192;
@@ -212,7 +215,9 @@ impl FrameRenderer {
                 head_pixels: 0,
             });
         };
-        let (rgb, n_rays) = self.run_sub_box(&view, &view.hits, full, audio, up)?;
+        let patch = self.patch_rays(c2w, up);
+        let (rgb, patch_rgb, n_rays) =
+            self.run_sub_box(&view, &view.hits, full, &patch, audio, up)?;
         let r = up.factor;
         let w = self.intrinsics.width as usize;
         let (x0, x1) = (full.2 * r, full.3 * r);
@@ -221,10 +226,29 @@ impl FrameRenderer {
             image.data[3 * (y * w + x0)..3 * (y * w + x1)]
                 .copy_from_slice(&rgb[k * line..(k + 1) * line]);
         }
+        image.paint(&patch.pixels, &patch_rgb);
         Ok(RenderedFrame {
             image,
-            head_pixels: n_rays,
+            head_pixels: n_rays + patch.pixels.len(),
         })
+    }
+
+    /// The mouth patch's rays seen from `c2w`: the output pixels whose rays meet the
+    /// upsampler's mouth box within `[near, far]` (as `nldf_train`'s `mouth_patch_rays`
+    /// finds them); none without a patch.
+    fn patch_rays(&self, c2w: Mat4, up: UpsampleInfo) -> PixelRays {
+        let Some(mouth) = up.mouth_patch else {
+            return PixelRays::default();
+        };
+        let camera = Camera {
+            intrinsics: self.intrinsics,
+            c2w,
+        };
+        let range = HeadRange {
+            bounds: mouth,
+            ..self.backend.info().spec.head_range()
+        };
+        head_rays(&camera, &range)
     }
 
     /// The coarse rays seen from `c2w` that go through the network, their cells and the
@@ -242,15 +266,17 @@ impl FrameRenderer {
 
     /// The graph on the sub-box `(row0, row1, col0, col1)` of the coarse grid (within the
     /// view's box), sent the view's rays whose cells `given` (`[hc wc]`) marks (every other
-    /// cell a miss): its pixels `[rows r, cols r, 3]` flat and the rays sent.
+    /// cell a miss) and the mouth patch's rays `patch` (none without a patch): its pixels
+    /// `[rows r, cols r, 3]` flat, the patch's `[n_patch, 3]` and the coarse rays sent.
     fn run_sub_box(
         &mut self,
         view: &CoarseView,
         given: &[bool],
         (r0, r1, c0, c1): BoxSides,
+        patch: &PixelRays,
         audio: &[f32],
         up: UpsampleInfo,
-    ) -> Result<(Vec<f32>, usize)> {
+    ) -> Result<(Vec<f32>, Vec<f32>, usize)> {
         let wc = self.ray_intrinsics.width as usize;
         let send =
             |p: usize| given[p] && (r0..r1).contains(&(p / wc)) && (c0..c1).contains(&(p % wc));
@@ -273,14 +299,20 @@ impl FrameRenderer {
             .copied()
             .collect();
         let n_rays = origins.len() / 3;
+        let patch_background = self.background.gather(&patch.pixels);
         let boxed = BoxInput {
             cells: &cells,
             rows: r1 - r0,
             cols: c1 - c0,
             background: &background,
+            patch: up.mouth_patch.map(|_| PatchRays {
+                origins: &patch.rays.origins,
+                directions: &patch.rays.directions,
+                background: &patch_background,
+            }),
         };
         let out = self.backend.run_box(&origins, &directions, audio, boxed)?;
-        Ok((out.rgb, n_rays))
+        Ok((out.rgb, out.patch_rgb, n_rays))
     }
 
     /// The pixels (indices into the frame) that the network can change in the frame seen
@@ -358,19 +390,22 @@ impl FrameRenderer {
             c0.max(full.2),
             c1.min(full.3),
         );
-        if sub.0 >= sub.1 || sub.2 >= sub.3 {
+        let patch = patch_within(self.patch_rays(c2w, up), &region.pixels);
+        let outside = sub.0 >= sub.1 || sub.2 >= sub.3;
+        if outside && patch.rays.pixels.is_empty() {
             // Every pixel lies outside the head's box: the background.
             return Ok((self.background.gather(&region.pixels), 0));
         }
         // Without a hit among the given cells, the whole box (the graph takes one ray at
         // least, and the whole box gives those pixels exactly).
-        let any_hit = (0..hc * wc).any(|p| given[p] && view.hits[p]);
+        let any_hit = !outside && (0..hc * wc).any(|p| given[p] && view.hits[p]);
         let (given, sub) = if any_hit {
             (&given, sub)
         } else {
             (&view.hits, full)
         };
-        let (rgb, n_rays) = self.run_sub_box(&view, given, sub, audio, up)?;
+        let (rgb, patch_rgb, n_rays) =
+            self.run_sub_box(&view, given, sub, &patch.rays, audio, up)?;
         let (y0, y1, x0, x1) = (sub.0 * r, sub.1 * r, sub.2 * r, sub.3 * r);
         let mut out = Vec::with_capacity(3 * region.pixels.len());
         for &p in &region.pixels {
@@ -382,7 +417,10 @@ impl FrameRenderer {
                 out.extend_from_slice(&self.background.data[3 * p..3 * p + 3]);
             }
         }
-        Ok((out, n_rays))
+        for &(place, k) in &patch.at {
+            out[3 * place..3 * place + 3].copy_from_slice(&patch_rgb[3 * k..3 * k + 3]);
+        }
+        Ok((out, n_rays + patch.rays.pixels.len()))
     }
 
     /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),
@@ -403,6 +441,50 @@ impl FrameRenderer {
             audio,
         )
     }
+}
+
+/// The mouth patch's rays whose pixels a region lists, and where each of the region's
+/// patch pixels takes its colour from.
+struct RegionPatch {
+    rays: PixelRays,
+    /// `(place in the region, ray in rays)` for every region pixel of the patch.
+    at: Vec<(usize, usize)>,
+}
+
+/// The rays of `patch` whose pixels are among `pixels` (each once), with the places of
+/// those pixels in `pixels` (a pixel listed twice gets its colour twice).
+fn patch_within(patch: PixelRays, pixels: &[usize]) -> RegionPatch {
+    let mut out = RegionPatch {
+        rays: PixelRays::default(),
+        at: Vec::new(),
+    };
+    if patch.pixels.is_empty() {
+        return out;
+    }
+    let ray_of: std::collections::HashMap<usize, usize> = patch
+        .pixels
+        .iter()
+        .enumerate()
+        .map(|(k, &p)| (p, k))
+        .collect();
+    let mut sent: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+    for (place, p) in pixels.iter().enumerate() {
+        let Some(&k) = ray_of.get(p) else { continue };
+        let next = sent.len();
+        let ray = *sent.entry(k).or_insert(next);
+        if ray == next {
+            let rays = &mut out.rays;
+            rays.pixels.push(*p);
+            rays.rays
+                .origins
+                .extend_from_slice(&patch.rays.origins[3 * k..3 * k + 3]);
+            rays.rays
+                .directions
+                .extend_from_slice(&patch.rays.directions[3 * k..3 * k + 3]);
+        }
+        out.at.push((place, ray));
+    }
+    out
 }
 
 /// A box of the coarse grid, `(row0, row1, col0, col1)`, ends excluded.

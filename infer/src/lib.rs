@@ -35,5 +35,7 @@ pub mod video;
 pub use backend::{backend_for, open_backend};
 pub use error::{Error, Result};
 pub use frame::{FrameRenderer, RenderedFrame};
-pub use runtime::{Backend, BackendKind, BackendOptions, RayOutputs};
+pub use runtime::{
+    Backend, BackendKind, BackendOptions, BoxInput, BoxOutputs, PatchRays, RayOutputs,
+};
 pub use video::{VideoJob, VideoPlan, VideoReport};

@@ -7,8 +7,10 @@ use std::sync::OnceLock;
 
 use nldf_model::ExportedModel;
 use nldf_model::contract::{
-    INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS, INPUT_DIRECTIONS, INPUT_ORIGINS, ModelInfo,
-    OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS,
+    INPUT_AUDIO, INPUT_BACKGROUND, INPUT_CELLS, INPUT_DIRECTIONS, INPUT_ORIGINS,
+    INPUT_PATCH_BACKGROUND, INPUT_PATCH_DIRECTIONS, INPUT_PATCH_ORIGINS, ModelInfo,
+    OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB, OUTPUT_OPACITY, OUTPUT_PATCH_RGB, OUTPUT_RGB,
+    OUTPUT_SEGMENTS,
 };
 use ort::environment::Environment;
 use ort::session::{Session, SessionOutputs};
@@ -207,7 +209,7 @@ impl Backend for OrtBackend {
         let n = origins.len() / 3;
         let fail = |e: ort::Error| Error::backend(NAME, e);
         let pixels = [boxed.rows * r, boxed.cols * r, 3];
-        let inputs = ort::inputs![
+        let mut inputs = ort::inputs![
             INPUT_ORIGINS => TensorRef::from_array_view(([n, 3], origins)).map_err(fail)?,
             INPUT_DIRECTIONS => TensorRef::from_array_view(([n, 3], directions)).map_err(fail)?,
             INPUT_AUDIO => TensorRef::from_array_view((self.info.audio.shape(), audio))
@@ -217,6 +219,17 @@ impl Backend for OrtBackend {
             INPUT_BACKGROUND => TensorRef::from_array_view((pixels, boxed.background))
                 .map_err(fail)?,
         ];
+        if let Some(p) = boxed.patch {
+            let rows = [p.len(), 3];
+            inputs.extend(ort::inputs![
+                INPUT_PATCH_ORIGINS => TensorRef::from_array_view((rows, p.origins))
+                    .map_err(fail)?,
+                INPUT_PATCH_DIRECTIONS => TensorRef::from_array_view((rows, p.directions))
+                    .map_err(fail)?,
+                INPUT_PATCH_BACKGROUND => TensorRef::from_array_view((rows, p.background))
+                    .map_err(fail)?,
+            ]);
+        }
         let outputs = self.session.run(inputs).map_err(fail)?;
         let take = |name: &str| -> Result<Vec<f32>> {
             let value = outputs
@@ -228,6 +241,10 @@ impl Backend for OrtBackend {
         Ok(BoxOutputs {
             rgb: take(OUTPUT_BOX_RGB)?,
             opacity: take(OUTPUT_BOX_OPACITY)?,
+            patch_rgb: match boxed.patch {
+                Some(_) => take(OUTPUT_PATCH_RGB)?,
+                None => Vec::new(),
+            },
         })
     }
 }

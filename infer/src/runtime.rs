@@ -109,6 +109,37 @@ pub struct BoxInput<'a> {
     pub cols: usize,
     /// `[rows r, cols r, 3]` flat: the background of the box's pixels (`r` the factor).
     pub background: &'a [f32],
+    /// The mouth patch's rays, for a graph that has one (`UpsampleInfo::mouth_patch`;
+    /// `None` sends none).
+    pub patch: Option<PatchRays<'a>>,
+}
+
+/// The rays of the output pixels whose rays meet an upsampled ray graph's mouth box, and
+/// the background behind them, `[n_patch, 3]` flat each.
+#[derive(Debug, Clone, Copy)]
+pub struct PatchRays<'a> {
+    pub origins: &'a [f32],
+    pub directions: &'a [f32],
+    pub background: &'a [f32],
+}
+
+impl PatchRays<'_> {
+    /// The patch that holds no ray.
+    pub const NONE: PatchRays<'static> = PatchRays {
+        origins: &[],
+        directions: &[],
+        background: &[],
+    };
+
+    /// How many rays it holds.
+    pub fn len(&self) -> usize {
+        self.origins.len() / 3
+    }
+
+    /// Whether it holds no ray.
+    pub fn is_empty(&self) -> bool {
+        self.origins.is_empty()
+    }
 }
 
 /// An upsampled ray graph's outputs for one box.
@@ -118,6 +149,32 @@ pub struct BoxOutputs {
     pub rgb: Vec<f32>,
     /// How much of each pixel the head covers, `[rows r, cols r]`.
     pub opacity: Vec<f32>,
+    /// The mouth patch's pixels, `[n_patch, 3]`, the background composited in (empty
+    /// without a patch).
+    pub patch_rgb: Vec<f32>,
+}
+
+/// The mouth patch a graph is sent: `patch` for a graph with one (none given: an empty
+/// patch), none for a graph without; the rays' and background's lengths checked.
+fn check_patch(has_patch: bool, patch: Option<PatchRays<'_>>) -> Result<Option<PatchRays<'_>>> {
+    match (has_patch, patch) {
+        (false, None) => Ok(None),
+        (false, Some(_)) => Err(Error::Argument(
+            "this model has no mouth patch: it takes no patch rays".into(),
+        )),
+        (true, None) => Ok(Some(PatchRays::NONE)),
+        (true, Some(p)) => {
+            check_rays(p.origins, p.directions)?;
+            if p.background.len() != p.origins.len() {
+                return Err(Error::Argument(format!(
+                    "mouth patch: {} background values for {} rays",
+                    p.background.len(),
+                    p.len()
+                )));
+            }
+            Ok(Some(p))
+        }
+    }
 }
 
 /// A runtime holding one exported model.
@@ -200,7 +257,22 @@ pub trait Backend {
             )));
         }
         check_audio(info, audio)?;
+        let boxed = BoxInput {
+            patch: check_patch(up.mouth_patch.is_some(), boxed.patch)?,
+            ..boxed
+        };
+        let n_patch = boxed.patch.map_or(0, |p| p.len());
         let out = self.run_box_once(origins, directions, audio, boxed)?;
+        if out.patch_rgb.len() != 3 * n_patch {
+            return Err(Error::backend(
+                self.kind().name(),
+                format!(
+                    "the mouth patch's output holds {} values, expected {}",
+                    out.patch_rgb.len(),
+                    3 * n_patch
+                ),
+            ));
+        }
         if out.rgb.len() != 3 * area * r * r || out.opacity.len() != area * r * r {
             return Err(Error::backend(
                 self.kind().name(),

@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use nldf_model::ExportedModel;
 use nldf_model::contract::{
-    BOX_COLS, BOX_ROWS, ModelInfo, RAY_AXIS, model_input_names, model_output_names,
+    BOX_COLS, BOX_ROWS, ModelInfo, PATCH_AXIS, RAY_AXIS, model_input_names, model_output_names,
 };
 use tract_onnx::prelude::*;
 
@@ -139,15 +139,23 @@ fn boxed_plan(
     let cols: TDim = parsed.symbols.sym(BOX_COLS).into();
     let r = TDim::from(factor as i64);
     let three = TDim::from(3i64);
-    parsed
+    let mut model = parsed
         .clone()
         .with_input_fact(0, f32::fact([n.clone(), three.clone()]).into())?
         .with_input_fact(1, f32::fact([n, three.clone()]).into())?
         .with_input_fact(2, f32::fact(info.audio.shape()).into())?
         .with_input_fact(3, bool::fact([rows.clone(), cols.clone()]).into())?
-        .with_input_fact(4, f32::fact([rows * r.clone(), cols * r, three]).into())?
-        .into_optimized()?
-        .into_runnable()
+        .with_input_fact(
+            4,
+            f32::fact([rows * r.clone(), cols * r, three.clone()]).into(),
+        )?;
+    if info.upsample.is_some_and(|u| u.mouth_patch.is_some()) {
+        let p: TDim = parsed.symbols.sym(PATCH_AXIS).into();
+        for input in 5..8 {
+            model = model.with_input_fact(input, f32::fact([p.clone(), three.clone()]).into())?;
+        }
+    }
+    model.into_optimized()?.into_runnable()
 }
 
 impl Backend for TractBackend {
@@ -243,7 +251,7 @@ impl Backend for TractBackend {
         let r = self.info.upsample.map_or(1, |u| u.factor);
         let fail = |e: TractError| Error::backend(NAME, e);
         let n = origins.len() / 3;
-        let inputs: TVec<TValue> = tvec!(
+        let mut inputs: TVec<TValue> = tvec!(
             Tensor::from_shape(&[n, 3], origins).map_err(fail)?.into(),
             Tensor::from_shape(&[n, 3], directions)
                 .map_err(fail)?
@@ -258,6 +266,15 @@ impl Backend for TractBackend {
                 .map_err(fail)?
                 .into(),
         );
+        if let Some(p) = boxed.patch {
+            for values in [p.origins, p.directions, p.background] {
+                inputs.push(
+                    Tensor::from_shape(&[p.len(), 3], values)
+                        .map_err(fail)?
+                        .into(),
+                );
+            }
+        }
         let outputs =
             tract_linalg::multithread::multithread_tract_scope(self.executor.clone(), || {
                 plan.run(inputs)
@@ -273,6 +290,10 @@ impl Backend for TractBackend {
         Ok(BoxOutputs {
             rgb: take(0)?,
             opacity: take(2)?,
+            patch_rgb: match boxed.patch {
+                Some(_) => take(3)?,
+                None => Vec::new(),
+            },
         })
     }
 }

@@ -555,7 +555,7 @@ fn models_checkpoints_and_configs_of_an_older_nldf_are_refused_with_one_error() 
     let err = read_model(&older_path).unwrap_err();
     assert!(matches!(err, Error::Older { .. }), "{err:?}");
     assert!(err.to_string().contains("older.onnx"), "{err}");
-    let newer = ModelInfo::from_metadata(&with(version, "6"))
+    let newer = ModelInfo::from_metadata(&with(version, "7"))
         .unwrap_err()
         .to_string();
     assert!(newer.contains("newer nldf"), "{newer}");

@@ -562,6 +562,129 @@ fn a_mouth_patch_draws_the_students_own_rays_in_the_frame_graph() {
             }
         }
     }
+    patched_ray_graph_matches_candle(&run, (&plain_dir, &patch_dir), &up, &poses, &|f| {
+        neighbourhood(&windows, f, cfg.audio.att_frames)
+    });
+}
+
+/// The patched upsampled ray graph through nldf's renderer (`nldf render`) draws what
+/// candle's `render_upsampled` draws with the patch, within `REL_TOL`, and sends its rays
+/// (the coarse ones and the patch's); the patchless ray graph's frames differ only on the
+/// patch's pixels. Parts of the frame through `render_pixels` (skipping still pixels) give
+/// the whole frame's pixels, the patch's included.
+fn patched_ray_graph_matches_candle(
+    run: &crate::util::Run,
+    (plain_dir, patch_dir): (&std::path::Path, &std::path::Path),
+    up: &Upsampler,
+    poses: &[Mat4],
+    audio: &dyn Fn(usize) -> Vec<f32>,
+) {
+    use nldf_train::networks::upsampler::mouth_patch_rays;
+    let export = |dir: &std::path::Path, name: &str| {
+        let path = run.root.join(name);
+        export_student_upsampled(&run.student_dir(), dir, &path, WeightType::F32).unwrap();
+        read_model(&path).unwrap()
+    };
+    let plain = export(plain_dir, "rays_up.onnx");
+    let patched = export(patch_dir, "rays_mouth.onnx");
+    let mouth = up.cfg.mouth_patch.expect("a patched upsampler");
+    assert_eq!(
+        patched.info.upsample.and_then(|u| u.mouth_patch),
+        Some(mouth),
+        "the ray graph carries the mouth's box"
+    );
+    assert!(plain.info.upsample.is_some_and(|u| u.mouth_patch.is_none()));
+    // The metadata refuses a patch under contract 5 and a box turned inside out.
+    let props = patched.proto.metadata_props.clone();
+    let with = |key: &str, value: String| {
+        let mut props = props.clone();
+        for p in &mut props {
+            if p.key.as_deref() == Some(key) {
+                p.value = Some(value.clone());
+            }
+        }
+        props
+    };
+    use nldf_model::contract::{ModelInfo, keys};
+    let contract5 = ModelInfo::from_metadata(&with(keys::CONTRACT, "5".into()));
+    let err = contract5.unwrap_err().to_string();
+    assert!(err.contains("needs contract 6"), "{err}");
+    let turned = serde_json::json!({
+        "factor": 4, "margin": 2,
+        "mouth_patch": {"lo": mouth.hi.to_array(), "hi": mouth.lo.to_array()},
+    });
+    let err = ModelInfo::from_metadata(&with(keys::UPSAMPLE, turned.to_string())).unwrap_err();
+    assert!(err.to_string().contains("below `hi`"), "{err}");
+    let spec = patched.info.spec.clone();
+    let range = spec.head_range();
+    let background = ImageRgb::load(&run.student_dir().join("background.png")).unwrap();
+    let options = BackendOptions {
+        threads: 2,
+        spin: false,
+        ..BackendOptions::default()
+    };
+    for kind in runtimes() {
+        let open = |m: &nldf_model::ExportedModel| {
+            FrameRenderer::new(backend_for(m, kind, options).unwrap(), None).unwrap()
+        };
+        let (mut plain_r, mut patched_r) = (open(&plain), open(&patched));
+        for (c, &pose) in poses.iter().enumerate() {
+            let f = 1 + c;
+            let label = format!("{} ray graph, camera {c}", kind.name());
+            let camera = Camera {
+                intrinsics: spec.intrinsics,
+                c2w: pose,
+            };
+            let a = audio(f);
+            let au = patched.info.audio;
+            let shape = (1, au.att_frames, au.window, au.n_features);
+            let tensor =
+                candle_core::Tensor::from_vec(a.clone(), shape, &candle_core::Device::Cpu).unwrap();
+            let code = run.student.audio_codes(&tensor).unwrap();
+            let (want, want_rays) =
+                render_upsampled(&run.student, up, &camera, &background, &code, &range).unwrap();
+            let got = patched_r.render(pose, &a).unwrap();
+            let without = plain_r.render(pose, &a).unwrap();
+            let patch = mouth_patch_rays(&camera, &range, &mouth).pixels;
+            let scale = want.data.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            let d = max_diff(&got.image.data, &want.data) / scale;
+            assert!(
+                d <= REL_TOL,
+                "{label}: worst difference {d:.2e} from candle"
+            );
+            if without.head_pixels > 0 {
+                assert_eq!(got.head_pixels, want_rays, "{label}: rays sent");
+                assert_eq!(
+                    got.head_pixels,
+                    without.head_pixels + patch.len(),
+                    "{label}: the patch's rays are sent"
+                );
+            }
+            let mut in_patch = vec![false; want.data.len() / 3];
+            for &p in &patch {
+                in_patch[p] = true;
+            }
+            for (p, &inside) in in_patch.iter().enumerate() {
+                if !inside {
+                    let d = max_diff(
+                        &got.image.data[3 * p..3 * p + 3],
+                        &without.image.data[3 * p..3 * p + 3],
+                    );
+                    assert!(
+                        d == 0.0,
+                        "{label}: pixel {p} outside the patch moved by {d:.2e}"
+                    );
+                }
+            }
+            // Every other pixel of the head's box and of the patch, through render_pixels.
+            let mut region = patched_r.head_region(pose);
+            region.pixels.extend(patch.iter().copied());
+            region.pixels = region.pixels.into_iter().step_by(2).collect();
+            let (rgb, _) = patched_r.render_pixels(pose, &region, &a).unwrap();
+            let d = max_diff(&rgb, &want.gather(&region.pixels)) / scale;
+            assert!(d <= REL_TOL, "{label}: part of the frame: {d:.2e}");
+        }
+    }
 }
 
 /// A tiny demo's run gains an upsampler through the library job: it trains (its loss falls),

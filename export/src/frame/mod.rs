@@ -41,8 +41,9 @@ use crate::upsampler_graph::{UpsamplerCheckpoint, upsampled_image};
 use nldf_core::camera::Intrinsics;
 use nldf_core::upsampler_config::coarse_intrinsics;
 
+use crate::layers::rank_rows;
 use front_end::front_end;
-use mouth_patch::{MouthPatch, rank_rows};
+use mouth_patch::MouthPatch;
 use select::{hit_rays, mask_indices, pixel_coords, pose_columns, ray_directions, slab_hits};
 
 /// Name of the frame graph.

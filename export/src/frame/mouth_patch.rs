@@ -12,51 +12,6 @@ use super::select::{
 use crate::checkpoint::StudentCheckpoint;
 use crate::graph::{GraphBuilder, attr_int};
 
-/// The rows of a batch that the true entries of a mask hold, in the order `NonZero` lists
-/// them (`indices`, int64 `[n]`): entry k (row-major) is row `first + k` (`first` 0 when
-/// `None`; int64 `[1]` otherwise). An index list sized by the mask's `NonZero`, for a
-/// Gather: runtimes do not all size a Slice of computed bounds (tract's fails to run).
-///
-/// # Shapes
-/// - `mask_i64`: int64 `[m]`, 0 or 1; returns int64 `[n]`
-pub(super) fn rank_rows(
-    g: &mut GraphBuilder,
-    prefix: &str,
-    mask_i64: &str,
-    indices: &str,
-    first: Option<&str>,
-) -> String {
-    let name = |n: &str| format!("{prefix}.{n}");
-    // Ranks summed in f32 (exact to 2^24 entries): tract sums no integers.
-    let mask = g.node(
-        "Cast",
-        &name("mask_f32"),
-        &[mask_i64],
-        vec![attr_int("to", DataType::Float as i64)],
-    );
-    let axis0 = g.constant_i64(&name("rank_axis"), &[], &[0]);
-    let ranks = g.node("CumSum", &name("ranks_f32"), &[&mask, &axis0], vec![]);
-    let ranks = g.node(
-        "Cast",
-        &name("ranks_all"),
-        &[&ranks],
-        vec![attr_int("to", DataType::Int64 as i64)],
-    );
-    let ranks = g.node(
-        "Gather",
-        &name("ranks"),
-        &[&ranks, indices],
-        vec![attr_int("axis", 0)],
-    );
-    // Ranks count from 1.
-    let one = g.constant_i64(&name("rank_one"), &[1], &[1]);
-    let offset = match first {
-        Some(first) => g.node("Sub", &name("first_row"), &[first, &one], vec![]),
-        None => g.node("Neg", &name("first_row"), &[&one], vec![]),
-    };
-    g.node("Add", &name("row_index"), &[&ranks, &offset], vec![])
-}
-
 /// The pixel rows and columns (int64 `[n]` index lists, ascending) of the rectangle that
 /// the corners of `bounds` project to in the camera `k` at `pose`, grown by one pixel on
 /// each side and clipped to the image; the whole image when a corner is not in front of
@@ -286,33 +241,20 @@ impl MouthPatch {
     ) -> String {
         // The student's rows (hidden layer, colour, logit) that the upsampler's part of the
         // graph gathered, `[n_all, width + 4]`; the patch's are rows `n_first ..`.
-        let at = rank_rows(g, "patch", &self.mask_i64, &self.local, Some(n_first));
-        let rows = g.node(
-            "Gather",
-            "patch.rows",
-            &[crate::upsampler_graph::UP_ROWS, &at],
-            vec![attr_int("axis", 0)],
-        );
-        let cols = |g: &mut GraphBuilder, name: &str, lo: i64, hi: i64| {
-            let lo = g.constant_i64(&format!("{name}.start"), &[1], &[lo]);
-            let hi = g.constant_i64(&format!("{name}.end"), &[1], &[hi]);
-            let axis = g.constant_i64(&format!("{name}.axis"), &[1], &[1]);
-            g.node("Slice", name, &[&rows, &lo, &hi, &axis], vec![])
-        };
-        let f = width as i64;
-        let colour = cols(g, "patch.colour", f, f + 3);
-        let logit = cols(g, "patch.logit", f + 3, f + 4);
-        let alpha = g.node("Sigmoid", "patch.opacity", &[&logit], vec![]);
-        let one = g.constant_f32("patch.one", &[1], &[1.0]);
-        let clear = g.node("Sub", "patch.clear", &[&one, &alpha], vec![]);
+        let at = crate::layers::rank_rows(g, "patch", &self.mask_i64, &self.local, Some(n_first));
         let behind = g.node(
             "Gather",
             "patch.background",
             &[background, &self.pixels],
             vec![attr_int("axis", 0)],
         );
-        let behind = g.node("Mul", "patch.behind", &[&clear, &behind], vec![]);
-        let pixels = g.node("Add", "patch.pixels", &[&colour, &behind], vec![]);
+        let pixels = crate::patch::patch_pixels(
+            g,
+            "patch",
+            (crate::upsampler_graph::UP_ROWS, &at),
+            &behind,
+            width,
+        );
         let flat = g.constant_i64("patch.flat_shape", &[2], &[-1, 3]);
         let flat = g.node("Reshape", "patch.image_flat", &[image, &flat], vec![]);
         let axis1 = g.constant_i64("patch.index_axis", &[1], &[1]);

@@ -68,8 +68,10 @@ pub const FRAME_AUDIO: &str = "nldf.frame_audio";
 /// `[height / factor, width / factor]`.
 pub const FRAME_UPSAMPLE: &str = "nldf.frame_upsample";
 /// A ray graph's learned upsampler (`super::UpsampleInfo` as JSON, `{"factor",
-/// "margin"}`; contract 5): the graph takes the coarse rays of a box of the coarse
-/// grid and gives the box's pixels ([`super::INPUT_CELLS`], [`super::OUTPUT_BOX_RGB`]).
+/// "margin"}`, contract 5, and `"mouth_patch": {"lo", "hi"}`, contract 6): the graph
+/// takes the coarse rays of a box of the coarse grid and gives the box's pixels
+/// ([`super::INPUT_CELLS`], [`super::OUTPUT_BOX_RGB`]), and with a mouth patch the colours
+/// of the patch's rays ([`super::INPUT_PATCH_ORIGINS`], [`super::OUTPUT_PATCH_RGB`]).
 pub const UPSAMPLE: &str = "nldf.upsample";
 /// The background as base64 of an 8-bit RGB PNG (plain string). Written last.
 pub const BACKGROUND_PNG: &str = "nldf.background_png";

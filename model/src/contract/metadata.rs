@@ -212,6 +212,19 @@ fn read_upsample(
     match props.0.get(keys::UPSAMPLE) {
         Some(v) if format == FORMAT => {
             let up: UpsampleInfo = parse(keys::UPSAMPLE, v)?;
+            if let Some(b) = &up.mouth_patch
+                && (contract < 6 || !b.is_proper())
+            {
+                return Err(MetadataError::Malformed(
+                    keys::UPSAMPLE.to_string(),
+                    format!(
+                        "a mouth patch needs contract 6 (this is {contract}) and a box with \
+                         finite `lo` below `hi` on every axis (lo {:?}, hi {:?})",
+                        b.lo.to_array(),
+                        b.hi.to_array()
+                    ),
+                ));
+            }
             if !matches!(up.factor, 2 | 4 | 8) || up.margin > UpsampleInfo::MAX_MARGIN {
                 return Err(MetadataError::Malformed(
                     keys::UPSAMPLE.to_string(),

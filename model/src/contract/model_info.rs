@@ -3,6 +3,7 @@
 use base64::Engine;
 use nldf_core::audio::FeatureSource;
 use nldf_core::beam::BeamSpec;
+use nldf_core::bounds::Bounds;
 use nldf_core::encoding::MAX_COORD;
 use nldf_core::frame_audio::FrameAudio;
 use nldf_core::render_spec::RenderSpec;
@@ -10,36 +11,52 @@ use serde::{Deserialize, Serialize};
 
 use super::keys;
 use super::names::{
-    CONTRACT_PLAIN, CONTRACT_VERSION, FORMAT, FRAME_FORMAT, INPUT_AUDIO, INPUT_BACKGROUND,
-    INPUT_CELLS, INPUT_DIRECTIONS, INPUT_ORIGINS, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB,
-    OUTPUT_SEGMENTS, input_names, output_names,
+    CONTRACT_PLAIN, CONTRACT_UPSAMPLED, CONTRACT_VERSION, FORMAT, FRAME_FORMAT, INPUT_AUDIO,
+    INPUT_BACKGROUND, INPUT_CELLS, INPUT_DIRECTIONS, INPUT_ORIGINS, INPUT_PATCH_BACKGROUND,
+    INPUT_PATCH_DIRECTIONS, INPUT_PATCH_ORIGINS, OUTPUT_BOX_OPACITY, OUTPUT_BOX_RGB,
+    OUTPUT_PATCH_RGB, OUTPUT_SEGMENTS, input_names, output_names,
 };
 use crate::onnx::{GraphProto, StringStringEntryProto};
 
 /// The input names of the model `info` describes, in the order the exporter writes them:
-/// [`input_names`], with [`INPUT_CELLS`] before the background for an upsampled ray graph.
+/// [`input_names`], with [`INPUT_CELLS`] before the background for an upsampled ray graph,
+/// and the mouth patch's rays and background after it when it has one.
 pub fn model_input_names(info: &ModelInfo) -> Vec<&'static str> {
-    if info.upsample.is_some() {
-        vec![
-            INPUT_ORIGINS,
-            INPUT_DIRECTIONS,
-            INPUT_AUDIO,
-            INPUT_CELLS,
-            INPUT_BACKGROUND,
-        ]
-    } else {
-        input_names()
+    match info.upsample {
+        Some(up) => {
+            let mut names = vec![
+                INPUT_ORIGINS,
+                INPUT_DIRECTIONS,
+                INPUT_AUDIO,
+                INPUT_CELLS,
+                INPUT_BACKGROUND,
+            ];
+            if up.mouth_patch.is_some() {
+                names.extend([
+                    INPUT_PATCH_ORIGINS,
+                    INPUT_PATCH_DIRECTIONS,
+                    INPUT_PATCH_BACKGROUND,
+                ]);
+            }
+            names
+        }
+        None => input_names(),
     }
 }
 
 /// The output names of the model `info` describes, in the order the exporter writes them:
 /// [`output_names`], or for an upsampled ray graph [`OUTPUT_BOX_RGB`], [`OUTPUT_SEGMENTS`]
-/// and [`OUTPUT_BOX_OPACITY`].
+/// and [`OUTPUT_BOX_OPACITY`], then [`OUTPUT_PATCH_RGB`] with a mouth patch.
 pub fn model_output_names(info: &ModelInfo) -> Vec<&'static str> {
-    if info.upsample.is_some() {
-        vec![OUTPUT_BOX_RGB, OUTPUT_SEGMENTS, OUTPUT_BOX_OPACITY]
-    } else {
-        output_names()
+    match info.upsample {
+        Some(up) => {
+            let mut names = vec![OUTPUT_BOX_RGB, OUTPUT_SEGMENTS, OUTPUT_BOX_OPACITY];
+            if up.mouth_patch.is_some() {
+                names.push(OUTPUT_PATCH_RGB);
+            }
+            names
+        }
+        None => output_names(),
     }
 }
 
@@ -128,7 +145,7 @@ pub struct ModelInfo {
 }
 
 /// What a renderer needs to know of an upsampled ray graph's upsampler.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct UpsampleInfo {
     /// Output pixels per coarse ray along each side: 2, 4 or 8. The coarse grid's rays pass
     /// through the centres of the output's `factor x factor` blocks
@@ -137,6 +154,11 @@ pub struct UpsampleInfo {
     /// Coarse rays added around the hits on each side of the box
     /// (`nldf_core::upsampler_config::coarse_box`).
     pub margin: usize,
+    /// The mouth's box in head space (contract 6): the output pixels whose rays meet it
+    /// within `[near, far]` are the student's own rays ([`INPUT_PATCH_ORIGINS`]), painted
+    /// over the upsampled frame. Absent: no patch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mouth_patch: Option<Bounds>,
 }
 
 impl UpsampleInfo {
@@ -160,7 +182,11 @@ impl ModelInfo {
             (
                 keys::CONTRACT,
                 json(&match self.upsample {
-                    Some(_) => CONTRACT_VERSION,
+                    Some(UpsampleInfo {
+                        mouth_patch: Some(_),
+                        ..
+                    }) => CONTRACT_VERSION,
+                    Some(_) => CONTRACT_UPSAMPLED,
                     None => CONTRACT_PLAIN,
                 }),
             ),

@@ -41,6 +41,19 @@ pub const BOX_COLS: &str = "box_cols";
 pub const BOX_HEIGHT: &str = "box_height";
 pub const BOX_WIDTH: &str = "box_width";
 
+/// An upsampled ray graph's mouth patch (contract 6, [`super::UpsampleInfo::mouth_patch`]):
+/// the rays of the output pixels whose rays meet the mouth's box, f32 `[n_patch, 3]` each
+/// (none: `[0, 3]`). They go through the student after the coarse rays.
+pub const INPUT_PATCH_ORIGINS: &str = "patch_o";
+pub const INPUT_PATCH_DIRECTIONS: &str = "patch_d";
+/// The background colour behind each of the mouth patch's pixels, f32 `[n_patch, 3]`.
+pub const INPUT_PATCH_BACKGROUND: &str = "patch_background";
+/// The mouth patch's pixels, f32 `[n_patch, 3]`: the student's own colour of each ray
+/// composited over its background, which replace the upsampled pixels there.
+pub const OUTPUT_PATCH_RGB: &str = "patch_rgb";
+/// Symbolic name of the mouth patch's ray axis.
+pub const PATCH_AXIS: &str = "n_patch";
+
 /// The graph's input names in the order the exporter writes them: the background last.
 pub fn input_names() -> Vec<&'static str> {
     vec![
@@ -88,9 +101,13 @@ pub const FRAME_OUTPUT_RAYS: &str = "n_rays";
 /// (2: the audio front end is recorded, [`keys::AUDIO_FRONT_END`](super::keys::AUDIO_FRONT_END); 3: [`keys::OPACITY`](super::keys::OPACITY),
 /// with the background input and opacity output of a model that has one; 4:
 /// [`keys::BEAM_ANCHOR`](super::keys::BEAM_ANCHOR), the graph anchoring rays before sampling them; 5: [`keys::UPSAMPLE`](super::keys::UPSAMPLE),
-/// the upsampled ray graph, written only for one). This build reads contracts 4 and 5, and
-/// only models with opacity and anchored beams: older ones were made by an older nldf.
-pub const CONTRACT_VERSION: u32 = 5;
+/// the upsampled ray graph, written only for one; 6: the upsampled ray graph's mouth patch,
+/// [`INPUT_PATCH_ORIGINS`] and the rest, written only for one that has it). This build reads
+/// contracts 4 to 6, and only models with opacity and anchored beams: older ones were made
+/// by an older nldf.
+pub const CONTRACT_VERSION: u32 = 6;
+/// The contract an upsampled ray graph without a mouth patch is written with.
+pub const CONTRACT_UPSAMPLED: u32 = 5;
 /// The contract a ray graph without an upsampler is written with: it reads as it did
 /// before contract 5.
 pub const CONTRACT_PLAIN: u32 = 4;
