@@ -154,17 +154,15 @@ fn note_mouth_patch(dir: &Path, frame: bool) {
         .pointer("/model/mouth_patch")
         .is_some_and(|b| !b.is_null())
     {
-        if frame {
-            println!(
-                "mouth patch: the pixels whose rays meet the mouth's box are the student's own \
-                 rays, drawn over the upsampled frame"
-            );
+        let which = if frame {
+            "the graph finds them"
         } else {
-            eprintln!(
-                "note: the ray graph leaves out the upsampler's mouth patch; the frame graph \
-                 (--frame) draws it"
-            );
-        }
+            "nldf render finds them and sends their rays (contract 6)"
+        };
+        println!(
+            "mouth patch: the pixels whose rays meet the mouth's box are the student's own \
+             rays, drawn over the upsampled frame ({which})"
+        );
     }
 }
 

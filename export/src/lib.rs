@@ -15,6 +15,7 @@ pub mod graph;
 pub(crate) mod layers;
 pub(crate) mod patch;
 pub mod student;
+pub mod upsampled_rays;
 pub mod upsampler_graph;
 
 pub use error::{Error, Result};
@@ -23,4 +24,4 @@ pub use frame::{
 };
 pub use graph::{ActivationRanges, Tap, WeightType};
 pub use student::{ExportReport, calibration_model, export_student, export_student_int8};
-pub use upsampler_graph::{export_student_upsampled, export_student_upsampled_int8};
+pub use upsampled_rays::{export_student_upsampled, export_student_upsampled_int8};
