@@ -106,6 +106,53 @@ pub fn head_rays(camera: &Camera, head: &HeadRange) -> PixelRays {
     })
 }
 
+/// [`head_rays`] for a box that fills little of the image (a mouth's): the same rays and
+/// pixels, testing only the pixels inside the rectangle that the box's corners project to,
+/// grown by a pixel on each side, or every pixel when a corner is not in front of the
+/// camera. A ray that meets the box passes through the box's image, which is the hull of
+/// its corners' images.
+pub fn box_rays(camera: &Camera, head: &HeadRange) -> PixelRays {
+    let k = &camera.intrinsics;
+    let (lo, hi) = (head.bounds.lo, head.bounds.hi);
+    let mut rect = (
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    );
+    for c in 0..8 {
+        let corner = Vec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        );
+        match camera.project(corner) {
+            Some((i, j, z)) if z > 1e-6 && i.is_finite() && j.is_finite() => {
+                rect = (rect.0.min(i), rect.1.max(i), rect.2.min(j), rect.3.max(j));
+            }
+            _ => return head_rays(camera, head),
+        }
+    }
+    let span = |a: f32, b: f32, n: u32| -> (u32, u32) {
+        let first = (a.floor() - 1.0).clamp(0.0, n as f32) as u32;
+        let past = (b.ceil() + 2.0).clamp(0.0, n as f32) as u32;
+        (first, past.max(first))
+    };
+    let (i0, i1) = span(rect.0, rect.1, k.width);
+    let (j0, j1) = span(rect.2, rect.3, k.height);
+    let mut out = PixelRays::default();
+    for j in j0..j1 {
+        for i in i0..i1 {
+            let (o, d) = camera.ray(i as f32, j as f32);
+            if head.bounds.intersect(o, d, head.near, head.far).is_some() {
+                out.rays.push(o, d);
+                out.pixels.push(j as usize * k.width as usize + i as usize);
+            }
+        }
+    }
+    out
+}
+
 /// Every ray of `camera`'s image with its pixel, row by row (as [`rays_for_image`]).
 pub fn all_pixel_rays(camera: &Camera) -> PixelRays {
     pixel_rays(camera, |_, _| true)
@@ -173,4 +220,55 @@ pub fn sample_batch(
     }
     let rays = rays_for_pixels(camera, &pixels);
     PixelBatch { pixels, rays }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Mat4, Vec3};
+
+    use super::*;
+    use crate::bounds::Bounds;
+    use crate::camera::{Intrinsics, look_at, turn_about};
+
+    /// `box_rays` finds exactly `head_rays`' rays and pixels for a small box seen from the
+    /// front, turned, from afar, half out of the image, out of sight, behind, and from
+    /// inside the box.
+    #[test]
+    fn box_rays_are_head_rays() {
+        let intrinsics = Intrinsics {
+            width: 48,
+            height: 40,
+            focal: 60.0,
+            cx: 24.0,
+            cy: 20.0,
+        };
+        let mouth = Bounds {
+            lo: Vec3::new(-0.03, -0.08, 0.04),
+            hi: Vec3::new(0.03, -0.03, 0.09),
+        };
+        let head = HeadRange {
+            bounds: mouth,
+            near: 0.3,
+            far: 1.5,
+        };
+        let front = look_at(Vec3::new(0.0, 0.0, 0.8), Vec3::ZERO, Vec3::Y);
+        let poses = [
+            front,
+            turn_about(Vec3::ZERO, 0.6, -0.3) * front,
+            Mat4::from_translation(Vec3::new(0.0, 0.0, 0.6)) * front,
+            Mat4::from_translation(Vec3::new(0.25, 0.0, 0.0)) * front,
+            Mat4::from_translation(Vec3::new(2.0, 0.0, 0.0)) * front,
+            look_at(Vec3::new(0.0, 0.0, 0.8), Vec3::new(0.0, 0.0, 2.0), Vec3::Y),
+            Mat4::from_translation(mouth.centre() - front.w_axis.truncate()) * front,
+        ];
+        let mut seen = 0;
+        for (c, c2w) in poses.into_iter().enumerate() {
+            let camera = Camera { intrinsics, c2w };
+            let want = head_rays(&camera, &head);
+            let got = box_rays(&camera, &head);
+            assert_eq!(got, want, "camera {c}");
+            seen += usize::from(!want.pixels.is_empty());
+        }
+        assert!(seen >= 4, "{seen} cameras see the box");
+    }
 }

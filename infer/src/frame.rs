@@ -15,7 +15,7 @@ use glam::Mat4;
 use nldf_core::bounds::HeadRange;
 use nldf_core::camera::{Camera, Intrinsics};
 use nldf_core::image::ImageRgb;
-use nldf_core::rays::{PixelRays, all_pixel_rays, head_rays};
+use nldf_core::rays::{PixelRays, all_pixel_rays, box_rays, head_rays};
 use nldf_core::upsampler_config::{coarse_box, coarse_intrinsics, receptive_halo};
 use nldf_model::contract::{ModelInfo, UpsampleInfo};
 
@@ -248,7 +248,7 @@ impl FrameRenderer {
             bounds: mouth,
             ..self.backend.info().spec.head_range()
         };
-        head_rays(&camera, &range)
+        box_rays(&camera, &range)
     }
 
     /// The coarse rays seen from `c2w` that go through the network, their cells and the
