@@ -138,19 +138,11 @@ pub fn box_rays(camera: &Camera, head: &HeadRange) -> PixelRays {
         let past = (b.ceil() + 2.0).clamp(0.0, n as f32) as u32;
         (first, past.max(first))
     };
-    let (i0, i1) = span(rect.0, rect.1, k.width);
-    let (j0, j1) = span(rect.2, rect.3, k.height);
-    let mut out = PixelRays::default();
-    for j in j0..j1 {
-        for i in i0..i1 {
-            let (o, d) = camera.ray(i as f32, j as f32);
-            if head.bounds.intersect(o, d, head.near, head.far).is_some() {
-                out.rays.push(o, d);
-                out.pixels.push(j as usize * k.width as usize + i as usize);
-            }
-        }
-    }
-    out
+    let columns = span(rect.0, rect.1, k.width);
+    let rows = span(rect.2, rect.3, k.height);
+    pixel_rays_in(camera, (columns, rows), |o, d| {
+        head.bounds.intersect(o, d, head.near, head.far).is_some()
+    })
 }
 
 /// Every ray of `camera`'s image with its pixel, row by row (as [`rays_for_image`]).
@@ -160,9 +152,20 @@ pub fn all_pixel_rays(camera: &Camera) -> PixelRays {
 
 fn pixel_rays(camera: &Camera, keep: impl Fn(Vec3, Vec3) -> bool) -> PixelRays {
     let k = &camera.intrinsics;
+    pixel_rays_in(camera, ((0, k.width), (0, k.height)), keep)
+}
+
+/// The rays `keep` accepts among the pixels of columns `i0 .. i1` and rows `j0 .. j1`, row
+/// by row, with their pixels.
+fn pixel_rays_in(
+    camera: &Camera,
+    ((i0, i1), (j0, j1)): ((u32, u32), (u32, u32)),
+    keep: impl Fn(Vec3, Vec3) -> bool,
+) -> PixelRays {
+    let k = &camera.intrinsics;
     let mut out = PixelRays::default();
-    for j in 0..k.height {
-        for i in 0..k.width {
+    for j in j0..j1 {
+        for i in i0..i1 {
             let (o, d) = camera.ray(i as f32, j as f32);
             if keep(o, d) {
                 out.rays.push(o, d);
