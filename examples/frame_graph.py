@@ -10,7 +10,7 @@ session = ort.InferenceSession(model, providers=["CPUExecutionProvider"])
 meta = session.get_modelmeta().custom_metadata_map
 audio = json.loads(meta["nldf.frame_audio"])  # which samples one frame reads
 pose = np.array(json.loads(meta["nldf.default_pose"]), np.float32)  # camera to world
-keep = np.ones((int(meta["nldf.image_height"]), int(meta["nldf.image_width"])), bool)  # render all
+keep = np.ones(next(i.shape for i in session.get_inputs() if i.name == "keep"), bool)  # render all
 with wave.open(wav) as w:
     if w.getsampwidth() != 2:
         sys.exit(f"{wav}: 16-bit PCM WAV expected")

@@ -163,6 +163,13 @@ def main() -> int:
     if raw.get("nldf.format") != "nldf-student":
         print(f"{args.model}: not an nldf model (no nldf.format metadata)", file=sys.stderr)
         return 1
+    if "nldf.upsample" in raw:
+        print(
+            f"{args.model}: an upsampled ray graph (nldf.upsample): its rays are the head box's on a"
+            " coarse grid; render it with nldf render, or its frame graph with examples/frame_graph.py",
+            file=sys.stderr,
+        )
+        return 1
     plain = {
         "nldf.format",
         "nldf.audio_front_end",

@@ -60,8 +60,11 @@ pub struct RenderedFrame {
     /// The image, `[height, width, 3]` in [0, 1].
     pub image: ImageRgb,
     /// Pixels whose rays went through the network (those meeting the head's bounds, unless
-    /// skipping is off); with a learned upsampler, the coarse rays that did.
+    /// skipping is off); with a learned upsampler, the coarse rays that did and the mouth
+    /// patch's.
     pub head_pixels: usize,
+    /// Of `head_pixels`, the mouth patch's (0 without one).
+    pub patch_pixels: usize,
 }
 
 /// Renders frames of one model with one backend.
@@ -195,6 +198,7 @@ impl FrameRenderer {
         Ok(RenderedFrame {
             image,
             head_pixels: rays.pixels.len(),
+            patch_pixels: 0,
         })
     }
 
@@ -213,6 +217,7 @@ impl FrameRenderer {
             return Ok(RenderedFrame {
                 image,
                 head_pixels: 0,
+                patch_pixels: 0,
             });
         };
         let patch = self.patch_rays(c2w, up);
@@ -230,6 +235,7 @@ impl FrameRenderer {
         Ok(RenderedFrame {
             image,
             head_pixels: n_rays + patch.pixels.len(),
+            patch_pixels: patch.pixels.len(),
         })
     }
 
@@ -334,7 +340,8 @@ impl FrameRenderer {
 
     /// The colours of the pixels of `region` in the frame seen from `c2w` with the audio
     /// neighbourhood `audio`, as [`FrameRenderer::render`] gives them (within f32
-    /// rounding), and the rays that went through the network. `region` comes from
+    /// rounding), the rays that went through the network and, of them, the mouth patch's
+    /// (as in [`RenderedFrame`]). `region` comes from
     /// [`FrameRenderer::head_region`] (or a subset of it): its rays go through the network;
     /// with a learned upsampler the coarse rays within [`receptive_halo`] cells of the
     /// pixels' own do, and the CNN runs on the part of the head's box around them, which
@@ -347,14 +354,14 @@ impl FrameRenderer {
         c2w: Mat4,
         region: &PixelRays,
         audio: &[f32],
-    ) -> Result<(Vec<f32>, usize)> {
+    ) -> Result<(Vec<f32>, usize, usize)> {
         let Some(up) = self.backend.info().upsample else {
             let rgb = self.run_rays(region, audio)?.rgb;
-            return Ok((rgb, region.pixels.len()));
+            return Ok((rgb, region.pixels.len(), 0));
         };
         let view = self.coarse_view(c2w, up);
         let (Some(full), false) = (view.full, region.pixels.is_empty()) else {
-            return Ok((self.background.gather(&region.pixels), 0));
+            return Ok((self.background.gather(&region.pixels), 0, 0));
         };
         let (r, w) = (up.factor, self.intrinsics.width as usize);
         let (hc, wc) = (
@@ -394,7 +401,7 @@ impl FrameRenderer {
         let outside = sub.0 >= sub.1 || sub.2 >= sub.3;
         if outside && patch.rays.pixels.is_empty() {
             // Every pixel lies outside the head's box: the background.
-            return Ok((self.background.gather(&region.pixels), 0));
+            return Ok((self.background.gather(&region.pixels), 0, 0));
         }
         // Without a hit among the given cells, the whole box (the graph takes one ray at
         // least, and the whole box gives those pixels exactly).
@@ -420,7 +427,8 @@ impl FrameRenderer {
         for &(place, k) in &patch.at {
             out[3 * place..3 * place + 3].copy_from_slice(&patch_rgb[3 * k..3 * k + 3]);
         }
-        Ok((out, n_rays + patch.rays.pixels.len()))
+        let n_patch = patch.rays.pixels.len();
+        Ok((out, n_rays + n_patch, n_patch))
     }
 
     /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),

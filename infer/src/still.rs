@@ -173,11 +173,15 @@ impl StillSkipper {
         };
         self.since_full += 1;
         let mut image = base;
-        let (rgb, head_pixels) = renderer.render_pixels(c2w, &moving, audio)?;
+        let (rgb, head_pixels, patch_pixels) = renderer.render_pixels(c2w, &moving, audio)?;
         image.paint(&moving.pixels, &rgb);
         self.moving = Some(moving);
         Ok(SkippedFrame {
-            frame: RenderedFrame { image, head_pixels },
+            frame: RenderedFrame {
+                image,
+                head_pixels,
+                patch_pixels,
+            },
             kind,
         })
     }

@@ -370,10 +370,11 @@ fn check_skipping(
     let mut last_full: Option<Vec<u8>> = None;
     let (mut worst_kept, mut skipped, mut values) = (0u8, 0usize, 0usize);
     let (mut page_sq, mut page_worst, mut nldf_sq, mut nldf_worst) = (0f64, 0u8, 0f64, 0u8);
-    let (mut page_rays, mut nldf_rays) = (0usize, 0usize);
+    let (mut page_rays, mut nldf_rays, mut patch_rays) = (0usize, 0usize, 0usize);
     for (f, entry) in frames.iter().enumerate() {
         let audio = neighbourhood(windows, f, att);
-        let full = renderer.render(pose, &audio).unwrap().image.to_rgb8();
+        let whole = renderer.render(pose, &audio).unwrap();
+        let full = whole.image.to_rgb8();
         let nldf = skipper.render(&mut skipping, pose, &audio).unwrap();
         let kind = entry["kind"].as_str().unwrap_or_default();
         let want_kind = match nldf.kind {
@@ -409,7 +410,10 @@ fn check_skipping(
             }
             skipped += 1;
             page_rays += entry["n_rays"].as_u64().unwrap() as usize;
-            nldf_rays += nldf.frame.head_pixels;
+            // The frame graph draws the whole mouth patch whatever `keep` says; nldf sends
+            // the patch's rays of the moving pixels only. The coarse rays are the same.
+            nldf_rays += nldf.frame.head_pixels - nldf.frame.patch_pixels + whole.patch_pixels;
+            patch_rays += whole.patch_pixels;
         }
         let nldf_rgb8 = nldf.frame.image.to_rgb8();
         for (x, (a, b)) in got.iter().zip(&nldf_rgb8).enumerate() {
@@ -424,7 +428,8 @@ fn check_skipping(
     let (page_psnr, nldf_psnr) = (psnr_8bit(page_sq, values), psnr_8bit(nldf_sq, values));
     println!(
         "skipping, {} frames ({skipped} skipped; re-rendered rays {page_rays} on the page, \
-         {nldf_rays} in nldf): re-rendered pixels against nldf's full frames {worst_kept}/255; \
+         {nldf_rays} in nldf, each with the whole mouth patch, {patch_rays} rays): \
+         re-rendered pixels against nldf's full frames {worst_kept}/255; \
          against the full frames, page {page_psnr:.2} dB (worst {page_worst}/255), nldf's \
          --skip-still {nldf_psnr:.2} dB (worst {nldf_worst}/255)",
         frames.len()

@@ -385,6 +385,28 @@ fn python_example_renders_frames_with_numpy_and_onnxruntime_alone() {
     }
     println!("python example: 25 frames, worst difference from nldf's frames {worst} / 255");
     assert!(worst <= 1, "{worst}");
+
+    // The ray-graph example renders every pixel's ray; the shipped ray graph is upsampled
+    // (coarse rays of the head's box), which it refuses with one line naming the way out.
+    let ray_example = example.with_file_name("onnxruntime_render.py");
+    let refused = std::process::Command::new(&python)
+        .args([
+            ray_example.to_str().unwrap(),
+            ray_model.path.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success(),
+        "the upsampled ray graph was rendered"
+    );
+    assert!(
+        stderr.trim().lines().count() == 1
+            && stderr.contains("upsampled")
+            && stderr.contains("frame_graph.py"),
+        "{stderr}"
+    );
 }
 
 /// The fp16 and int8 frame graphs render what nldf renders with the fp16 and int8 ray

@@ -101,7 +101,7 @@ fn the_shipped_model_scores_its_cards_figures_on_its_own_scene() {
     let card = std::fs::read_to_string(dir.join("README.md")).unwrap();
     let row = card
         .lines()
-        .find(|l| l.starts_with("| this student |"))
+        .find(|l| l.starts_with("| this model |"))
         .expect("the card's score row");
     let cells: Vec<f64> = row
         .split('|')

@@ -242,7 +242,7 @@ fn part_of_the_box(
     for y in y0 + th..y1 - th {
         part.pixels.extend((x0 + tw..x1 - tw).map(|x| y * w + x));
     }
-    let (rgb, sent) = renderer.render_pixels(pose, &part, &audio(1)).unwrap();
+    let (rgb, sent, _) = renderer.render_pixels(pose, &part, &audio(1)).unwrap();
     let want = whole.gather(&part.pixels);
     let scale = want.iter().fold(1.0f32, |m, v| m.max(v.abs()));
     let mut d = max_diff(&rgb, &want) / scale;
@@ -257,7 +257,7 @@ fn part_of_the_box(
             .chain(patch(y1 - th - 3, x1 - tw - 3))
             .collect(),
     };
-    let (rgb, sent_two) = renderer.render_pixels(pose, &two, &audio(1)).unwrap();
+    let (rgb, sent_two, _) = renderer.render_pixels(pose, &two, &audio(1)).unwrap();
     d = d.max(max_diff(&rgb, &whole.gather(&two.pixels)) / scale);
     // The rays sent, counted here from the coarse grid's hits (core's head test on the
     // coarse camera): a hit cell is sent when a wanted pixel's own cell lies within the
@@ -311,7 +311,7 @@ fn part_of_the_box(
             rays: Default::default(),
             pixels: vec![p],
         };
-        let (rgb, _) = renderer.render_pixels(pose, &one, &audio(1)).unwrap();
+        let (rgb, _, _) = renderer.render_pixels(pose, &one, &audio(1)).unwrap();
         d = d.max(max_diff(&rgb, &whole.gather(&[p])) / scale);
     }
     assert!(
@@ -680,7 +680,7 @@ fn patched_ray_graph_matches_candle(
             let mut region = patched_r.head_region(pose);
             region.pixels.extend(patch.iter().copied());
             region.pixels = region.pixels.into_iter().step_by(2).collect();
-            let (rgb, _) = patched_r.render_pixels(pose, &region, &a).unwrap();
+            let (rgb, _, _) = patched_r.render_pixels(pose, &region, &a).unwrap();
             let d = max_diff(&rgb, &want.gather(&region.pixels)) / scale;
             assert!(d <= REL_TOL, "{label}: part of the frame: {d:.2e}");
         }
