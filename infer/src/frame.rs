@@ -371,26 +371,7 @@ impl FrameRenderer {
         // The cells the pixels read: their own, widened by the halo. Only those rays are
         // sent (the others count as misses, which no wanted pixel reads), and the CNN runs
         // on the box around them.
-        let halo = receptive_halo(r);
-        let mut own = vec![false; hc * wc];
-        for &p in &region.pixels {
-            own[(p / w / r) * wc + p % w / r] = true;
-        }
-        let mut given = vec![false; hc * wc];
-        let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
-        for j in 0..hc {
-            for i in 0..wc {
-                if !own[j * wc + i] {
-                    continue;
-                }
-                let (j0, j1) = (j.saturating_sub(halo), (j + halo + 1).min(hc));
-                let (i0, i1) = (i.saturating_sub(halo), (i + halo + 1).min(wc));
-                for jj in j0..j1 {
-                    given[jj * wc + i0..jj * wc + i1].fill(true);
-                }
-                (r0, r1, c0, c1) = (r0.min(j0), r1.max(j1), c0.min(i0), c1.max(i1));
-            }
-        }
+        let (given, (r0, r1, c0, c1)) = cells_read(&region.pixels, w, r, (hc, wc));
         let sub = (
             r0.max(full.0),
             r1.min(full.1),
@@ -427,8 +408,11 @@ impl FrameRenderer {
         for &(place, k) in &patch.at {
             out[3 * place..3 * place + 3].copy_from_slice(&patch_rgb[3 * k..3 * k + 3]);
         }
-        let n_patch = patch.rays.pixels.len();
-        Ok((out, n_rays + n_patch, n_patch))
+        Ok((
+            out,
+            n_rays + patch.rays.pixels.len(),
+            patch.rays.pixels.len(),
+        ))
     }
 
     /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),
@@ -457,6 +441,40 @@ struct RegionPatch {
     rays: PixelRays,
     /// `(place in the region, ray in rays)` for every region pixel of the patch.
     at: Vec<(usize, usize)>,
+}
+
+/// The coarse cells that the output pixels `pixels` (of an image `w` wide, `r` pixels a
+/// cell) read through the upsampler: each pixel's own cell widened by
+/// [`receptive_halo`] cells, clipped to the `(hc, wc)` grid; and the rectangle of cells
+/// holding them, `(row0, row1, col0, col1)` with exclusive ends (`(usize::MAX, 0, ..)` for
+/// none).
+fn cells_read(
+    pixels: &[usize],
+    w: usize,
+    r: usize,
+    (hc, wc): (usize, usize),
+) -> (Vec<bool>, (usize, usize, usize, usize)) {
+    let halo = receptive_halo(r);
+    let mut own = vec![false; hc * wc];
+    for &p in pixels {
+        own[(p / w / r) * wc + p % w / r] = true;
+    }
+    let mut given = vec![false; hc * wc];
+    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+    for j in 0..hc {
+        for i in 0..wc {
+            if !own[j * wc + i] {
+                continue;
+            }
+            let (j0, j1) = (j.saturating_sub(halo), (j + halo + 1).min(hc));
+            let (i0, i1) = (i.saturating_sub(halo), (i + halo + 1).min(wc));
+            for jj in j0..j1 {
+                given[jj * wc + i0..jj * wc + i1].fill(true);
+            }
+            (r0, r1, c0, c1) = (r0.min(j0), r1.max(j1), c0.min(i0), c1.max(i1));
+        }
+    }
+    (given, (r0, r1, c0, c1))
 }
 
 /// The rays of `patch` whose pixels are among `pixels` (each once), with the places of

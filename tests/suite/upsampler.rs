@@ -680,9 +680,24 @@ fn patched_ray_graph_matches_candle(
             let mut region = patched_r.head_region(pose);
             region.pixels.extend(patch.iter().copied());
             region.pixels = region.pixels.into_iter().step_by(2).collect();
-            let (rgb, _, _) = patched_r.render_pixels(pose, &region, &a).unwrap();
+            let (rgb, _, sent_patch) = patched_r.render_pixels(pose, &region, &a).unwrap();
             let d = max_diff(&rgb, &want.gather(&region.pixels)) / scale;
             assert!(d <= REL_TOL, "{label}: part of the frame: {d:.2e}");
+            // The patch's rays it sent: one for each patch pixel of the region, once.
+            let listed: std::collections::BTreeSet<usize> = region
+                .pixels
+                .iter()
+                .copied()
+                .filter(|&p| in_patch[p])
+                .collect();
+            if without.head_pixels > 0 {
+                assert_eq!(sent_patch, listed.len(), "{label}: patch rays of a region");
+                assert_eq!(
+                    got.patch_pixels,
+                    patch.len(),
+                    "{label}: patch rays of a frame"
+                );
+            }
         }
     }
 }
