@@ -19,7 +19,7 @@ use crate::patch::{PatchInputs, patch_pixels};
 use crate::student::{
     ExportReport, model_info, model_proto, ray_inputs, student_nodes, write_model,
 };
-use crate::upsampler_graph::{UP_ROWS, UpsamplerCheckpoint, open_pair, upsampled_box};
+use crate::upsampler_graph::{UP_ROWS, UpsamplerCheckpoint, export_pair, open_pair, upsampled_box};
 
 /// Exports the student in `student_dir` with the learned upsampler in `upsampler_dir` as an
 /// upsampled ray graph to `out` (written atomically): the coarse rays of a box of the
@@ -31,12 +31,8 @@ pub fn export_student_upsampled(
     out: &Path,
     weights: WeightType,
 ) -> Result<ExportReport> {
-    if weights == WeightType::Int8 {
-        return Err(crate::student::needs_ranges("--upsampler NAME "));
-    }
-    let (ckpt, up) = open_pair(student_dir, upsampler_dir, weights)?;
-    let (model, info, n_values) = upsampled_ray_model(&ckpt, &up, GraphBuilder::new(weights))?;
-    write_model(&model, info, n_values, out)
+    let paths = (student_dir, upsampler_dir, out);
+    export_pair(paths, weights, "--upsampler NAME ", upsampled_ray_model)
 }
 
 /// [`export_student_upsampled`] with the student's per-ray products in int8, their inputs'

@@ -24,13 +24,14 @@ use std::path::{Path, PathBuf};
 use nldf_core::run_files::{CONFIG_FILE, MODEL_FILE};
 use nldf_core::student_network::MlpLayout;
 use nldf_core::upsampler_config::{Conv2dLayer, MISS_LOGIT, UpsamplerConfig};
-use nldf_model::contract::OUTPUT_RGB;
-use nldf_model::onnx::DataType;
+use nldf_model::contract::{ModelInfo, OUTPUT_RGB};
+use nldf_model::onnx::{DataType, ModelProto};
 
 use crate::checkpoint::{StudentCheckpoint, Weight, checked_weight, parse_weights_of};
 use crate::error::{Error, Result};
 use crate::graph::{GraphBuilder, WeightType, attr_int, attr_ints};
 use crate::layers::{self, bilinear_up, channels_of, depth_to_space, index_range, span};
+use crate::student::ExportReport;
 
 /// An upsampler folder, read and checked.
 #[derive(Debug, Clone)]
@@ -97,6 +98,26 @@ pub(crate) fn open_pair(
     }
     crate::student::check_f16_range(&ckpt, student_dir, weights)?;
     Ok((ckpt, up))
+}
+
+/// A built graph: the model, its metadata and the count of stored values.
+pub(crate) type Built = (ModelProto, ModelInfo, usize);
+
+/// Exports the student in `student_dir` with the upsampler in `upsampler_dir` as the graph
+/// `build` makes, to `out` (written atomically). Int8 is refused here: its activation
+/// ranges come from training rays (`flags`: the command's flags that asked for it).
+pub(crate) fn export_pair(
+    (student_dir, upsampler_dir, out): (&Path, &Path, &Path),
+    weights: WeightType,
+    flags: &str,
+    build: impl FnOnce(&StudentCheckpoint, &UpsamplerCheckpoint, GraphBuilder) -> Result<Built>,
+) -> Result<ExportReport> {
+    if weights == WeightType::Int8 {
+        return Err(crate::student::needs_ranges(flags));
+    }
+    let (ckpt, up) = open_pair(student_dir, upsampler_dir, weights)?;
+    let (model, info, n_values) = build(&ckpt, &up, GraphBuilder::new(weights))?;
+    crate::student::write_model(&model, info, n_values, out)
 }
 
 /// The checkpoint's convolution of the described layer `l` (`[c_out, c_in, k, k]`),

@@ -71,12 +71,9 @@ pub fn export_frame_upsampled(
     out: &Path,
     weights: WeightType,
 ) -> Result<ExportReport> {
-    if weights == WeightType::Int8 {
-        return Err(crate::student::needs_ranges("--frame --upsampler NAME "));
-    }
-    let (ckpt, up) = crate::upsampler_graph::open_pair(student_dir, upsampler_dir, weights)?;
-    let (model, report_info, n_values) = frame_model(&ckpt, Some(&up), GraphBuilder::new(weights))?;
-    write_model(&model, report_info, n_values, out)
+    let paths = (student_dir, upsampler_dir, out);
+    let build = |ckpt: &_, up: &_, g| frame_model(ckpt, Some(up), g);
+    crate::upsampler_graph::export_pair(paths, weights, "--frame --upsampler NAME ", build)
 }
 
 /// [`export_frame_upsampled`] with the student's per-ray products in int8 over the
