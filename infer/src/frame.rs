@@ -408,11 +408,8 @@ impl FrameRenderer {
         for &(place, k) in &patch.at {
             out[3 * place..3 * place + 3].copy_from_slice(&patch_rgb[3 * k..3 * k + 3]);
         }
-        Ok((
-            out,
-            n_rays + patch.rays.pixels.len(),
-            patch.rays.pixels.len(),
-        ))
+        let n_patch = patch.rays.pixels.len();
+        Ok((out, n_rays + n_patch, n_patch))
     }
 
     /// The outputs for `rays` with the audio neighbourhood `audio` (none for no rays),

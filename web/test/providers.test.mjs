@@ -7,19 +7,17 @@ import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
 import * as ort from 'onnxruntime-web';
 
-const frameGraph = () =>
-  readFileSync(new URL('../../models/demo/frame.onnx', import.meta.url));
+const frameGraph = readFileSync(new URL('../../models/demo/frame.onnx', import.meta.url));
+ort.env.wasm.numThreads = 1;
 
 test('the page runs the shipped frame graph on the wasm provider', async () => {
-  ort.env.wasm.numThreads = 1;
-  const session = await ort.InferenceSession.create(frameGraph(), { executionProviders: ['wasm'] });
+  const session = await ort.InferenceSession.create(frameGraph, { executionProviders: ['wasm'] });
   assert.deepEqual(session.inputNames, ['audio', 'pose', 'keep']);
 });
 
 test('onnxruntime-web offers no xnnpack provider', async () => {
-  ort.env.wasm.numThreads = 1;
   await assert.rejects(
-    ort.InferenceSession.create(frameGraph(), { executionProviders: ['xnnpack'] }),
+    ort.InferenceSession.create(frameGraph, { executionProviders: ['xnnpack'] }),
     /xnnpack\] backend not found/,
   );
 });
