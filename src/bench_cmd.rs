@@ -149,6 +149,10 @@ pub struct UpsamplerBenchArgs {
     /// Rays per network call of the ray graphs.
     #[arg(long, default_value_t = 4096)]
     pub batch: usize,
+    /// The student's products kept in f32 in the int8 ray graph, comma-separated (as
+    /// `nldf export --int8-f32`).
+    #[arg(long, value_delimiter = ',')]
+    pub int8_f32: Vec<String>,
     /// Output folder (default RUN/bench_upsampler).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -173,6 +177,7 @@ fn upsampler(args: UpsamplerBenchArgs) -> Result<()> {
         splits,
         teacher: !args.no_teacher,
         batch: args.batch,
+        int8_f32: args.int8_f32,
         load: args.load.gate(),
     };
     let mut printer = EventPrinter::default();

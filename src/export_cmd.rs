@@ -50,6 +50,11 @@ pub struct ExportArgs {
     /// Training frames to calibrate --int8 on (their rays that meet the head's bounds).
     #[arg(long, default_value_t = 16)]
     pub calibration_frames: usize,
+    /// With --int8, these per-ray products stay in f32, comma-separated by layer name
+    /// (`mlp.input.beam`, `mlp.body.6.fc2`; an unknown name lists the student's): mixed
+    /// precision for the layers whose int8 error costs the most (docs/sharp.md).
+    #[arg(long, value_delimiter = ',', requires = "int8")]
+    pub int8_f32: Vec<String>,
 }
 
 /// Runs `nldf export`.
@@ -98,7 +103,8 @@ fn export(
     Ok(match (&args.data, weights) {
         (Some(data), WeightType::Int8) => {
             let export = || -> nldf_pipeline::Result<ExportReport> {
-                let ranges = calibrated_ranges(student, data, args.calibration_frames)?;
+                let ranges =
+                    calibrated_ranges(student, data, args.calibration_frames, &args.int8_f32)?;
                 let up = args.upsampler.as_ref().map(|name| args.run.join(name));
                 Ok(match (&up, args.frame) {
                     (Some(up), true) => export_frame_upsampled_int8(student, up, out, &ranges)?,

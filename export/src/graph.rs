@@ -19,10 +19,12 @@ pub enum Dim {
 }
 
 /// The range of values entering each int8 product, by product name (`mlp.body.3.fc1`),
-/// measured by running the f32 model on calibration rays.
+/// measured by running the f32 model on calibration rays; and the products kept in f32
+/// ([`ActivationRanges::keep_f32`]), whose ranges go unused.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ActivationRanges {
     ranges: std::collections::BTreeMap<String, (f32, f32)>,
+    f32_products: std::collections::BTreeSet<String>,
 }
 
 impl ActivationRanges {
@@ -52,6 +54,22 @@ impl ActivationRanges {
     /// Every product's range, by name.
     pub fn iter(&self) -> impl Iterator<Item = (&str, (f32, f32))> {
         self.ranges.iter().map(|(k, v)| (k.as_str(), *v))
+    }
+
+    /// Keeps `product` in f32 under [`WeightType::Int8`]: mixed precision, for the
+    /// products whose int8 error costs the most (`nldf export --int8-f32`).
+    pub fn keep_f32(&mut self, product: &str) {
+        self.f32_products.insert(product.to_string());
+    }
+
+    /// Whether `product` stays in f32 ([`ActivationRanges::keep_f32`]).
+    pub fn keeps_f32(&self, product: &str) -> bool {
+        self.f32_products.contains(product)
+    }
+
+    /// The products kept in f32, by name.
+    pub fn f32_products(&self) -> impl Iterator<Item = &str> {
+        self.f32_products.iter().map(String::as_str)
     }
 }
 
@@ -330,6 +348,12 @@ impl GraphBuilder {
     /// The products recorded by [`GraphBuilder::tap`], in graph order.
     pub fn taps(&self) -> &[Tap] {
         &self.taps
+    }
+
+    /// Whether the product `name` is done in int8: under [`WeightType::Int8`], unless its
+    /// ranges keep it in f32 ([`ActivationRanges::keep_f32`]).
+    pub fn int8_product(&self, name: &str) -> bool {
+        self.weights == WeightType::Int8 && !self.ranges.keeps_f32(name)
     }
 
     /// `x W^T` in int8 with the activations' calibrated range, for `x` `[n, in]` and the

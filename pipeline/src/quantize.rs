@@ -180,18 +180,38 @@ pub fn export_int8(
     n_frames: usize,
     out: &Path,
 ) -> Result<ExportReport> {
-    let ranges = calibrated_ranges(student_dir, data, n_frames)?;
+    let ranges = calibrated_ranges(student_dir, data, n_frames, &[])?;
     Ok(export_student_int8(student_dir, out, &ranges)?)
 }
 
 /// The int8 products' input ranges of the student in `student_dir`, measured on `n_frames`
-/// training frames of the dataset at `data`.
+/// training frames of the dataset at `data`, with the products named in `keep_f32` kept in
+/// f32 ([`keep_in_f32`]).
 pub fn calibrated_ranges(
     student_dir: &Path,
     data: &Path,
     n_frames: usize,
+    keep_f32: &[String],
 ) -> Result<ActivationRanges> {
     let (bytes, info, taps) = calibration_model(student_dir)?;
     let frames = training_frames(data, &info, n_frames)?;
-    ranges_of(&bytes, &taps, &info, &frames)
+    let mut ranges = ranges_of(&bytes, &taps, &info, &frames)?;
+    keep_in_f32(&mut ranges, &taps, keep_f32)?;
+    Ok(ranges)
+}
+
+/// Marks the products named in `names` to stay in f32 ([`ActivationRanges::keep_f32`]);
+/// a name that is none of the student's int8 products (`taps`) is an error that lists them.
+pub fn keep_in_f32(ranges: &mut ActivationRanges, taps: &[Tap], names: &[String]) -> Result<()> {
+    for name in names {
+        if !taps.iter().any(|t| &t.product == name) {
+            let known: Vec<&str> = taps.iter().map(|t| t.product.as_str()).collect();
+            return Err(Error::Argument(format!(
+                "`{name}` is not one of the student's int8 products ({})",
+                known.join(", ")
+            )));
+        }
+        ranges.keep_f32(name);
+    }
+    Ok(())
 }

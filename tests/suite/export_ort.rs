@@ -16,7 +16,7 @@ use nldf_core::rays::Rays;
 use nldf_export::{WeightType, export_student_int8};
 use nldf_infer::backend::{BackendKind, BackendOptions, backend_for};
 use nldf_model::read_model;
-use nldf_pipeline::quantize::{CalibrationFrame, activation_ranges};
+use nldf_pipeline::quantize::{CalibrationFrame, activation_ranges, keep_in_f32};
 use nldf_train::networks::student::StudentConfig;
 
 /// Python onnxruntime's outputs for the rays and audio, through `.npy` files in `folder`.
@@ -251,6 +251,92 @@ fn export_int8_agrees_across_runtimes_and_stays_near_the_f32_student() {
             assert!(rel <= INT8_RUNTIME_RMS, "{na} vs {nb}: {rel}");
         }
     }
+}
+
+/// Mixed precision (`nldf export --int8 --int8-f32`): a product kept in f32 loses its
+/// integer product and keeps its f32 weight. Keeping every product renders the f32
+/// export's pixels (tract, within `1e-5` of the largest); keeping only the last one leaves
+/// one `MatMulInteger` fewer and pixels that still differ from f32. A name that is none of
+/// the student's products is refused with the list of those that are.
+#[test]
+fn int8_products_kept_in_f32_render_as_the_f32_export() {
+    let cfg = StudentConfig::tiny();
+    let run = write_run(&cfg, 31);
+    run.scale_weights_like_trained(cfg.n_blocks());
+    let f32_path = run.export(WeightType::F32);
+    let f32_model = read_model(&f32_path).unwrap();
+    let calibration: Vec<CalibrationFrame> = (0..2)
+        .map(|i| {
+            let rays = random_rays(600, 70 + i);
+            CalibrationFrame {
+                origins: rays.origins,
+                directions: rays.directions,
+                audio: neighbourhood(
+                    &random_audio(&cfg, 10, 21),
+                    i as usize,
+                    cfg.audio.att_frames,
+                ),
+            }
+        })
+        .collect();
+    let ranges = activation_ranges(&run.student_dir(), &f32_model.info, &calibration).unwrap();
+    let (_, _, taps) = nldf_export::calibration_model(&run.student_dir()).unwrap();
+    let products: Vec<String> = taps.iter().map(|t| t.product.clone()).collect();
+    assert_eq!(products.len(), 1 + 2 * cfg.n_blocks());
+    let export_keeping = |names: &[String], file: &str| {
+        let mut kept = ranges.clone();
+        keep_in_f32(&mut kept, &taps, names).unwrap();
+        let path = run.root.join(file);
+        export_student_int8(&run.student_dir(), &path, &kept).unwrap();
+        path
+    };
+    let integer_products = |path: &Path| {
+        let graph = read_model(path).unwrap().proto.graph.unwrap();
+        graph
+            .node
+            .iter()
+            .filter(|n| n.op_type.as_deref() == Some("MatMulInteger"))
+            .count()
+    };
+    let rays = random_rays(700, 23);
+    let audio = neighbourhood(&random_audio(&cfg, 10, 21), 5, cfg.audio.att_frames);
+    let render = |path: &Path| {
+        let model = read_model(path).unwrap();
+        let options = BackendOptions {
+            batch_size: 512,
+            threads: 2,
+            spin: false,
+        };
+        let mut backend = backend_for(&model, BackendKind::Tract, options).unwrap();
+        let bg = ray_background(rays.len());
+        let out = backend
+            .run(&rays.origins, &rays.directions, &bg, &audio)
+            .unwrap();
+        out.rgb
+    };
+    let reference = render(&f32_path);
+    let scale = reference
+        .iter()
+        .fold(0.0f32, |m, x| m.max(x.abs()))
+        .max(1.0);
+
+    let every = export_keeping(&products, "every_f32.onnx");
+    assert_eq!(integer_products(&every), 0);
+    let d = max_diff(&render(&every), &reference) / scale;
+    assert!(d <= 1e-5, "every product kept in f32: {d}");
+
+    let last = export_keeping(&products[products.len() - 1..], "last_f32.onnx");
+    assert_eq!(integer_products(&last), products.len() - 1);
+    let d = max_diff(&render(&last), &reference) / scale;
+    assert!(d > 1e-6, "the other products are still in int8: {d}");
+
+    let err = keep_in_f32(&mut ranges.clone(), &taps, &["mlp.body.99.fc1".to_string()])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("mlp.body.99.fc1") && err.contains(&products[0]),
+        "{err}"
+    );
 }
 
 /// Relative RMS error allowed between the int8 model's pixels and the f32 student's.

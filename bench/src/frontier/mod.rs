@@ -28,6 +28,7 @@ mod shared;
 mod timing;
 mod upsampled_point;
 pub mod upsampler_bench;
+mod upsampler_report;
 
 use std::cell::RefCell;
 use std::path::Path;

@@ -15,7 +15,6 @@ use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
-use nldf_core::host::Machine;
 use nldf_core::stats::median;
 use nldf_export::WeightType;
 use nldf_infer::BackendKind;
@@ -25,17 +24,17 @@ use nldf_train::job::eval::{EvalJob, EvalPlan};
 use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::reports::eval::{EvalReport, FrameModel};
 use nldf_train::trainers::upsampler_trainer::UpsampledModel;
-use serde::Serialize;
 
 use super::exports::{Export, open_point};
 use super::front::{SplitScore, paired_ratio, score};
 use super::points::{OnnxPoint, Timed};
 use super::shared::{THREADS, eval_split, precision_name};
 use super::upsampled_point::UpsampledPoint;
+use super::upsampler_report::markdown;
+pub use super::upsampler_report::{PrecisionRatio, UpsamplerBenchReport, UpsamplerRow};
 use crate::error::{Error, Result, create_dir};
 use crate::load::LoadGate;
-use crate::repeats::{Ratio, cell};
-use crate::report::{Written, machine_cell, write_bench_files};
+use crate::report::{Written, write_bench_files};
 
 /// What `nldf bench upsampler` was asked to do.
 #[derive(Debug, Clone)]
@@ -54,61 +53,14 @@ pub struct UpsamplerBench {
     pub teacher: bool,
     /// Rays per network call of the ray graphs.
     pub batch: usize,
+    /// The student's products kept in f32 in the int8 ray graph (mixed precision).
+    pub int8_f32: Vec<String>,
     /// The load limit at the start.
     pub load: LoadGate,
 }
 
 /// Adds a row: way, precision, runtime, grid side, the model's label, seconds of each frame.
 type AddRow<'a> = dyn FnMut(&str, &str, &str, u32, String, Vec<f64>) + 'a;
-
-/// One way of rendering.
-#[derive(Debug, Clone, Serialize)]
-pub struct UpsamplerRow {
-    /// `teacher`, `native rays`, `bilinear`, `upsampler, frame graph` or `upsampler, ray
-    /// graph`.
-    pub way: String,
-    pub precision: String,
-    pub runtime: String,
-    /// Output frames' side, and the side of the grid the network evaluates.
-    pub size: u32,
-    pub grid: u32,
-    /// Median seconds a whole frame, 2 threads, taking turns frame by frame.
-    pub s_per_frame: f64,
-    pub fps: f64,
-    pub scores: Vec<SplitScore>,
-    /// How many times as fast as the student's native rays in f32 onnxruntime: the median
-    /// over the frames of that row's time over this one's (smallest-largest).
-    pub speed_against_native: Option<Ratio>,
-    /// Seconds of each frame, in the order the ways took turns (any two rows pair frame by
-    /// frame).
-    pub frame_seconds: Vec<f64>,
-}
-
-/// One precision against another of the same way and runtime.
-#[derive(Debug, Clone, Serialize)]
-pub struct PrecisionRatio {
-    pub way: String,
-    pub runtime: String,
-    /// The faster-to-compute precision, and the one it is set against.
-    pub precision: String,
-    pub against: String,
-    /// How many times as fast `precision` is as `against`, frame by frame.
-    pub speed: Ratio,
-}
-
-/// The benchmark's result.
-#[derive(Debug, Clone, Serialize)]
-pub struct UpsamplerBenchReport {
-    pub machine: Machine,
-    pub run: String,
-    pub upsampler: String,
-    pub factor: usize,
-    pub frames: Option<usize>,
-    pub threads: usize,
-    pub rows: Vec<UpsamplerRow>,
-    /// Each precision against the others of its way and runtime.
-    pub precisions: Vec<PrecisionRatio>,
-}
 
 /// The graphs the benchmark renders with, exported under `models/`.
 struct Exports {
@@ -164,6 +116,7 @@ impl UpsamplerBench {
             factor,
             frames: self.frames,
             threads: THREADS,
+            int8_f32: self.int8_f32.clone(),
             rows,
             precisions,
         };
@@ -217,7 +170,12 @@ impl UpsamplerBench {
         }
         // The upsampled ray graph with the student's products in int8, calibrated as the
         // frontier calibrates (16 training frames).
-        let ranges = nldf_pipeline::quantize::calibrated_ranges(&student.dir, &self.data, 16)?;
+        let ranges = nldf_pipeline::quantize::calibrated_ranges(
+            &student.dir,
+            &self.data,
+            16,
+            &self.int8_f32,
+        )?;
         let rays = models_dir.join(format!("{}.rays.int8.onnx", self.upsampler));
         nldf_export::export_student_upsampled_int8(&student.dir, &up.dir, &rays, &ranges)?;
         ray_graphs.push(ray_export(WeightType::Int8, rays));
@@ -453,83 +411,6 @@ fn speed_ratios(rows: &mut [UpsamplerRow]) -> Vec<PrecisionRatio> {
         }
     }
     out
-}
-
-/// The report as Markdown: one row per way of rendering, head PSNR / SSIM per split.
-fn markdown(r: &UpsamplerBenchReport, splits: &[Split]) -> String {
-    let mut md = format!(
-        "# Learned upsampler x{} against native rays and bilinear\n\n\
-         Run `{}`, upsampler `{}`; {} threads; {} frames a split; {}.\n\
-         Times: median seconds a whole frame, the ways of rendering taking turns frame by \
-         frame. Speed: how many times as fast as the student's native rays in fp32 \
-         onnxruntime, the median over the frames (each rendered by both in turn) of the \
-         per-frame ratio (smallest-largest). Scores: head-region PSNR (dB) / head SSIM, then \
-         whole-frame PSNR.\n\n",
-        r.factor,
-        r.run,
-        r.upsampler,
-        r.threads,
-        r.frames.map_or("all".to_string(), |n| n.to_string()),
-        machine_cell(&r.machine),
-    );
-    md.push_str("| way | precision | runtime | size | grid | ms / frame | frames/s | speed |");
-    for s in splits {
-        md.push_str(&format!(
-            " {} head PSNR / SSIM | {} whole |",
-            s.name(),
-            s.name()
-        ));
-    }
-    md.push_str("\n| --- | --- | --- | --- | --- | --- | --- | --- |");
-    for _ in splits {
-        md.push_str(" --- | --- |");
-    }
-    md.push('\n');
-    let f2 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
-    let f3 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
-    for row in &r.rows {
-        md.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {:.1} | {:.1} | {} |",
-            row.way,
-            row.precision,
-            row.runtime,
-            row.size,
-            row.grid,
-            1000.0 * row.s_per_frame,
-            row.fps,
-            cell(row.speed_against_native.as_ref())
-        ));
-        for s in splits {
-            match row.scores.iter().find(|x| x.split == s.name()) {
-                Some(x) => md.push_str(&format!(
-                    " {} / {} | {:.2} |",
-                    f2(x.head_psnr),
-                    f3(x.head_ssim),
-                    x.psnr
-                )),
-                None => md.push_str(" - | - |"),
-            }
-        }
-        md.push('\n');
-    }
-    if !r.precisions.is_empty() {
-        md.push_str(
-            "\nPrecisions against each other, the same way and runtime, frame by frame: how \
-             many times as fast (median over the frames, smallest-largest).\n\n\
-             | way | runtime | precision | against | speed |\n| --- | --- | --- | --- | --- |\n",
-        );
-        for p in &r.precisions {
-            md.push_str(&format!(
-                "| {} | {} | {} | {} | {} |\n",
-                p.way,
-                p.runtime,
-                p.precision,
-                p.against,
-                p.speed.cell()
-            ));
-        }
-    }
-    md
 }
 
 /// The default output folder: `RUN/bench_upsampler`.

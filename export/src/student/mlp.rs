@@ -5,7 +5,7 @@ use nldf_model::contract::{OUTPUT_OPACITY, OUTPUT_RGB, OUTPUT_SEGMENTS};
 use super::ops::{linear, ray_linear};
 use crate::checkpoint::StudentCheckpoint;
 use crate::error::{Error, Result};
-use crate::graph::{GraphBuilder, WeightType, attr_int};
+use crate::graph::{GraphBuilder, attr_int};
 use nldf_core::student_config::StudentConfig;
 use nldf_core::student_network::{LinearLayer, MlpLayout};
 
@@ -85,7 +85,7 @@ fn input_layer(
         vec![attr_int("transB", 1)],
     );
     g.tap(&format!("{name}.beam"), beams, beam_dim);
-    let x = if g.weight_type() == WeightType::Int8 {
+    let x = if g.int8_product(&format!("{name}.beam")) {
         let product = g
             .matmul_int8(&format!("{name}.beam"), beams, &w_beam, w, beam_dim)
             .map_err(Error::Calibration)?;

@@ -2,14 +2,15 @@
 
 use crate::checkpoint::StudentCheckpoint;
 use crate::error::{Error, Result};
-use crate::graph::{GraphBuilder, WeightType, attr_float, attr_int, attr_ints};
+use crate::graph::{GraphBuilder, attr_float, attr_int, attr_ints};
 use nldf_core::student_network::Conv1dLayer;
 
 /// AD-NeRF's LeakyReLU slope.
 const SLOPE: f32 = 0.02;
 
 /// `x W^T + b` with the checkpoint's Linear `name` for a product every ray passes through:
-/// in int8 under [`WeightType::Int8`] ([`GraphBuilder::matmul_int8`]), else as [`linear`].
+/// in int8 under [`crate::graph::WeightType::Int8`] ([`GraphBuilder::matmul_int8`]) unless kept in f32
+/// ([`GraphBuilder::int8_product`]), else as [`linear`].
 pub(super) fn ray_linear(
     g: &mut GraphBuilder,
     ckpt: &StudentCheckpoint,
@@ -19,7 +20,7 @@ pub(super) fn ray_linear(
     out_dim: usize,
 ) -> Result<String> {
     g.tap(name, x, in_dim);
-    if g.weight_type() != WeightType::Int8 {
+    if !g.int8_product(name) {
         return linear(g, ckpt, name, x, in_dim, out_dim);
     }
     let w = ckpt.weight(&format!("{name}.weight"), &[out_dim, in_dim])?;
