@@ -1138,3 +1138,28 @@ fn the_shipped_x2_upsampler_config_reads_as_chosen() {
     cfg.student = "student".into();
     cfg.check().unwrap();
 }
+
+/// The x4 shape the shipped model was trained with (`configs/upsampler_x4.json`, chosen for
+/// 128 x 128 on the tuning scene): three stages of 64 / 32 / 16 channels, 8000 steps, 60 %
+/// of the recorded crops on the mouth and the mouth patch found when training ends.
+#[test]
+fn the_shipped_x4_upsampler_config_reads_as_chosen() {
+    use nldf_train::trainers::config::read_config;
+    use nldf_train::trainers::upsampler_trainer::{UpsamplerRunConfig, UpsamplerTrainConfig};
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/upsampler_x4.json");
+    let mut cfg: UpsamplerRunConfig = read_config(&path).unwrap();
+    assert_eq!(cfg.model.factor, 4);
+    assert_eq!(cfg.model.channels, vec![64, 32, 16]);
+    assert_eq!(cfg.model.margin, UpsamplerConfig::default().margin);
+    assert_eq!(cfg.train.iters, 8000);
+    assert_eq!(cfg.train.mouth_fraction, 0.6);
+    assert!(cfg.train.mouth_patch);
+    let defaults = UpsamplerTrainConfig::default();
+    assert_eq!(
+        (cfg.train.batch, cfg.train.lr, cfg.train.pseudo_views),
+        (defaults.batch, defaults.lr, defaults.pseudo_views)
+    );
+    cfg.student = "student".into();
+    cfg.check().unwrap();
+}

@@ -576,8 +576,9 @@ async function skipError(n, chunk, c2w) {
   return { psnr_vs_full: psnr(total / count), worst_frame_psnr: psnr(worst), max_abs_error: maxAbs };
 }
 
-// `?model=URL` loads that graph; `?models=A,B,...` (default: the demo's frame graph) picks
-// what this browser can afford among them, at `?fps=` frames/s if given.
+// `?model=URL` loads that graph; `?models=A,B,...` (default: the demo's frame graph in fp16,
+// then with int8 products) picks what this browser can afford among them, at `?fps=`
+// frames/s if given.
 hook.ready = (async () => {
   const one = params.get('model');
   if (one === 'none') return;
@@ -586,7 +587,7 @@ hook.ready = (async () => {
     if (one) {
       await hook.loadModel(...url(one));
     } else {
-      const list = (params.get('models') ?? '../models/demo/frame.onnx').split(',').filter(Boolean);
+      const list = (params.get('models') ?? '../models/demo/frame.onnx,../models/demo/frame_int8.onnx').split(',').filter(Boolean);
       await hook.choose(list.map(url), Number(params.get('fps')) || null);
     }
   } catch (e) {
