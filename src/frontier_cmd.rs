@@ -53,6 +53,15 @@ pub struct FrontierArgs {
     /// its turn, each turn one untimed frame and then its share of these.
     #[arg(long, default_value_t = 8)]
     pub timed_frames: usize,
+    /// A learned upsampler of the run (its folder, e.g. `upsampler`; repeat the flag): its
+    /// upsampled ray graph joins the frontier in fp16 and with int8 products, scored and
+    /// timed per whole frame as the students are.
+    #[arg(long)]
+    pub upsampler: Vec<String>,
+    /// The student's products kept in f32 in the upsampled int8 graphs, comma-separated
+    /// (as `nldf export --int8-f32`).
+    #[arg(long, value_delimiter = ',', requires = "upsampler")]
+    pub int8_f32: Vec<String>,
     #[command(flatten)]
     pub load: crate::bench_common::LoadArgs,
 }
@@ -71,6 +80,8 @@ pub fn run(args: FrontierArgs) -> Result<()> {
         adnerf_frames: args.adnerf_frames,
         hires_data: args.hires_data,
         timed_frames: args.timed_frames,
+        upsamplers: args.upsampler,
+        int8_f32: args.int8_f32,
         load: args.load.gate(),
     };
     let mut printer = EventPrinter::default();

@@ -1025,9 +1025,11 @@ fn the_fixture_renders_and_the_suite_counts_its_cases() {
     assert!(out.join("frame_00000.png").is_file());
 }
 
-/// `nldf bench frontier` end to end on the fixture's tiny run: every point of its JSON has
-/// its fields and finite times, the front is exactly the points nothing beats on both time
-/// and `val` PSNR, and the speed-up names an export, never a variant of the teacher.
+/// `nldf bench frontier` end to end on the fixture's tiny run with a tiny learned upsampler:
+/// every point of its JSON has its fields and finite times, the upsampled ray graph is a
+/// point in fp16 and int8 in both runtimes (`--upsampler`, its int8 keeping the product
+/// `--int8-f32` names), the front is exactly the points nothing beats on both time and `val`
+/// PSNR, and the speed-up names an export, never a variant of the teacher.
 #[test]
 fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
     if let Err(e) = nldf_infer::ort_library::find_ort_library() {
@@ -1038,10 +1040,26 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
     let dir = scratch();
     let run = dir.path().join("run");
     nldf_tests::copy_dir(&f.run, &run);
+    let config = dir.path().join("upsampler.json");
+    std::fs::write(&config, upsampler_config(None)).unwrap();
+    nldf_ok(args(&[
+        "train",
+        "upsampler",
+        "--data",
+        &s(&f.data),
+        "--run",
+        &s(&run),
+        "--config",
+        &s(&config),
+    ]));
     let out = dir.path().join("frontier");
     let a = args(&[
         "bench",
         "frontier",
+        "--upsampler",
+        "upsampler",
+        "--int8-f32",
+        "mlp.input.beam",
         "--run",
         &s(&run),
         "--data",
@@ -1092,6 +1110,27 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
         points.len()
     );
     assert_eq!(points[0]["runtime"], "candle");
+    let mut upsampled: Vec<(String, String)> = points
+        .iter()
+        .filter(|p| p["file"].as_str().is_some_and(|f| f.contains("upsampler.rays.")))
+        .map(|p| {
+            let field = |k: &str| p[k].as_str().unwrap_or_default().to_string();
+            (field("precision"), field("runtime"))
+        })
+        .collect();
+    upsampled.sort();
+    let want: Vec<(String, String)> = [
+        ("fp16", "ort"),
+        ("fp16", "tract"),
+        ("int8", "ort"),
+        ("int8", "tract"),
+    ]
+    .iter()
+    .map(|(p, r)| (p.to_string(), r.to_string()))
+    .collect();
+    assert_eq!(upsampled, want, "the upsampled ray graph's points");
+    assert_eq!(json["settings"]["upsamplers"][0], "upsampler");
+    assert_eq!(json["settings"]["int8_f32"][0], "mlp.input.beam");
     let key = |p: &serde_json::Value| {
         let val = p["scores"]
             .as_array()

@@ -77,6 +77,66 @@ pub(crate) fn export_all(
     Ok(out)
 }
 
+/// Exports the upsampled ray graph of each of `job.upsamplers` (the run's learned
+/// upsamplers, found by `val`'s plan) over the student it reads, in fp16 and with int8
+/// products calibrated as the students' are (`job.int8_f32` kept in f32), into
+/// `OUT/models`. Each is a point named `<student>+<upsampler>`; its multiply-adds are not
+/// counted (0: the CNN's are not per ray).
+pub(crate) fn export_upsampled(
+    job: &super::FrontierJob,
+    val: &nldf_train::job::eval::EvalPlan,
+    on_event: OnEvent,
+) -> Result<Vec<Export>> {
+    let dir = job.out.join("models");
+    let mut out = Vec::new();
+    for name in &job.upsamplers {
+        let (up, _) = val
+            .upsamplers
+            .iter()
+            .find(|(u, _)| u.label() == *name)
+            .ok_or_else(|| {
+                Error::Missing(format!(
+                    "{} has no trained upsampler `{name}`",
+                    job.run.display()
+                ))
+            })?;
+        let student = &up.student;
+        let factor = up.cfg.model.factor;
+        let ranges = nldf_pipeline::quantize::calibrated_ranges(
+            &student.dir,
+            &job.data,
+            job.calibration_frames,
+            &job.int8_f32,
+        )?;
+        for w in [WeightType::F16, WeightType::Int8] {
+            let path = dir.join(format!("{name}.rays.{}.onnx", precision_name(w)));
+            match w {
+                WeightType::Int8 => nldf_export::export_student_upsampled_int8(
+                    &student.dir,
+                    &up.dir,
+                    &path,
+                    &ranges,
+                )?,
+                _ => nldf_export::export_student_upsampled(&student.dir, &up.dir, &path, w)?,
+            };
+            on_event(&JobEvent::Note(format!("exported {}", path.display())));
+            out.push(Export {
+                student: format!("{}+{name}", student.label()),
+                describe: format!(
+                    "{} under the learned upsampler `{name}` (x{factor})",
+                    student.describe()
+                ),
+                short: format!("{} x{factor}", student_short_name(&student.cfg)),
+                step: student.step,
+                macs_per_ray: 0.0,
+                precision: w,
+                path,
+            });
+        }
+    }
+    Ok(out)
+}
+
 /// `e` in `kind`, rendering frames of `size` (`None`: the model's own), each `upscale` times
 /// smaller (a ray through the centre of each `upscale x upscale` block) and then upscaled.
 pub(crate) fn open_point(

@@ -45,7 +45,7 @@ pub use front::{Point, SpeedUp, SplitScore, mark_front, speed_ups};
 pub use report::{AdNerfSetting, FrontierReport, FrontierSettings};
 
 use crate::error::{Error, Result};
-use exports::{Export, export_all, open_point};
+use exports::{Export, export_all, export_upsampled, open_point};
 use front::{Times, score};
 use points::{OnnxPoint, Timed};
 use shared::eval_split;
@@ -88,6 +88,9 @@ impl FrontierJob {
             &self.out.join("models"),
             &mut *on_event,
         )?;
+        let upsampled = export_upsampled(self, &val, &mut *on_event)?;
+        let student_exports = exports.len();
+        let exports: Vec<Export> = exports.into_iter().chain(upsampled).collect();
         // Every export in both runtimes; `val` scores them all, the other splits score the
         // onnxruntime points (tract runs the same graphs: the suite's parity tests).
         let mut points: Vec<OnnxPoint> = Vec::new();
@@ -109,7 +112,12 @@ impl FrontierJob {
         let speed_up = speed_ups(&table);
         let adnerf = self.adnerf(&val.data, &table, &speed_up, &ways, &mut *on_event)?;
         let hires_points = match &self.hires_data {
-            Some(dir) => Some(hires::hires_points(self, dir, &exports, on_event)?),
+            Some(dir) => Some(hires::hires_points(
+                self,
+                dir,
+                &exports[..student_exports],
+                on_event,
+            )?),
             None => None,
         };
         machine.record_end();
@@ -312,6 +320,8 @@ impl FrontierJob {
             batch: self.batch,
             hires_data: self.hires_data.clone(),
             timed_frames: self.timed_frames,
+            upsamplers: self.upsamplers.clone(),
+            int8_f32: self.int8_f32.clone(),
         }
     }
 }

@@ -29,6 +29,12 @@ pub struct FrontierSettings {
     pub batch: usize,
     pub hires_data: Option<PathBuf>,
     pub timed_frames: usize,
+    /// The upsamplers whose upsampled ray graphs are points.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub upsamplers: Vec<String>,
+    /// The student's products kept in f32 in their int8 graphs.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub int8_f32: Vec<String>,
 }
 
 /// AD-NeRF's setting, timed with seeded weights.

@@ -50,6 +50,11 @@ pub struct FrontierJob {
     pub hires_data: Option<PathBuf>,
     /// Frames each point also renders back to back, for a second 2-thread median.
     pub timed_frames: usize,
+    /// Learned upsamplers of the run (their folders) whose upsampled ray graphs join the
+    /// frontier, in fp16 and with int8 products.
+    pub upsamplers: Vec<String>,
+    /// The student's products kept in f32 in those int8 graphs (`--int8-f32`).
+    pub int8_f32: Vec<String>,
     /// The load limit at the start.
     pub load: LoadGate,
 }
