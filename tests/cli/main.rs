@@ -1112,7 +1112,11 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
     assert_eq!(points[0]["runtime"], "candle");
     let mut upsampled: Vec<(String, String)> = points
         .iter()
-        .filter(|p| p["file"].as_str().is_some_and(|f| f.contains("upsampler.rays.")))
+        .filter(|p| {
+            p["file"]
+                .as_str()
+                .is_some_and(|f| f.contains("upsampler.rays."))
+        })
         .map(|p| {
             let field = |k: &str| p[k].as_str().unwrap_or_default().to_string();
             (field("precision"), field("runtime"))
