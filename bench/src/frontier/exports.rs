@@ -83,7 +83,7 @@ pub(crate) fn export_all(
 /// `OUT/models`. Each is a point named `<student>+<upsampler>`; its multiply-adds are not
 /// counted (0: the CNN's are not per ray).
 pub(crate) fn export_upsampled(
-    job: &super::FrontierJob,
+    job: &super::shared::FrontierJob,
     val: &nldf_train::job::eval::EvalPlan,
     on_event: OnEvent,
 ) -> Result<Vec<Export>> {
