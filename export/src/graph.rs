@@ -66,11 +66,6 @@ impl ActivationRanges {
     pub fn keeps_f32(&self, product: &str) -> bool {
         self.f32_products.contains(product)
     }
-
-    /// The products kept in f32, by name.
-    pub fn f32_products(&self) -> impl Iterator<Item = &str> {
-        self.f32_products.iter().map(String::as_str)
-    }
 }
 
 /// A product done in int8 under [`WeightType::Int8`] and the tensor it reads.

@@ -1040,18 +1040,7 @@ fn bench_frontier_runs_end_to_end_on_a_tiny_run() {
     let dir = scratch();
     let run = dir.path().join("run");
     nldf_tests::copy_dir(&f.run, &run);
-    let config = dir.path().join("upsampler.json");
-    std::fs::write(&config, upsampler_config(None)).unwrap();
-    nldf_ok(args(&[
-        "train",
-        "upsampler",
-        "--data",
-        &s(&f.data),
-        "--run",
-        &s(&run),
-        "--config",
-        &s(&config),
-    ]));
+    train_tiny_upsampler(&f.data, &run, dir.path());
     let out = dir.path().join("frontier");
     let a = args(&[
         "bench",
@@ -1199,6 +1188,23 @@ fn upsampler_config(student: Option<&str>) -> String {
     )
 }
 
+/// `nldf train upsampler` of the tiny configuration ([`upsampler_config`], written into
+/// `scratch`) over `run`'s student, into `run/upsampler`.
+fn train_tiny_upsampler(data: &Path, run: &Path, scratch: &Path) {
+    let config = scratch.join("upsampler.json");
+    std::fs::write(&config, upsampler_config(None)).unwrap();
+    nldf_ok(args(&[
+        "train",
+        "upsampler",
+        "--data",
+        &s(data),
+        "--run",
+        &s(run),
+        "--config",
+        &s(&config),
+    ]));
+}
+
 /// `nldf train upsampler --student NAME` with a `--config` that names another student: the
 /// flag wins and says so on stderr. A configuration naming a folder that does not exist
 /// trains over `--student student`, and the upsampler's saved configuration names
@@ -1271,18 +1277,7 @@ fn an_upsampled_ray_graph_renders_from_the_command_line() {
     let d = dir.path();
     let run = d.join("run");
     copy_trained_run(&f.run, &run);
-    let config = d.join("upsampler.json");
-    std::fs::write(&config, upsampler_config(None)).unwrap();
-    nldf_ok(args(&[
-        "train",
-        "upsampler",
-        "--data",
-        &s(&f.data),
-        "--run",
-        &s(&run),
-        "--config",
-        &s(&config),
-    ]));
+    train_tiny_upsampler(&f.data, &run, d);
     let model = d.join("up.onnx");
     let out = nldf_ok(args(&[
         "export",
