@@ -169,6 +169,30 @@ fn export_production_size_student_agrees_across_candle_tract_ort_and_python() {
     println!("88 x 256: worst relative difference of any pair {worst:.2e}");
 }
 
+/// `frames` calibration frames of `rays` random rays each (ray seeds from `ray_seed`), the
+/// audio of frame `i` the neighbourhood of window `stride * i` of a random 10-frame track
+/// drawn with `audio_seed`.
+fn random_calibration(
+    cfg: &StudentConfig,
+    frames: u64,
+    rays: usize,
+    ray_seed: u64,
+    audio_seed: u64,
+    stride: usize,
+) -> Vec<CalibrationFrame> {
+    let audio = random_audio(cfg, 10, audio_seed);
+    (0..frames)
+        .map(|i| {
+            let r = random_rays(rays, ray_seed + i);
+            CalibrationFrame {
+                origins: r.origins,
+                directions: r.directions,
+                audio: neighbourhood(&audio, stride * i as usize, cfg.audio.att_frames),
+            }
+        })
+        .collect()
+}
+
 /// int8 export at the default student's size (28 x 256, K = 16, L = 10, attention on),
 /// weights at a trained ReLU network's magnitude, calibrated on other rays than those it
 /// is tested on: tract, onnxruntime (batches of 1024) and Python onnxruntime (one call of
@@ -187,20 +211,7 @@ fn export_int8_agrees_across_runtimes_and_stays_near_the_f32_student() {
     let run = write_run(&cfg, 28);
     run.scale_weights_like_trained(cfg.n_blocks());
     let f32_model = read_model(&run.export(WeightType::F32)).unwrap();
-    let calibration: Vec<CalibrationFrame> = (0..3)
-        .map(|i| {
-            let rays = random_rays(1000, 40 + i);
-            CalibrationFrame {
-                origins: rays.origins,
-                directions: rays.directions,
-                audio: neighbourhood(
-                    &random_audio(&cfg, 10, 20),
-                    3 * i as usize,
-                    cfg.audio.att_frames,
-                ),
-            }
-        })
-        .collect();
+    let calibration = random_calibration(&cfg, 3, 1000, 40, 20, 3);
     let ranges = activation_ranges(&run.student_dir(), &f32_model.info, &calibration).unwrap();
     let path = run.root.join("model_int8.onnx");
     export_student_int8(&run.student_dir(), &path, &ranges).unwrap();
@@ -265,20 +276,7 @@ fn int8_products_kept_in_f32_render_as_the_f32_export() {
     run.scale_weights_like_trained(cfg.n_blocks());
     let f32_path = run.export(WeightType::F32);
     let f32_model = read_model(&f32_path).unwrap();
-    let calibration: Vec<CalibrationFrame> = (0..2)
-        .map(|i| {
-            let rays = random_rays(600, 70 + i);
-            CalibrationFrame {
-                origins: rays.origins,
-                directions: rays.directions,
-                audio: neighbourhood(
-                    &random_audio(&cfg, 10, 21),
-                    i as usize,
-                    cfg.audio.att_frames,
-                ),
-            }
-        })
-        .collect();
+    let calibration = random_calibration(&cfg, 2, 600, 70, 21, 1);
     let ranges = activation_ranges(&run.student_dir(), &f32_model.info, &calibration).unwrap();
     let (_, _, taps) = nldf_export::calibration_model(&run.student_dir()).unwrap();
     let products: Vec<String> = taps.iter().map(|t| t.product.clone()).collect();

@@ -4,11 +4,12 @@
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 
-use nldf_export::WeightType;
+use nldf_export::{ActivationRanges, WeightType};
 use nldf_infer::{BackendKind, BackendOptions, FrameRenderer, backend_for};
 use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::reports::eval::{FrameModel, student_short_name};
 use nldf_train::trainers::student_trainer::StudentModel;
+use nldf_train::trainers::upsampler_trainer::UpsampledModel;
 
 use super::points::OnnxPoint;
 use super::shared::{PRECISIONS, precision_name};
@@ -80,8 +81,9 @@ pub(crate) fn export_all(
 /// Exports the upsampled ray graph of each of `job.upsamplers` (the run's learned
 /// upsamplers, found by `val`'s plan) over the student it reads, in fp16 and with int8
 /// products calibrated as the students' are (`job.int8_f32` kept in f32), into
-/// `OUT/models`. Each is a point named `<student>+<upsampler>`; its multiply-adds are not
-/// counted (0: the CNN's are not per ray).
+/// `OUT/models`. Each is a point named `<student>+<upsampler>`; its multiply-adds per ray
+/// are the upsampler's estimate (the student's share of a coarse ray and the CNN's cost of
+/// a pixel).
 pub(crate) fn export_upsampled(
     job: &super::shared::FrontierJob,
     val: &nldf_train::job::eval::EvalPlan,
@@ -110,15 +112,7 @@ pub(crate) fn export_upsampled(
         )?;
         for w in [WeightType::F16, WeightType::Int8] {
             let path = dir.join(format!("{name}.rays.{}.onnx", precision_name(w)));
-            match w {
-                WeightType::Int8 => nldf_export::export_student_upsampled_int8(
-                    &student.dir,
-                    &up.dir,
-                    &path,
-                    &ranges,
-                )?,
-                _ => nldf_export::export_student_upsampled(&student.dir, &up.dir, &path, w)?,
-            };
+            export_upsampled_rays(up, &path, w, &ranges)?;
             on_event(&JobEvent::Note(format!("exported {}", path.display())));
             out.push(Export {
                 student: format!("{}+{name}", student.label()),
@@ -128,7 +122,7 @@ pub(crate) fn export_upsampled(
                 ),
                 short: format!("{} x{factor}", student_short_name(&student.cfg)),
                 step: student.step,
-                macs_per_ray: 0.0,
+                macs_per_ray: up.macs_per_ray(),
                 precision: w,
                 path,
             });
@@ -176,4 +170,22 @@ pub(crate) fn open_point(
         upscale: upscale.max(1),
         seconds: RefCell::new(Vec::new()),
     })
+}
+
+/// Exports the ray graph of `up` (the upsampler over its student) to `path` in `w`; int8
+/// takes its products' ranges from `ranges`, the other precisions ignore them.
+pub(crate) fn export_upsampled_rays(
+    up: &UpsampledModel,
+    path: &Path,
+    w: WeightType,
+    ranges: &ActivationRanges,
+) -> Result<()> {
+    let student = &up.student.dir;
+    match w {
+        WeightType::Int8 => {
+            nldf_export::export_student_upsampled_int8(student, &up.dir, path, ranges)?
+        }
+        _ => nldf_export::export_student_upsampled(student, &up.dir, path, w)?,
+    };
+    Ok(())
 }

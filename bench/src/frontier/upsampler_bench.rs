@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 use nldf_core::dataset::Split;
 use nldf_core::stats::median;
-use nldf_export::WeightType;
+use nldf_export::{ActivationRanges, WeightType};
 use nldf_infer::BackendKind;
 use nldf_infer::frame_graph::FrameGraph;
 use nldf_model::FrameGraphFile;
@@ -25,7 +25,7 @@ use nldf_train::job::{JobEvent, OnEvent};
 use nldf_train::reports::eval::{EvalReport, FrameModel};
 use nldf_train::trainers::upsampler_trainer::UpsampledModel;
 
-use super::exports::{Export, open_point};
+use super::exports::{Export, export_upsampled_rays, open_point};
 use super::front::{SplitScore, paired_ratio, score};
 use super::points::{OnnxPoint, Timed};
 use super::shared::{THREADS, eval_split, precision_name};
@@ -141,7 +141,7 @@ impl UpsamplerBench {
             describe: format!("{} with upsampler x{factor}", student.describe()),
             short: nldf_train::reports::eval::student_short_name(&student.cfg),
             step: up.step,
-            macs_per_ray: 0.0,
+            macs_per_ray: up.macs_per_ray(),
             precision,
             path,
         };
@@ -162,7 +162,7 @@ impl UpsamplerBench {
             nldf_export::export_frame_upsampled(&student.dir, &up.dir, &frame, w)?;
             graphs.push((w, nldf_model::read_frame_model(&frame)?));
             let rays = models_dir.join(format!("{}.rays.{p}.onnx", self.upsampler));
-            nldf_export::export_student_upsampled(&student.dir, &up.dir, &rays, w)?;
+            export_upsampled_rays(up, &rays, w, &ActivationRanges::default())?;
             ray_graphs.push(ray_export(w, rays));
             on_event(&JobEvent::Note(format!(
                 "exported the student's ray graph and the upsampled frame and ray graphs in {p}"
@@ -177,7 +177,7 @@ impl UpsamplerBench {
             &self.int8_f32,
         )?;
         let rays = models_dir.join(format!("{}.rays.int8.onnx", self.upsampler));
-        nldf_export::export_student_upsampled_int8(&student.dir, &up.dir, &rays, &ranges)?;
+        export_upsampled_rays(up, &rays, WeightType::Int8, &ranges)?;
         ray_graphs.push(ray_export(WeightType::Int8, rays));
         on_event(&JobEvent::Note(
             "exported the upsampled ray graph with int8 products".into(),
