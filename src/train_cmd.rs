@@ -248,6 +248,18 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
 }
 
 impl StudentArgs {
+    /// The network of the teacher in `RUN/teacher`, when it has been trained (the recipe's
+    /// learning rate depends on it).
+    fn teacher_network(&self) -> Result<Option<nldf_train::trainers::config::TeacherConfig>> {
+        let path = self.run.join("teacher").join("config.json");
+        if !path.is_file() {
+            return Ok(None);
+        }
+        let cfg: nldf_train::trainers::config::TeacherRunConfig =
+            nldf_train::trainers::config::read_config(&path)?;
+        Ok(Some(cfg.model))
+    }
+
     /// The library job these flags ask for.
     pub fn job(&self) -> Result<StudentJob> {
         let plain = self.depth.is_some()
@@ -261,8 +273,10 @@ impl StudentArgs {
             Some(path) => StudentSource::File(path.clone()),
             None if !plain => {
                 let defaults = nldf_pipeline::demo::DemoJob::defaults(self.run.clone());
+                let teacher = self.teacher_network()?.unwrap_or(defaults.teacher);
                 let cfg = nldf_train::job::recipe::student_recipe(
                     &defaults.student,
+                    &teacher,
                     true,
                     defaults.pseudo,
                     defaults.student_iters,
@@ -510,6 +524,7 @@ mod tests {
         let defaults = nldf_pipeline::demo::DemoJob::defaults("r".into());
         let recipe = nldf_train::job::recipe::student_recipe(
             &defaults.student,
+            &defaults.teacher,
             true,
             defaults.pseudo,
             defaults.student_iters,
@@ -529,6 +544,11 @@ mod tests {
             }
             _ => panic!("not the recipe"),
         }
+        assert_eq!(
+            recipe.train.lr,
+            nldf_train::job::recipe::DEMO_STUDENT_LR,
+            "without a teacher the recipe's rate is the MLP teacher's student's"
+        );
         for flags in [
             &["--depth", "88"][..],
             &["--no-pool"],
@@ -539,5 +559,37 @@ mod tests {
                 "{flags:?}"
             );
         }
+    }
+
+    /// Under a trained grid teacher, `nldf train student` with no flags trains the grid
+    /// teacher's recipe, at its own learning rate; under the MLP teacher, at the MLP's.
+    #[test]
+    fn a_student_without_flags_takes_its_teachers_rate() {
+        use nldf_train::job::recipe::{DEMO_GRID_STUDENT_LR, DEMO_STUDENT_LR};
+        use nldf_train::trainers::config::{TeacherConfig, TeacherRunConfig};
+        for (teacher, lr) in [
+            (TeacherConfig::grid(), DEMO_GRID_STUDENT_LR),
+            (TeacherConfig::small(), DEMO_STUDENT_LR),
+        ] {
+            let run = tempfile::tempdir().unwrap();
+            std::fs::create_dir(run.path().join("teacher")).unwrap();
+            let cfg = TeacherRunConfig {
+                model: teacher,
+                train: Default::default(),
+            };
+            std::fs::write(
+                run.path().join("teacher").join("config.json"),
+                serde_json::to_string(&cfg).unwrap(),
+            )
+            .unwrap();
+            let run_arg = run.path().to_str().unwrap();
+            let argv = ["nldf", "--data", "d", "--run", run_arg];
+            let job = Cli::try_parse_from(argv).unwrap().student.job().unwrap();
+            match job.source {
+                StudentSource::Config(c) => assert_eq!(c.train.lr, lr),
+                _ => panic!("not the recipe"),
+            }
+        }
+        assert_ne!(DEMO_GRID_STUDENT_LR, DEMO_STUDENT_LR);
     }
 }

@@ -323,6 +323,7 @@ impl DemoJob {
         )));
         let cfg = student_recipe(
             &self.student,
+            &self.teacher,
             self.student_distill,
             self.pseudo,
             self.student_iters,
