@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Subcommand;
+use nldf_core::run_files::{CONFIG_FILE, TEACHER_DIR};
 
 use nldf_train::job::JobEvent;
 use nldf_train::job::student::{PseudoSettings, StudentJob, StudentSource};
@@ -251,7 +252,7 @@ impl StudentArgs {
     /// The network of the teacher in `RUN/teacher`, when it has been trained (the recipe's
     /// learning rate depends on it).
     fn teacher_network(&self) -> Result<Option<nldf_train::trainers::config::TeacherConfig>> {
-        let path = self.run.join("teacher").join("config.json");
+        let path = self.run.join(TEACHER_DIR).join(CONFIG_FILE);
         if !path.is_file() {
             return Ok(None);
         }
@@ -572,13 +573,14 @@ mod tests {
             (TeacherConfig::small(), DEMO_STUDENT_LR),
         ] {
             let run = tempfile::tempdir().unwrap();
-            std::fs::create_dir(run.path().join("teacher")).unwrap();
+            let teacher_dir = run.path().join(TEACHER_DIR);
+            std::fs::create_dir(&teacher_dir).unwrap();
             let cfg = TeacherRunConfig {
                 model: teacher,
                 train: Default::default(),
             };
             std::fs::write(
-                run.path().join("teacher").join("config.json"),
+                teacher_dir.join(CONFIG_FILE),
                 serde_json::to_string(&cfg).unwrap(),
             )
             .unwrap();
