@@ -9,7 +9,9 @@ trained again scores exactly as that one did, else from the same folder (`studen
 beside the new student, the MLP demo's in `mlp/`). Writes results/grid/student_lr/summary.json:
 per scene and split, each model's head and mouth PSNR and the differences the issue
 bounds (the new student minus the MLP teacher's student: +1.5; minus its own teacher:
--0.5 on val, -1.0 on novel and voice). Prints a table.
+-0.5 on val, -1.0 on novel and voice). Where results/grid/student_lr/steps9k/test_<scene>/
+holds `nldf eval`'s files of the same teacher and its student trained at 1e-3 for 9000
+steps (label `lr1e3_9k`), that student is added with the same differences. Prints a table.
 """
 
 import json
@@ -19,6 +21,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "results",
 SPLITS = ("val", "novel", "voice")
 METRICS = ("head_psnr", "mouth_psnr")
 LABEL = "student_lr1e3"
+LABEL_9K = "lr1e3_9k"
 
 
 def load(path):
@@ -61,10 +64,16 @@ def main():
             models["mlp_student"] = pick("mlp")
             source = "results/grid/summary.json"
 
+        d9 = os.path.join(ROOT, "student_lr", "steps9k", f"test_{scene}")
+        if os.path.isdir(d9):
+            if split_metrics(d9, "teacher") != models["teacher"]:
+                raise SystemExit(f"{scene}: the 9000-step student's teacher is another one")
+            models["lr1e3_9k"] = split_metrics(d9, LABEL_9K)
+
         def minus(a, b):
             return {s: {k: models[a][s][k] - models[b][s][k] for k in METRICS} for s in SPLITS}
 
-        scenes.append({
+        entry = {
             "scene": scene,
             "baselines_from": source,
             "models": models,
@@ -75,7 +84,12 @@ def main():
             # PSNR): the recipe is pinned in steps, so 0 says the scene and teacher are
             # the same.
             "teacher_again_minus_then": again,
-        })
+        }
+        if "lr1e3_9k" in models:
+            entry["lr1e3_9k_minus_mlp_student"] = minus("lr1e3_9k", "mlp_student")
+            entry["lr1e3_9k_minus_lr1e3"] = minus("lr1e3_9k", "lr1e3")
+            entry["lr1e3_9k_minus_teacher"] = minus("lr1e3_9k", "teacher")
+        scenes.append(entry)
     with open(os.path.join(ROOT, "student_lr", "summary.json"), "w") as f:
         json.dump({"scenes": scenes}, f, indent=1)
     for e in scenes:
@@ -89,6 +103,11 @@ def main():
                   f"vs 5e-4 {e['lr1e3_minus_grid_student'][s]['head_psnr']:+.2f} "
                   f"vs teacher {e['lr1e3_minus_teacher'][s]['head_psnr']:+.2f} "
                   f"teacher again {e['teacher_again_minus_then'][s]:+.3f}")
+            if "lr1e3_9k" in m:
+                print(f"   9000 steps {m['lr1e3_9k'][s]['head_psnr']:.2f} "
+                      f"vs mlp {e['lr1e3_9k_minus_mlp_student'][s]['head_psnr']:+.2f} "
+                      f"vs 4500 {e['lr1e3_9k_minus_lr1e3'][s]['head_psnr']:+.2f} "
+                      f"vs teacher {e['lr1e3_9k_minus_teacher'][s]['head_psnr']:+.2f}")
 
 
 if __name__ == "__main__":

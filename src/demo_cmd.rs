@@ -16,7 +16,7 @@ use nldf_pipeline::demo::{DemoJob, DemoReport};
 use nldf_pipeline::demo_video::plan_video;
 use nldf_train::job::JobEvent;
 use nldf_train::job::recipe::{
-    DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
+    DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_TEACHER_CAP_MINUTES, student_budget,
 };
 
 use crate::progress::{EventPrinter, progress_bar, stop_flag};
@@ -66,8 +66,8 @@ pub struct StageArgs {
     /// 300].
     #[arg(long)]
     pub teacher_iters: Option<usize>,
-    /// Student training steps (0 skips the student and the export) [default: 4500; nldf
-    /// demo --pixels-only: 5300, --quick: 300].
+    /// Student training steps (0 skips the student and the export) [default: 4500, under
+    /// the grid teacher 18000; nldf demo --pixels-only: 5300, --quick: 300].
     #[arg(long)]
     pub student_iters: Option<usize>,
     /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
@@ -75,25 +75,33 @@ pub struct StageArgs {
     #[arg(long)]
     pub minutes: Option<f64>,
     /// A wall-clock cap on the student in minutes, its teacher targets included
-    /// [default: 8; nldf demo --pixels-only: 15, --quick: 2].
+    /// [default: 8, under the grid teacher 30; nldf demo --pixels-only: 15, --quick: 2].
     #[arg(long)]
     pub student_minutes: Option<f64>,
 }
 
 /// Runs `nldf demo`.
 pub fn run(args: DemoArgs) -> Result<()> {
+    run_job(job(&args)?, "nldf demo")
+}
+
+/// The job `nldf demo`'s flags ask for: the recipe of the chosen teacher, with the steps,
+/// caps, size and folder the flags change.
+fn job(args: &DemoArgs) -> Result<DemoJob> {
     let quick = args.quick;
     let pick = |full: f64, fast: f64| if quick { fast } else { full };
     let minutes = args
         .stages
         .minutes
         .unwrap_or(pick(DEMO_TEACHER_CAP_MINUTES, 2.0));
+    let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
+    let (student_iters, student_cap) = student_budget(&teacher);
     // The pixels-only student stands in for the teacher too: the caps of both.
     let student_minutes = args.stages.student_minutes.unwrap_or(pick(
         if args.pixels_only {
             DEMO_TEACHER_CAP_MINUTES + DEMO_STUDENT_CAP_MINUTES
         } else {
-            DEMO_STUDENT_CAP_MINUTES
+            student_cap
         },
         2.0,
     ));
@@ -133,7 +141,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
         scene.size = size;
         nldf_core::synth::validate(&scene)?;
     }
-    let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
     let job = DemoJob {
         scene,
         teacher,
@@ -150,13 +157,13 @@ pub fn run(args: DemoArgs) -> Result<()> {
             .unwrap_or(match (quick, args.pixels_only) {
                 (true, _) => 300,
                 (false, true) => DEMO_PIXELS_ITERS,
-                (false, false) => DEMO_STUDENT_ITERS,
+                (false, false) => student_iters,
             }),
         student_cap_minutes: student_minutes,
         student_distill: !args.pixels_only,
         ..defaults
     };
-    run_job(job, "nldf demo")
+    Ok(job)
 }
 
 /// Runs a demo job (the synthetic scene's, or `nldf train --data`'s on a dataset) with
@@ -274,4 +281,39 @@ fn print_summary(command: &str, out: &Path, report: &DemoReport, video: Option<&
         show("model", model.clone());
     }
     show("scores", report.eval_dir.join("metrics.json"));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+    use nldf_train::job::recipe::{
+        DEMO_GRID_STUDENT_CAP_MINUTES, DEMO_GRID_STUDENT_ITERS, DEMO_STUDENT_ITERS,
+    };
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        demo: DemoArgs,
+    }
+
+    fn demo_job(flags: &[&str]) -> DemoJob {
+        let argv = [&["nldf"][..], flags].concat();
+        job(&Cli::try_parse_from(argv).unwrap().demo).unwrap()
+    }
+
+    /// `nldf demo --teacher grid` trains the grid teacher's student for its own steps and
+    /// cap; the default demo keeps the MLP teacher's; a flag still wins.
+    #[test]
+    fn the_demo_student_takes_its_teachers_steps() {
+        let grid = demo_job(&["--teacher", "grid"]);
+        assert_eq!(grid.student_iters, DEMO_GRID_STUDENT_ITERS);
+        assert_eq!(grid.student_cap_minutes, DEMO_GRID_STUDENT_CAP_MINUTES);
+        assert!(grid.teacher.grid.is_some());
+        let mlp = demo_job(&[]);
+        assert_eq!(mlp.student_iters, DEMO_STUDENT_ITERS);
+        assert_eq!(mlp.student_cap_minutes, DEMO_STUDENT_CAP_MINUTES);
+        let set = demo_job(&["--teacher", "grid", "--student-iters", "7"]);
+        assert_eq!(set.student_iters, 7);
+    }
 }

@@ -235,14 +235,15 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
     };
     let defaults = nldf_pipeline::demo::DemoJob::defaults(run);
     let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
+    let (student_iters, student_cap) = nldf_train::job::recipe::student_budget(&teacher);
     let job = nldf_pipeline::demo::DemoJob {
         data: Some(data),
         teacher,
         teacher_lr,
         teacher_iters: args.stages.teacher_iters.unwrap_or(teacher_iters),
-        student_iters: args.stages.student_iters.unwrap_or(defaults.student_iters),
+        student_iters: args.stages.student_iters.unwrap_or(student_iters),
         teacher_cap_minutes: args.stages.minutes.unwrap_or(defaults.teacher_cap_minutes),
-        student_cap_minutes: (args.stages.student_minutes).unwrap_or(defaults.student_cap_minutes),
+        student_cap_minutes: (args.stages.student_minutes).unwrap_or(student_cap),
         ..defaults
     };
     crate::demo_cmd::run_job(job, "nldf train")
@@ -275,12 +276,13 @@ impl StudentArgs {
             None if !plain => {
                 let defaults = nldf_pipeline::demo::DemoJob::defaults(self.run.clone());
                 let teacher = self.teacher_network()?.unwrap_or(defaults.teacher);
+                let (iters, _) = nldf_train::job::recipe::student_budget(&teacher);
                 let cfg = nldf_train::job::recipe::student_recipe(
                     &defaults.student,
                     &teacher,
                     true,
                     defaults.pseudo,
-                    defaults.student_iters,
+                    iters,
                 )?;
                 StudentSource::Config(Box::new(cfg))
             }
@@ -496,102 +498,4 @@ fn run_upsampler(args: UpsamplerArgs) -> Result<()> {
 }
 
 #[cfg(test)]
-mod tests {
-    use clap::Parser;
-
-    use super::*;
-
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        student: StudentArgs,
-    }
-
-    fn source(extra: &[&str]) -> StudentSource {
-        let mut argv = vec!["nldf", "--data", "d", "--run", "r"];
-        argv.extend_from_slice(extra);
-        Cli::try_parse_from(argv)
-            .unwrap()
-            .student
-            .job()
-            .unwrap()
-            .source
-    }
-
-    /// `nldf train student` with no shape flags trains the recipe's student, the one
-    /// `nldf train --data` trains; a preset or a switch asks for the plain settings.
-    #[test]
-    fn a_student_without_flags_is_the_recipes() {
-        let defaults = nldf_pipeline::demo::DemoJob::defaults("r".into());
-        let recipe = nldf_train::job::recipe::student_recipe(
-            &defaults.student,
-            &defaults.teacher,
-            true,
-            defaults.pseudo,
-            defaults.student_iters,
-        )
-        .unwrap();
-        match source(&[]) {
-            StudentSource::Config(cfg) => {
-                assert_eq!(
-                    serde_json::to_value(&*cfg).unwrap(),
-                    serde_json::to_value(&recipe).unwrap()
-                );
-                assert_eq!(
-                    cfg.model,
-                    nldf_train::networks::student::StudentConfig::realtime()
-                );
-                assert_eq!(cfg.train.pseudo_frames, 600);
-            }
-            _ => panic!("not the recipe"),
-        }
-        assert_eq!(
-            recipe.train.lr,
-            nldf_train::job::recipe::DEMO_STUDENT_LR,
-            "without a teacher the recipe's rate is the MLP teacher's student's"
-        );
-        for flags in [
-            &["--depth", "88"][..],
-            &["--no-pool"],
-            &["--pseudo-frames", "10"],
-        ] {
-            assert!(
-                matches!(source(flags), StudentSource::Settings { .. }),
-                "{flags:?}"
-            );
-        }
-    }
-
-    /// Under a trained grid teacher, `nldf train student` with no flags trains the grid
-    /// teacher's recipe, at its own learning rate; under the MLP teacher, at the MLP's.
-    #[test]
-    fn a_student_without_flags_takes_its_teachers_rate() {
-        use nldf_train::job::recipe::{DEMO_GRID_STUDENT_LR, DEMO_STUDENT_LR};
-        use nldf_train::trainers::config::{TeacherConfig, TeacherRunConfig};
-        for (teacher, lr) in [
-            (TeacherConfig::grid(), DEMO_GRID_STUDENT_LR),
-            (TeacherConfig::small(), DEMO_STUDENT_LR),
-        ] {
-            let run = tempfile::tempdir().unwrap();
-            let teacher_dir = run.path().join(TEACHER_DIR);
-            std::fs::create_dir(&teacher_dir).unwrap();
-            let cfg = TeacherRunConfig {
-                model: teacher,
-                train: Default::default(),
-            };
-            std::fs::write(
-                teacher_dir.join(CONFIG_FILE),
-                serde_json::to_string(&cfg).unwrap(),
-            )
-            .unwrap();
-            let run_arg = run.path().to_str().unwrap();
-            let argv = ["nldf", "--data", "d", "--run", run_arg];
-            let job = Cli::try_parse_from(argv).unwrap().student.job().unwrap();
-            match job.source {
-                StudentSource::Config(c) => assert_eq!(c.train.lr, lr),
-                _ => panic!("not the recipe"),
-            }
-        }
-        assert_ne!(DEMO_GRID_STUDENT_LR, DEMO_STUDENT_LR);
-    }
-}
+mod tests;

@@ -56,6 +56,28 @@ pub const DEMO_STUDENT_ITERS: usize = 4500;
 /// The demo's cap on the student in minutes.
 pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
 
+/// The demo's student steps under the grid teacher: four times [`DEMO_STUDENT_ITERS`]. On
+/// the tuning scene (seed 7) the grid teacher's student at 1e-3 scored 2.1-2.8 dB (head
+/// PSNR) below its teacher after 4500 steps, 0.9-1.4 after 9000 and 0.3-0.7 after 18000;
+/// each doubling of the steps doubles the student's minutes (docs/grid.md, "The student's
+/// steps").
+pub const DEMO_GRID_STUDENT_ITERS: usize = 18_000;
+
+/// The demo's cap on the grid teacher's student in minutes: [`DEMO_GRID_STUDENT_ITERS`]
+/// took about 18 on a 2 vCPU machine.
+pub const DEMO_GRID_STUDENT_CAP_MINUTES: f64 = 30.0;
+
+/// The recipe's student steps and cap in minutes under `teacher`:
+/// [`DEMO_GRID_STUDENT_ITERS`] and [`DEMO_GRID_STUDENT_CAP_MINUTES`] under the grid teacher,
+/// [`DEMO_STUDENT_ITERS`] and [`DEMO_STUDENT_CAP_MINUTES`] under the MLP one.
+pub fn student_budget(teacher: &TeacherConfig) -> (usize, f64) {
+    if teacher.grid.is_some() {
+        (DEMO_GRID_STUDENT_ITERS, DEMO_GRID_STUDENT_CAP_MINUTES)
+    } else {
+        (DEMO_STUDENT_ITERS, DEMO_STUDENT_CAP_MINUTES)
+    }
+}
+
 /// The pixels-only student's steps (`nldf demo --pixels-only`, the comparison): 4096 rays
 /// a step, as many as fit in the distilled recipe's measured teacher and student minutes
 /// together on one machine, so that it is given the same total time (docs/demo.md, "Against
