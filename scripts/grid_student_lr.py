@@ -10,8 +10,9 @@ beside the new student, the MLP demo's in `mlp/`). Writes results/grid/student_l
 per scene and split, each model's head and mouth PSNR and the differences the issue
 bounds (the new student minus the MLP teacher's student: +1.5; minus its own teacher:
 -0.5 on val, -1.0 on novel and voice). Where results/grid/student_lr/steps9k/test_<scene>/
-holds `nldf eval`'s files of the same teacher and its student trained at 1e-3 for 9000
-steps (label `lr1e3_9k`), that student is added with the same differences. Prints a table.
+(or steps18k/) holds `nldf eval`'s files of the same teacher and its student trained at 1e-3
+for 9000 steps, label `lr1e3_9k` (or 18000, `lr1e3_18k`), that student is added with the
+same differences and its gain over the 4500-step one. Prints a table.
 """
 
 import json
@@ -21,7 +22,8 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "results",
 SPLITS = ("val", "novel", "voice")
 METRICS = ("head_psnr", "mouth_psnr")
 LABEL = "student_lr1e3"
-LABEL_9K = "lr1e3_9k"
+# The longer students: their label and folder.
+LONGER = (("lr1e3_9k", "steps9k"), ("lr1e3_18k", "steps18k"))
 
 
 def load(path):
@@ -64,11 +66,14 @@ def main():
             models["mlp_student"] = pick("mlp")
             source = "results/grid/summary.json"
 
-        d9 = os.path.join(ROOT, "student_lr", "steps9k", f"test_{scene}")
-        if os.path.isdir(d9):
-            if split_metrics(d9, "teacher") != models["teacher"]:
-                raise SystemExit(f"{scene}: the 9000-step student's teacher is another one")
-            models["lr1e3_9k"] = split_metrics(d9, LABEL_9K)
+        longer = []
+        for label, folder in LONGER:
+            dl = os.path.join(ROOT, "student_lr", folder, f"test_{scene}")
+            if os.path.isdir(dl):
+                if split_metrics(dl, "teacher") != models["teacher"]:
+                    raise SystemExit(f"{scene}: {label}'s teacher is another one")
+                models[label] = split_metrics(dl, label)
+                longer.append(label)
 
         def minus(a, b):
             return {s: {k: models[a][s][k] - models[b][s][k] for k in METRICS} for s in SPLITS}
@@ -85,10 +90,10 @@ def main():
             # the same.
             "teacher_again_minus_then": again,
         }
-        if "lr1e3_9k" in models:
-            entry["lr1e3_9k_minus_mlp_student"] = minus("lr1e3_9k", "mlp_student")
-            entry["lr1e3_9k_minus_lr1e3"] = minus("lr1e3_9k", "lr1e3")
-            entry["lr1e3_9k_minus_teacher"] = minus("lr1e3_9k", "teacher")
+        for label in longer:
+            entry[f"{label}_minus_mlp_student"] = minus(label, "mlp_student")
+            entry[f"{label}_minus_lr1e3"] = minus(label, "lr1e3")
+            entry[f"{label}_minus_teacher"] = minus(label, "teacher")
         scenes.append(entry)
     with open(os.path.join(ROOT, "student_lr", "summary.json"), "w") as f:
         json.dump({"scenes": scenes}, f, indent=1)
@@ -103,11 +108,12 @@ def main():
                   f"vs 5e-4 {e['lr1e3_minus_grid_student'][s]['head_psnr']:+.2f} "
                   f"vs teacher {e['lr1e3_minus_teacher'][s]['head_psnr']:+.2f} "
                   f"teacher again {e['teacher_again_minus_then'][s]:+.3f}")
-            if "lr1e3_9k" in m:
-                print(f"   9000 steps {m['lr1e3_9k'][s]['head_psnr']:.2f} "
-                      f"vs mlp {e['lr1e3_9k_minus_mlp_student'][s]['head_psnr']:+.2f} "
-                      f"vs 4500 {e['lr1e3_9k_minus_lr1e3'][s]['head_psnr']:+.2f} "
-                      f"vs teacher {e['lr1e3_9k_minus_teacher'][s]['head_psnr']:+.2f}")
+            for label, _ in LONGER:
+                if label in m:
+                    print(f"   {label} {m[label][s]['head_psnr']:.2f} "
+                          f"vs mlp {e[label + '_minus_mlp_student'][s]['head_psnr']:+.2f} "
+                          f"vs 4500 {e[label + '_minus_lr1e3'][s]['head_psnr']:+.2f} "
+                          f"vs teacher {e[label + '_minus_teacher'][s]['head_psnr']:+.2f}")
 
 
 if __name__ == "__main__":

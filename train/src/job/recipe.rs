@@ -64,7 +64,7 @@ pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
 pub const DEMO_GRID_STUDENT_ITERS: usize = 18_000;
 
 /// The demo's cap on the grid teacher's student in minutes: [`DEMO_GRID_STUDENT_ITERS`]
-/// took about 18 on a 2 vCPU machine.
+/// took about 19 on a 2 vCPU machine.
 pub const DEMO_GRID_STUDENT_CAP_MINUTES: f64 = 30.0;
 
 /// The recipe's student steps and cap in minutes under `teacher`:
