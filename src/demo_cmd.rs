@@ -95,13 +95,13 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
         .minutes
         .unwrap_or(pick(DEMO_TEACHER_CAP_MINUTES, 2.0));
     let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
-    let (student_iters, student_cap) = student_budget(&teacher);
+    let budget = student_budget(&teacher);
     // The pixels-only student stands in for the teacher too: the caps of both.
     let student_minutes = args.stages.student_minutes.unwrap_or(pick(
         if args.pixels_only {
             DEMO_TEACHER_CAP_MINUTES + DEMO_STUDENT_CAP_MINUTES
         } else {
-            student_cap
+            budget.cap_minutes
         },
         2.0,
     ));
@@ -157,7 +157,7 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
             .unwrap_or(match (quick, args.pixels_only) {
                 (true, _) => 300,
                 (false, true) => DEMO_PIXELS_ITERS,
-                (false, false) => student_iters,
+                (false, false) => budget.iters,
             }),
         student_cap_minutes: student_minutes,
         student_distill: !args.pixels_only,

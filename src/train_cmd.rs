@@ -235,15 +235,15 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
     };
     let defaults = nldf_pipeline::demo::DemoJob::defaults(run);
     let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
-    let (student_iters, student_cap) = nldf_train::job::recipe::student_budget(&teacher);
+    let budget = nldf_train::job::recipe::student_budget(&teacher);
     let job = nldf_pipeline::demo::DemoJob {
         data: Some(data),
         teacher,
         teacher_lr,
         teacher_iters: args.stages.teacher_iters.unwrap_or(teacher_iters),
-        student_iters: args.stages.student_iters.unwrap_or(student_iters),
+        student_iters: args.stages.student_iters.unwrap_or(budget.iters),
         teacher_cap_minutes: args.stages.minutes.unwrap_or(defaults.teacher_cap_minutes),
-        student_cap_minutes: (args.stages.student_minutes).unwrap_or(student_cap),
+        student_cap_minutes: (args.stages.student_minutes).unwrap_or(budget.cap_minutes),
         ..defaults
     };
     crate::demo_cmd::run_job(job, "nldf train")
@@ -251,7 +251,7 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
 
 impl StudentArgs {
     /// The network of the teacher in `RUN/teacher`, when it has been trained (the recipe's
-    /// learning rate depends on it).
+    /// steps and learning rate depend on it).
     fn teacher_network(&self) -> Result<Option<nldf_train::trainers::config::TeacherConfig>> {
         let path = self.run.join(TEACHER_DIR).join(CONFIG_FILE);
         if !path.is_file() {
@@ -276,7 +276,7 @@ impl StudentArgs {
             None if !plain => {
                 let defaults = nldf_pipeline::demo::DemoJob::defaults(self.run.clone());
                 let teacher = self.teacher_network()?.unwrap_or(defaults.teacher);
-                let (iters, _) = nldf_train::job::recipe::student_budget(&teacher);
+                let iters = nldf_train::job::recipe::student_budget(&teacher).iters;
                 let cfg = nldf_train::job::recipe::student_recipe(
                     &defaults.student,
                     &teacher,

@@ -67,17 +67,6 @@ pub const DEMO_GRID_STUDENT_ITERS: usize = 18_000;
 /// took about 19 on a 2 vCPU machine.
 pub const DEMO_GRID_STUDENT_CAP_MINUTES: f64 = 30.0;
 
-/// The recipe's student steps and cap in minutes under `teacher`:
-/// [`DEMO_GRID_STUDENT_ITERS`] and [`DEMO_GRID_STUDENT_CAP_MINUTES`] under the grid teacher,
-/// [`DEMO_STUDENT_ITERS`] and [`DEMO_STUDENT_CAP_MINUTES`] under the MLP one.
-pub fn student_budget(teacher: &TeacherConfig) -> (usize, f64) {
-    if teacher.grid.is_some() {
-        (DEMO_GRID_STUDENT_ITERS, DEMO_GRID_STUDENT_CAP_MINUTES)
-    } else {
-        (DEMO_STUDENT_ITERS, DEMO_STUDENT_CAP_MINUTES)
-    }
-}
-
 /// The pixels-only student's steps (`nldf demo --pixels-only`, the comparison): 4096 rays
 /// a step, as many as fit in the distilled recipe's measured teacher and student minutes
 /// together on one machine, so that it is given the same total time (docs/demo.md, "Against
@@ -118,13 +107,32 @@ pub const DEMO_STUDENT_LR: f64 = 5e-4;
 /// 2e-3 gained less (docs/grid.md, "The student's learning rate").
 pub const DEMO_GRID_STUDENT_LR: f64 = 1e-3;
 
-/// The recipe's learning rate for a student distilled from `teacher`:
-/// [`DEMO_GRID_STUDENT_LR`] under the grid teacher, [`DEMO_STUDENT_LR`] under the MLP one.
-pub fn student_lr(teacher: &TeacherConfig) -> f64 {
+/// What the recipe gives a student distilled from a teacher: its steps, its cap in
+/// minutes and its learning rate before it decays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StudentBudget {
+    pub iters: usize,
+    pub cap_minutes: f64,
+    pub lr: f64,
+}
+
+/// The recipe's student under `teacher`: [`DEMO_GRID_STUDENT_ITERS`],
+/// [`DEMO_GRID_STUDENT_CAP_MINUTES`] and [`DEMO_GRID_STUDENT_LR`] under the grid teacher,
+/// [`DEMO_STUDENT_ITERS`], [`DEMO_STUDENT_CAP_MINUTES`] and [`DEMO_STUDENT_LR`] under the
+/// MLP one.
+pub fn student_budget(teacher: &TeacherConfig) -> StudentBudget {
     if teacher.grid.is_some() {
-        DEMO_GRID_STUDENT_LR
+        StudentBudget {
+            iters: DEMO_GRID_STUDENT_ITERS,
+            cap_minutes: DEMO_GRID_STUDENT_CAP_MINUTES,
+            lr: DEMO_GRID_STUDENT_LR,
+        }
     } else {
-        DEMO_STUDENT_LR
+        StudentBudget {
+            iters: DEMO_STUDENT_ITERS,
+            cap_minutes: DEMO_STUDENT_CAP_MINUTES,
+            lr: DEMO_STUDENT_LR,
+        }
     }
 }
 
@@ -140,7 +148,7 @@ pub const DEMO_HOLD: f64 = 0.6;
 
 /// The recipe's student run for `iters` steps: `model` distilled from the teacher with
 /// `pseudo` views of `teacher` (the demo's settings: [`DEMO_PSEUDO_FRACTION`],
-/// [`student_lr`], [`DEMO_AUDIO_LR_SCALE`], [`DEMO_MOUTH`], [`DEMO_STUDENT_BATCH`],
+/// [`student_budget`]'s rate, [`DEMO_AUDIO_LR_SCALE`], [`DEMO_MOUTH`], [`DEMO_STUDENT_BATCH`],
 /// [`DEMO_RECORDED_RAYS`]), or, with `distill` off, the pixels-only comparison (4096 rays a
 /// step from every pixel).
 /// Either way the learning rate is held for [`DEMO_HOLD`] of the steps, then falls tenfold.
@@ -167,7 +175,7 @@ pub fn student_recipe(
     t.lr_decay_steps = iters.saturating_sub(hold).max(1);
     if distill {
         t.pseudo_fraction = DEMO_PSEUDO_FRACTION;
-        t.lr = student_lr(teacher);
+        t.lr = student_budget(teacher).lr;
         t.audio_lr_scale = DEMO_AUDIO_LR_SCALE;
         (t.mouth_fraction, t.mouth_weight) = DEMO_MOUTH;
         t.batch_rays = DEMO_STUDENT_BATCH;
