@@ -17,6 +17,7 @@ mod layers;
 mod lookahead;
 mod machine_paths;
 mod metrics;
+mod occupancy;
 mod posed;
 mod prepare_check;
 mod rendering;

@@ -10,6 +10,7 @@ pub mod field;
 pub mod hash_grid;
 pub mod hash_grid_reference;
 pub mod nn;
+pub mod occupancy;
 pub mod render;
 pub mod sampler;
 pub mod student;

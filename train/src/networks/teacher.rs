@@ -11,6 +11,7 @@ use crate::networks::audio_net::{AudioEncoder, audio_encoder};
 use crate::networks::field::{TeacherField, teacher_field};
 use crate::networks::hash_grid::{HashGrid, hash_grid};
 use crate::networks::nn::{Dense, dense};
+use crate::networks::occupancy::{OCCUPANCY_VAR, Occupancy, UNMEASURED, sample_occupied};
 use crate::networks::render::composite;
 use crate::networks::sampler::{RaySamples, sample_importance, sample_stratified};
 use crate::networks::teacher_config::TeacherConfig;
@@ -26,11 +27,42 @@ pub struct Teacher {
     pub grid: Option<HashGrid>,
     /// The grid teacher's region attention: grid features -> one weight per audio channel.
     pub attention: Option<Dense>,
+    /// The grid teacher's occupancy grid over the grid's box (none: every sample inside
+    /// the bounds).
+    pub occupancy: Option<Occupancy>,
 }
 
-/// Builds a [`Teacher`] under `vb` (`audio`, `field`, and `grid` for the grid teacher).
+/// Builds a [`Teacher`] under `vb` (`audio`, `field`, and `grid` for the grid teacher;
+/// [`OCCUPANCY_VAR`] with an occupancy grid, which needs the grid's box).
 pub fn teacher(cfg: &TeacherConfig, vb: VarBuilder) -> Result<Teacher> {
+    let occupancy = match (&cfg.occupancy, &cfg.grid) {
+        (Some(o), Some(g)) => {
+            let cells = o.resolution.pow(3);
+            let (prefix, name) = OCCUPANCY_VAR.split_once('.').unwrap_or(("", OCCUPANCY_VAR));
+            let density = vb.pp(prefix).get_with_hints(
+                cells,
+                name,
+                candle_nn::Init::Const(f64::from(UNMEASURED)),
+            )?;
+            let bounds = Bounds {
+                lo: g.lo.into(),
+                hi: g.hi.into(),
+            };
+            Some(Occupancy::new(
+                o,
+                bounds,
+                candle_core::Var::from_tensor(&density)?,
+            ))
+        }
+        (Some(_), None) => {
+            return Err(candle_core::Error::Msg(
+                "`model.occupancy` needs the grid teacher (`model.grid`)".into(),
+            ));
+        }
+        _ => None,
+    };
     Ok(Teacher {
+        occupancy,
         cfg: cfg.clone(),
         audio: audio_encoder(&cfg.audio, vb.pp("audio"))?,
         field: teacher_field(cfg, vb.pp("field"))?,
@@ -195,7 +227,8 @@ impl Teacher {
         Ok(((densities * mask)?, colors))
     }
 
-    /// The samples of each ray that hits `bounds`: `n_samples` stratified ones, plus
+    /// The samples of each ray that hits `bounds`: `n_samples` stratified ones (over the
+    /// occupied cells only, with an occupancy grid: [`sample_occupied`]), plus
     /// `n_importance` drawn from the weights that a coarse pass of the field (no gradient)
     /// gives them. `codes_of` gives the audio codes of a list of hit rays.
     pub fn sample(
@@ -207,14 +240,25 @@ impl Teacher {
         mut rng: Option<&mut dyn rand::RngCore>,
         codes_of: &dyn Fn(&[usize]) -> Result<Tensor>,
     ) -> Result<RaySamples> {
-        let coarse = sample_stratified(
-            rays,
-            bounds,
-            near,
-            far,
-            self.cfg.n_samples,
-            rng.as_deref_mut(),
-        );
+        let coarse = match &self.occupancy {
+            Some(occ) => sample_occupied(
+                rays,
+                bounds,
+                near,
+                far,
+                self.cfg.n_samples,
+                &occ.mask()?,
+                rng.as_deref_mut(),
+            ),
+            None => sample_stratified(
+                rays,
+                bounds,
+                near,
+                far,
+                self.cfg.n_samples,
+                rng.as_deref_mut(),
+            ),
+        };
         if self.cfg.n_importance == 0 || coarse.hit.is_empty() {
             return Ok(coarse);
         }
@@ -287,6 +331,47 @@ impl Teacher {
         Ok(())
     }
 }
+
+impl Teacher {
+    /// One update of the occupancy grid ([`Occupancy::absorb`]), if the teacher has one:
+    /// the field's density at a fresh point in every cell (drawn from `rng`), cell `i` under
+    /// row `(i + step) mod n` of `codes` (`[n, audio_dim]`, the batch's codes).
+    pub fn update_occupancy(
+        &self,
+        codes: &Tensor,
+        step: usize,
+        rng: &mut dyn rand::RngCore,
+    ) -> Result<()> {
+        let Some(occ) = &self.occupancy else {
+            return Ok(());
+        };
+        let points = occ.cell_points(rng);
+        let n_cells = points.len() / 3;
+        let n_codes = codes.dim(0)?.max(1);
+        let dir = encode_vectors(&[0.0, 0.0, 1.0], self.cfg.dir_freqs);
+        let mut sigma = Vec::with_capacity(n_cells);
+        for lo in (0..n_cells).step_by(OCCUPANCY_CHUNK) {
+            let hi = (lo + OCCUPANCY_CHUNK).min(n_cells);
+            let rows: Vec<u32> = (lo..hi).map(|i| ((i + step) % n_codes) as u32).collect();
+            let rows = Tensor::from_vec(rows, hi - lo, &Device::Cpu)?;
+            let dirs = Tensor::from_slice(&dir.data, (1, dir.width), &Device::Cpu)?
+                .broadcast_as((hi - lo, dir.width))?
+                .contiguous()?;
+            let (density, _) = self.query(
+                &points[3 * lo..3 * hi],
+                &codes.detach().index_select(&rows, 0)?,
+                &dirs,
+                1,
+                false,
+            )?;
+            sigma.extend(density.flatten_all()?.to_vec1::<f32>()?);
+        }
+        occ.absorb(&sigma)
+    }
+}
+
+/// Cells whose density one call of the field measures in an occupancy update.
+const OCCUPANCY_CHUNK: usize = 32_768;
 
 impl Teacher {
     /// Every hit ray of `samples` under one audio `code` (`[1, audio_dim]`), with its

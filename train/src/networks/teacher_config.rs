@@ -33,6 +33,9 @@ pub struct TeacherConfig {
     /// The grid teacher: points encoded by a multiresolution hash grid instead of
     /// frequencies (`pos_freqs` is then unused). None: AD-NeRF's positional encoding.
     pub grid: Option<crate::networks::hash_grid::GridConfig>,
+    /// The grid teacher's occupancy grid: samples only the cells where the field has
+    /// density, kept up to date while training. None: every sample inside the bounds.
+    pub occupancy: Option<crate::networks::occupancy::OccupancyConfig>,
 }
 
 impl Default for TeacherConfig {
@@ -57,6 +60,7 @@ impl TeacherConfig {
             n_importance: 128,
             min_transmittance: 1e-4,
             grid: None,
+            occupancy: None,
         }
     }
 

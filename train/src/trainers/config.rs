@@ -163,6 +163,28 @@ impl RunConfig for TeacherRunConfig {
         if let Some(g) = &m.grid {
             g.check("model.grid")?;
         }
+        if let Some(o) = &m.occupancy {
+            if m.grid.is_none() {
+                return Err(Error::Config(
+                    "`model.occupancy` needs the grid teacher: set `model.grid` too".into(),
+                ));
+            }
+            in_range(
+                "model.occupancy.resolution",
+                o.resolution,
+                2,
+                crate::networks::occupancy::MAX_RESOLUTION,
+            )?;
+            in_range("model.occupancy.update_every", o.update_every, 1, 1 << 20)?;
+            in_range("model.occupancy.warmup_steps", o.warmup_steps, 0, 1 << 30)?;
+            in_range("model.occupancy.decay", o.decay, 0.0, 1.0)?;
+            in_range_open(
+                "model.occupancy.min_opacity",
+                o.min_opacity as f64,
+                0.0,
+                1.0,
+            )?;
+        }
         let t = &self.train;
         check_shared_train!(t);
         positive("train.att_lr_scale", t.att_lr_scale, 1e3)?;

@@ -20,6 +20,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::error::{Error, Result};
 use crate::networks::nn::{new_varmap, scaled_vars};
+use crate::networks::occupancy::OCCUPANCY_VAR;
 use crate::networks::teacher::{Teacher, teacher};
 use crate::trainers::adam::{Adam, AdamParams};
 use crate::trainers::checkpoint::save_json;
@@ -181,6 +182,9 @@ impl TeacherRun {
             seed,
             run.model.cfg.model.audio.att_frames,
         )?;
+        if let Some(occ) = &run.model.teacher.occupancy {
+            occ.reset()?;
+        }
         if run.model.cfg.model.grid.is_some() {
             crate::networks::hash_grid::init_table(
                 &run.model.varmap,
@@ -311,6 +315,7 @@ impl TeacherRun {
         } = self.sample_step_batch(data, &mut rng);
         let aud_ids: Vec<usize> = picked.iter().map(|&fi| frames[fi].aud_id).collect();
         let codes = self.model.audio_codes(data, &aud_ids)?;
+        self.update_occupancy(&codes)?;
         let out = self.model.teacher.render(
             &rays,
             &bg,
@@ -352,6 +357,22 @@ impl TeacherRun {
         Ok((value, psnr_from_mse(value)))
     }
 
+    /// Updates the teacher's occupancy grid when the step is due
+    /// ([`crate::networks::occupancy::Occupancy::due`]):
+    /// cell points from their own random stream of `(seed, step)`, the batch's `codes`.
+    fn update_occupancy(&self, codes: &Tensor) -> Result<()> {
+        let teacher = &self.model.teacher;
+        let step = self.model.step;
+        match &teacher.occupancy {
+            Some(occ) if occ.due(step) => {
+                let mut rng = ChaCha8Rng::seed_from_u64(self.model.cfg.train.seed ^ OCCUPANCY_SEED);
+                rng.set_stream(step as u64 + 1);
+                Ok(teacher.update_occupancy(codes, step, &mut rng)?)
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// Writes the checkpoint (weights, optimizer state, config) into the run's folder.
     pub fn save(&self) -> Result<()> {
         let title = format!(
@@ -390,13 +411,20 @@ impl TrainingRun for TeacherRun {
     }
 }
 
+/// Mixed into the seed of the occupancy grid's cell points, apart from the batches' stream.
+const OCCUPANCY_SEED: u64 = 0x6f63_6375_7079;
+
 fn new_adam(varmap: &VarMap, cfg: &TeacherRunConfig) -> Result<Adam> {
     let t = &cfg.train;
     let mut scales = vec![("audio.att.", t.att_lr_scale)];
     if let Some(grid) = &cfg.model.grid {
         scales.push((crate::networks::teacher::GRID_TABLE, grid.lr_scale));
     }
-    let vars = scaled_vars(varmap, &scales)?;
+    // The occupancy grid's densities are measured, not learned.
+    let vars = scaled_vars(varmap, &scales)?
+        .into_iter()
+        .filter(|(name, _, _)| name != OCCUPANCY_VAR)
+        .collect();
     Ok(Adam::new(
         vars,
         AdamParams {
