@@ -55,10 +55,33 @@ fn a_grid_teacher_with_an_occupancy_grid_learns_and_empties_the_space_around_the
     assert_eq!(reopened, occ.mask().unwrap());
 }
 
+/// The occupancy grid's cell densities of a run, as bits.
+fn density_bits(run: &TeacherRun) -> Vec<u32> {
+    let occ = run.model.teacher.occupancy.as_ref().unwrap();
+    let values: Vec<f32> = occ.density.as_tensor().to_vec1().unwrap();
+    values.iter().map(|v| v.to_bits()).collect()
+}
+
 #[test]
 fn a_resumed_grid_teacher_with_an_occupancy_grid_continues_bit_for_bit() {
     // Updated at every step from step 2: the grid's state at the save decides the next steps.
     assert_teacher_resumes_bit_for_bit(with_occupancy(20, 2, 1));
+    // The cells themselves: saved, restored and updated alike.
+    let data = TrainData::load(tiny_scene()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut run = TeacherRun::create(dir.path(), with_occupancy(20, 2, 1), &data).unwrap();
+    for _ in 0..6 {
+        run.train_step(&data).unwrap();
+    }
+    run.save().unwrap();
+    let saved = density_bits(&run);
+    run.train_step(&data).unwrap();
+    run.train_step(&data).unwrap();
+    let mut resumed = TeacherRun::open(dir.path()).unwrap();
+    assert_eq!(density_bits(&resumed), saved);
+    resumed.train_step(&data).unwrap();
+    resumed.train_step(&data).unwrap();
+    assert_eq!(density_bits(&resumed), density_bits(&run));
 }
 
 #[test]
