@@ -26,7 +26,7 @@ use nldf_core::rays::Rays;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::networks::sampler::{RaySamples, sample_stratified};
+use crate::networks::sampler::{RaySamples, sample_hits, sample_stratified};
 
 /// The occupancy grid's settings (`model.occupancy` in the teacher's `config.json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -262,58 +262,47 @@ pub fn sample_occupied<R: Rng + ?Sized>(
     far: f32,
     n_samples: usize,
     mask: &OccupancyMask,
-    mut rng: Option<&mut R>,
+    rng: Option<&mut R>,
 ) -> RaySamples {
     if mask.all() {
         return sample_stratified(rays, bounds, near, far, n_samples, rng);
     }
-    let mut s = RaySamples {
-        n_samples,
-        ..RaySamples::default()
-    };
     let mut pieces: Vec<(f32, f32)> = Vec::new();
-    let mut u = vec![0.0f32; n_samples];
-    for r in 0..rays.len() {
-        let (o, d) = (rays.origin(r), rays.direction(r));
-        let Some((t0, t1)) = bounds.intersect(o, d, near, far) else {
-            continue;
-        };
-        s.hit.push(r);
-        s.spans.push((t0, t1));
-        let norm = d.length();
-        for v in u.iter_mut() {
-            *v = match rng.as_deref_mut() {
-                Some(g) => g.random::<f32>(),
-                None => 0.5,
-            };
-        }
-        occupied_pieces(o, d, (t0, t1), mask, &mut pieces);
-        let total: f32 = pieces.iter().map(|&(a, b)| b - a).sum();
-        let mut along = Vec::with_capacity(n_samples);
-        let (mut piece, mut before) = (0, 0.0f32);
-        for (k, &uk) in u.iter().enumerate() {
-            let sk = (k as f32 + uk) * total / n_samples as f32;
-            while piece + 1 < pieces.len() && before + (pieces[piece].1 - pieces[piece].0) < sk {
-                before += pieces[piece].1 - pieces[piece].0;
-                piece += 1;
+    let mut along: Vec<(f32, f32)> = Vec::with_capacity(n_samples);
+    sample_hits(
+        rays,
+        bounds,
+        near,
+        far,
+        n_samples,
+        rng,
+        &mut |o, d, (t0, t1), u, s| {
+            let norm = d.length();
+            occupied_pieces(o, d, (t0, t1), mask, &mut pieces);
+            let total: f32 = pieces.iter().map(|&(a, b)| b - a).sum();
+            along.clear();
+            let (mut piece, mut before) = (0, 0.0f32);
+            for (k, &uk) in u.iter().enumerate() {
+                let sk = (k as f32 + uk) * total / n_samples as f32;
+                while piece + 1 < pieces.len() && before + (pieces[piece].1 - pieces[piece].0) < sk
+                {
+                    before += pieces[piece].1 - pieces[piece].0;
+                    piece += 1;
+                }
+                let t = match pieces.get(piece) {
+                    Some(&(a, b)) => (a + (sk - before)).min(b),
+                    None => t0 + (k as f32 + uk) * (t1 - t0) / n_samples as f32,
+                };
+                along.push((sk, t));
             }
-            let t = match pieces.get(piece) {
-                Some(&(a, b)) => (a + (sk - before)).min(b),
-                None => t0 + (k as f32 + uk) * (t1 - t0) / n_samples as f32,
-            };
-            along.push((sk, t));
-        }
-        for k in 0..n_samples {
-            let (sk, t) = along[k];
-            let next = along.get(k + 1).map_or(total, |&(sn, _)| sn);
-            s.t_vals.push(t);
-            s.deltas.push((next - sk).max(0.0) * norm);
-            s.points.extend_from_slice(&(o + t * d).to_array());
-        }
-        s.view_dirs
-            .extend_from_slice(&(d / norm.max(1e-12)).to_array());
-    }
-    s
+            for (k, &(sk, t)) in along.iter().enumerate() {
+                let next = along.get(k + 1).map_or(total, |&(sn, _)| sn);
+                s.t_vals.push(t);
+                s.deltas.push((next - sk).max(0.0) * norm);
+                s.points.extend_from_slice(&(o + t * d).to_array());
+            }
+        },
+    )
 }
 
 /// The occupied pieces of the span `(t0, t1)` of the ray `o + t d`, in order, neighbours

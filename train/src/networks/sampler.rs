@@ -2,6 +2,7 @@
 //! [near, far]), stratified, with jitter when training. Produces flat f32 buffers; nothing
 //! here knows the network.
 
+use glam::Vec3;
 use nldf_core::bounds::Bounds;
 use nldf_core::rays::Rays;
 use rand::Rng;
@@ -27,6 +28,44 @@ pub struct RaySamples {
     pub spans: Vec<(f32, f32)>,
 }
 
+/// The samples of every ray that hits `bounds` (within `[near, far]`), in order: for each,
+/// `place(o, d, (t0, t1), u, samples)` pushes its `n_samples` `t` values, spacings and
+/// points, given its jitter `u` (`n_samples` draws from `rng`, in order, or ½ each without
+/// it); the hit, span and view direction are pushed here.
+pub fn sample_hits<R: Rng + ?Sized>(
+    rays: &Rays,
+    bounds: &Bounds,
+    near: f32,
+    far: f32,
+    n_samples: usize,
+    mut rng: Option<&mut R>,
+    place: &mut PlaceSamples,
+) -> RaySamples {
+    let mut s = RaySamples {
+        n_samples,
+        ..RaySamples::default()
+    };
+    let mut u = vec![0.5f32; n_samples];
+    for r in 0..rays.len() {
+        let (o, d) = (rays.origin(r), rays.direction(r));
+        let Some(span) = bounds.intersect(o, d, near, far) else {
+            continue;
+        };
+        s.hit.push(r);
+        s.spans.push(span);
+        if let Some(g) = rng.as_deref_mut() {
+            u.iter_mut().for_each(|v| *v = g.random::<f32>());
+        }
+        place(o, d, span, &u, &mut s);
+        s.view_dirs
+            .extend_from_slice(&(d / d.length().max(1e-12)).to_array());
+    }
+    s
+}
+
+/// Places one hit ray's samples for [`sample_hits`]: origin, direction, span, jitter.
+pub type PlaceSamples<'a> = dyn FnMut(Vec3, Vec3, (f32, f32), &[f32], &mut RaySamples) + 'a;
+
 /// Stratified samples inside the bounds: `n_samples` equal bins between entry and exit, one
 /// sample per bin, at its centre or (with `rng`) uniformly inside it.
 ///
@@ -38,43 +77,34 @@ pub fn sample_stratified<R: Rng + ?Sized>(
     near: f32,
     far: f32,
     n_samples: usize,
-    mut rng: Option<&mut R>,
+    rng: Option<&mut R>,
 ) -> RaySamples {
-    let mut s = RaySamples {
+    sample_hits(
+        rays,
+        bounds,
+        near,
+        far,
         n_samples,
-        ..RaySamples::default()
-    };
-    for r in 0..rays.len() {
-        let (o, d) = (rays.origin(r), rays.direction(r));
-        let Some((t0, t1)) = bounds.intersect(o, d, near, far) else {
-            continue;
-        };
-        s.hit.push(r);
-        s.spans.push((t0, t1));
-        let norm = d.length();
-        let bin = (t1 - t0) / n_samples as f32;
-        let start = s.t_vals.len();
-        for k in 0..n_samples {
-            let u = match rng.as_deref_mut() {
-                Some(g) => g.random::<f32>(),
-                None => 0.5,
-            };
-            s.t_vals.push(t0 + (k as f32 + u) * bin);
-        }
-        for k in 0..n_samples {
-            let t = s.t_vals[start + k];
-            let next = if k + 1 < n_samples {
-                s.t_vals[start + k + 1]
-            } else {
-                t1
-            };
-            s.deltas.push((next - t).max(0.0) * norm);
-            s.points.extend_from_slice(&(o + t * d).to_array());
-        }
-        s.view_dirs
-            .extend_from_slice(&(d / norm.max(1e-12)).to_array());
-    }
-    s
+        rng,
+        &mut |o, d, (t0, t1), u, s| {
+            let norm = d.length();
+            let bin = (t1 - t0) / n_samples as f32;
+            let start = s.t_vals.len();
+            for (k, &uk) in u.iter().enumerate() {
+                s.t_vals.push(t0 + (k as f32 + uk) * bin);
+            }
+            for k in 0..n_samples {
+                let t = s.t_vals[start + k];
+                let next = if k + 1 < n_samples {
+                    s.t_vals[start + k + 1]
+                } else {
+                    t1
+                };
+                s.deltas.push((next - t).max(0.0) * norm);
+                s.points.extend_from_slice(&(o + t * d).to_array());
+            }
+        },
+    )
 }
 
 /// Hierarchical sampling (NeRF): for each ray of `coarse`, `n_importance` more `t` values
