@@ -61,6 +61,20 @@ impl Default for OccupancyConfig {
 /// The largest `resolution` the checks accept.
 pub const MAX_RESOLUTION: usize = 256;
 
+impl OccupancyConfig {
+    /// Refuses settings out of range, naming each as `{key}.field`.
+    pub fn check(&self, key: &str) -> crate::error::Result<()> {
+        use nldf_core::checks::{in_range, in_range_open};
+        let k = |name: &str| format!("{key}.{name}");
+        in_range(&k("resolution"), self.resolution, 2, MAX_RESOLUTION)?;
+        in_range(&k("update_every"), self.update_every, 1, 1 << 20)?;
+        in_range(&k("warmup_steps"), self.warmup_steps, 0, 1 << 30)?;
+        in_range(&k("decay"), self.decay, 0.0, 1.0)?;
+        in_range_open(&k("min_opacity"), f64::from(self.min_opacity), 0.0, 1.0)?;
+        Ok(())
+    }
+}
+
 /// The name of the cells' densities among the teacher's variables. It sorts after every
 /// other variable, so seeding the teacher's weights draws the others as without it; the
 /// optimizer leaves it alone.

@@ -169,21 +169,7 @@ impl RunConfig for TeacherRunConfig {
                     "`model.occupancy` needs the grid teacher: set `model.grid` too".into(),
                 ));
             }
-            in_range(
-                "model.occupancy.resolution",
-                o.resolution,
-                2,
-                crate::networks::occupancy::MAX_RESOLUTION,
-            )?;
-            in_range("model.occupancy.update_every", o.update_every, 1, 1 << 20)?;
-            in_range("model.occupancy.warmup_steps", o.warmup_steps, 0, 1 << 30)?;
-            in_range("model.occupancy.decay", o.decay, 0.0, 1.0)?;
-            in_range_open(
-                "model.occupancy.min_opacity",
-                o.min_opacity as f64,
-                0.0,
-                1.0,
-            )?;
+            o.check("model.occupancy")?;
         }
         let t = &self.train;
         check_shared_train!(t);
