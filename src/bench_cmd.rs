@@ -137,7 +137,7 @@ pub struct UpsamplerBenchArgs {
     /// The upsampler's folder in the run.
     #[arg(long, default_value = "upsampler")]
     pub upsampler: String,
-    /// At most this many frames of each split, spread evenly.
+    /// At most this many frames of each split, spread evenly over each kind of view.
     #[arg(long)]
     pub frames: Option<usize>,
     /// Splits to score (repeat the flag) [default: val, novel, voice].

@@ -48,7 +48,8 @@ pub struct EvalArgs {
     /// Which split to render.
     #[arg(long, value_enum, default_value_t = SplitArg::Val)]
     pub split: SplitArg,
-    /// Render at most this many frames, spread evenly over the split.
+    /// Render at most this many frames, spread evenly over each kind of view the split holds
+    /// (`novel`: turned, closer and farther in turn).
     #[arg(long)]
     pub frames: Option<usize>,
     /// Output folder (default RUN/eval/<split>).

@@ -25,7 +25,7 @@ pub struct FrontierArgs {
     /// Output folder [default: RUN/frontier].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// At most this many frames per split, spread evenly.
+    /// At most this many frames per split, spread evenly over each kind of view.
     #[arg(long)]
     pub frames: Option<usize>,
     /// Frames timed with 1 thread per point.

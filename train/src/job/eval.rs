@@ -22,7 +22,7 @@ pub struct EvalJob {
     /// The dataset the run was trained on.
     pub data: PathBuf,
     pub split: Split,
-    /// At most this many frames, spread evenly over the split.
+    /// At most this many frames, spread evenly over each kind of view the split holds.
     pub frames: Option<usize>,
     /// Output folder; default `RUN/eval/<split>`.
     pub out: Option<PathBuf>,

@@ -147,7 +147,8 @@ const GRID_ROWS: usize = 4;
 /// Gain of the error heat map (an absolute error of 0.25 is full scale).
 const ERROR_GAIN: f32 = 4.0;
 
-/// Evaluates `models` on `split` (at most `max_frames`, spread evenly), writing into
+/// Evaluates `models` on `split` (at most `max_frames`, spread evenly over each kind of
+/// view: [`pick_frames`]), writing into
 /// `out`: `<label>/<img_id>.png` per model, `grid.png` (ground truth, then each model's
 /// render and error map) and `metrics.json`. `on_frame` is called after each frame.
 pub fn eval_models(
@@ -158,23 +159,14 @@ pub fn eval_models(
     out: &Path,
     on_frame: &mut dyn FnMut(),
 ) -> Result<Evaluation> {
-    let all = data.dataset.frames(split);
-    if all.is_empty() {
-        return Err(Error::Config(format!(
-            "the {} split of {} has no frames",
-            split.name(),
-            data.dataset.root.display()
-        )));
-    }
-    let n = max_frames.unwrap_or(all.len()).clamp(1, all.len());
-    let frames: Vec<_> = (0..n).map(|k| &all[k * all.len() / n]).collect();
+    let (frames, views) = frames_to_score(data, split, max_frames)?;
+    let n = frames.len();
     let mut scores: Vec<Vec<FrameScore>> = vec![Vec::with_capacity(n); models.len()];
     let mut render_s = vec![0.0; models.len()];
     let mut macs = vec![0.0; models.len()];
     let mut non_finite = vec![0usize; models.len()];
     let mut rows: Vec<Vec<ImageRgb>> = Vec::new();
     let mut files = Vec::new();
-    let views = nldf_core::synth::eval_views(&data.dataset.root, split.name())?;
     for m in models {
         let dir = out.join(m.label());
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
@@ -227,6 +219,66 @@ pub fn eval_models(
     };
     save_json(&out.join("metrics.json"), &evaluation)?;
     Ok(evaluation)
+}
+
+/// What each kind of view of a split is called, by `img_id` (empty without a scene file).
+type Views = std::collections::HashMap<i64, String>;
+
+/// The frames of `split` that [`eval_models`] scores (at most `max_frames`: [`pick_frames`])
+/// and the kinds of view of the split's frames.
+fn frames_to_score(
+    data: &TrainData,
+    split: Split,
+    max_frames: Option<usize>,
+) -> Result<(Vec<&Frame>, Views)> {
+    let all = data.dataset.frames(split);
+    if all.is_empty() {
+        return Err(Error::Config(format!(
+            "the {} split of {} has no frames",
+            split.name(),
+            data.dataset.root.display()
+        )));
+    }
+    let views = nldf_core::synth::eval_views(&data.dataset.root, split.name())?;
+    let kinds: Vec<Option<&str>> = all
+        .iter()
+        .map(|f| views.get(&f.img_id).map(String::as_str))
+        .collect();
+    let picked = pick_frames(&kinds, max_frames.unwrap_or(all.len()));
+    Ok((picked.iter().map(|&i| &all[i]).collect(), views))
+}
+
+/// Indices of at most `n` (at least 1) of the frames whose kinds of view are `kinds`, in
+/// order, spread evenly over each kind in turn. The kinds take shares of `n` in proportion to
+/// their frames, the earliest kinds the remainder. Spreading over the whole split instead
+/// would alias with the split's own pattern: `novel` cycles turned, closer, farther, so
+/// every third of its 84 frames is the turned view alone. Frames without a kind form one
+/// kind, so a split without views is spread as a whole.
+pub fn pick_frames(kinds: &[Option<&str>], n: usize) -> Vec<usize> {
+    let mut groups: Vec<(Option<&str>, Vec<usize>)> = Vec::new();
+    for (i, kind) in kinds.iter().enumerate() {
+        match groups.iter_mut().find(|(k, _)| k == kind) {
+            Some((_, members)) => members.push(i),
+            None => groups.push((*kind, vec![i])),
+        }
+    }
+    let total = kinds.len();
+    let n = n.clamp(1, total.max(1)).min(total);
+    let mut quotas: Vec<usize> = groups.iter().map(|(_, g)| n * g.len() / total).collect();
+    let mut left = n - quotas.iter().sum::<usize>();
+    for (quota, (_, g)) in quotas.iter_mut().zip(&groups) {
+        if left > 0 && *quota < g.len() {
+            *quota += 1;
+            left -= 1;
+        }
+    }
+    let mut picked: Vec<usize> = groups
+        .iter()
+        .zip(&quotas)
+        .flat_map(|((_, g), &q)| (0..q).map(move |k| g[k * g.len() / q]))
+        .collect();
+    picked.sort_unstable();
+    picked
 }
 
 /// Per model, what an evaluation sums over the frames besides their scores.
@@ -393,5 +445,46 @@ impl Evaluation {
                 broken.join("; ")
             )))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pick_frames;
+
+    /// `novel`'s pattern: turned, closer, farther, over and over.
+    fn novel(len: usize) -> Vec<Option<&'static str>> {
+        let kinds = [Some("turned 1.5x"), Some("closer"), Some("farther")];
+        (0..len).map(|i| kinds[i % 3]).collect()
+    }
+
+    #[test]
+    fn a_third_of_novel_holds_every_kind_of_view() {
+        let kinds = novel(84);
+        let picked = pick_frames(&kinds, 28);
+        assert_eq!(picked.len(), 28);
+        assert!(picked.windows(2).all(|w| w[0] < w[1]));
+        for kind in ["turned 1.5x", "closer", "farther"] {
+            let count = picked.iter().filter(|&&i| kinds[i] == Some(kind)).count();
+            assert!((9..=10).contains(&count), "{kind}: {count} of 28");
+        }
+        // Each kind's frames still span the split.
+        assert!(picked[0] < 3 && picked[27] >= 75, "{picked:?}");
+    }
+
+    #[test]
+    fn a_split_without_views_is_spread_as_a_whole() {
+        let kinds = vec![None; 30];
+        assert_eq!(pick_frames(&kinds, 4), vec![0, 7, 15, 22]);
+        assert_eq!(pick_frames(&kinds, 0), vec![0]);
+        assert_eq!(pick_frames(&kinds, 99), (0..30).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn fewer_frames_than_kinds_take_the_earliest_kinds() {
+        let kinds = novel(9);
+        assert_eq!(pick_frames(&kinds, 1), vec![0]);
+        assert_eq!(pick_frames(&kinds, 2), vec![0, 1]);
+        assert_eq!(pick_frames(&kinds, 9), (0..9).collect::<Vec<_>>());
     }
 }
