@@ -10,8 +10,9 @@ beside the new student, the MLP demo's in `mlp/`). Writes results/grid/student_l
 per scene and split, each model's head and mouth PSNR and the differences the issue
 bounds (the new student minus the MLP teacher's student: +1.5; minus its own teacher:
 -0.5 on val, -1.0 on novel and voice). Where results/grid/student_lr/steps9k/test_<scene>/
-(or steps18k/) holds `nldf eval`'s files of the same teacher and its student trained at 1e-3
-for 9000 steps, label `lr1e3_9k` (or 18000, `lr1e3_18k`), that student is added with the
+(or steps18k/, steps36k/) holds `nldf eval`'s files of the same teacher and its student
+trained at 1e-3 for 9000 steps, label `lr1e3_9k` (or 18000, `lr1e3_18k`; 36000,
+`lr1e3_36k`), that student is added with the
 same differences and its gain over the 4500-step one. Prints a table.
 """
 
@@ -23,7 +24,7 @@ SPLITS = ("val", "novel", "voice")
 METRICS = ("head_psnr", "mouth_psnr")
 LABEL = "student_lr1e3"
 # The longer students: their label and folder.
-LONGER = (("lr1e3_9k", "steps9k"), ("lr1e3_18k", "steps18k"))
+LONGER = (("lr1e3_9k", "steps9k"), ("lr1e3_18k", "steps18k"), ("lr1e3_36k", "steps36k"))
 
 
 def load(path):

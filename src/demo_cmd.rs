@@ -67,7 +67,7 @@ pub struct StageArgs {
     #[arg(long)]
     pub teacher_iters: Option<usize>,
     /// Student training steps (0 skips the student and the export) [default: 4500, under
-    /// the grid teacher 18000; nldf demo --pixels-only: 5300, --quick: 300].
+    /// the grid teacher 36000; nldf demo --pixels-only: 5300, --quick: 300].
     #[arg(long)]
     pub student_iters: Option<usize>,
     /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
