@@ -65,7 +65,7 @@ pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
 pub const DEMO_GRID_STUDENT_ITERS: usize = 36_000;
 
 /// The demo's cap on the grid teacher's student in minutes: [`DEMO_GRID_STUDENT_ITERS`]
-/// took 36-57 on a 2 vCPU machine (the longer with other work beside it).
+/// took 32 alone on a 2 vCPU machine, up to 57 with other training beside it.
 pub const DEMO_GRID_STUDENT_CAP_MINUTES: f64 = 75.0;
 
 /// The pixels-only student's steps (`nldf demo --pixels-only`, the comparison): 4096 rays
