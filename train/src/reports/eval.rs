@@ -248,9 +248,9 @@ fn frames_to_score(
     Ok((picked.iter().map(|&i| &all[i]).collect(), views))
 }
 
-/// Indices of at most `n` (at least 1) of the frames whose kinds of view are `kinds`, in
-/// order, spread evenly over each kind in turn. The kinds take shares of `n` in proportion to
-/// their frames, the earliest kinds the remainder. Spreading over the whole split instead
+/// Indices of at most `n` (at least 1; none of no frames) of the frames whose kinds of view
+/// are `kinds`, in order, spread evenly over each kind in turn. The kinds take shares of `n`
+/// in proportion to their frames, the earliest kinds the remainder. Spreading over the whole split instead
 /// would alias with the split's own pattern: `novel` cycles turned, closer, farther, so
 /// every third of its 84 frames is the turned view alone. Frames without a kind form one
 /// kind, so a split without views is spread as a whole.
@@ -263,7 +263,10 @@ pub fn pick_frames(kinds: &[Option<&str>], n: usize) -> Vec<usize> {
         }
     }
     let total = kinds.len();
-    let n = n.clamp(1, total.max(1)).min(total);
+    if total == 0 {
+        return Vec::new();
+    }
+    let n = n.clamp(1, total);
     let mut quotas: Vec<usize> = groups.iter().map(|(_, g)| n * g.len() / total).collect();
     let mut left = n - quotas.iter().sum::<usize>();
     for (quota, (_, g)) in quotas.iter_mut().zip(&groups) {
@@ -478,6 +481,7 @@ mod tests {
         assert_eq!(pick_frames(&kinds, 4), vec![0, 7, 15, 22]);
         assert_eq!(pick_frames(&kinds, 0), vec![0]);
         assert_eq!(pick_frames(&kinds, 99), (0..30).collect::<Vec<_>>());
+        assert_eq!(pick_frames(&[], 4), Vec::<usize>::new());
     }
 
     #[test]
