@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The demo's recipe with each teacher on the test scenes: `nldf demo` (the MLP teacher)
+# The demo's recipe with each teacher on the test scenes: `nldf demo --teacher mlp`
 # and `nldf demo --teacher grid`, one after the other (never two at once), then the
 # figures kept in results/grid/<machine>_<scene>_<teacher>/ and the summary rewritten.
 #

@@ -13,7 +13,10 @@ bounds (the new student minus the MLP teacher's student: +1.5; minus its own tea
 (or steps18k/, steps36k/) holds `nldf eval`'s files of the same teacher and its student
 trained at 1e-3 for 9000 steps, label `lr1e3_9k` (or 18000, `lr1e3_18k`; 36000,
 `lr1e3_36k`), that student is added with the
-same differences and its gain over the 4500-step one. Prints a table.
+same differences and its gain over the 4500-step one. Under `demos`, each whole `nldf demo`
+of the grid recipe in results/demo/grid_epyc_<scene>/ (teacher and 36000-step student in one
+run): the same differences, its teacher's steps and its teacher against the committed grid
+run of results/grid/summary.json (0: the same teacher). Prints a table.
 """
 
 import json
@@ -96,8 +99,40 @@ def main():
             entry[f"{label}_minus_lr1e3"] = minus(label, "lr1e3")
             entry[f"{label}_minus_teacher"] = minus(label, "teacher")
         scenes.append(entry)
+    demos = []
+    for scene, mlp_dir in (("s0", None), ("h2", os.path.join(ROOT, "student_lr", "test_h2", "mlp"))):
+        d = os.path.join(ROOT, "..", "demo", f"grid_epyc_{scene}")
+        if not os.path.isdir(d):
+            continue
+        models = {"teacher": split_metrics(d, "teacher"), "student": split_metrics(d, "student")}
+        runs = old[scene]["runs"]
+        if mlp_dir is None:
+            models["mlp_student"] = {s: {k: runs["mlp"]["models"]["student"][s][k] for k in METRICS}
+                                     for s in SPLITS}
+        else:
+            models["mlp_student"] = split_metrics(mlp_dir, "student")
+        steps = load(os.path.join(d, "metrics_val.json"))["models"][0]["step"]
+        demos.append({
+            "scene": scene,
+            "teacher_steps": steps,
+            "models": models,
+            "student_minus_teacher": {s: {k: models["student"][s][k] - models["teacher"][s][k]
+                                          for k in METRICS} for s in SPLITS},
+            "student_minus_mlp_student": {
+                s: {k: models["student"][s][k] - models["mlp_student"][s][k] for k in METRICS}
+                for s in SPLITS},
+            "teacher_minus_committed": {
+                s: models["teacher"][s]["head_psnr"]
+                - runs["grid"]["models"]["teacher"][s]["head_psnr"] for s in SPLITS},
+        })
     with open(os.path.join(ROOT, "student_lr", "summary.json"), "w") as f:
-        json.dump({"scenes": scenes}, f, indent=1)
+        json.dump({"scenes": scenes, "demos": demos}, f, indent=1)
+    for e in demos:
+        for s in SPLITS:
+            print(f"demo {e['scene']} {s:5} teacher step {e['teacher_steps']} "
+                  f"vs teacher {e['student_minus_teacher'][s]['head_psnr']:+.2f} "
+                  f"vs mlp {e['student_minus_mlp_student'][s]['head_psnr']:+.2f} "
+                  f"teacher vs committed {e['teacher_minus_committed'][s]:+.3f}")
     for e in scenes:
         for s in SPLITS:
             m = e["models"]

@@ -18,5 +18,5 @@ if [ -z "${NLDF:-}" ]; then
   cargo build --release --bin nldf
   NLDF=target/release/nldf
 fi
-"$NLDF" demo --seed "$seed" --minutes "$teacher_minutes" --student-minutes 0 --out "$out"
+"$NLDF" demo --teacher mlp --seed "$seed" --minutes "$teacher_minutes" --student-minutes 0 --out "$out"
 "$NLDF" ablate --data "$out/data" --run "$out" --depth "$depth" --posed-minutes "$student_minutes"

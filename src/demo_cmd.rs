@@ -58,16 +58,16 @@ pub struct DemoArgs {
 /// `nldf train --data`.
 #[derive(clap::Args, Debug)]
 pub struct StageArgs {
-    /// The teacher: `mlp` (AD-NeRF's, frequency-encoded) or `grid` (a hash grid, sharper
-    /// in the same minutes).
-    #[arg(long, value_enum, default_value_t = crate::presets::TeacherRecipe::Mlp)]
+    /// The teacher: `grid` (a hash grid, sharper in the same minutes; its student takes
+    /// eight times the steps) or `mlp` (AD-NeRF's, frequency-encoded; the quicker recipe).
+    #[arg(long, value_enum, default_value_t = crate::presets::TeacherRecipe::default())]
     pub teacher: crate::presets::TeacherRecipe,
-    /// Teacher training steps [default: 1100, the grid teacher 2400; nldf demo --quick:
+    /// Teacher training steps [default: 2400, the MLP teacher 1100; nldf demo --quick:
     /// 300].
     #[arg(long)]
     pub teacher_iters: Option<usize>,
-    /// Student training steps (0 skips the student and the export) [default: 4500, under
-    /// the grid teacher 36000; nldf demo --pixels-only: 5300, --quick: 300].
+    /// Student training steps (0 skips the student and the export) [default: 36000, under
+    /// the MLP teacher 4500; nldf demo --pixels-only: 5300, --quick: 300].
     #[arg(long)]
     pub student_iters: Option<usize>,
     /// A wall-clock cap on the teacher in minutes: it only stops a machine slower than
@@ -75,7 +75,7 @@ pub struct StageArgs {
     #[arg(long)]
     pub minutes: Option<f64>,
     /// A wall-clock cap on the student in minutes, its teacher targets included
-    /// [default: 8, under the grid teacher 30; nldf demo --pixels-only: 15, --quick: 2].
+    /// [default: 75, under the MLP teacher 8; nldf demo --pixels-only: 15, --quick: 2].
     #[arg(long)]
     pub student_minutes: Option<f64>,
 }
@@ -288,7 +288,8 @@ mod tests {
     use super::*;
     use clap::Parser;
     use nldf_train::job::recipe::{
-        DEMO_GRID_STUDENT_CAP_MINUTES, DEMO_GRID_STUDENT_ITERS, DEMO_STUDENT_ITERS,
+        DEMO_GRID_STUDENT_CAP_MINUTES, DEMO_GRID_STUDENT_ITERS, DEMO_GRID_TEACHER_ITERS,
+        DEMO_STUDENT_ITERS, DEMO_TEACHER_ITERS,
     };
 
     #[derive(Parser)]
@@ -302,18 +303,26 @@ mod tests {
         job(&Cli::try_parse_from(argv).unwrap().demo).unwrap()
     }
 
-    /// `nldf demo --teacher grid` trains the grid teacher's student for its own steps and
-    /// cap; the default demo keeps the MLP teacher's; a flag still wins.
+    /// The default demo trains the grid teacher and its student for that student's own
+    /// steps and cap; `--teacher mlp` the MLP teacher's; a flag still wins.
     #[test]
     fn the_demo_student_takes_its_teachers_steps() {
-        let grid = demo_job(&["--teacher", "grid"]);
+        let grid = demo_job(&[]);
         assert_eq!(grid.student_iters, DEMO_GRID_STUDENT_ITERS);
         assert_eq!(grid.student_cap_minutes, DEMO_GRID_STUDENT_CAP_MINUTES);
+        assert_eq!(grid.teacher_iters, DEMO_GRID_TEACHER_ITERS);
         assert!(grid.teacher.grid.is_some());
-        let mlp = demo_job(&[]);
+        let mlp = demo_job(&["--teacher", "mlp"]);
+        assert!(mlp.teacher.grid.is_none());
+        assert_eq!(mlp.teacher_iters, DEMO_TEACHER_ITERS);
         assert_eq!(mlp.student_iters, DEMO_STUDENT_ITERS);
         assert_eq!(mlp.student_cap_minutes, DEMO_STUDENT_CAP_MINUTES);
-        let set = demo_job(&["--teacher", "grid", "--student-iters", "7"]);
+        let set = demo_job(&["--student-iters", "7"]);
         assert_eq!(set.student_iters, 7);
+        // The command line's default is the library's (`DemoJob::defaults`).
+        assert_eq!(
+            crate::presets::TeacherRecipe::default().kind(),
+            nldf_train::job::recipe::TeacherKind::default()
+        );
     }
 }

@@ -30,10 +30,12 @@ impl TeacherPreset {
 /// The teacher a recipe trains (`nldf demo --teacher`, `nldf train --data --teacher`).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TeacherRecipe {
-    /// AD-NeRF's MLP on frequency-encoded points (6 x 128), 1100 steps.
-    #[default]
+    /// AD-NeRF's MLP on frequency-encoded points (6 x 128), 1100 steps, its student 4500:
+    /// the quicker recipe, about a quarter of the grid recipe's minutes.
     Mlp,
-    /// A multiresolution hash grid under a 2 x 64 network, 2400 steps in the same minutes.
+    /// A multiresolution hash grid under a 2 x 64 network, 2400 steps in the MLP teacher's
+    /// minutes, its student 36000: sharper, the student's steps eight times as long.
+    #[default]
     Grid,
 }
 

@@ -114,7 +114,8 @@ pub struct StudentArgs {
     /// with the plain settings and the flags below. Without it, and without --width,
     /// --no-distill, --no-pool and the pseudo-view flags, the student is the recipe's (that
     /// of `nldf demo` and `nldf train --data`): the real-time 16 x 128 student distilled with
-    /// 600 pseudo views at twice the recorded pose range, 4500 steps.
+    /// 600 pseudo views at twice the recorded pose range, 36000 steps under a grid teacher
+    /// in RUN/teacher, 4500 under an MLP teacher.
     #[arg(long, value_enum)]
     pub depth: Option<StudentPreset>,
     /// Hidden width (overrides the preset's 256).

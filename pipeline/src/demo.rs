@@ -14,8 +14,7 @@ use nldf_core::synth::{self, SynthConfig};
 
 use nldf_train::job::eval::EvalJob;
 use nldf_train::job::recipe::{
-    DEMO_HOLD, DEMO_PSEUDO, DEMO_STUDENT_CAP_MINUTES, DEMO_STUDENT_ITERS, DEMO_TEACHER_CAP_MINUTES,
-    DEMO_TEACHER_ITERS, DEMO_TEACHER_LR, student_recipe,
+    DEMO_HOLD, DEMO_PSEUDO, DEMO_TEACHER_CAP_MINUTES, TeacherKind, student_budget, student_recipe,
 };
 use nldf_train::job::student::{PseudoSettings, StudentJob, StudentSource};
 use nldf_train::job::teacher::{TeacherJob, TeacherSource};
@@ -82,12 +81,15 @@ pub struct DemoReport {
 
 impl DemoJob {
     /// The demo as `nldf demo` runs it by default, into `out`: the synthetic scene of seed
-    /// 0 at 128 x 128 (supersampled 3x), the small teacher (6 x 128) for
-    /// [`DEMO_TEACHER_ITERS`] steps, then the real-time student (16 x 128, K = 8) with
-    /// opacity, distilled from the teacher with pseudo views, for [`DEMO_STUDENT_ITERS`]
-    /// steps, evaluated on `val`, `novel` and `voice`. The command line changes only what
-    /// its flags say; the tests shrink the sizes and steps and keep the recipe.
+    /// 0 at 128 x 128 (supersampled 3x), the recipe's default teacher ([`TeacherKind`]'s
+    /// default, the grid teacher) for its steps, then the real-time student (16 x 128,
+    /// K = 8) with opacity, distilled from the teacher with pseudo views, for the steps
+    /// [`student_budget`] gives under that teacher, evaluated on `val`, `novel` and
+    /// `voice`. The command line changes only what its flags say; the tests shrink the
+    /// sizes and steps and keep the recipe.
     pub fn defaults(out: PathBuf) -> DemoJob {
+        let (teacher, teacher_iters, teacher_lr) = TeacherKind::default().recipe();
+        let budget = student_budget(&teacher);
         DemoJob {
             out,
             data: None,
@@ -96,13 +98,13 @@ impl DemoJob {
                 supersample: 3,
                 ..SynthConfig::default()
             },
-            teacher: TeacherConfig::small(),
-            teacher_iters: DEMO_TEACHER_ITERS,
-            teacher_lr: DEMO_TEACHER_LR,
+            teacher,
+            teacher_iters,
+            teacher_lr,
             teacher_cap_minutes: DEMO_TEACHER_CAP_MINUTES,
             student: StudentConfig::realtime(),
-            student_iters: DEMO_STUDENT_ITERS,
-            student_cap_minutes: DEMO_STUDENT_CAP_MINUTES,
+            student_iters: budget.iters,
+            student_cap_minutes: budget.cap_minutes,
             student_distill: true,
             pseudo: DEMO_PSEUDO,
             splits: vec![Split::Val, Split::Novel, Split::Voice],

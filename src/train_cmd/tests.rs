@@ -49,9 +49,12 @@ fn a_student_without_flags_is_the_recipes() {
         _ => panic!("not the recipe"),
     }
     assert_eq!(
-        recipe.train.lr,
-        nldf_train::job::recipe::DEMO_STUDENT_LR,
-        "without a teacher the recipe's rate is the MLP teacher's student's"
+        (recipe.train.lr, recipe.train.iters),
+        (
+            nldf_train::job::recipe::DEMO_GRID_STUDENT_LR,
+            nldf_train::job::recipe::DEMO_GRID_STUDENT_ITERS
+        ),
+        "without a teacher the recipe's student is the default (grid) teacher's"
     );
     for flags in [
         &["--depth", "88"][..],

@@ -23,13 +23,16 @@ pub const DEMO_GRID_TEACHER_ITERS: usize = 2400;
 /// `GridConfig::lr_scale` times this), chosen on the tuning scene (docs/grid.md).
 pub const DEMO_GRID_TEACHER_LR: f64 = 5e-3;
 
-/// Which teacher a recipe trains.
+/// Which teacher a recipe trains. The grid teacher is the default: in the MLP teacher's
+/// minutes it scores 2.5-4.5 dB higher in head PSNR on held-out frames and turned heads,
+/// and its student, in eight times the MLP recipe's student steps, keeps within 0.5 dB of
+/// it (docs/grid.md). The MLP teacher stays as the comparison and the quicker recipe.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TeacherKind {
     /// AD-NeRF's MLP on frequency-encoded points (6 x 128).
-    #[default]
     Mlp,
     /// A multiresolution hash grid under a 2 x 64 network.
+    #[default]
     Grid,
 }
 
