@@ -8,7 +8,7 @@ use crate::job::student::{PseudoSettings, StudentSource};
 use crate::networks::student::StudentConfig;
 use crate::trainers::config::{StudentRunConfig, TeacherConfig};
 
-/// The demo's teacher steps.
+/// The MLP recipe's teacher steps (`--teacher mlp`).
 pub const DEMO_TEACHER_ITERS: usize = 1100;
 
 /// The MLP teacher's learning rate before it decays.
@@ -53,10 +53,10 @@ impl TeacherKind {
 /// The demo's cap on the teacher in minutes.
 pub const DEMO_TEACHER_CAP_MINUTES: f64 = 7.0;
 
-/// The demo's student steps.
+/// The MLP recipe's student steps.
 pub const DEMO_STUDENT_ITERS: usize = 4500;
 
-/// The demo's cap on the student in minutes.
+/// The MLP recipe's cap on the student in minutes.
 pub const DEMO_STUDENT_CAP_MINUTES: f64 = 8.0;
 
 /// The demo's student steps under the grid teacher: eight times [`DEMO_STUDENT_ITERS`]. On
@@ -72,7 +72,7 @@ pub const DEMO_GRID_STUDENT_ITERS: usize = 36_000;
 pub const DEMO_GRID_STUDENT_CAP_MINUTES: f64 = 75.0;
 
 /// The pixels-only student's steps (`nldf demo --pixels-only`, the comparison): 4096 rays
-/// a step, as many as fit in the distilled recipe's measured teacher and student minutes
+/// a step, as many as fit in the MLP recipe's measured teacher and student minutes
 /// together on one machine, so that it is given the same total time (docs/demo.md, "Against
 /// the pixels-only student", has the measurement).
 pub const DEMO_PIXELS_ITERS: usize = 5300;
@@ -100,7 +100,7 @@ pub const DEMO_RECORDED_RAYS: usize = 4096;
 /// loss.
 pub const DEMO_MOUTH: (f32, f32) = (0.2, 2.0);
 
-/// A distilled demo student's learning rate before it decays: R2L's. Twice that scored
+/// The MLP recipe's distilled student's learning rate before it decays: R2L's. Twice that scored
 /// higher on the tuning scene and lower on a test scene, within the seeds' spread; how the
 /// choice was made, and its figures, are in docs/tuning.md.
 pub const DEMO_STUDENT_LR: f64 = 5e-4;
