@@ -44,6 +44,16 @@ def split_metrics(d, label):
     return out
 
 
+def minus(models, a, b):
+    """`models[a]` minus `models[b]`, per split and metric."""
+    return {s: {k: models[a][s][k] - models[b][s][k] for k in METRICS} for s in SPLITS}
+
+
+def committed_student(run):
+    """The student's head and mouth PSNR per split in one of summary.json's runs."""
+    return {s: {k: run["models"]["student"][s][k] for k in METRICS} for s in SPLITS}
+
+
 def main():
     old = {s["scene"]: s for s in load(os.path.join(ROOT, "summary.json"))["scenes"]}
     scenes = []
@@ -64,10 +74,8 @@ def main():
         else:
             if any(abs(v) > 1e-9 for v in again.values()):
                 raise SystemExit(f"{scene}: the teacher differs from summary.json's")
-            pick = lambda t: {s: {k: runs[t]["models"]["student"][s][k] for k in METRICS}
-                              for s in SPLITS}
-            models["grid_student"] = pick("grid")
-            models["mlp_student"] = pick("mlp")
+            models["grid_student"] = committed_student(runs["grid"])
+            models["mlp_student"] = committed_student(runs["mlp"])
             source = "results/grid/summary.json"
 
         longer = []
@@ -79,25 +87,22 @@ def main():
                 models[label] = split_metrics(dl, label)
                 longer.append(label)
 
-        def minus(a, b):
-            return {s: {k: models[a][s][k] - models[b][s][k] for k in METRICS} for s in SPLITS}
-
         entry = {
             "scene": scene,
             "baselines_from": source,
             "models": models,
-            "lr1e3_minus_mlp_student": minus("lr1e3", "mlp_student"),
-            "lr1e3_minus_grid_student": minus("lr1e3", "grid_student"),
-            "lr1e3_minus_teacher": minus("lr1e3", "teacher"),
+            "lr1e3_minus_mlp_student": minus(models, "lr1e3", "mlp_student"),
+            "lr1e3_minus_grid_student": minus(models, "lr1e3", "grid_student"),
+            "lr1e3_minus_teacher": minus(models, "lr1e3", "teacher"),
             # The grid teacher trained again here against the one of summary.json (head
             # PSNR): the recipe is pinned in steps, so 0 says the scene and teacher are
             # the same.
             "teacher_again_minus_then": again,
         }
         for label in longer:
-            entry[f"{label}_minus_mlp_student"] = minus(label, "mlp_student")
-            entry[f"{label}_minus_lr1e3"] = minus(label, "lr1e3")
-            entry[f"{label}_minus_teacher"] = minus(label, "teacher")
+            entry[f"{label}_minus_mlp_student"] = minus(models, label, "mlp_student")
+            entry[f"{label}_minus_lr1e3"] = minus(models, label, "lr1e3")
+            entry[f"{label}_minus_teacher"] = minus(models, label, "teacher")
         scenes.append(entry)
     demos = []
     for scene, mlp_dir in (("s0", None), ("h2", os.path.join(ROOT, "student_lr", "test_h2", "mlp"))):
@@ -107,8 +112,7 @@ def main():
         models = {"teacher": split_metrics(d, "teacher"), "student": split_metrics(d, "student")}
         runs = old[scene]["runs"]
         if mlp_dir is None:
-            models["mlp_student"] = {s: {k: runs["mlp"]["models"]["student"][s][k] for k in METRICS}
-                                     for s in SPLITS}
+            models["mlp_student"] = committed_student(runs["mlp"])
         else:
             models["mlp_student"] = split_metrics(mlp_dir, "student")
         steps = load(os.path.join(d, "metrics_val.json"))["models"][0]["step"]
@@ -116,11 +120,8 @@ def main():
             "scene": scene,
             "teacher_steps": steps,
             "models": models,
-            "student_minus_teacher": {s: {k: models["student"][s][k] - models["teacher"][s][k]
-                                          for k in METRICS} for s in SPLITS},
-            "student_minus_mlp_student": {
-                s: {k: models["student"][s][k] - models["mlp_student"][s][k] for k in METRICS}
-                for s in SPLITS},
+            "student_minus_teacher": minus(models, "student", "teacher"),
+            "student_minus_mlp_student": minus(models, "student", "mlp_student"),
             "teacher_minus_committed": {
                 s: models["teacher"][s]["head_psnr"]
                 - runs["grid"]["models"]["teacher"][s]["head_psnr"] for s in SPLITS},

@@ -16,7 +16,7 @@ use nldf_pipeline::demo::{DemoJob, DemoReport};
 use nldf_pipeline::demo_video::plan_video;
 use nldf_train::job::JobEvent;
 use nldf_train::job::recipe::{
-    DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_TEACHER_CAP_MINUTES, student_budget,
+    DEMO_PIXELS_ITERS, DEMO_STUDENT_CAP_MINUTES, DEMO_TEACHER_CAP_MINUTES,
 };
 
 use crate::progress::{EventPrinter, progress_bar, stop_flag};
@@ -94,14 +94,20 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
         .stages
         .minutes
         .unwrap_or(pick(DEMO_TEACHER_CAP_MINUTES, 2.0));
-    let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
-    let budget = student_budget(&teacher);
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from(if quick {
+            "runs/demo_quick"
+        } else {
+            "runs/demo"
+        })
+    });
+    let defaults = DemoJob::with_teacher(out, args.stages.teacher.kind());
     // The pixels-only student stands in for the teacher too: the caps of both.
     let student_minutes = args.stages.student_minutes.unwrap_or(pick(
         if args.pixels_only {
             DEMO_TEACHER_CAP_MINUTES + DEMO_STUDENT_CAP_MINUTES
         } else {
-            budget.cap_minutes
+            defaults.student_cap_minutes
         },
         2.0,
     ));
@@ -113,14 +119,6 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
             anyhow::bail!("{flag} must be positive, got {v}");
         }
     }
-    let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from(if quick {
-            "runs/demo_quick"
-        } else {
-            "runs/demo"
-        })
-    });
-    let defaults = DemoJob::defaults(out);
     let mut scene = if quick {
         SynthConfig {
             seed: args.seed,
@@ -143,12 +141,11 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
     }
     let job = DemoJob {
         scene,
-        teacher,
-        teacher_lr,
-        teacher_iters: args
-            .stages
-            .teacher_iters
-            .unwrap_or(if quick { 300 } else { teacher_iters }),
+        teacher_iters: args.stages.teacher_iters.unwrap_or(if quick {
+            300
+        } else {
+            defaults.teacher_iters
+        }),
         teacher_cap_minutes: minutes,
         student: args.student_depth.config(),
         student_iters: args
@@ -157,7 +154,7 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
             .unwrap_or(match (quick, args.pixels_only) {
                 (true, _) => 300,
                 (false, true) => DEMO_PIXELS_ITERS,
-                (false, false) => budget.iters,
+                (false, false) => defaults.student_iters,
             }),
         student_cap_minutes: student_minutes,
         student_distill: !args.pixels_only,

@@ -234,18 +234,15 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
              for the whole recipe"
         );
     };
-    let defaults = nldf_pipeline::demo::DemoJob::defaults(run);
-    let (teacher, teacher_iters, teacher_lr) = args.stages.teacher.kind().recipe();
-    let budget = nldf_train::job::recipe::student_budget(&teacher);
+    let recipe = nldf_pipeline::demo::DemoJob::with_teacher(run, args.stages.teacher.kind());
+    let stages = &args.stages;
     let job = nldf_pipeline::demo::DemoJob {
         data: Some(data),
-        teacher,
-        teacher_lr,
-        teacher_iters: args.stages.teacher_iters.unwrap_or(teacher_iters),
-        student_iters: args.stages.student_iters.unwrap_or(budget.iters),
-        teacher_cap_minutes: args.stages.minutes.unwrap_or(defaults.teacher_cap_minutes),
-        student_cap_minutes: (args.stages.student_minutes).unwrap_or(budget.cap_minutes),
-        ..defaults
+        teacher_iters: stages.teacher_iters.unwrap_or(recipe.teacher_iters),
+        student_iters: stages.student_iters.unwrap_or(recipe.student_iters),
+        teacher_cap_minutes: stages.minutes.unwrap_or(recipe.teacher_cap_minutes),
+        student_cap_minutes: stages.student_minutes.unwrap_or(recipe.student_cap_minutes),
+        ..recipe
     };
     crate::demo_cmd::run_job(job, "nldf train")
 }

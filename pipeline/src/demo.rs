@@ -88,7 +88,13 @@ impl DemoJob {
     /// `voice`. The command line changes only what its flags say; the tests shrink the
     /// sizes and steps and keep the recipe.
     pub fn defaults(out: PathBuf) -> DemoJob {
-        let (teacher, teacher_iters, teacher_lr) = TeacherKind::default().recipe();
+        DemoJob::with_teacher(out, TeacherKind::default())
+    }
+
+    /// [`DemoJob::defaults`] with the recipe of `kind`: its teacher's network, steps and
+    /// learning rate, and the steps and cap [`student_budget`] gives its student.
+    pub fn with_teacher(out: PathBuf, kind: TeacherKind) -> DemoJob {
+        let (teacher, teacher_iters, teacher_lr) = kind.recipe();
         let budget = student_budget(&teacher);
         DemoJob {
             out,
