@@ -5,7 +5,8 @@
 # shrunk to 128 (`nldf synth --size 128 --render-size 512`), as the prepared frames are.
 # The videos come from scripts/prepare_check.sh run with the same SEED into the same WORK.
 # Each run's log, the prepared dataset's scores and every split's metrics go to
-# OUT/<head>/{truth,prepared}/ (default results/prepare/e2e_test).
+# OUT/<head>/{truth,prepared}/ (default results/prepare/e2e_test); the prepared run's `val`
+# also scored against the scene's frames (metrics_val_against_truth.json).
 # HEADS picks the heads (default: standard second), SIDES the runs (default: truth prepared;
 # the truth's runs do not read anything `nldf prepare` writes, so after a change to it alone
 # SIDES=prepared suffices).
@@ -48,6 +49,14 @@ for head in ${HEADS:-standard second}; do
     for split in val novel voice; do
       cp "$run/eval/$split/metrics.json" "$out/$head/$side/metrics_$split.json"
     done
+    # The prepared `val` frames are the video's (compressed); scored again against the
+    # scene's own frames and head masks, as the truth's run is (and as `novel` and `voice`
+    # are, carried with the scene's images).
+    if [ "$side" = prepared ]; then
+      "$nldf" eval --run "$run" --data "$data" --split val --against "$truth" \
+        --out "$run/eval/val_against_truth" > /dev/null
+      cp "$run/eval/val_against_truth/metrics.json" "$out/$head/$side/metrics_val_against_truth.json"
+    fi
   done
 done
 # The logs and JSON name the work folder; results/ keeps no machine paths.

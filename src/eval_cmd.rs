@@ -55,6 +55,13 @@ pub struct EvalArgs {
     /// Output folder (default RUN/eval/<split>).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Score against this dataset's frames instead of DATA's own: each frame's image and
+    /// head, mouth and background regions from AGAINST's frame of the same `img_id` in the
+    /// split, the models still rendering DATA's cameras. Two runs of one scene on different
+    /// datasets (a dataset `nldf prepare` made from a video, and the scene the video shows)
+    /// are then scored on the same pixels.
+    #[arg(long)]
+    pub against: Option<PathBuf>,
 }
 
 /// Runs `nldf eval`.
@@ -65,6 +72,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         split: args.split.into(),
         frames: args.frames,
         out: args.out,
+        against: args.against,
     };
     let mut printer = EventPrinter::default();
     let mut show = |e: &JobEvent| printer.show(e);

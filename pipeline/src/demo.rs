@@ -401,6 +401,7 @@ impl DemoJob {
                 split,
                 frames: None,
                 out: None,
+                against: None,
             }
             .plan(on_event)?;
             let started = Instant::now();

@@ -11,6 +11,7 @@ use nldf_core::run_files::{
 };
 use nldf_core::synth::SynthConfig;
 use nldf_pipeline::demo::DemoJob;
+use nldf_tests::copy_dir;
 use nldf_train::job::JobEvent;
 use nldf_train::job::ablation::AblationJob;
 use nldf_train::job::eval::EvalJob;
@@ -215,6 +216,7 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
         split: Split::Novel,
         frames: Some(3),
         out: None,
+        against: None,
     };
     let plan = eval.plan(&mut |_| {}).unwrap();
     assert_eq!(plan.out, out.join("eval").join("novel"));
@@ -257,7 +259,7 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
     assert!(deleted >= 3, "{deleted} optimizer and pool files deleted");
     let bare = EvalJob {
         out: Some(out.join("eval_bare")),
-        ..eval
+        ..eval.clone()
     }
     .plan(&mut |_| {})
     .unwrap()
@@ -267,6 +269,7 @@ fn a_tiny_demo_and_a_tiny_ablation_run_through_the_library_jobs() {
     for (a, b) in bare.models.iter().zip(&evaluation.models) {
         assert_eq!((&a.model, a.psnr), (&b.model, b.psnr));
     }
+    scores_against_another_dataset(&out, &eval, &evaluation);
 
     // The posed ablation: three students at equal total wall time, scored on val, novel
     // and voice, with the pose-sweep strip.
@@ -366,4 +369,63 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
     };
     assert!(bad.run(&stop, &mut |_| {}).is_err());
     assert!(!dir.path().join("bad").exists());
+}
+
+/// `nldf eval --against`: the same renders scored against another dataset's frames of the
+/// same `img_id`. Against an exact copy of the run's data the scores are the data's own;
+/// against a copy whose images are darker they move; against one that lacks a frame the
+/// evaluation stops, naming that dataset.
+fn scores_against_another_dataset(
+    out: &std::path::Path,
+    eval: &EvalJob,
+    own: &nldf_train::reports::eval::Evaluation,
+) {
+    let run = |against: &std::path::Path, name: &str| {
+        EvalJob {
+            out: Some(out.join(name)),
+            against: Some(against.to_path_buf()),
+            ..eval.clone()
+        }
+        .plan(&mut |_| {})
+        .and_then(|plan| plan.run(&mut |_| {}))
+    };
+    let twin = out.join("data_twin");
+    copy_dir(&out.join("data"), &twin);
+    let same = run(&twin, "eval_twin").unwrap();
+    for (a, b) in same.models.iter().zip(&own.models) {
+        assert_eq!(
+            (a.psnr, a.head_psnr, a.mouth_psnr),
+            (b.psnr, b.head_psnr, b.mouth_psnr)
+        );
+    }
+    let dark = out.join("data_dark");
+    copy_dir(&out.join("data"), &dark);
+    for e in std::fs::read_dir(dark.join("head_imgs")).unwrap().flatten() {
+        let mut img = nldf_core::image::ImageRgb::load(&e.path()).unwrap();
+        img.data.iter_mut().for_each(|v| *v *= 0.5);
+        img.save_png(&e.path()).unwrap();
+    }
+    let darker = run(&dark, "eval_dark").unwrap();
+    for (a, b) in darker.models.iter().zip(&own.models) {
+        let (a, b) = (a.head_psnr.unwrap(), b.head_psnr.unwrap());
+        assert!(
+            (a - b).abs() > 1.0,
+            "{}: {a} against the darker frames, {b} against its own",
+            eval.run.display()
+        );
+    }
+    let short = out.join("data_short");
+    copy_dir(&out.join("data"), &short);
+    let path = short.join("transforms_novel.json");
+    let mut file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let frames = file["frames"].as_array_mut().unwrap();
+    let first = frames.remove(0)["img_id"].as_i64().unwrap();
+    std::fs::write(&path, file.to_string()).unwrap();
+    let err = run(&short, "eval_short").err().unwrap().to_string();
+    assert!(
+        err.contains(&format!("has no frame {first} in its novel split"))
+            && err.contains("data_short"),
+        "{err}"
+    );
 }

@@ -833,6 +833,7 @@ fn a_tiny_upsampler_trains_scores_and_exports() {
         split: nldf_core::dataset::Split::Train,
         frames: Some(4),
         out: Some(out.join("eval_up")),
+        against: None,
     }
     .plan(&mut |_| {})
     .unwrap();

@@ -32,6 +32,7 @@ pub(crate) fn hires_points(
         split: Split::Val,
         frames: job.frames,
         out: None,
+        against: None,
     }
     .plan(&mut *on_event)?;
     let size = plan.data.dataset.intrinsics.width;

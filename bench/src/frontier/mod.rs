@@ -287,6 +287,7 @@ impl FrontierJob {
             split,
             frames: self.frames,
             out: None,
+            against: None,
         }
     }
 

@@ -372,6 +372,7 @@ impl UpsamplerBench {
             split,
             frames: self.frames,
             out: None,
+            against: None,
         }
     }
 }

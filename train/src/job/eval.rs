@@ -3,12 +3,12 @@
 
 use std::path::PathBuf;
 
-use nldf_core::dataset::{AudioChoice, Split};
+use nldf_core::dataset::{AudioChoice, Dataset, Split};
 use nldf_core::run_files::{RENDER_SPEC_FILE, has_checkpoint, teacher_dir};
 
 use crate::error::{Error, Result};
 use crate::job::{JobEvent, OnEvent, audio_note, mouth_note};
-use crate::reports::eval::{Evaluation, FrameModel, eval_models};
+use crate::reports::eval::{Evaluation, FrameModel, eval_models_against};
 use crate::trainers::data::TrainData;
 use crate::trainers::student_trainer::StudentModel;
 use crate::trainers::teacher_trainer::TeacherModel;
@@ -26,6 +26,9 @@ pub struct EvalJob {
     pub frames: Option<usize>,
     /// Output folder; default `RUN/eval/<split>`.
     pub out: Option<PathBuf>,
+    /// Score against this dataset's frames of the same `img_id` instead of `data`'s own
+    /// (see [`eval_models_against`]).
+    pub against: Option<PathBuf>,
 }
 
 /// A checked evaluation: every model and the data loaded.
@@ -45,6 +48,8 @@ pub struct EvalPlan {
     pub frames: Option<usize>,
     /// Where the renders, the grid and `metrics.json` go.
     pub out: PathBuf,
+    /// The dataset scored against, when not `data`'s own frames.
+    pub against: Option<Dataset>,
 }
 
 impl EvalJob {
@@ -97,6 +102,16 @@ impl EvalJob {
         let data = TrainData::open_held_out(&self.data, false, &audio, self.split)?;
         on_event(&audio_note(&data));
         on_event(&mouth_note(&data));
+        let against = match &self.against {
+            Some(root) => {
+                on_event(&JobEvent::Note(format!(
+                    "scoring against the frames of {}",
+                    root.display()
+                )));
+                Some(Dataset::load_held_out(root, &audio, self.split)?)
+            }
+            None => None,
+        };
         Ok(EvalPlan {
             teacher,
             students,
@@ -105,6 +120,7 @@ impl EvalJob {
             split: self.split,
             frames: self.frames,
             out,
+            against,
         })
     }
 }
@@ -135,9 +151,10 @@ impl EvalPlan {
     pub fn run(&self, on_event: OnEvent) -> Result<Evaluation> {
         let total = self.n_frames();
         let mut done = 0;
-        let evaluation = eval_models(
+        let evaluation = eval_models_against(
             &self.models(),
             &self.data,
+            self.against.as_ref(),
             self.split,
             self.frames,
             &self.out,

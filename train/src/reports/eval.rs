@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nldf_core::dataset::Split;
+use nldf_core::dataset::{Dataset, Split};
 use nldf_core::image::{ImageRgb, error_map, grid};
 use serde::Serialize;
 
@@ -159,6 +159,24 @@ pub fn eval_models(
     out: &Path,
     on_frame: &mut dyn FnMut(),
 ) -> Result<Evaluation> {
+    eval_models_against(models, data, None, split, max_frames, out, on_frame)
+}
+
+/// [`eval_models`], each frame scored against `against`'s frame of the same `img_id` in
+/// the same split (its image and its regions: head, mouth, background) instead of the
+/// rendered dataset's own, when given. The models still render `data`'s cameras and
+/// composite over `data`'s background. Two runs trained on different datasets of one scene
+/// (a prepared video and the scene it was made from) are then scored on the same pixels.
+/// Errors when `against` lacks one of the frames.
+pub fn eval_models_against(
+    models: &[&dyn FrameModel],
+    data: &TrainData,
+    against: Option<&Dataset>,
+    split: Split,
+    max_frames: Option<usize>,
+    out: &Path,
+    on_frame: &mut dyn FnMut(),
+) -> Result<Evaluation> {
     let (frames, views) = frames_to_score(data, split, max_frames)?;
     let n = frames.len();
     let mut scores: Vec<Vec<FrameScore>> = vec![Vec::with_capacity(n); models.len()];
@@ -172,8 +190,7 @@ pub fn eval_models(
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     }
     for (k, frame) in frames.iter().enumerate() {
-        let truth = data.dataset.load_image(frame)?;
-        let regions = data.dataset.load_regions(frame)?;
+        let (truth, regions) = ground_truth(&data.dataset, against, split, frame)?;
         let in_grid = k * GRID_ROWS / n != (k + 1) * GRID_ROWS / n || n <= GRID_ROWS;
         let mut row = vec![truth.clone()];
         let hits = hit_rays(data, frame) as f64;
@@ -219,6 +236,34 @@ pub fn eval_models(
     };
     save_json(&out.join("metrics.json"), &evaluation)?;
     Ok(evaluation)
+}
+
+/// The image and regions `frame` is scored against: its own, or those of `against`'s
+/// frame of the same `img_id` in `split`.
+fn ground_truth(
+    own: &Dataset,
+    against: Option<&Dataset>,
+    split: Split,
+    frame: &Frame,
+) -> Result<(ImageRgb, Option<Vec<Region>>)> {
+    let (ds, frame) = match against {
+        None => (own, frame),
+        Some(ds) => {
+            let twin = ds.frames(split).iter().find(|f| f.img_id == frame.img_id);
+            let twin = twin.ok_or_else(|| {
+                Error::invalid(
+                    &ds.root,
+                    format!(
+                        "has no frame {} in its {} split to score against",
+                        frame.img_id,
+                        split.name()
+                    ),
+                )
+            })?;
+            (ds, twin)
+        }
+    };
+    Ok((ds.load_image(frame)?, ds.load_regions(frame)?))
 }
 
 /// What each kind of view of a split is called, by `img_id` (empty without a scene file).
