@@ -242,8 +242,12 @@ pub fn decode_frames(
 fn decode_command(ffmpeg: &Path, path: &Path, window: &Window) -> Command {
     let [x, y, side] = window.crop;
     let resample = window.fps.map(|f| format!("fps={f},")).unwrap_or_default();
+    // swscale's default YUV-to-RGB path rounds coarsely and darkens every channel by 1-1.5
+    // levels of 255; with `accurate_rnd` and full chroma interpolation the mean stays within
+    // a tenth of a level (the suite's `prepare_video` test).
     let filter = format!(
-        "showinfo,{resample}crop={side}:{side}:{x}:{y},scale={s}:{s}:flags=area",
+        "showinfo,{resample}crop={side}:{side}:{x}:{y},\
+         scale={s}:{s}:flags=area+accurate_rnd+full_chroma_int",
         s = window.size
     );
     let mut cmd = Command::new(ffmpeg);

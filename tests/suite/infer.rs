@@ -523,7 +523,7 @@ fn infer_bad_streams_get_one_line_errors() {
 
 /// The ffmpeg binary of the `.venv`'s imageio-ffmpeg wheel (scripts/python_env.sh); `None`
 /// (a skip) only outside CI.
-fn venv_ffmpeg() -> Option<PathBuf> {
+pub(crate) fn venv_ffmpeg() -> Option<PathBuf> {
     let py = python()?;
     let out = std::process::Command::new(&py)
         .args([

@@ -20,6 +20,7 @@ mod metrics;
 mod occupancy;
 mod posed;
 mod prepare_check;
+mod prepare_video;
 mod rendering;
 mod results_cited;
 mod shipped;
