@@ -151,7 +151,7 @@ fn files_with(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
 }
 
 /// Rewrites the image at `path` resized to `size x size` as `kind` says (its format kept:
-/// JPEG at quality 95 as the job writes, PNG otherwise).
+/// JPEG at the job's quality, PNG otherwise).
 fn resize_file(path: &Path, size: u32, kind: Kind) -> Result<()> {
     let img = image::open(path).map_err(|e| Error::invalid(path, format!("cannot read: {e}")))?;
     let written = match kind {
