@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use crate::util::{
-    Run, candle_frame, configs, foreign_model, ort_available, python, random_audio, write_run,
+    Run, candle_frame, configs, foreign_model, ort_available, random_audio, venv_ffmpeg, write_run,
     write_test_wav,
 };
 use glam::Mat4;
@@ -519,24 +519,6 @@ fn infer_bad_streams_get_one_line_errors() {
     std::fs::write(full.join("x"), b"x").unwrap();
     let err = stream_job(&full).plan().unwrap_err().to_string();
     assert!(err.contains("not empty"), "{err}");
-}
-
-/// The ffmpeg binary of the `.venv`'s imageio-ffmpeg wheel (scripts/python_env.sh); `None`
-/// (a skip) only outside CI.
-pub(crate) fn venv_ffmpeg() -> Option<PathBuf> {
-    let py = python()?;
-    let out = std::process::Command::new(&py)
-        .args([
-            "-c",
-            "import imageio_ffmpeg; print(imageio_ffmpeg.get_ffmpeg_exe())",
-        ])
-        .output()
-        .unwrap();
-    if out.status.success() {
-        return Some(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()));
-    }
-    let msg = "the .venv lacks imageio-ffmpeg: run scripts/python_env.sh";
-    nldf_tests::tool_missing(msg)
 }
 
 /// With ffmpeg, `nldf render` also writes `video.mp4`: one video frame per PNG at the

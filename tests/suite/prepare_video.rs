@@ -4,7 +4,7 @@
 use nldf_core::image::ImageRgb;
 use nldf_prepare::video::{Window, decode_frames, probe};
 
-use crate::infer::venv_ffmpeg;
+use crate::util::venv_ffmpeg;
 
 /// Frame `k` of the clip: red across, green down, blue against both, moving with `k`.
 fn ramp(size: u32, k: u32) -> ImageRgb {

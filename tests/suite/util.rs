@@ -360,6 +360,24 @@ pub(crate) fn python() -> Option<PathBuf> {
     nldf_tests::tool_missing(msg)
 }
 
+/// The ffmpeg binary of the `.venv`'s imageio-ffmpeg wheel (scripts/python_env.sh); `None`
+/// (a skip) only outside CI.
+pub(crate) fn venv_ffmpeg() -> Option<PathBuf> {
+    let py = python()?;
+    let out = Command::new(&py)
+        .args([
+            "-c",
+            "import imageio_ffmpeg; print(imageio_ffmpeg.get_ffmpeg_exe())",
+        ])
+        .output()
+        .unwrap();
+    if out.status.success() {
+        return Some(PathBuf::from(String::from_utf8_lossy(&out.stdout).trim()));
+    }
+    let msg = "the .venv lacks imageio-ffmpeg: run scripts/python_env.sh";
+    nldf_tests::tool_missing(msg)
+}
+
 pub(crate) fn run_python(python: &Path, args: &[&str]) -> String {
     let out = Command::new(python).args(args).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();
