@@ -51,7 +51,15 @@ class Tracker:
     found in, starting from there, so that it does not drift, and kept when that moves it
     by less than `anchor_px` and it stays in the region. Corners stronger than `quality`
     times the region's strongest (Shi-Tomasi) top the live tracks up to `most` when fewer
-    than `least` are alive, at most every `detect_every` frames.
+    than `least` are alive, at most every `detect_every` frames; each new corner is also
+    followed back in time, with the same checks, through up to `back_frames` earlier
+    frames, so that a frame sees the points found after it too (without this, a clip's
+    first frames saw a quarter of the tracks its later frames did, and every track was
+    shorter).
+
+    Frames of at least 256 pixels take weaker corners (`quality` 0.01, not 0.045) and follow
+    them back 90 frames; smaller ones neither: on the tuning videos (seeds 0-2, both heads)
+    that posed the 512 videos better and the 128 videos worse (docs/prepare.md).
     """
 
     def __init__(self, size, reach):
@@ -67,7 +75,8 @@ class Tracker:
                        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
         self.fb_px = max(0.25, 0.5 * self.scale)
         self.margin = max(2, int(round(10 * self.scale)))
-        self.quality = 0.045
+        fine = size >= 256
+        self.quality = 0.01 if fine else 0.045
         self.block = max(3, int(round(7 * self.scale)) | 1)
         self.anchor_px = max(0.25, self.scale)
         self.prev = None
@@ -79,6 +88,9 @@ class Tracker:
         self.next_id = 0
         self.detect_every = 3
         self.last_detect = -self.detect_every
+        self.back_frames = 90 if fine else 0
+        # (frame, gray, region) of the last `back_frames` frames, oldest first.
+        self.history = []
         self.rows = []
 
     def region(self, pts, person):
@@ -121,6 +133,8 @@ class Tracker:
             self.detect(i, gray, mask)
             self.last_detect = i
         self.prev = gray
+        if self.back_frames:
+            self.history = (self.history + [(i, gray, mask)])[-self.back_frames:]
         for (x, y), t in zip(self.points, self.ids):
             self.rows.append((i, t, x, y))
 
@@ -129,13 +143,7 @@ class Tracker:
         first frame's patch from there (so it does not drift): which tracks survive, and
         where they are."""
         import numpy as np
-        cv2 = self.cv2
-        p0 = self.points.reshape(-1, 1, 2)
-        p1, ok1, _ = cv2.calcOpticalFlowPyrLK(self.prev, gray, p0, None, **self.lk)
-        back, ok2, _ = cv2.calcOpticalFlowPyrLK(gray, self.prev, p1, None, **self.lk)
-        fb = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
-        good = (ok1.ravel() == 1) & (ok2.ravel() == 1) & (fb < self.fb_px)
-        p1 = p1.reshape(-1, 2).copy()
+        good, p1 = self.flow(self.prev, gray, self.points)
         for b in np.unique(self.births):
             sel = np.flatnonzero((self.births == b) & good)
             if len(sel):
@@ -145,10 +153,27 @@ class Tracker:
         if mask is None:
             good[:] = False
         else:
-            xi = np.clip(np.round(p1[:, 0]).astype(int), 0, gray.shape[1] - 1)
-            yi = np.clip(np.round(p1[:, 1]).astype(int), 0, gray.shape[0] - 1)
-            good &= np.isfinite(p1).all(axis=1) & (mask[yi, xi] > 0)
+            good &= self.inside(p1, mask)
         return good, p1
+
+    def flow(self, a, b, pts):
+        """Pyramidal Lucas-Kanade of `pts` from image `a` into `b`, kept where flowing back
+        lands within `fb_px` of the start: which points survive, and where they are in `b`."""
+        import numpy as np
+        cv2 = self.cv2
+        p0 = pts.reshape(-1, 1, 2)
+        p1, ok1, _ = cv2.calcOpticalFlowPyrLK(a, b, p0, None, **self.lk)
+        back, ok2, _ = cv2.calcOpticalFlowPyrLK(b, a, p1, None, **self.lk)
+        fb = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
+        good = (ok1.ravel() == 1) & (ok2.ravel() == 1) & (fb < self.fb_px)
+        return good, p1.reshape(-1, 2).copy()
+
+    def inside(self, pts, mask):
+        """Which of `pts` are finite and fall in the tracking region `mask`."""
+        import numpy as np
+        xi = np.clip(np.round(pts[:, 0]).astype(int), 0, mask.shape[1] - 1)
+        yi = np.clip(np.round(pts[:, 1]).astype(int), 0, mask.shape[0] - 1)
+        return np.isfinite(pts).all(axis=1) & (mask[yi, xi] > 0)
 
     def align(self, template, anchors, gray, guess):
         """Lucas-Kanade of the patches at `anchors` in `template` onto `gray`, from `guess`,
@@ -199,10 +224,32 @@ class Tracker:
         self.births = np.concatenate([self.births, np.full(len(found), i)])
         self.anchors = np.concatenate([self.anchors, found]).astype(np.float32)
         self.templates[i] = gray
+        self.extend_back(gray, found, ids)
+
+    def extend_back(self, gray, found, ids):
+        """Follows corners just found back through the frames kept in `history`, so that
+        the frames before a detection see the points it found."""
+        import numpy as np
+        later, pts, anchors, alive = gray, found.copy(), found.copy(), ids.copy()
+        for j, g, m in reversed(self.history):
+            if m is None or not len(alive):
+                break
+            good, p1 = self.flow(later, g, pts)
+            if good.any():
+                sel = np.flatnonzero(good)
+                got, ok = self.align(gray, anchors[sel], g, p1[sel])
+                good[sel] &= ok & (np.linalg.norm(got - p1[sel], axis=1) < self.anchor_px)
+                p1[sel] = got
+            good &= self.inside(p1, m)
+            pts, anchors, alive = p1[good], anchors[good], alive[good]
+            for (x, y), t in zip(pts, alive):
+                self.rows.append((j, t, x, y))
+            later = g
 
     def save(self, path):
         import numpy as np
-        np.asarray(self.rows, dtype="<f4").reshape(-1, 4).tofile(path)
+        rows = np.asarray(self.rows, dtype="<f4").reshape(-1, 4)
+        rows[np.lexsort((rows[:, 1], rows[:, 0]))].tofile(path)
 
 
 def run_frames(args):
