@@ -412,7 +412,7 @@ fn prepare_drops_the_frames_where_the_face_leaves_the_picture() {
 /// At 256 pixels and up the face helper follows each corner it finds back through the
 /// frames before it too, so a clip's first frames see as many feature tracks as the rest
 /// (going forward only, they saw the first detection's few: about 0.7 of the median frame's
-/// count on this clip, a quarter on the standard head's 512 test video).
+/// count on this clip, a quarter of it on the standard head's 512 test video).
 #[test]
 fn the_first_frames_see_the_tracks_found_after_them() {
     let Some(ff) = tools() else { return };
