@@ -12,9 +12,11 @@ Commands:
         detections.u8  N bytes: faces the detector found on every 5th frame, 255 elsewhere
         mask/<i>.png   the person's probability, 0-255, the frame's size
         tracks.f32     M x 4 little-endian float32 rows (frame, track id, x, y), pixels,
-                       ordered by frame: corner features on the rigid part of the head
-                       (forehead, hair, nose, cheeks; not the eyes, the lips or the chin)
-                       followed by pyramidal Lucas-Kanade with a forward-backward check
+                       ordered by frame, then track: corner features on the rigid part of
+                       the head (forehead, hair, nose, cheeks; not the eyes, the lips or
+                       the chin) followed by pyramidal Lucas-Kanade with a forward-backward
+                       check, forward and (frames of 256 pixels and up) back in time from
+                       the frame each was found in
       prints "done <i>" after each frame.
   canonical --assets FILE --loader FILE --out FILE
       decodes the canonical face (468 vertices, cm) and the rigid landmarks' weights from
