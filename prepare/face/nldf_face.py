@@ -24,6 +24,7 @@ Commands:
 """
 
 import argparse
+import collections
 import json
 import os
 import re
@@ -92,7 +93,7 @@ class Tracker:
         self.last_detect = -self.detect_every
         self.back_frames = 90 if fine else 0
         # (frame, gray, region) of the last `back_frames` frames, oldest first.
-        self.history = []
+        self.history = collections.deque(maxlen=self.back_frames)
         self.rows = []
 
     def region(self, pts, person):
@@ -135,8 +136,7 @@ class Tracker:
             self.detect(i, gray, mask)
             self.last_detect = i
         self.prev = gray
-        if self.back_frames:
-            self.history = (self.history + [(i, gray, mask)])[-self.back_frames:]
+        self.history.append((i, gray, mask))
         for (x, y), t in zip(self.points, self.ids):
             self.rows.append((i, t, x, y))
 
@@ -149,9 +149,7 @@ class Tracker:
         for b in np.unique(self.births):
             sel = np.flatnonzero((self.births == b) & good)
             if len(sel):
-                got, ok = self.align(self.templates[b], self.anchors[sel], gray, p1[sel])
-                good[sel] &= ok & (np.linalg.norm(got - p1[sel], axis=1) < self.anchor_px)
-                p1[sel] = got
+                self.anchor(self.templates[b], self.anchors[sel], gray, p1, good, sel)
         if mask is None:
             good[:] = False
         else:
@@ -176,6 +174,15 @@ class Tracker:
         xi = np.clip(np.round(pts[:, 0]).astype(int), 0, mask.shape[1] - 1)
         yi = np.clip(np.round(pts[:, 1]).astype(int), 0, mask.shape[0] - 1)
         return np.isfinite(pts).all(axis=1) & (mask[yi, xi] > 0)
+
+    def anchor(self, template, anchors, gray, pts, good, sel):
+        """Aligns the points `pts[sel]` in `gray` with their patches at `anchors` in
+        `template` (`align`), in place: a point that moves `anchor_px` or more, or fails to
+        align, leaves `good`."""
+        import numpy as np
+        got, ok = self.align(template, anchors, gray, pts[sel])
+        good[sel] &= ok & (np.linalg.norm(got - pts[sel], axis=1) < self.anchor_px)
+        pts[sel] = got
 
     def align(self, template, anchors, gray, guess):
         """Lucas-Kanade of the patches at `anchors` in `template` onto `gray`, from `guess`,
@@ -237,11 +244,9 @@ class Tracker:
             if m is None or not len(alive):
                 break
             good, p1 = self.flow(later, g, pts)
-            if good.any():
-                sel = np.flatnonzero(good)
-                got, ok = self.align(gray, anchors[sel], g, p1[sel])
-                good[sel] &= ok & (np.linalg.norm(got - p1[sel], axis=1) < self.anchor_px)
-                p1[sel] = got
+            sel = np.flatnonzero(good)
+            if len(sel):
+                self.anchor(gray, anchors[sel], g, p1, good, sel)
             good &= self.inside(p1, m)
             pts, anchors, alive = p1[good], anchors[good], alive[good]
             for (x, y), t in zip(pts, alive):

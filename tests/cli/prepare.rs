@@ -53,28 +53,35 @@ fn clip() -> &'static Clip {
     static C: OnceLock<Clip> = OnceLock::new();
     C.get_or_init(|| {
         let dir = scratch();
-        let (scene, video) = (dir.path().join("scene"), dir.path().join("clip.mp4"));
-        nldf_ok(args(&[
-            "synth",
-            "--out",
-            &s(&scene),
-            "--size",
-            "128",
-            "--seconds",
-            "6",
-            "--supersample",
-            "1",
-            "--max-yaw-deg",
-            "20",
-            "--video",
-            &s(&video),
-        ]));
+        let (scene, video) = synth_video(dir.path(), "128", "6");
         Clip {
             _dir: dir,
             scene,
             video,
         }
     })
+}
+
+/// `nldf synth` of the standard head turning up to 20 degrees, `size` pixels and `seconds`
+/// long, into `dir`: the scene (the truth) and its video.
+fn synth_video(dir: &Path, size: &str, seconds: &str) -> (PathBuf, PathBuf) {
+    let (scene, video) = (dir.join("scene"), dir.join("clip.mp4"));
+    nldf_ok(args(&[
+        "synth",
+        "--out",
+        &s(&scene),
+        "--size",
+        size,
+        "--seconds",
+        seconds,
+        "--supersample",
+        "1",
+        "--max-yaw-deg",
+        "20",
+        "--video",
+        &s(&video),
+    ]));
+    (scene, video)
 }
 
 /// The test video becomes a dataset in AD-NeRF's layout that nldf loads, whose head masks
@@ -417,22 +424,8 @@ fn prepare_drops_the_frames_where_the_face_leaves_the_picture() {
 fn the_first_frames_see_the_tracks_found_after_them() {
     let Some(ff) = tools() else { return };
     let dir = scratch();
-    let (video, frames) = (dir.path().join("clip.mp4"), dir.path().join("frames"));
-    nldf_ok(args(&[
-        "synth",
-        "--out",
-        &s(&dir.path().join("scene")),
-        "--size",
-        "256",
-        "--seconds",
-        "4",
-        "--supersample",
-        "1",
-        "--max-yaw-deg",
-        "20",
-        "--video",
-        &s(&video),
-    ]));
+    let (_, video) = synth_video(dir.path(), "256", "4");
+    let frames = dir.path().join("frames");
     std::fs::create_dir_all(&frames).unwrap();
     let pattern = s(&frames.join("%d.jpg"));
     ffmpeg(
