@@ -103,9 +103,10 @@ pub struct PrepareBenchArgs {
     #[arg(long)]
     pub carry_held_out: bool,
     /// How a held-out camera enters the prepared world: `nearest-frame` moves the prepared
-    /// camera of the recorded frame nearest it as the true camera moved from that frame's
-    /// (a `voice` frame gets the prepared pose of the frame it repeats); `similarity` maps
-    /// it by the one similarity fitted to the whole recording.
+    /// camera of the recorded frame nearest it as the true camera moved from that frame's,
+    /// lengths scaled by that frame's own distance to the head (a `voice` frame gets the
+    /// prepared pose of the frame it repeats); `similarity` maps it by the one similarity
+    /// fitted to the whole recording.
     #[arg(long, value_enum, default_value_t = CarryBy::NearestFrame, requires = "carry_held_out")]
     pub carry_by: CarryBy,
 }

@@ -71,8 +71,13 @@ impl Similarity {
     pub fn apply(&self, pose: &CameraPose) -> CameraPose {
         CameraPose {
             rotation: self.rotation * pose.rotation,
-            centre: self.scale * (self.rotation * pose.centre) + self.translation,
+            centre: self.apply_point(pose.centre),
         }
+    }
+
+    /// The image of a point, `s Q x + t`.
+    pub fn apply_point(&self, x: DVec3) -> DVec3 {
+        self.scale * (self.rotation * x) + self.translation
     }
 
     /// The inverse similarity: `x -> (1/s) Q^T (x - t)`.
