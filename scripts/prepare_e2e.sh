@@ -10,11 +10,12 @@
 # HEADS picks the heads (default: standard second), SIDES the runs (default: truth prepared;
 # the truth's runs do not read anything `nldf prepare` writes, so after a change to it alone
 # SIDES=prepared suffices).
-# PREPARE_FLAGS are added to `nldf prepare` (a setting under test, say `--ear-points 0`).
+# PREPARE_FLAGS are added to `nldf prepare` (a setting under test, say `--ear-points 0`),
+# TRAIN_FLAGS to `nldf train` (say `--train-seed 1`, a second run of the recipe).
 # TEACHER picks the recipe's teacher (default grid, the recipe's; mlp: the quicker recipe,
 # the one the tables of docs/prepare.md were made with).
 # NLDF names the binary to run (default: a release build of this tree).
-# Usage: [SEED=3] [TEACHER=mlp] [NLDF=...] [HEADS=second] [SIDES=prepared] [PREPARE_FLAGS=...] scripts/prepare_e2e.sh WORK [OUT]
+# Usage: [SEED=3] [TEACHER=mlp] [NLDF=...] [HEADS=second] [SIDES=prepared] [PREPARE_FLAGS=...] [TRAIN_FLAGS=...] scripts/prepare_e2e.sh WORK [OUT]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 work=${1:?usage: scripts/prepare_e2e.sh WORK [OUT]}
@@ -43,8 +44,9 @@ for head in ${HEADS:-standard second}; do
     run=$work/e2e_${head}_run_$side
     rm -rf "$run"
     # The caps only stop a slower machine; raised, so that a busy one still runs every step.
+    # shellcheck disable=SC2086 # TRAIN_FLAGS is a list of flags.
     "$nldf" train --data "$data" --run "$run" --teacher "${TEACHER:-grid}" \
-      --minutes 30 --student-minutes 150 \
+      --minutes 30 --student-minutes 150 ${TRAIN_FLAGS:-} \
       > "$out/$head/$side/train.log" 2>&1
     for split in val novel voice; do
       cp "$run/eval/$split/metrics.json" "$out/$head/$side/metrics_$split.json"

@@ -78,6 +78,10 @@ pub struct StageArgs {
     /// [default: 75, under the MLP teacher 8; nldf demo --pixels-only: 15, --quick: 2].
     #[arg(long)]
     pub student_minutes: Option<f64>,
+    /// Seed of the teacher's and the student's ray batches and initial weights: another
+    /// value trains the same recipe again, to see how far two runs part.
+    #[arg(long, default_value_t = 0)]
+    pub train_seed: u64,
 }
 
 /// Runs `nldf demo`.
@@ -158,6 +162,7 @@ fn job(args: &DemoArgs) -> Result<DemoJob> {
             }),
         student_cap_minutes: student_minutes,
         student_distill: !args.pixels_only,
+        train_seed: args.stages.train_seed,
         ..defaults
     };
     Ok(job)
@@ -316,6 +321,8 @@ mod tests {
         assert_eq!(mlp.student_cap_minutes, DEMO_STUDENT_CAP_MINUTES);
         let set = demo_job(&["--student-iters", "7"]);
         assert_eq!(set.student_iters, 7);
+        assert_eq!(set.train_seed, 0);
+        assert_eq!(demo_job(&["--train-seed", "3"]).train_seed, 3);
         // The command line's default is the library's (`DemoJob::defaults`).
         assert_eq!(
             crate::presets::TeacherRecipe::default().kind(),

@@ -242,6 +242,7 @@ fn run_recipe(args: RecipeArgs) -> Result<()> {
         student_iters: stages.student_iters.unwrap_or(recipe.student_iters),
         teacher_cap_minutes: stages.minutes.unwrap_or(recipe.teacher_cap_minutes),
         student_cap_minutes: stages.student_minutes.unwrap_or(recipe.student_cap_minutes),
+        train_seed: stages.train_seed,
         ..recipe
     };
     crate::demo_cmd::run_job(job, "nldf train")

@@ -64,6 +64,9 @@ pub struct DemoJob {
     pub pseudo: PseudoSettings,
     /// Held-out splits evaluated (those the scene has).
     pub splits: Vec<Split>,
+    /// Seed of the teacher's and the student's ray batches and initial weights (the
+    /// recipe's: 0), so that a second run of the recipe on one dataset shows its spread.
+    pub train_seed: u64,
 }
 
 /// What the demo made.
@@ -114,6 +117,7 @@ impl DemoJob {
             student_distill: true,
             pseudo: DEMO_PSEUDO,
             splits: vec![Split::Val, Split::Novel, Split::Voice],
+            train_seed: 0,
         }
     }
 
@@ -302,6 +306,7 @@ impl DemoJob {
         // The learning rate is held, then decays tenfold over the last 40 % of the pinned
         // steps (as the budgeted teacher's did over its minutes); the cap only stops.
         if !resume {
+            plan.run.model.cfg.train.seed = self.train_seed;
             plan.run.model.cfg.train.lr = self.teacher_lr;
             let hold = (DEMO_HOLD * self.teacher_iters as f64).round() as usize;
             plan.run.model.cfg.train.lr_hold_steps = hold;
@@ -329,13 +334,14 @@ impl DemoJob {
             if resume { ", resuming" } else { "" },
             student_dir.display()
         )));
-        let cfg = student_recipe(
+        let mut cfg = student_recipe(
             &self.student,
             &self.teacher,
             self.student_distill,
             self.pseudo,
             self.student_iters,
         )?;
+        cfg.train.seed = self.train_seed;
         // The recipe is complete before the run is built from it (a resumed run keeps
         // its own).
         let mut plan = StudentJob {

@@ -330,6 +330,7 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
     let job = DemoJob {
         teacher,
         teacher_lr: nldf_train::job::recipe::DEMO_GRID_TEACHER_LR,
+        train_seed: 7,
         ..tiny_demo(&out)
     };
     let report = job
@@ -344,6 +345,12 @@ fn a_tiny_demo_with_the_grid_teacher_distils_its_student_from_the_grid() {
         nldf_train::job::recipe::DEMO_GRID_TEACHER_LR
     );
     assert!(grid.hi.iter().zip(&grid.lo).all(|(h, l)| h > l));
+    // The run's seed is in both stages' saved configs.
+    assert_eq!(teacher.cfg.train.seed, 7);
+    let student: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("student/config.json")).unwrap())
+            .unwrap();
+    assert_eq!(student["train"]["seed"], 7, "{}", student["train"]);
     let described: Vec<&str> = report
         .evaluation
         .models
