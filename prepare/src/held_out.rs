@@ -151,7 +151,7 @@ fn nearest_frame(truth: &Track, ids: &[i64], camera: &CameraPose) -> i64 {
 /// (`λ = 1e-6`) towards `p_0 = prior`, the similarity's image of the origin, that only
 /// matters when the rays are nearly parallel (a head that hardly moves). Exact when the
 /// prepared track is the truth under a similarity: then every ray passes through `p_0`.
-pub(crate) fn seen_centre(truth: &Track, track: &Track, ids: &[i64], prior: DVec3) -> DVec3 {
+fn seen_centre(truth: &Track, track: &Track, ids: &[i64], prior: DVec3) -> DVec3 {
     const PULL: f64 = 1e-6;
     let pull = PULL * ids.len().max(1) as f64;
     let (mut normal, mut rhs) = (DMat3::IDENTITY * pull, prior * pull);
