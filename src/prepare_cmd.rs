@@ -74,6 +74,11 @@ pub struct PrepareArgs {
     /// and sways over the head.
     #[arg(long, default_value_t = PoseConfig::default().track_reach, value_parser = share)]
     pub track_reach: f32,
+    /// Frames analysed at fewer pixels than this (a small video) are decoded again at this
+    /// size for the head's pose alone, where the tracker finds more to follow; 0 turns it
+    /// off.
+    #[arg(long, default_value_t = PoseConfig::default().pose_size)]
+    pub pose_size: u32,
     /// Replace the output folder if it exists.
     #[arg(long)]
     pub force: bool,
@@ -145,6 +150,7 @@ pub fn run(args: PrepareArgs) -> Result<()> {
         force: args.force,
         pose: PoseConfig {
             track_reach: args.track_reach,
+            pose_size: args.pose_size,
             ..PoseConfig::default()
         },
         analysis_size: args.analysis_size,

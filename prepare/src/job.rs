@@ -8,7 +8,6 @@ use std::time::Instant;
 use nldf_core::audio::{
     FeatureConfig, FeatureSource, audio_windows_for_frames, n_video_frames, read_wav,
 };
-use nldf_core::camera::Intrinsics;
 use nldf_core::dataset::save_audio_features;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -20,7 +19,8 @@ use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{
     ParsingConfig, Part, Plate, background, hang_below_jaw, head_rect, parse_frame, parsing_image,
 };
-use crate::pose::{CameraTrack, PoseConfig, TrackSummary, solve_track};
+use crate::pose::{PoseConfig, TrackSummary};
+use crate::pose_stage::PoseStage;
 use crate::resample::shrink_dataset;
 use crate::scratch::Scratch;
 use crate::transforms::write_transforms;
@@ -86,6 +86,9 @@ pub struct PrepareReport {
     pub size: u32,
     /// The size the frames were analysed at before the dataset was shrunk to `size`.
     pub analysed_at: u32,
+    /// The size the head's pose was solved at: `analysed_at`, or the frames decoded again
+    /// larger for it ([`PoseConfig::pose_size`]); `reprojection_px` is in its pixels.
+    pub posed_at: u32,
     pub focal: f32,
     pub fps: f64,
     pub frames_read: usize,
@@ -111,7 +114,7 @@ pub struct PrepareReport {
 
 impl PrepareJob {
     /// The crop and window this job reads from a probed video, checked against it.
-    fn window(&self, probe: &Probe) -> Result<Window> {
+    pub(crate) fn window(&self, probe: &Probe) -> Result<Window> {
         let crop = self
             .crop
             .unwrap_or_else(|| video::centre_square(probe.width, probe.height));
@@ -243,9 +246,10 @@ fn prepare_into(
     lap("decode", &mut seconds);
     let face_dir = dir.join("face");
     let faces = find_faces(job, env, &ori, n, &face_dir, events)?;
-    let kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
+    let mut kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
     lap("faces", &mut seconds);
-    let (k, track) = solve_poses(job, env, &faces, &kept, events)?;
+    let stage = PoseStage { ffmpeg, probe, dir };
+    let (k, track, posed_at) = stage.run(job, env, &faces, &mut kept, events)?;
     lap("pose", &mut seconds);
     let bc = background_of(&kept, &ori, &faces, size)?;
     save_jpeg(&dir.join("bc.jpg"), bc.as_raw(), size)?;
@@ -274,6 +278,7 @@ fn prepare_into(
         video: job.video.display().to_string(),
         size,
         analysed_at: size,
+        posed_at,
         focal: k.focal,
         fps: probe.fps,
         frames_read: n,
@@ -296,7 +301,7 @@ fn prepare_into(
 
 /// The face stage: the face helper's landmarks, masks and feature tracks of the `n` frames
 /// in `ori` (see [`FaceEnv::run_frames`]), written into `face_dir`.
-fn find_faces(
+pub(crate) fn find_faces(
     job: &PrepareJob,
     env: &FaceEnv,
     ori: &Path,
@@ -319,38 +324,6 @@ fn write_features(dir: &Path, wave: &nldf_core::audio::Waveform, fps: f64, n: us
     let windows = audio_windows_for_frames(wave, fps as f32, &features, n)
         .map_err(|e| Error::invalid(dir.join("aud.wav"), e.to_string()))?;
     save_audio_features(dir, &windows, &FeatureSource::Nldf(features))
-}
-
-/// The head-pose stage: the intrinsics of `job`'s frames and the track of the kept frames.
-fn solve_poses(
-    job: &PrepareJob,
-    env: &FaceEnv,
-    faces: &FaceOutput,
-    kept: &[usize],
-    events: &mut impl FnMut(Event),
-) -> Result<(Intrinsics, CameraTrack)> {
-    let size = job.size;
-    events(Event::Stage {
-        name: "head pose",
-        total: None,
-    });
-    let k = Intrinsics {
-        focal: job.focal(),
-        cx: size as f32 / 2.0,
-        cy: size as f32 / 2.0,
-        width: size,
-        height: size,
-    };
-    let canonical = env.canonical()?;
-    let track = solve_track(
-        &faces.landmark_frames(kept),
-        &faces.tracks,
-        &canonical.vertices,
-        &canonical.rigid_weights,
-        &k,
-        &job.pose,
-    )?;
-    Ok((k, track))
 }
 
 /// Decodes the frames into `ori_imgs/` and the audio into `aud.wav`: the number of frames
@@ -398,7 +371,7 @@ fn decode(
     Ok((n, wave))
 }
 
-fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result<()> {
+pub(crate) fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result<()> {
     if n < min {
         return Err(Error::invalid(
             video,
@@ -413,7 +386,7 @@ fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result
 
 /// The frames to keep: one face, whole inside the frame. Refuses a clip with no face, with
 /// two faces, or with too few frames left.
-fn frames_with_one_face(
+pub(crate) fn frames_with_one_face(
     video: &Path,
     faces: &FaceOutput,
     size: u32,
@@ -459,7 +432,7 @@ fn frames_with_one_face(
 }
 
 /// Decodes the frames into `ori/<i>.jpg`, encoding them in parallel batches.
-fn decode_to_jpegs(
+pub(crate) fn decode_to_jpegs(
     ffmpeg: &Path,
     video: &Path,
     probe: &Probe,

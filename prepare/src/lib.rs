@@ -26,6 +26,7 @@ pub mod job;
 pub mod lms68;
 pub mod parsing;
 pub mod pose;
+mod pose_stage;
 pub(crate) mod recording;
 pub mod resample;
 pub(crate) mod scratch;

@@ -202,6 +202,57 @@ fn prepare_analyses_a_larger_video_at_its_own_size() {
     }
 }
 
+/// A video smaller than the pose size (256) is decoded again at 256 for the head's pose
+/// alone: with the default the 128-pixel test video's `prepare.json` says so and its
+/// cameras move, while its frames, background, parsing and landmarks stay byte for byte
+/// those of the dataset prepared with `--pose-size 0`, the video's own. (What the larger
+/// frames do for the poses is measured on the tuning and test videos, docs/prepare.md.)
+#[test]
+fn a_small_video_is_posed_from_its_frames_scaled_up() {
+    if tools().is_none() {
+        return;
+    }
+    let c = clip();
+    let dir = scratch();
+    let prepared = |name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let (video, to) = (s(&c.video), s(&out));
+        let mut a = vec!["prepare", "--video", &video, "--out", &to, "--size", "128"];
+        a.extend(extra);
+        nldf_ok(args(&a));
+        out
+    };
+    let (larger, own) = (
+        prepared("larger", &[]),
+        prepared("own", &["--pose-size", "0"]),
+    );
+    let report = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("prepare.json")).unwrap()).unwrap()
+    };
+    assert_eq!(report(&larger)["posed_at"], 256, "{}", report(&larger));
+    assert_eq!(report(&own)["posed_at"], 128, "{}", report(&own));
+    for f in [
+        "bc.jpg",
+        "ori_imgs/5.jpg",
+        "ori_imgs/5.lms",
+        "parsing/5.png",
+        "head_imgs/5.jpg",
+    ] {
+        let (a, b) = (
+            std::fs::read(larger.join(f)).unwrap(),
+            std::fs::read(own.join(f)).unwrap(),
+        );
+        assert!(a == b, "{f} differs");
+    }
+    let pose = |d: &Path| {
+        nldf_core::dataset::TransformsFile::load(&d.join("transforms_train.json"))
+            .unwrap()
+            .frames[5]
+            .transform_matrix
+    };
+    assert_ne!(pose(&larger), pose(&own), "the cameras did not move");
+}
+
 /// A copy of `video` whose odd frames come half a frame late: a variable frame rate.
 fn variable_rate_copy(ff: &Path, video: &Path, out: &Path) {
     ffmpeg(
