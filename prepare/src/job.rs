@@ -19,18 +19,25 @@ use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{
     ParsingConfig, Part, Plate, background, hang_below_jaw, head_rect, parse_frame, parsing_image,
 };
+use crate::pose::CameraTrack;
 use crate::pose::{PoseConfig, TrackSummary};
-use crate::pose_stage::PoseStage;
+use crate::pose_stage::solve_poses;
 use crate::resample::shrink_dataset;
 use crate::scratch::Scratch;
 use crate::transforms::write_transforms;
 use crate::video::{self, Probe, Window};
+use nldf_core::camera::Intrinsics;
 
 /// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
 /// since landmarks cannot tell the focal length.
 pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
 /// The largest size frames are analysed at by default (see [`PrepareJob::analysis_size`]).
 pub const ANALYSIS_MAX: u32 = 512;
+/// The head-pose stage's start.
+const HEAD_POSE: Event = Event::Stage {
+    name: "head pose",
+    total: None,
+};
 /// Frames the background median samples at most.
 const BACKGROUND_SAMPLES: usize = 150;
 /// The face mesh's nose tip: a point on the head in every frame.
@@ -246,7 +253,7 @@ fn prepare_into(
     lap("decode", &mut seconds);
     let face_dir = dir.join("face");
     let faces = find_faces(job, env, &ori, n, &face_dir, events)?;
-    let mut kept = frames_with_one_face(&job.video, &faces, size, job.min_frames, probe.fps)?;
+    let mut kept = faces.frames_with_one_face(&job.video, size, job.min_frames, probe.fps)?;
     lap("faces", &mut seconds);
     let stage = PoseStage { ffmpeg, probe, dir };
     let (k, track, posed_at) = stage.run(job, env, &faces, &mut kept, events)?;
@@ -361,7 +368,7 @@ fn decode(
             ),
         ));
     }
-    too_short(
+    video::too_short(
         &job.video,
         n,
         job.min_frames,
@@ -369,66 +376,6 @@ fn decode(
         "in the chosen time range",
     )?;
     Ok((n, wave))
-}
-
-pub(crate) fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result<()> {
-    if n < min {
-        return Err(Error::invalid(
-            video,
-            format!(
-                "too short to train: {n} frames with one face {what} ({:.1} s), at least {min} needed",
-                n as f64 / fps
-            ),
-        ));
-    }
-    Ok(())
-}
-
-/// The frames to keep: one face, whole inside the frame. Refuses a clip with no face, with
-/// two faces, or with too few frames left.
-pub(crate) fn frames_with_one_face(
-    video: &Path,
-    faces: &FaceOutput,
-    size: u32,
-    min: usize,
-    fps: f64,
-) -> Result<Vec<usize>> {
-    let n = faces.faces.len();
-    let checked: Vec<u8> = faces.detections.iter().flatten().copied().collect();
-    let two = checked.iter().filter(|&&d| d >= 2).count()
-        + faces.faces.iter().filter(|&&f| f >= 2).count();
-    if two * 20 > checked.len().max(1) {
-        return Err(Error::invalid(
-            video,
-            format!(
-                "shows two faces ({two} detections of a second face): nldf prepare needs one person alone"
-            ),
-        ));
-    }
-    let margin = -0.01 * size as f32;
-    let inside = |p: &[f32; 2]| p.iter().all(|&v| v >= margin && v <= size as f32 - margin);
-    let kept: Vec<usize> = (0..n)
-        .filter(|&i| {
-            faces.faces[i] == 1
-                && faces.landmarks[i]
-                    .as_ref()
-                    .is_some_and(|l| l.iter().all(inside))
-        })
-        .collect();
-    if kept.is_empty() || kept.len() * 2 < n {
-        return Err(Error::invalid(
-            video,
-            format!("no face found in {} of its {n} frames", n - kept.len()),
-        ));
-    }
-    too_short(
-        video,
-        kept.len(),
-        min,
-        fps,
-        "after dropping the frames without one",
-    )?;
-    Ok(kept)
 }
 
 /// Decodes the frames into `ori/<i>.jpg`, encoding them in parallel batches.
@@ -557,4 +504,93 @@ fn write_heads(
         events(Event::Frames((chunk_no * 32 + chunk.len()).min(kept.len())));
     }
     Ok(())
+}
+
+/// The head-pose stage of a job, with what it needs to decode the video again at
+/// [`PoseConfig::pose_size`], into scratch folders of `dir` that it removes.
+struct PoseStage<'a> {
+    ffmpeg: &'a Path,
+    probe: &'a Probe,
+    dir: &'a Path,
+}
+
+impl PoseStage<'_> {
+    /// The intrinsics of `job`'s frames, the track of the `kept` frames and the size it was
+    /// solved at: from `faces` at the job's size, or from the frames decoded again larger
+    /// when the job's size is below [`PoseConfig::pose_size`] (then `kept` loses the frames
+    /// without one whole face at that size).
+    fn run(
+        &self,
+        job: &PrepareJob,
+        env: &FaceEnv,
+        faces: &FaceOutput,
+        kept: &mut Vec<usize>,
+        events: &mut impl FnMut(Event),
+    ) -> Result<(Intrinsics, CameraTrack, u32)> {
+        if job.pose.pose_size > job.size {
+            let (k, track) = self.larger(job, env, kept, events)?;
+            Ok((k, track, job.pose.pose_size))
+        } else {
+            events(HEAD_POSE);
+            let (k, track) = solve_poses(env, faces, kept, job.size, job.focal(), &job.pose)?;
+            Ok((k, track, job.size))
+        }
+    }
+
+    /// The intrinsics of `job`'s frames and the track of the `kept` frames, solved from the
+    /// landmarks and tracks of the larger frames; `kept` loses the frames without one whole
+    /// face at that size.
+    fn larger(
+        &self,
+        job: &PrepareJob,
+        env: &FaceEnv,
+        kept: &mut Vec<usize>,
+        events: &mut impl FnMut(Event),
+    ) -> Result<(Intrinsics, CameraTrack)> {
+        let at = PrepareJob {
+            size: job.pose.pose_size,
+            focal: Some(job.focal() * job.pose.pose_size as f32 / job.size as f32),
+            ..job.clone()
+        };
+        let frames = self.dir.join("pose_frames");
+        std::fs::create_dir_all(&frames).map_err(|e| Error::io(&frames, e))?;
+        events(Event::Stage {
+            name: "decoding for the pose",
+            total: self.probe.duration.map(|d| (d * self.probe.fps) as usize),
+        });
+        let window = at.window(self.probe)?;
+        let n = decode_to_jpegs(
+            self.ffmpeg,
+            &job.video,
+            self.probe,
+            &window,
+            &frames,
+            events,
+        )?;
+        let face_dir = self.dir.join("pose_face");
+        let faces = find_faces(&at, env, &frames, n, &face_dir, events)?;
+        let larger = faces.frames_with_one_face(&job.video, at.size, 0, self.probe.fps)?;
+        kept.retain(|i| larger.binary_search(i).is_ok());
+        video::too_short(
+            &job.video,
+            kept.len(),
+            job.min_frames,
+            self.probe.fps,
+            "after dropping the frames without one",
+        )?;
+        events(HEAD_POSE);
+        let (_, track) = solve_poses(env, &faces, kept, at.size, at.focal(), &at.pose)?;
+        for d in [&frames, &face_dir] {
+            std::fs::remove_dir_all(d).map_err(|e| Error::io(d, e))?;
+        }
+        let size = job.size as f32;
+        let k = Intrinsics {
+            focal: job.focal(),
+            cx: size / 2.0,
+            cy: size / 2.0,
+            width: job.size,
+            height: job.size,
+        };
+        Ok((k, track))
+    }
 }

@@ -335,6 +335,21 @@ pub fn part_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// Refuses a clip of `n` usable frames when fewer than `min` are left (`what`: after what),
+/// naming the video and the seconds it holds.
+pub(crate) fn too_short(video: &Path, n: usize, min: usize, fps: f64, what: &str) -> Result<()> {
+    if n < min {
+        return Err(Error::invalid(
+            video,
+            format!(
+                "too short to train: {n} frames with one face {what} ({:.1} s), at least {min} needed",
+                n as f64 / fps
+            ),
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
