@@ -8,6 +8,7 @@ use std::time::Instant;
 use nldf_core::audio::{
     FeatureConfig, FeatureSource, audio_windows_for_frames, n_video_frames, read_wav,
 };
+use nldf_core::camera::Intrinsics;
 use nldf_core::dataset::save_audio_features;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -19,14 +20,12 @@ use crate::lms68::{jaw_line, landmarks_68};
 use crate::parsing::{
     ParsingConfig, Part, Plate, background, hang_below_jaw, head_rect, parse_frame, parsing_image,
 };
-use crate::pose::CameraTrack;
-use crate::pose::{PoseConfig, TrackSummary};
-use crate::pose_stage::solve_poses;
+use crate::pose::{CameraTrack, PoseConfig, TrackSummary};
+use crate::pose_stage::{solve_poses, square_intrinsics};
 use crate::resample::shrink_dataset;
 use crate::scratch::Scratch;
 use crate::transforms::write_transforms;
 use crate::video::{self, Probe, Window};
-use nldf_core::camera::Intrinsics;
 
 /// AD-NeRF's focal length, 1200 px at 450 x 450, scaled to the output size: the default,
 /// since landmarks cannot tell the focal length.
@@ -121,7 +120,7 @@ pub struct PrepareReport {
 
 impl PrepareJob {
     /// The crop and window this job reads from a probed video, checked against it.
-    pub(crate) fn window(&self, probe: &Probe) -> Result<Window> {
+    fn window(&self, probe: &Probe) -> Result<Window> {
         let crop = self
             .crop
             .unwrap_or_else(|| video::centre_square(probe.width, probe.height));
@@ -308,7 +307,7 @@ fn prepare_into(
 
 /// The face stage: the face helper's landmarks, masks and feature tracks of the `n` frames
 /// in `ori` (see [`FaceEnv::run_frames`]), written into `face_dir`.
-pub(crate) fn find_faces(
+fn find_faces(
     job: &PrepareJob,
     env: &FaceEnv,
     ori: &Path,
@@ -379,7 +378,7 @@ fn decode(
 }
 
 /// Decodes the frames into `ori/<i>.jpg`, encoding them in parallel batches.
-pub(crate) fn decode_to_jpegs(
+fn decode_to_jpegs(
     ffmpeg: &Path,
     video: &Path,
     probe: &Probe,
@@ -583,14 +582,6 @@ impl PoseStage<'_> {
         for d in [&frames, &face_dir] {
             std::fs::remove_dir_all(d).map_err(|e| Error::io(d, e))?;
         }
-        let size = job.size as f32;
-        let k = Intrinsics {
-            focal: job.focal(),
-            cx: size / 2.0,
-            cy: size / 2.0,
-            width: job.size,
-            height: job.size,
-        };
-        Ok((k, track))
+        Ok((square_intrinsics(job.size, job.focal()), track))
     }
 }

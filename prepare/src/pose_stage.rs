@@ -18,13 +18,7 @@ pub(crate) fn solve_poses(
     focal: f32,
     cfg: &PoseConfig,
 ) -> Result<(Intrinsics, CameraTrack)> {
-    let k = Intrinsics {
-        focal,
-        cx: size as f32 / 2.0,
-        cy: size as f32 / 2.0,
-        width: size,
-        height: size,
-    };
+    let k = square_intrinsics(size, focal);
     let canonical = env.canonical()?;
     let track = solve_track(
         &faces.landmark_frames(kept),
@@ -35,4 +29,15 @@ pub(crate) fn solve_poses(
         cfg,
     )?;
     Ok((k, track))
+}
+
+/// The intrinsics of square frames `size` pixels across, centred, focal length `focal`.
+pub(crate) fn square_intrinsics(size: u32, focal: f32) -> Intrinsics {
+    Intrinsics {
+        focal,
+        cx: size as f32 / 2.0,
+        cy: size as f32 / 2.0,
+        width: size,
+        height: size,
+    }
 }
