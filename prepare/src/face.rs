@@ -224,6 +224,53 @@ impl FaceOutput {
             })
             .collect()
     }
+
+    /// The frames to keep: one face, whole inside the frame. Refuses a clip with no face, with
+    /// two faces, or with too few frames left.
+    pub(crate) fn frames_with_one_face(
+        &self,
+        video: &Path,
+        size: u32,
+        min: usize,
+        fps: f64,
+    ) -> Result<Vec<usize>> {
+        let n = self.faces.len();
+        let checked: Vec<u8> = self.detections.iter().flatten().copied().collect();
+        let two = checked.iter().filter(|&&d| d >= 2).count()
+            + self.faces.iter().filter(|&&f| f >= 2).count();
+        if two * 20 > checked.len().max(1) {
+            return Err(Error::invalid(
+                video,
+                format!(
+                    "shows two faces ({two} detections of a second face): nldf prepare needs one person alone"
+                ),
+            ));
+        }
+        let margin = -0.01 * size as f32;
+        let inside = |p: &[f32; 2]| p.iter().all(|&v| v >= margin && v <= size as f32 - margin);
+        let kept: Vec<usize> = (0..n)
+            .filter(|&i| {
+                self.faces[i] == 1
+                    && self.landmarks[i]
+                        .as_ref()
+                        .is_some_and(|l| l.iter().all(inside))
+            })
+            .collect();
+        if kept.is_empty() || kept.len() * 2 < n {
+            return Err(Error::invalid(
+                video,
+                format!("no face found in {} of its {n} frames", n - kept.len()),
+            ));
+        }
+        crate::video::too_short(
+            video,
+            kept.len(),
+            min,
+            fps,
+            "after dropping the frames without one",
+        )?;
+        Ok(kept)
+    }
 }
 
 /// The helper's `tracks.f32`: rows of four little-endian f32, `(frame, track, x, y)`, the
@@ -368,53 +415,4 @@ fn write_if_changed(path: &Path, text: &str) -> Result<()> {
         return Ok(());
     }
     std::fs::write(path, text).map_err(|e| Error::io(path, e))
-}
-
-impl FaceOutput {
-    /// The frames to keep: one face, whole inside the frame. Refuses a clip with no face, with
-    /// two faces, or with too few frames left.
-    pub(crate) fn frames_with_one_face(
-        &self,
-        video: &Path,
-        size: u32,
-        min: usize,
-        fps: f64,
-    ) -> Result<Vec<usize>> {
-        let n = self.faces.len();
-        let checked: Vec<u8> = self.detections.iter().flatten().copied().collect();
-        let two = checked.iter().filter(|&&d| d >= 2).count()
-            + self.faces.iter().filter(|&&f| f >= 2).count();
-        if two * 20 > checked.len().max(1) {
-            return Err(Error::invalid(
-                video,
-                format!(
-                    "shows two faces ({two} detections of a second face): nldf prepare needs one person alone"
-                ),
-            ));
-        }
-        let margin = -0.01 * size as f32;
-        let inside = |p: &[f32; 2]| p.iter().all(|&v| v >= margin && v <= size as f32 - margin);
-        let kept: Vec<usize> = (0..n)
-            .filter(|&i| {
-                self.faces[i] == 1
-                    && self.landmarks[i]
-                        .as_ref()
-                        .is_some_and(|l| l.iter().all(inside))
-            })
-            .collect();
-        if kept.is_empty() || kept.len() * 2 < n {
-            return Err(Error::invalid(
-                video,
-                format!("no face found in {} of its {n} frames", n - kept.len()),
-            ));
-        }
-        crate::video::too_short(
-            video,
-            kept.len(),
-            min,
-            fps,
-            "after dropping the frames without one",
-        )?;
-        Ok(kept)
-    }
 }
