@@ -21,7 +21,8 @@ pub struct PrepareArgs {
     /// Output dataset folder (created; must be empty or absent unless --force).
     #[arg(long, required_unless_present = "setup")]
     pub out: Option<PathBuf>,
-    /// Output frames are SIZE x SIZE pixels (a square crop of the video, scaled).
+    /// Output frames are SIZE x SIZE pixels (a square crop of the video, scaled; 32 to
+    /// 2048).
     #[arg(long, default_value_t = 512)]
     pub size: u32,
     /// Find the face, its landmarks, tracks, poses and masks in frames of this size, then
@@ -128,8 +129,8 @@ fn face_env() -> Result<FaceEnv> {
 }
 
 pub fn run(args: PrepareArgs) -> Result<()> {
-    let env = face_env()?;
     if args.setup {
+        let env = face_env()?;
         println!("face environment ready: {}", env.dir.display());
         println!("ffmpeg: {}", tools::ffmpeg()?.display());
         return Ok(());
@@ -137,7 +138,6 @@ pub fn run(args: PrepareArgs) -> Result<()> {
     let (Some(video), Some(out)) = (args.video, args.out) else {
         bail!("--video and --out are needed");
     };
-    let ffmpeg = tools::ffmpeg()?;
     let job = PrepareJob {
         video,
         out: out.clone(),
@@ -162,6 +162,10 @@ pub fn run(args: PrepareArgs) -> Result<()> {
             ear_points: args.ear_points,
         },
     };
+    // Settings first: a mistyped flag should not wait for the face environment's install.
+    job.check()?;
+    let env = face_env()?;
+    let ffmpeg = tools::ffmpeg()?;
     let mut bar: Option<ProgressBar> = None;
     let report = job::run(&job, &env, &ffmpeg, |event| match event {
         Event::Stage { name, total } => {

@@ -32,6 +32,9 @@ use crate::video::{self, Probe, Window};
 pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
 /// The largest size frames are analysed at by default (see [`PrepareJob::analysis_size`]).
 pub const ANALYSIS_MAX: u32 = 512;
+/// The smallest and largest sizes, in pixels, that frames are written, analysed or posed at.
+pub const MIN_SIZE: u32 = 32;
+pub const MAX_SIZE: u32 = 2048;
 /// The head-pose stage's start.
 const HEAD_POSE: Event = Event::Stage {
     name: "head pose",
@@ -119,22 +122,39 @@ pub struct PrepareReport {
 }
 
 impl PrepareJob {
-    /// The crop and window this job reads from a probed video, checked against it.
-    fn window(&self, probe: &Probe) -> Result<Window> {
-        let crop = self
-            .crop
-            .unwrap_or_else(|| video::centre_square(probe.width, probe.height));
-        let [x, y, side] = crop;
-        if side == 0 || x + side > probe.width || y + side > probe.height {
+    /// Why this job's settings cannot be used, as an error naming the flag; checked before
+    /// anything is read or installed.
+    pub fn check(&self) -> Result<()> {
+        let sizes = [
+            ("--size", Some(self.size), ""),
+            ("--analysis-size", self.analysis_size, ""),
+            (
+                "--pose-size",
+                Some(self.pose.pose_size).filter(|&s| s != 0),
+                " (or 0, off)",
+            ),
+        ];
+        for (flag, size, or) in sizes {
+            if let Some(s) = size.filter(|s| !(MIN_SIZE..=MAX_SIZE).contains(s)) {
+                return Err(Error::Argument(format!(
+                    "{flag} {s} is not in {MIN_SIZE}..={MAX_SIZE} pixels{or}"
+                )));
+            }
+        }
+        if !(self.start.is_finite() && self.start >= 0.0) {
             return Err(Error::Argument(format!(
-                "--crop {x},{y},{side} does not fit the {}x{} video",
-                probe.width, probe.height
+                "--start {} is not a time in seconds >= 0",
+                self.start
             )));
         }
-        if self.size < 32 {
+        if let Some(s) = self.seconds.filter(|s| !(s.is_finite() && *s > 0.0)) {
             return Err(Error::Argument(format!(
-                "--size {} is below 32 pixels",
-                self.size
+                "--seconds {s} is not a duration in seconds > 0"
+            )));
+        }
+        if let Some(f) = self.focal.filter(|f| !(f.is_finite() && *f > 0.0)) {
+            return Err(Error::Argument(format!(
+                "--focal {f} is not a focal length in pixels > 0"
             )));
         }
         if let Some(f) = self
@@ -145,8 +165,26 @@ impl PrepareJob {
                 "--fps {f} is not a frame rate in 1..=120"
             )));
         }
+        self.pose.validate()
+    }
+
+    /// The crop and window this job reads from a probed video, checked against it.
+    fn window(&self, probe: &Probe) -> Result<Window> {
+        let crop = self
+            .crop
+            .unwrap_or_else(|| video::centre_square(probe.width, probe.height));
+        let [x, y, side] = crop;
+        if side == 0
+            || x.saturating_add(side) > probe.width
+            || y.saturating_add(side) > probe.height
+        {
+            return Err(Error::Argument(format!(
+                "--crop {x},{y},{side} does not fit the {}x{} video",
+                probe.width, probe.height
+            )));
+        }
         Ok(Window {
-            start: self.start.max(0.0),
+            start: self.start,
             seconds: self.seconds,
             crop,
             size: self.size,
@@ -176,17 +214,11 @@ pub fn run(
     ffmpeg: &Path,
     mut events: impl FnMut(Event),
 ) -> Result<PrepareReport> {
-    job.pose.validate()?;
+    job.check()?;
     let focal = job.focal();
-    if !(focal.is_finite() && focal > 0.0) {
-        return Err(Error::Argument(format!(
-            "--focal must be positive, got {focal}"
-        )));
-    }
     let started = Instant::now();
     let mut probe = video::probe(ffmpeg, &job.video)?;
     if let Some(f) = job.fps {
-        job.window(&probe)?;
         probe.fps = f;
     }
     if !probe.has_audio {

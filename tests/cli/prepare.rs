@@ -375,6 +375,33 @@ fn prepare_refuses_videos_it_cannot_train_on() {
     }
 }
 
+/// Settings no video can be prepared with are refused in one line naming the flag, before
+/// the video is read or the face environment installed (no tools needed), and nothing is
+/// written: a size of 100000 pixels once asked for 30 GB and aborted.
+#[test]
+fn prepare_refuses_settings_it_cannot_use() {
+    let dir = scratch();
+    let out = dir.path().join("data");
+    let video = s(&dir.path().join("clip.mp4"));
+    let cases: [(&[&str], &[&str]); 8] = [
+        (&["--size", "0"], &["--size 0", "32..=2048"]),
+        (&["--size", "100000"], &["--size 100000", "32..=2048"]),
+        (&["--analysis-size", "5000"], &["--analysis-size 5000"]),
+        (&["--pose-size", "7"], &["--pose-size 7"]),
+        (&["--seconds", "0"], &["--seconds 0", "> 0"]),
+        (&["--start=-1"], &["--start -1", ">= 0"]),
+        (&["--focal", "0"], &["--focal 0", "> 0"]),
+        (&["--fps", "0"], &["--fps 0", "1..=120"]),
+    ];
+    for (flags, needles) in cases {
+        let mut a = vec!["prepare", "--video", &video, "--out"];
+        let o = s(&out);
+        a.push(&o);
+        a.extend_from_slice(flags);
+        refused(&flags.join(" "), &args(&a), needles, &[&out]);
+    }
+}
+
 /// `--fps` resamples to a constant rate: the 25 frames/s test video at 12.5 gives half its
 /// frames, written at 12.5 frames/s, and a variable-rate copy of it, refused without the
 /// flag, is taken with `--fps 25`.

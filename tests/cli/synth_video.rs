@@ -170,6 +170,12 @@ fn synth_video_with_an_odd_size_or_a_folder_is_refused() {
         &[&scene],
     );
     refused(
+        "synth --render-size 100000",
+        &args(&["synth", "--out", &s(&scene), "--render-size", "100000"]),
+        &["--render-size", "100000"],
+        &[&scene],
+    );
+    refused(
         "synth --focal-at-128 0",
         &args(&["synth", "--out", &s(&scene), "--focal-at-128", "0"]),
         &["focal_at_128", "positive"],

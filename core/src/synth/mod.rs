@@ -35,8 +35,8 @@ use crate::region::Region;
 use frames::{Tracks, camera_at, feature_windows, stream, transforms_file};
 use head::{FaceState, HeadParams, head_bounds};
 pub use scene::{
-    EvalFrame, GENERATOR, HeadPose, HeadStyle, SECOND_HEAD_PAD, SceneFile, SceneFrame, SynthConfig,
-    validate,
+    EvalFrame, GENERATOR, HeadPose, HeadStyle, SECOND_HEAD_PAD, SIZES, SceneFile, SceneFrame,
+    SynthConfig, validate,
 };
 use speech::{Voice, synthesize_speech};
 use trace::{HeadFrame, render_background, render_head};

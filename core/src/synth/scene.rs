@@ -90,6 +90,9 @@ impl Default for SynthConfig {
     }
 }
 
+/// The sizes, in pixels, a scene renders at.
+pub const SIZES: std::ops::RangeInclusive<u32> = 16..=2048;
+
 /// Checks that a configuration can be rendered.
 pub fn validate(cfg: &SynthConfig) -> Result<()> {
     let bad = |m: String| Err(Error::Argument(m));
@@ -99,9 +102,11 @@ pub fn validate(cfg: &SynthConfig) -> Result<()> {
             cfg.seconds
         ));
     }
-    if !(16..=2048).contains(&cfg.size) {
+    if !SIZES.contains(&cfg.size) {
         return bad(format!(
-            "--size must be in 16..=2048 pixels, got {}",
+            "--size must be in {}..={} pixels, got {}",
+            SIZES.start(),
+            SIZES.end(),
             cfg.size
         ));
     }
