@@ -140,7 +140,7 @@ impl DemoJob {
         ] {
             if !(minutes.is_finite() && minutes > 0.0) {
                 return Err(Error::Argument(format!(
-                    "the {what}'s wall-clock cap must be positive, got {minutes} minutes"
+                    "the {what}'s wall-clock cap must be a finite number of minutes above 0, got {minutes}"
                 )));
             }
         }

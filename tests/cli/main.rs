@@ -795,7 +795,7 @@ fn command_line_misuse_is_refused() {
                 "--minutes",
                 "0",
             ]),
-            vec!["cap must be positive"],
+            vec!["cap must be a finite number of minutes above 0"],
             vec![out.clone()],
         ),
         (
