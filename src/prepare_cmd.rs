@@ -22,8 +22,9 @@ pub struct PrepareArgs {
     #[arg(long, required_unless_present = "setup")]
     pub out: Option<PathBuf>,
     /// Output frames are SIZE x SIZE pixels (a square crop of the video, scaled; 32 to
-    /// 2048).
-    #[arg(long, default_value_t = 512)]
+    /// 2048). The default, 128, is the size `nldf train --data`'s recipe is measured at; a
+    /// larger video is analysed at up to 512 pixels first (--analysis-size).
+    #[arg(long, default_value_t = 128)]
     pub size: u32,
     /// Find the face, its landmarks, tracks, poses and masks in frames of this size, then
     /// shrink the dataset to --size: landmarks hold a pixel's worth of error at any size,
@@ -32,7 +33,7 @@ pub struct PrepareArgs {
     #[arg(long)]
     pub analysis_size: Option<u32>,
     /// Focal length in output pixels; landmarks cannot tell it. Default: AD-NeRF's 1200 at
-    /// 450 pixels, scaled to --size (1365 at 512). Half or twice the true value moves the
+    /// 450 pixels, scaled to --size (341 at 128, 1365 at 512). Half or twice the true value moves the
     /// rotations by well under a degree.
     #[arg(long)]
     pub focal: Option<f32>,

@@ -30,6 +30,7 @@ mod pose_stage;
 pub(crate) mod recording;
 pub mod resample;
 pub(crate) mod scratch;
+mod settings;
 pub mod tools;
 pub(crate) mod transforms;
 pub mod video;

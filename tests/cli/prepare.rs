@@ -86,7 +86,8 @@ fn synth_video(dir: &Path, size: &str, seconds: &str) -> (PathBuf, PathBuf) {
 
 /// The test video becomes a dataset in AD-NeRF's layout that nldf loads, whose head masks
 /// and background match the scene's truth (`nldf bench prepare`'s bars for them), and whose
-/// cameras turn as the scene's do to within a few degrees.
+/// cameras turn as the scene's do to within a few degrees; without `--size` its frames are
+/// 128 x 128, the size `nldf train --data`'s recipe is measured at.
 #[test]
 fn prepare_turns_a_test_video_into_a_dataset_close_to_its_truth() {
     if tools().is_none() {
@@ -101,8 +102,6 @@ fn prepare_turns_a_test_video_into_a_dataset_close_to_its_truth() {
         &s(&c.video),
         "--out",
         &s(&out),
-        "--size",
-        "128",
     ]));
     for f in [
         "bc.jpg",
@@ -122,6 +121,7 @@ fn prepare_turns_a_test_video_into_a_dataset_close_to_its_truth() {
     assert!(!dir.path().join("data.part").exists());
     let ds = nldf_core::dataset::Dataset::load(&out).unwrap();
     assert_eq!(ds.train.len() + ds.val.len(), 150);
+    assert_eq!((ds.intrinsics.width, ds.intrinsics.height), (128, 128));
     let report = dir.path().join("score.json");
     nldf(args(&[
         "bench",
