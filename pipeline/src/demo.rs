@@ -235,7 +235,11 @@ impl DemoJob {
     fn prepare_scene(&self, data: &Path, own: &mut Timing, on_event: OnEvent) -> Result<()> {
         let started = Instant::now();
         if self.data.is_some() {
-            on_event(&JobEvent::Stage(format!("dataset: {}", data.display())));
+            on_event(&JobEvent::Stage(format!(
+                "dataset: {}{}",
+                data.display(),
+                size_note(data)
+            )));
         } else if data.join(nldf_core::dataset::SCENE_FILE).is_file() {
             on_event(&JobEvent::Stage(format!(
                 "synthetic scene: reusing {}",
@@ -423,5 +427,63 @@ impl DemoJob {
             splits.push((split, evaluation));
         }
         Ok((splits, eval_dir))
+    }
+}
+
+/// The frame size the recipe's steps and scores were measured at.
+const RECIPE_SIZE: u32 = 128;
+
+/// A note on a dataset larger than [`RECIPE_SIZE`] (its training transforms' width, or twice
+/// their principal point): the recipe runs the same steps over more pixels there, which no
+/// measurement covers. Empty for the recipe's size, smaller ones, or transforms it cannot
+/// read (loading the dataset then says why).
+fn size_note(data: &Path) -> String {
+    let path = data.join("transforms_train.json");
+    let Ok(t) = nldf_core::dataset::TransformsFile::load(&path) else {
+        return String::new();
+    };
+    let width = t.width.unwrap_or((2.0 * t.cx).round() as u32);
+    if width <= RECIPE_SIZE {
+        return String::new();
+    }
+    let pixels = (width as f64 / RECIPE_SIZE as f64).powi(2);
+    format!(
+        " ({width} pixels wide: the recipe is measured at {RECIPE_SIZE}, the size `nldf prepare` \
+         writes by default; here it runs the same steps over {pixels:.0} times the pixels)"
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn transforms(dir: &Path, fields: &str) {
+        let text = format!(r#"{{"focal_len": 300.0, {fields}, "frames": []}}"#);
+        std::fs::write(dir.join("transforms_train.json"), text).unwrap();
+    }
+
+    /// A 512-pixel dataset (its width, or AD-NeRF's principal point without one) gets the
+    /// note with 16 times the pixels; the recipe's size, a smaller one and unreadable
+    /// transforms get none.
+    #[test]
+    fn a_dataset_larger_than_the_recipes_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        assert_eq!(size_note(d), "");
+        transforms(
+            d,
+            r#""cx": 256.0, "cy": 256.0, "width": 512, "height": 512"#,
+        );
+        let note = size_note(d);
+        assert!(
+            note.contains("512 pixels wide") && note.contains("16 times"),
+            "{note}"
+        );
+        transforms(d, r#""cx": 225.0, "cy": 225.0"#);
+        assert!(size_note(d).contains("450 pixels wide"), "{}", size_note(d));
+        transforms(d, r#""cx": 64.0, "cy": 64.0, "width": 128, "height": 128"#);
+        assert_eq!(size_note(d), "");
+        transforms(d, r#""cx": 32.0, "cy": 32.0"#);
+        assert_eq!(size_note(d), "");
     }
 }
