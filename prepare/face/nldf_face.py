@@ -51,7 +51,8 @@ class Tracker:
     everything below the upper lip (the jaw moves with the mouth). Tracks follow by
     pyramidal Lucas-Kanade from the previous frame, kept when tracking back lands within
     `fb_px` of where they started; then each is aligned with its patch in the frame it was
-    found in, starting from there, so that it does not drift, and kept when that moves it
+    found in, turned as the patches found with it have turned since (a rolling head turns
+    them), starting from there, so that it does not drift, and kept when that moves it
     by less than `anchor_px` and it stays in the region. Corners stronger than `quality`
     times the region's strongest (Shi-Tomasi) top the live tracks up to `most` when fewer
     than `least` are alive, at most every `detect_every` frames; each new corner is also
@@ -184,6 +185,20 @@ class Tracker:
         good[sel] &= ok & (np.linalg.norm(got - pts[sel], axis=1) < self.anchor_px)
         pts[sel] = got
 
+    def turn(self, anchors, guess):
+        """The 2D rotation and shift (2 x 3) that best take `anchors` onto `guess` in least
+        squares (the shift alone for fewer than three points): how far the patches turned
+        in the image since they were found, as a head that rolls turns them."""
+        import numpy as np
+        m = np.eye(2, 3, dtype=np.float64)
+        if len(anchors) >= 3:
+            a = anchors - anchors.mean(axis=0)
+            b = guess - guess.mean(axis=0)
+            angle = np.arctan2((a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum())
+            m[:, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+        m[:, 2] = guess.mean(axis=0) - m[:, :2] @ anchors.mean(axis=0)
+        return m
+
     def align(self, template, anchors, gray, guess):
         """Lucas-Kanade of the patches at `anchors` in `template` onto `gray`, from `guess`,
         on crops around the points (the guess is close: no pyramid is needed)."""
@@ -200,10 +215,18 @@ class Tracker:
             lo = np.clip(lo, 0, full - size)
             return img[lo[1]:lo[1] + size[1], lo[0]:lo[0] + size[0]], lo.astype(np.float32)
 
-        t_img, t_lo = crop(template, anchors)
         g_img, g_lo = crop(gray, guess)
+        # The template turned as the patches have turned since, into the crop's frame: a
+        # patch compared unturned pulls its point back towards where it was found (a head
+        # rolled 12 degrees: its tracks turned 7 % short, and a real face's pose turned
+        # sideways with the roll; docs/prepare.md, "Tracks aligned turned").
+        warp = self.turn(anchors.astype(np.float64), guess.astype(np.float64))
+        warp[:, 2] -= g_lo
+        t_img = cv2.warpAffine(template, warp, (g_img.shape[1], g_img.shape[0]),
+                               flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        start = anchors @ warp[:, :2].T + warp[:, 2]
         got, ok, _ = cv2.calcOpticalFlowPyrLK(
-            t_img, g_img, (anchors - t_lo).reshape(-1, 1, 2),
+            t_img, g_img, start.reshape(-1, 1, 2).astype(np.float32),
             (guess - g_lo).reshape(-1, 1, 2).copy(), winSize=self.lk["winSize"], maxLevel=0,
             criteria=self.lk["criteria"], flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
         return got.reshape(-1, 2) + g_lo, ok.ravel() == 1

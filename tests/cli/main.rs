@@ -11,6 +11,7 @@ use nldf_core::audio::{FeatureConfig, FeatureSource, Waveform, write_wav};
 use nldf_core::dataset::AUDIO_SOURCE_FILE;
 
 mod prepare;
+mod prepare_roll;
 mod synth_video;
 
 /// Runs `nldf` with `args`.

@@ -10,7 +10,7 @@ use std::sync::OnceLock;
 use super::{args, nldf, nldf_ok, refused, s, scratch};
 
 /// ffmpeg, and whether the face environment is installed; `None` (a skip) only outside CI.
-fn tools() -> Option<PathBuf> {
+pub(super) fn tools() -> Option<PathBuf> {
     let ffmpeg = match nldf_prepare::tools::ffmpeg() {
         Ok(p) => p,
         Err(e) => return nldf_tests::tool_missing(format!("nldf prepare needs ffmpeg: {e}")),
@@ -28,7 +28,7 @@ fn tools() -> Option<PathBuf> {
 }
 
 /// Runs ffmpeg with `args` and asserts it succeeded.
-fn ffmpeg(program: &Path, args: &[&str]) {
+pub(super) fn ffmpeg(program: &Path, args: &[&str]) {
     let out = Command::new(program)
         .args(["-hide_banner", "-nostdin", "-loglevel", "error", "-y"])
         .args(args)
