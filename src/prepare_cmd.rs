@@ -33,8 +33,8 @@ pub struct PrepareArgs {
     #[arg(long)]
     pub analysis_size: Option<u32>,
     /// Focal length in output pixels; landmarks cannot tell it. Default: AD-NeRF's 1200 at
-    /// 450 pixels, scaled to --size (341 at 128, 1365 at 512). Half or twice the true value moves the
-    /// rotations by well under a degree.
+    /// 450 pixels, scaled to --size (341 at 128, 1365 at 512). Half or twice the true value
+    /// moves the rotations by well under a degree.
     #[arg(long)]
     pub focal: Option<f32>,
     /// Resample the video to this constant frame rate (AD-NeRF's datasets are 25); this

@@ -100,15 +100,16 @@ pub fn run(args: SynthArgs) -> Result<()> {
         (Some(w), None) => w.samples.len() as f32 / w.sample_rate as f32,
         (None, None) => default.seconds,
     };
-    if let Some(r) = args.render_size.filter(|&r| r > args.size) {
-        // The scene is rendered at this size; its check would name --size.
-        if !synth::SIZES.contains(&r) {
-            bail!(
-                "--render-size must be in {}..={} pixels, got {r}",
-                synth::SIZES.start(),
-                synth::SIZES.end()
-            );
-        }
+    // A larger --render-size is the size the scene renders at; its check would name --size.
+    if let Some(r) = args
+        .render_size
+        .filter(|&r| r > args.size && !synth::SIZES.contains(&r))
+    {
+        bail!(
+            "--render-size must be in {}..={} pixels, got {r}",
+            synth::SIZES.start(),
+            synth::SIZES.end()
+        );
     }
     let cfg = SynthConfig {
         seed: args.seed,

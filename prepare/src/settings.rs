@@ -13,8 +13,9 @@ use crate::video::{self, Probe, Window};
 pub const DEFAULT_FOCAL_AT_450: f32 = 1200.0;
 /// The largest size frames are analysed at by default (see [`PrepareJob::analysis_size`]).
 pub const ANALYSIS_MAX: u32 = 512;
-/// The smallest and largest sizes, in pixels, that frames are written, analysed or posed at.
+/// The smallest size, in pixels, that frames are written, analysed or posed at.
 pub const MIN_SIZE: u32 = 32;
+/// The largest size, in pixels, that frames are written, analysed or posed at.
 pub const MAX_SIZE: u32 = 2048;
 
 /// What to prepare.

@@ -393,10 +393,9 @@ fn prepare_refuses_settings_it_cannot_use() {
         (&["--focal", "0"], &["--focal 0", "> 0"]),
         (&["--fps", "0"], &["--fps 0", "1..=120"]),
     ];
+    let o = s(&out);
     for (flags, needles) in cases {
-        let mut a = vec!["prepare", "--video", &video, "--out"];
-        let o = s(&out);
-        a.push(&o);
+        let mut a = vec!["prepare", "--video", &video, "--out", &o];
         a.extend_from_slice(flags);
         refused(&flags.join(" "), &args(&a), needles, &[&out]);
     }

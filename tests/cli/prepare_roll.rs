@@ -10,10 +10,15 @@ use super::{args, nldf_ok, s, scratch};
 /// A track's point in its reference frame and in another, about the image's centre.
 type Pair = ([f64; 2], [f64; 2]);
 
+/// The roll's amplitude (radians, 12 degrees) and period (seconds) at 25 frames/s.
+const AMPLITUDE: f64 = 0.2094;
+const PERIOD_S: f64 = 3.0;
+const FPS: f64 = 25.0;
+
 /// The turn, in radians, ffmpeg's `rotate` filter gives frame `f` of the clip below
 /// (clockwise on screen, so `x` towards `y` in pixel axes).
 fn roll(f: usize) -> f64 {
-    0.2094 * (2.0 * std::f64::consts::PI * f as f64 / 25.0 / 3.0).sin()
+    AMPLITUDE * (2.0 * std::f64::consts::PI * f as f64 / FPS / PERIOD_S).sin()
 }
 
 /// A track aligned with its first patch unturned is pulled back towards where it was
@@ -42,10 +47,14 @@ fn tracks_follow_a_rolling_head() {
     std::fs::create_dir_all(&frames).unwrap();
     let still = s(&scene.join("head_imgs/0.png"));
     let pattern = s(&frames.join("%d.jpg"));
+    let (fps, turn) = (
+        FPS.to_string(),
+        format!("rotate='{AMPLITUDE}*sin(2*PI*t/{PERIOD_S})':fillcolor=gray"),
+    );
     #[rustfmt::skip]
     ffmpeg(&ff, &[
-        "-loop", "1", "-framerate", "25", "-i", &still,
-        "-vf", "rotate='0.2094*sin(2*PI*t/3)':fillcolor=gray",
+        "-loop", "1", "-framerate", &fps, "-i", &still,
+        "-vf", &turn,
         "-t", "6", "-q:v", "1", "-start_number", "0", &pattern,
     ]);
     let n = std::fs::read_dir(&frames).unwrap().count();
